@@ -1,0 +1,27 @@
+# Every target bootstraps .venv on first use (scripts/bootstrap.sh; idempotent, quick when nothing changed).
+VENV := .venv
+PY := $(VENV)/bin/python
+BOOT := bash scripts/bootstrap.sh
+export AMENT_PREFIX_PATH := $(abspath $(VENV))
+
+.PHONY: setup test bench demo lint clean
+
+setup:
+	@$(BOOT)
+
+test: setup
+	$(PY) -m pytest tests $(PYTEST_ARGS)
+
+bench: setup
+	$(PY) -m tests.bench $(BENCH_ARGS)
+
+DEMO_LAUNCH ?= config/launch/demo_three.yaml
+demo: setup
+	$(VENV)/bin/tms-launch $(DEMO_LAUNCH) $(DEMO_ARGS)
+
+lint: setup
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check . || true
+
+clean:
+	rm -rf build .pytest_cache

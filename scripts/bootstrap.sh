@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Creates .venv, installs ROS 2 Jazzy from PyPI wheels, builds tms_msg with rosidl + CMake into the
+# venv prefix, installs this project editable and registers its nodes in the ament index.
+# Each step leaves a stamp in .venv/.stamps so a second run with nothing changed does nothing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+VENV="$ROOT/.venv"
+STAMPS="$VENV/.stamps"
+PY=${PYTHON:-python3.11}
+
+# One bootstrap at a time (parallel `make` targets or shells share the venv).
+exec 9>"$ROOT/.bootstrap.lock"
+flock 9
+
+say() { printf '[bootstrap] %s\n' "$*"; }
+fail() { printf '[bootstrap] ERROR: %s\n' "$*" >&2; exit 1; }
+
+command -v "$PY" >/dev/null || fail "$PY not found: CPython 3.11 is required (the ROS 2 Jazzy wheels are cp311 only)"
+command -v cmake >/dev/null || fail "cmake not found: install it (Debian: apt-get install cmake g++ make)"
+command -v g++ >/dev/null || fail "g++ not found: install it (Debian: apt-get install g++)"
+
+# A stamp is fresh when it exists and is newer than every file it depends on.
+fresh() { local stamp=$1; shift; [ -f "$stamp" ] || return 1; [ -z "$(find "$@" -newer "$stamp" -print -quit 2>/dev/null)" ]; }
+
+if [ ! -x "$VENV/bin/python" ]; then
+  say "creating $VENV with $PY"
+  "$PY" -m venv "$VENV"
+fi
+mkdir -p "$STAMPS"
+PIP=("$VENV/bin/python" -m pip --disable-pip-version-check -q)
+
+if ! fresh "$STAMPS/deps" constraints.txt requirements-ros.txt pyproject.toml; then
+  say "installing pinned dependencies (ROS 2 Jazzy wheels, python libraries); first run takes a few minutes"
+  "${PIP[@]}" install -c constraints.txt pip setuptools wheel
+  "${PIP[@]}" install -c constraints.txt -r requirements-ros.txt
+  touch "$STAMPS/deps"
+fi
+
+if ! fresh "$STAMPS/cmake-fix" "$STAMPS/deps" scripts/fix_ros_cmake.py; then
+  say "pointing the ROS wheels' exported CMake files at this venv"
+  "$VENV/bin/python" scripts/fix_ros_cmake.py "$VENV"
+  touch "$STAMPS/cmake-fix"
+fi
+
+if ! fresh "$STAMPS/tms_msg" tms_msg "$STAMPS/cmake-fix"; then
+  say "building tms_msg (rosidl + CMake) into $VENV"
+  bash scripts/build_tms_msg.sh
+  touch "$STAMPS/tms_msg"
+fi
+
+if ! fresh "$STAMPS/project" pyproject.toml constraints.txt "$STAMPS/deps"; then
+  say "installing the project (editable)"
+  "${PIP[@]}" install -c constraints.txt --no-build-isolation -e ".[test]"
+  touch "$STAMPS/project"
+fi
+
+if ! fresh "$STAMPS/ament" pyproject.toml scripts/register_ament.py "$STAMPS/project"; then
+  say "registering nodes in the ament index"
+  "$VENV/bin/python" scripts/register_ament.py "$VENV"
+  touch "$STAMPS/ament"
+fi

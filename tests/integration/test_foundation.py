@@ -1,0 +1,159 @@
+"""Foundation: real processes over DDS, a tms_msg action across processes, the launcher."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.rosproc import ROOT, VENV, executable
+
+pytestmark = pytest.mark.integration
+
+
+def test_ros2_run_resolution_finds_and_runs_a_registered_node():
+    """Resolve like `ros2 run`: ament prefix + lib/<pkg>/<exe>, executable, and it runs."""
+    import subprocess
+
+    path = executable("tms_launch", "demo_subtask_client")
+    assert path.parent == VENV / "lib" / "tms_launch"
+    assert (VENV / "share" / "ament_index" / "resource_index" / "packages" / "tms_launch").exists()
+    assert (VENV / "share" / "tms_launch" / "package.xml").exists()
+    out = subprocess.run([str(path), "--help"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "--cancel-after" in out.stdout
+
+
+def test_publisher_and_subscriber_processes_exchange_messages(procs):
+    talker = procs([executable("tms_launch", "demo_talker"), "--ros-args", "-p", "rate_hz:=50.0"])
+    listener = procs([executable("tms_launch", "demo_listener"), "--ros-args", "-p", "log_every:=25"])
+    assert listener.wait_for("total=26", timeout=30), f"listener heard too little:\n{listener.output}\n{talker.output}"
+
+
+def test_tms_msg_action_goal_feedback_result_across_processes(procs):
+    procs([executable("tms_launch", "demo_subtask_server"), "--ros-args", "-p", "duration_s:=0.5"])
+    client = procs([executable("tms_launch", "demo_subtask_client"), "--record", "initial_pose"])
+    assert client.wait(40) == 0, client.output
+    assert "goal accepted" in client.output
+    assert "feedback step 0" in client.output
+    assert "status SUCCEEDED success=True message='demo/initial_pose done" in client.output
+
+
+def test_tms_msg_action_cancel_is_acknowledged_by_the_server(procs):
+    procs([executable("tms_launch", "demo_subtask_server"), "--ros-args", "-p", "duration_s:=10.0"])
+    client = procs([executable("tms_launch", "demo_subtask_client"), "--cancel-after", "0.5"])
+    assert client.wait(40) == 0, client.output
+    assert "cancel acknowledged=True" in client.output
+    assert "status CANCELED success=False" in client.output
+
+
+def test_tms_msg_action_rejects_a_goal_without_record(procs):
+    procs([executable("tms_launch", "demo_subtask_server")])
+    client = procs([executable("tms_launch", "demo_subtask_client"), "--record", ""])
+    assert client.wait(40) == 3, client.output
+    assert "goal rejected" in client.output
+
+
+def _launcher(procs, launch_file: Path):
+    return procs([VENV / "bin" / "tms-launch", str(launch_file)], name="tms-launch")
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "launch.yaml"
+    path.write_text(text)
+    return path
+
+
+THREE_NODES = """
+name: three
+nodes:
+  - {name: talker, package: tms_launch, executable: demo_talker, namespace: /t3, parameters: {rate_hz: 20.0}}
+  - {name: listener, package: tms_launch, executable: demo_listener, namespace: /t3}
+  - {name: subtask_server, package: tms_launch, executable: demo_subtask_server, namespace: /t3}
+"""
+
+
+def _node_pids(launcher_pid: int) -> list[int]:
+    """Pids of the launcher's direct children (the node processes)."""
+    children = Path(f"/proc/{launcher_pid}/task/{launcher_pid}/children")
+    return [int(p) for p in children.read_text().split()] if children.exists() else []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A zombie is dead for our purpose.
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_launcher_starts_three_nodes_visible_to_a_client_and_ctrl_c_stops_them(procs, ros_node, tmp_path):
+    launcher = _launcher(procs, _write(tmp_path, THREE_NODES))
+    assert launcher.wait_for("all 3 node(s) of 'three' are up", timeout=90), launcher.output
+    assert "[tms-launch] running 3/3: talker, listener, subtask_server" in launcher.output
+    deadline = time.monotonic() + 20
+    want = {("talker", "/t3"), ("listener", "/t3"), ("subtask_server", "/t3")}
+    seen: set = set()
+    while time.monotonic() < deadline and not want <= seen:
+        ros_node.executor_for_test.spin_once(timeout_sec=0.1)
+        seen = set(ros_node.get_node_names_and_namespaces())
+    assert want <= seen, f"client sees {seen}"
+    pids = _node_pids(launcher.popen.pid)
+    assert len(pids) == 3
+    # Output of the nodes is prefixed with their name.
+    assert launcher.wait_for("[listener] heard seq=", timeout=20), launcher.output
+    started = time.monotonic()
+    os.kill(launcher.popen.pid, signal.SIGINT)
+    assert launcher.wait(10) == 0, launcher.output
+    assert time.monotonic() - started < 5.0
+    assert not [p for p in pids if _alive(p)], "node processes outlived the launcher"
+
+
+def test_launcher_exits_nonzero_naming_a_required_node_that_dies(procs, tmp_path):
+    launcher = _launcher(procs, _write(tmp_path, THREE_NODES))
+    assert launcher.wait_for("are up", timeout=90), launcher.output
+    pids = _node_pids(launcher.popen.pid)
+    os.kill(pids[1], signal.SIGKILL)  # the listener
+    assert launcher.wait(15) == 1, launcher.output
+    assert "ERROR: required node 'listener' exited with code -9" in launcher.output
+    assert not [p for p in pids if _alive(p)]
+
+
+def test_launcher_list_prints_nodes(procs):
+    out = procs([VENV / "bin" / "tms-launch", "--list", str(ROOT / "config/launch/demo_three.yaml")])
+    assert out.wait(60) == 0, out.output
+    assert "/demo/talker\ttms_launch/demo_talker\trequired" in out.output
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            "nodes:\n  - name: a\n    package: tms_launch\n    executable: no_such_exe\n",
+            "launch.yaml:4: node 'a': package 'tms_launch' has no executable 'no_such_exe'",
+        ),
+        (
+            "nodes:\n  - name: a\n    package: no_such_pkg\n    executable: x\n",
+            "launch.yaml:4: node 'a': package 'no_such_pkg' is not in the ament index",
+        ),
+        ("nodes:\n  - name: a\n    package: [unclosed\n", "launch.yaml:4: malformed YAML"),
+        (
+            "nodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n    colour: red\n",
+            "launch.yaml:5: node #1: unknown key 'colour'",
+        ),
+    ],
+    ids=["unknown-executable", "unknown-package", "malformed-yaml", "unknown-key"],
+)
+def test_bad_launch_file_names_file_and_line_and_starts_nothing(procs, tmp_path, text, expected):
+    launcher = _launcher(procs, _write(tmp_path, text))
+    assert launcher.wait(60) == 2, launcher.output
+    assert expected in launcher.output
+    assert "starting" not in launcher.output

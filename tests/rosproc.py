@@ -1,0 +1,129 @@
+"""Helpers for tests and benchmarks that run real ROS 2 processes.
+
+* :func:`isolated_domain` picks a ROS_DOMAIN_ID no other test on this machine holds (a flock per id
+  under /tmp), so parallel runs and leftovers never cross-talk; discovery stays on localhost.
+* :class:`Proc` starts an executable exactly as ``ros2 run`` resolves it, captures its output, and
+  is always killed at teardown.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+VENV = Path(sys.prefix)
+_LOCK_DIR = Path("/tmp/tms-ros-domains")
+
+
+@contextlib.contextmanager
+def isolated_domain() -> Iterator[int]:
+    """Hold a free ROS_DOMAIN_ID (1..200) for the duration of the block."""
+    _LOCK_DIR.mkdir(exist_ok=True)
+    ids = list(range(1, 201))
+    random.shuffle(ids)
+    for domain in ids:
+        fd = os.open(_LOCK_DIR / f"{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            continue
+        try:
+            yield domain
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+        return
+    raise RuntimeError("no free ROS_DOMAIN_ID in 1..200")
+
+
+def ros_env(domain: int, **extra: str) -> dict[str, str]:
+    """Environment for a node process on ``domain``, discovery limited to this host."""
+    env = dict(os.environ)
+    env.update(
+        ROS_DOMAIN_ID=str(domain),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        AMENT_PREFIX_PATH=str(VENV),
+        PYTHONUNBUFFERED="1",
+    )
+    env.update(extra)
+    return env
+
+
+def executable(package: str, name: str) -> Path:
+    """Resolve ``<prefix>/lib/<package>/<name>`` through ament_index_python, as ``ros2 run`` does."""
+    os.environ.setdefault("AMENT_PREFIX_PATH", str(VENV))
+    from ament_index_python.packages import get_package_prefix
+
+    path = Path(get_package_prefix(package)) / "lib" / package / name
+    if not (path.is_file() and os.access(path, os.X_OK)):
+        raise FileNotFoundError(f"{path} is not an executable file")
+    return path
+
+
+class Proc:
+    """A child process with its merged output collected line by line in a background thread."""
+
+    def __init__(self, cmd: list[str], env: dict[str, str], *, name: str | None = None) -> None:
+        self.name = name or Path(cmd[0]).name
+        self.popen = subprocess.Popen(
+            cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True
+        )
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        assert self.popen.stdout is not None
+        for raw in iter(self.popen.stdout.readline, b""):
+            with self._cond:
+                self.lines.append(raw.decode(errors="replace").rstrip("\n"))
+                self._cond.notify_all()
+        with self._cond:
+            self._cond.notify_all()
+
+    @property
+    def output(self) -> str:
+        with self._cond:
+            return "\n".join(self.lines)
+
+    def wait_for(self, text: str, timeout: float) -> bool:
+        """True once a line containing ``text`` has been printed, False after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                if any(text in line for line in self.lines):
+                    return True
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._cond.wait(min(remaining, 0.2))
+
+    def wait(self, timeout: float) -> int | None:
+        try:
+            return self.popen.wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def signal(self, sig: int) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.popen.pid, sig)
+
+    def kill(self) -> None:
+        if self.popen.poll() is None:
+            self.signal(signal.SIGINT)
+            if self.wait(3.0) is None:
+                self.signal(signal.SIGKILL)
+                self.wait(3.0)
+        self._thread.join(timeout=1.0)

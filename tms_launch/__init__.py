@@ -1,0 +1,7 @@
+"""tms_launch: the launcher and the node-registration conventions.
+
+``tms-launch <file.yaml>`` starts the nodes of a launch file as separate processes with their
+parameters and namespaces, prefixes their output, waits until each node is visible on the ROS graph,
+and stops them all cleanly. ``register_ament`` makes every console-script node findable by
+``ros2 run <package> <executable>``. ``demo_nodes`` are small nodes used by the foundation tests.
+"""

@@ -1,0 +1,226 @@
+"""``tms-launch``: run the nodes of a YAML launch file as separate processes.
+
+* Starts nodes in file order, each in its own process group, with stdout and stderr merged and
+  every line prefixed ``[node_name]``.
+* Waits until each node is visible on the ROS graph (its name and namespace) before starting the
+  next one, and prints a progress line ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
+* Ctrl-C (SIGINT) or SIGTERM stops everything within 5 s: SIGINT to every node, then SIGTERM after
+  2.5 s, then SIGKILL after 4 s.
+* When a required node exits (for any reason) the launcher stops the others and exits 1 naming it.
+* ``--list`` prints the nodes of the file and exits.
+
+Exit codes: 0 clean stop, 1 a required node died or did not come up, 2 bad launch file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tms_common.errors import ConfigError
+from tms_launch.launch_file import LaunchFile, NodeSpec, parse_launch_file
+
+SIGINT_GRACE_S = 2.5
+SIGTERM_GRACE_S = 1.5
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """Child-side: receive SIGTERM if the launcher itself dies, so no node outlives it."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except OSError:
+        pass
+    os.setpgrp()
+
+
+@dataclass
+class Running:
+    spec: NodeSpec
+    proc: subprocess.Popen[bytes]
+    reader: threading.Thread
+    ready: bool = False
+    lines: list[str] = field(default_factory=list)
+
+
+class Launcher:
+    """Starts, watches and stops the processes of one launch file."""
+
+    def __init__(self, launch: LaunchFile, *, out=None) -> None:  # noqa: ANN001
+        self.launch = launch
+        self.out = out or sys.stdout
+        self.running: list[Running] = []
+        self._stop = threading.Event()
+        self._print_lock = threading.Lock()
+        self._graph_node = None
+
+    # -- output ---------------------------------------------------------------------------------
+    def log(self, text: str) -> None:
+        with self._print_lock:
+            print(f"[tms-launch] {text}", file=self.out, flush=True)
+
+    def _pump(self, run: Running) -> None:
+        assert run.proc.stdout is not None
+        for raw in iter(run.proc.stdout.readline, b""):
+            line = raw.decode(errors="replace").rstrip("\n")
+            with self._print_lock:
+                print(f"[{run.spec.name}] {line}", file=self.out, flush=True)
+
+    # -- graph ----------------------------------------------------------------------------------
+    def _graph(self):  # noqa: ANN202
+        if self._graph_node is None:
+            import rclpy
+            from rclpy.signals import SignalHandlerOptions
+
+            # The launcher owns SIGINT/SIGTERM (to stop its children in order), not rclpy.
+            rclpy.init(
+                args=["tms-launch", "--ros-args", "--disable-rosout-logs"],
+                signal_handler_options=SignalHandlerOptions.NO,
+            )
+            self._graph_node = rclpy.create_node("tms_launch_monitor", start_parameter_services=False)
+        return self._graph_node
+
+    def visible(self, spec: NodeSpec) -> bool:
+        """True when the node is on the ROS graph under its name and namespace."""
+        return (spec.name, spec.namespace) in self._graph().get_node_names_and_namespaces()
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def start(self, spec: NodeSpec) -> Running:
+        env = {**os.environ, **self.launch.env, **spec.env, "PYTHONUNBUFFERED": "1"}
+        proc = subprocess.Popen(
+            spec.command(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            env=env,
+            preexec_fn=_die_with_parent,  # noqa: PLW1509 - needed for PDEATHSIG and a process group
+        )
+        run = Running(spec=spec, proc=proc, reader=threading.Thread(target=lambda: None))
+        run.reader = threading.Thread(target=self._pump, args=(run,), daemon=True, name=f"pump-{spec.name}")
+        run.reader.start()
+        self.running.append(run)
+        return run
+
+    def _dead_required(self) -> Running | None:
+        for run in self.running:
+            if run.spec.required and run.proc.poll() is not None:
+                return run
+        return None
+
+    def _wait_ready(self, run: Running) -> str | None:
+        """Wait until ``run`` is visible; returns an error text when it died or timed out."""
+        deadline = time.monotonic() + run.spec.ready_timeout
+        while time.monotonic() < deadline and not self._stop.is_set():
+            if run.proc.poll() is not None:
+                return f"node {run.spec.name!r} exited with code {run.proc.returncode} before it came up"
+            dead = self._dead_required()
+            if dead is not None:
+                return f"required node {dead.spec.name!r} exited with code {dead.proc.returncode}"
+            if self.visible(run.spec):
+                run.ready = True
+                return None
+            time.sleep(0.05)
+        if self._stop.is_set():
+            return None
+        return f"node {run.spec.name!r} did not appear on the ROS graph within {run.spec.ready_timeout:g} s"
+
+    def stop_all(self) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL: every process is gone within 5 s."""
+        alive = [r for r in self.running if r.proc.poll() is None]
+        if alive:
+            self.log(f"stopping {len(alive)} node(s): {', '.join(r.spec.name for r in alive)}")
+        for sig, grace in ((signal.SIGINT, SIGINT_GRACE_S), (signal.SIGTERM, SIGTERM_GRACE_S), (signal.SIGKILL, 0.5)):
+            alive = [r for r in self.running if r.proc.poll() is None]
+            if not alive:
+                break
+            for r in alive:
+                try:
+                    os.killpg(r.proc.pid, sig)
+                except ProcessLookupError:
+                    pass
+            deadline = time.monotonic() + grace
+            while time.monotonic() < deadline and any(r.proc.poll() is None for r in alive):
+                time.sleep(0.02)
+            if sig != signal.SIGKILL:
+                for r in alive:
+                    if r.proc.poll() is None:
+                        self.log(f"{r.spec.name} ignored {sig.name}; escalating")
+        for r in self.running:
+            r.reader.join(timeout=0.5)
+
+    def run(self) -> int:
+        """Start every node, then supervise until a stop signal or a required node dies."""
+        nodes = self.launch.nodes
+        error: str | None = None
+        try:
+            for index, spec in enumerate(nodes, 1):
+                if self._stop.is_set():
+                    break
+                self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.package}/{spec.executable})")
+                run = self.start(spec)
+                error = self._wait_ready(run)
+                if error:
+                    break
+                up = [r.spec.name for r in self.running if r.ready]
+                self.log(f"running {len(up)}/{len(nodes)}: {', '.join(up)}")
+            if not error and not self._stop.is_set():
+                self.log(f"all {len(nodes)} node(s) of {self.launch.name!r} are up; Ctrl-C stops them")
+            while not error and not self._stop.is_set():
+                dead = self._dead_required()
+                if dead is not None:
+                    error = f"required node {dead.spec.name!r} exited with code {dead.proc.returncode}"
+                    break
+                for r in self.running:
+                    if not r.spec.required and r.proc.poll() is not None and r.ready:
+                        self.log(f"optional node {r.spec.name!r} exited with code {r.proc.returncode}")
+                        r.ready = False
+                self._stop.wait(0.1)
+        finally:
+            self.stop_all()
+            if self._graph_node is not None:
+                import rclpy
+
+                self._graph_node.destroy_node()
+                rclpy.try_shutdown()
+        if error:
+            self.log(f"ERROR: {error}")
+            return 1
+        self.log("stopped")
+        return 0
+
+    def request_stop(self, *_args: object) -> None:
+        self._stop.set()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="tms-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("launch_file", help="YAML launch file, e.g. config/launch/demo_three.yaml")
+    parser.add_argument("--list", action="store_true", help="print the nodes of the file and exit")
+    opts = parser.parse_args(argv)
+    path = Path(opts.launch_file)
+    try:
+        launch = parse_launch_file(path)
+    except ConfigError as exc:
+        print(f"tms-launch: {exc}", file=sys.stderr, flush=True)
+        return 2
+    if opts.list:
+        for spec in launch.nodes:
+            flag = "required" if spec.required else "optional"
+            print(f"{spec.fqn}\t{spec.package}/{spec.executable}\t{flag}")
+        return 0
+    launcher = Launcher(launch)
+    signal.signal(signal.SIGINT, launcher.request_stop)
+    signal.signal(signal.SIGTERM, launcher.request_stop)
+    return launcher.run()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
