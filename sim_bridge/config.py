@@ -1,0 +1,426 @@
+"""Plant configuration: machine YAMLs (``config/machines/*.yaml``) and the plant YAML (``config/sim/plant.yaml``).
+
+Everything the plant needs is read here once, validated and frozen into dataclasses. A wrong value
+raises :class:`~sim_bridge.errors.SimConfigError` with ``file:line: key.path: problem (got value)``,
+so a malformed machine YAML names the key that is wrong. Top-level sections owned by other packages
+are left alone; inside the sections this package reads, unknown keys are errors (a typo must not
+silently fall back to a default).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sim_bridge.errors import SimConfigError
+from tms_common.config import Where, config_path, load_yaml
+
+__all__ = [
+    "JointSpec",
+    "TrackSpec",
+    "Zx200Spec",
+    "Ic120Spec",
+    "SiteSpec",
+    "SoilSpec",
+    "SensorSpec",
+    "PlantSpec",
+    "load_zx200",
+    "load_ic120",
+    "load_plant",
+]
+
+
+class _Reader:
+    """Typed access to a YAML mapping that reports ``file:line: key.path: problem`` on bad input."""
+
+    def __init__(self, data: Any, where: Where, path: tuple[Any, ...] = ()) -> None:
+        self.where = where
+        self.path = path
+        if not isinstance(data, dict):
+            raise self._err(path, f"expected a mapping, got {type(data).__name__} {data!r}")
+        self.data = data
+
+    def _name(self, path: tuple[Any, ...]) -> str:
+        return ".".join(str(p) for p in path) or "<document>"
+
+    def _err(self, path: tuple[Any, ...], problem: str) -> SimConfigError:
+        return SimConfigError(f"{self.where.file}:{self.where.line_of(path)}: {self._name(path)}: {problem}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str) -> Any:
+        if key not in self.data:
+            raise self._err(self.path + (key,), "missing required key")
+        return self.data[key]
+
+    def sub(self, key: str) -> _Reader:
+        return _Reader(self.raw(key), self.where, self.path + (key,))
+
+    def only(self, allowed: set[str]) -> None:
+        """Reject keys not in ``allowed`` (typos in our own sections)."""
+        for key in self.data:
+            if key not in allowed:
+                raise self._err(self.path + (key,), f"unknown key; expected one of {sorted(allowed)}")
+
+    def number(self, key: str, *, lo: float | None = None, hi: float | None = None, default: float | None = None) -> float:
+        if default is not None and key not in self.data:
+            return float(default)
+        value = self.raw(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self._err(self.path + (key,), f"expected a number, got {value!r}")
+        if lo is not None and value < lo:
+            raise self._err(self.path + (key,), f"must be >= {lo}, got {value!r}")
+        if hi is not None and value > hi:
+            raise self._err(self.path + (key,), f"must be <= {hi}, got {value!r}")
+        return float(value)
+
+    def vector(self, key: str, n: int) -> tuple[float, ...]:
+        value = self.raw(key)
+        ok = isinstance(value, list) and len(value) == n
+        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        if not ok:
+            raise self._err(self.path + (key,), f"expected a list of {n} numbers, got {value!r}")
+        return tuple(float(v) for v in value)
+
+    def string(self, key: str, default: str | None = None) -> str:
+        if default is not None and key not in self.data:
+            return default
+        value = self.raw(key)
+        if not isinstance(value, str) or not value:
+            raise self._err(self.path + (key,), f"expected a non-empty string, got {value!r}")
+        return value
+
+    def per_name(self, key: str, names: list[str], *, lo: float | None = None) -> dict[str, float]:
+        """A mapping ``{name: number}`` that must list exactly ``names``."""
+        sub = self.sub(key)
+        sub.only(set(names))
+        return {name: sub.number(name, lo=lo) for name in names}
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One hydraulically driven revolute joint (geometry from the URDF, actuator from ``hydraulics:``)."""
+
+    name: str
+    parent: str
+    child: str
+    origin_xyz: tuple[float, float, float]
+    origin_rpy: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    lower: float | None  # None = continuous
+    upper: float | None
+    max_velocity: float  # [rad/s]
+    dead_time: float  # [s]
+    time_constant: float  # [s]
+    flow_at_limit: float  # [L/min] pump flow drawn at max_velocity; 0 = not on the shared pumps
+
+
+@dataclass(frozen=True)
+class TrackSpec:
+    """Skid-steer undercarriage: limits, actuator lag and slip."""
+
+    gauge: float  # [m]
+    max_speed: float  # [m/s] per track
+    max_yaw_rate: float  # [rad/s]
+    length: float  # footprint [m]
+    width: float
+    dead_time: float  # [s]
+    time_constant: float  # [s]
+    slip: float  # longitudinal slip ratio: ground speed = track speed * (1 - slip)
+    yaw_slip: float  # yaw rate lost to lateral skidding: yaw = (vr - vl) / gauge * (1 - yaw_slip)
+
+
+@dataclass(frozen=True)
+class Zx200Spec:
+    """The backhoe: front joints in bus order, bucket tip, tracks, pumps and bucket soil handling."""
+
+    joints: tuple[JointSpec, ...]
+    bucket_tip_xyz: tuple[float, float, float]
+    home_pose: dict[str, float]
+    tracks: TrackSpec
+    pump_flow: float  # [L/min] shared by the joints with flow_at_limit > 0
+    bucket_capacity: float  # [m^3]
+    bucket_width: float  # [m] cutting edge width
+    release_tip_angle: float  # [rad] tip angle below horizontal under which the bucket spills
+    spill_time: float  # [s] to empty a full bucket when fully open
+    cut_min_speed: float  # [m/s] the edge only cuts while moving at least this fast
+    source: str
+
+    def joint(self, name: str) -> JointSpec:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class Ic120Spec:
+    """The crawler dump: tracks and the vessel on its rear hinge."""
+
+    tracks: TrackSpec
+    hinge_xyz: tuple[float, float, float]
+    vessel: JointSpec  # angle 0 = lowered, + = raised
+    vessel_angle_gain: float  # [1/s] P gain of the machine's own angle controller (vessel_cmd is a target angle)
+    inner_length: float
+    inner_width: float
+    capacity: float  # [m^3]
+    load_max_angle: float  # [rad] soil lands in the vessel only while it is this low
+    dump_start_angle: float  # [rad] soil starts to slide out above this angle
+    dump_time: float  # [s] to empty a full vessel when fully raised
+    dump_distance: float  # [m] behind the hinge where the dumped pile is centred
+    source: str
+
+
+@dataclass(frozen=True)
+class SiteSpec:
+    """The map frame's anchor in Japan Plane Rectangular CS (ROS x = easting, y = northing)."""
+
+    crs: str
+    easting: float
+    northing: float
+    altitude: float
+
+
+@dataclass(frozen=True)
+class SoilSpec:
+    """Height-field site with one mound (paraboloid of revolution)."""
+
+    x_min: float
+    y_min: float
+    size_x: float
+    size_y: float
+    resolution: float
+    mound_center: tuple[float, float]
+    mound_radius: float
+    mound_height: float
+    deposit_radius: float  # [m] disc over which released soil lands on the ground
+    dump_radius: float  # [m] disc of a vessel dump pile
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """Sensor noise (1 sigma) and seed: RTK-fix GNSS, IMU, encoders."""
+
+    gnss_sigma_h: float
+    gnss_sigma_v: float
+    imu_sigma: float
+    seed: int
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """Everything the plant needs, with where it came from."""
+
+    zx200: Zx200Spec
+    ic120: Ic120Spec
+    site: SiteSpec
+    soil: SoilSpec
+    sensors: SensorSpec
+    dt: float
+    watchdog_s: float
+    initial_poses: dict[str, tuple[float, float, float]]  # machine -> (x, y, yaw) in map
+    files: tuple[str, ...]
+
+
+def _tracks(r: _Reader, hyd: _Reader, footprint: tuple[float, float]) -> TrackSpec:
+    h = hyd.sub("tracks")
+    h.only({"dead_time_s", "time_constant_s", "slip", "yaw_slip"})
+    return TrackSpec(
+        gauge=r.number("gauge", lo=0.1),
+        max_speed=r.number("max_speed", lo=0.0),
+        max_yaw_rate=r.number("max_yaw_rate", lo=0.0),
+        length=footprint[0],
+        width=footprint[1],
+        dead_time=h.number("dead_time_s", lo=0.0, hi=5.0),
+        time_constant=h.number("time_constant_s", lo=0.0, hi=10.0),
+        slip=h.number("slip", lo=0.0, hi=0.9),
+        yaw_slip=h.number("yaw_slip", lo=0.0, hi=0.9),
+    )
+
+
+def _limits(r: _Reader) -> tuple[float | None, float | None]:
+    value = r.raw("position")
+    if value is None:
+        return None, None
+    lo, hi = r.vector("position", 2)
+    if lo >= hi:
+        raise r._err(r.path + ("position",), f"lower limit must be below upper, got {value!r}")
+    return lo, hi
+
+
+def load_zx200(path: str | Path | None = None) -> Zx200Spec:
+    """Read the ZX200 machine YAML (geometry from the URDF section, actuators from ``hydraulics:``)."""
+    path = Path(path) if path else config_path("machines", "zx200.yaml")
+    data, where = load_yaml(path)
+    top = _Reader(data, where)
+    hyd = top.sub("hydraulics")
+    hyd.only({"source", "dead_time_s", "time_constant_s", "pump_flow_lpm", "flow_at_limit_lpm", "tracks", "bucket"})
+    front = top.raw("front_joints")
+    if not isinstance(front, list) or not all(isinstance(n, str) for n in front):
+        raise top._err(("front_joints",), f"expected a list of joint names, got {front!r}")
+    jr = top.sub("joints")
+    dead = hyd.per_name("dead_time_s", front, lo=0.0)
+    tau = hyd.per_name("time_constant_s", front, lo=0.0)
+    flows_r = hyd.sub("flow_at_limit_lpm")
+    flows_r.only(set(front))
+    joints = []
+    for name in front:
+        j = jr.sub(name)
+        lo, hi = _limits(j)
+        joints.append(
+            JointSpec(
+                name=name,
+                parent=j.string("parent"),
+                child=j.string("child"),
+                origin_xyz=j.vector("origin_xyz", 3),  # type: ignore[arg-type]
+                origin_rpy=j.vector("origin_rpy", 3),  # type: ignore[arg-type]
+                axis=j.vector("axis", 3),  # type: ignore[arg-type]
+                lower=lo,
+                upper=hi,
+                max_velocity=j.number("velocity", lo=0.0),
+                dead_time=dead[name],
+                time_constant=tau[name],
+                flow_at_limit=flows_r.number(name, lo=0.0, default=0.0),
+            )
+        )
+    home_r = top.sub("home_pose")
+    home = {name: home_r.number(name) for name in front}
+    tr = top.sub("tracks")
+    b = hyd.sub("bucket")
+    b.only({"width", "release_tip_angle", "spill_time_s", "cut_min_speed"})
+    return Zx200Spec(
+        joints=tuple(joints),
+        bucket_tip_xyz=top.vector("bucket_tip_xyz", 3),  # type: ignore[arg-type]
+        home_pose=home,
+        tracks=_tracks(tr, hyd, (tr.number("length", lo=0.1), tr.number("width", lo=0.1))),
+        pump_flow=hyd.number("pump_flow_lpm", lo=1.0),
+        bucket_capacity=top.number("bucket_capacity", lo=0.01),
+        bucket_width=b.number("width", lo=0.1),
+        release_tip_angle=b.number("release_tip_angle"),
+        spill_time=b.number("spill_time_s", lo=0.01),
+        cut_min_speed=b.number("cut_min_speed", lo=0.0),
+        source=str(path),
+    )
+
+
+def load_ic120(path: str | Path | None = None) -> Ic120Spec:
+    """Read the IC120 machine YAML (tracks, vessel, ``hydraulics:``)."""
+    path = Path(path) if path else config_path("machines", "ic120.yaml")
+    data, where = load_yaml(path)
+    top = _Reader(data, where)
+    hyd = top.sub("hydraulics")
+    hyd.only({"source", "tracks", "vessel"})
+    hv = hyd.sub("vessel")
+    hv.only({"dead_time_s", "time_constant_s", "angle_gain", "load_max_angle", "dump_start_angle", "dump_time_s", "dump_distance"})
+    v = top.sub("vessel")
+    fp = top.sub("footprint")
+    max_angle = v.number("max_angle", lo=0.01, hi=math.pi / 2)
+    vessel = JointSpec(
+        name="vessel_joint",
+        parent="base_link",
+        child="vessel_link",
+        origin_xyz=v.vector("hinge_xyz", 3),  # type: ignore[arg-type]
+        origin_rpy=(0.0, 0.0, 0.0),
+        axis=(0.0, -1.0, 0.0),  # URDF: negative = raised about +y; ours: positive = raised
+        lower=0.0,
+        upper=max_angle,
+        max_velocity=v.number("velocity", lo=0.0),
+        dead_time=hv.number("dead_time_s", lo=0.0, hi=5.0),
+        time_constant=hv.number("time_constant_s", lo=0.0, hi=10.0),
+        flow_at_limit=0.0,
+    )
+    return Ic120Spec(
+        tracks=_tracks(top.sub("tracks"), hyd, (fp.number("length", lo=0.1), fp.number("width", lo=0.1))),
+        hinge_xyz=vessel.origin_xyz,
+        vessel=vessel,
+        vessel_angle_gain=hv.number("angle_gain", lo=0.0),
+        inner_length=v.number("inner_length", lo=0.1),
+        inner_width=v.number("inner_width", lo=0.1),
+        capacity=v.number("capacity", lo=0.01),
+        load_max_angle=hv.number("load_max_angle", lo=0.0),
+        dump_start_angle=hv.number("dump_start_angle", lo=0.0, hi=max_angle),
+        dump_time=hv.number("dump_time_s", lo=0.01),
+        dump_distance=hv.number("dump_distance", lo=0.0),
+        source=str(path),
+    )
+
+
+def load_site(path: str | Path | None = None) -> SiteSpec:
+    """Read ``config/site.yaml`` (CRS and map origin in plane coordinates)."""
+    path = Path(path) if path else config_path("site.yaml")
+    data, where = load_yaml(path)
+    top = _Reader(data, where)
+    o = top.sub("map_origin_plane")
+    return SiteSpec(
+        crs=top.string("crs"),
+        easting=o.number("easting"),
+        northing=o.number("northing"),
+        altitude=o.number("altitude"),
+    )
+
+
+def load_plant(
+    path: str | Path | None = None,
+    *,
+    zx200: str | Path | None = None,
+    ic120: str | Path | None = None,
+    site: str | Path | None = None,
+) -> PlantSpec:
+    """Read the plant YAML and the machine/site YAMLs it names (paths relative to ``config/``).
+
+    Explicit ``zx200``/``ic120``/``site`` paths override the plant file's ``machines``/``site`` keys
+    (tests use this to feed a malformed machine YAML).
+    """
+    path = Path(path) if path else config_path("sim", "plant.yaml")
+    data, where = load_yaml(path)
+    top = _Reader(data, where)
+    top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "soil", "sensors"})
+    m = top.sub("machines")
+    m.only({"zx200", "ic120"})
+    base = config_path()
+    zx_path = Path(zx200) if zx200 else base / m.string("zx200")
+    ic_path = Path(ic120) if ic120 else base / m.string("ic120")
+    site_path = Path(site) if site else base / top.string("site")
+    poses_r = top.sub("initial_poses")
+    poses_r.only({"zx200", "ic120"})
+    poses = {name: poses_r.vector(name, 3) for name in ("zx200", "ic120")}
+    s = top.sub("soil")
+    s.only({"grid", "mound", "deposit_radius", "dump_radius"})
+    g = s.sub("grid")
+    g.only({"x_min", "y_min", "size_x", "size_y", "resolution"})
+    mo = s.sub("mound")
+    mo.only({"center", "radius", "height"})
+    soil = SoilSpec(
+        x_min=g.number("x_min"),
+        y_min=g.number("y_min"),
+        size_x=g.number("size_x", lo=1.0),
+        size_y=g.number("size_y", lo=1.0),
+        resolution=g.number("resolution", lo=0.02, hi=2.0),
+        mound_center=mo.vector("center", 2),  # type: ignore[arg-type]
+        mound_radius=mo.number("radius", lo=0.0),
+        mound_height=mo.number("height", lo=0.0),
+        deposit_radius=s.number("deposit_radius", lo=0.0),
+        dump_radius=s.number("dump_radius", lo=0.0),
+    )
+    sn = top.sub("sensors")
+    sn.only({"gnss_sigma_h", "gnss_sigma_v", "imu_sigma", "seed"})
+    sensors = SensorSpec(
+        gnss_sigma_h=sn.number("gnss_sigma_h", lo=0.0),
+        gnss_sigma_v=sn.number("gnss_sigma_v", lo=0.0),
+        imu_sigma=sn.number("imu_sigma", lo=0.0),
+        seed=int(sn.number("seed", lo=0)),
+    )
+    return PlantSpec(
+        zx200=load_zx200(zx_path),
+        ic120=load_ic120(ic_path),
+        site=load_site(site_path),
+        soil=soil,
+        sensors=sensors,
+        dt=top.number("step_s", lo=0.0005, hi=0.05),
+        watchdog_s=top.number("watchdog_s", lo=0.01),
+        initial_poses=poses,  # type: ignore[arg-type]
+        files=(str(path), str(zx_path), str(ic_path), str(site_path)),
+    )
