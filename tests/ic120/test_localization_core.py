@@ -1,0 +1,133 @@
+"""EKF + GNSS projection on synthetic trajectories (no ROS)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.ic120.synth import simulate
+from tms_rp.ic120.ekf import EkfParams, Ic120Ekf, wrap_angle
+from tms_rp.ic120.geo import GnssProjector, projector_from_site
+
+
+def _run(samples, *, outage=None, jump=None):
+    ekf = Ic120Ekf(EkfParams())
+    errors, traces, results = [], [], []
+    for s in samples:
+        ekf.odometry(s.t, *s.odom)
+        in_outage = outage is not None and outage[0] <= s.t < outage[1]
+        if not in_outage:
+            gx, gy = s.gnss
+            if jump is not None and jump[0] <= s.t < jump[1]:
+                gx += 5.0
+            r = ekf.gnss(s.t, gx, gy)
+            if jump is not None and jump[0] <= s.t < jump[1]:
+                results.append(r)
+        ekf.azimuth(s.t, s.azimuth)
+        x, y, yaw = ekf.pose
+        errors.append(math.hypot(x - s.truth[0], y - s.truth[1]))
+        traces.append(float(np.trace(ekf.cov[:2, :2])))
+    return ekf, np.array(errors), np.array(traces), results
+
+
+def test_rms_under_5cm_with_2cm_gnss_noise_and_slip():
+    samples = simulate(120.0, gnss_sigma=0.02, slip=0.04)
+    _, errors, _, _ = _run(samples)
+    rms = math.sqrt(float(np.mean(errors[10:] ** 2)))
+    assert rms < 0.05, f"RMS {rms:.4f} m"
+
+
+def test_outage_10s_error_bounded_and_covariance_grows():
+    samples = simulate(60.0, gnss_sigma=0.02, slip=0.04)
+    ekf, errors, traces, _ = _run(samples, outage=(20.0, 30.0))
+    i0, i1 = 200, 299  # t = 20.0 s .. 29.9 s
+    assert errors[i0:i1].max() < 0.5, f"max error during outage {errors[i0:i1].max():.3f} m"
+    assert traces[i1 - 1] > 5.0 * traces[i0 - 1], "covariance did not grow during the outage"
+    assert np.all(np.diff(traces[i0:i1]) >= -1e-12), "covariance must not shrink without GNSS"
+    assert errors[i1 + 20:].max() < 0.1, "no recovery after the outage"
+
+
+def test_5m_jump_is_rejected():
+    samples = simulate(60.0)
+    ekf, errors, _, results = _run(samples, jump=(30.0, 33.0))
+    assert results and not any(r.accepted for r in results)
+    assert min(r.mahalanobis2 for r in results) > ekf.params.gate_chi2
+    assert errors[300:330].max() < 0.1
+    assert ekf.stats.gnss_rejected == len(results)
+
+
+def test_persistent_offset_reinitialises_after_timeout():
+    samples = simulate(60.0)
+    ekf, errors, _, _ = _run(samples, jump=(10.0, 60.0))
+    assert ekf.stats.reinits >= 1
+    assert errors[-1] > 4.0  # it now follows the (shifted) GNSS, as designed
+
+
+def test_yaw_wraps_across_pi():
+    ekf = Ic120Ekf()
+    ekf.azimuth(0.0, math.pi - 0.01)
+    ekf.gnss(0.0, 0.0, 0.0)
+    ekf.odometry(0.0, 0.0, 0.0, 0.0)
+    r = ekf.azimuth(0.1, -math.pi + 0.01)
+    assert r.accepted
+    assert abs(wrap_angle(ekf.pose[2] - math.pi)) < 0.02
+
+
+def test_map_to_odom_composes_back_to_pose():
+    ekf = Ic120Ekf()
+    ekf.azimuth(0.0, 0.5)
+    ekf.gnss(0.0, 10.0, 20.0)
+    ekf.odometry(0.0, 1.0, 2.0, 0.2)
+    ekf.odometry(0.1, 1.1, 2.05, 0.21)
+    tx, ty, tyaw = ekf.map_to_odom()
+    ox, oy, oyaw = 1.1, 2.05, 0.21
+    c, s = math.cos(tyaw), math.sin(tyaw)
+    x, y, yaw = ekf.pose
+    assert (tx + c * ox - s * oy, ty + s * ox + c * oy) == pytest.approx((x, y), abs=1e-9)
+    assert wrap_angle(tyaw + oyaw - yaw) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_non_finite_inputs_raise(bad):
+    ekf = Ic120Ekf()
+    with pytest.raises(ValueError, match="not finite"):
+        ekf.gnss(0.0, bad, 0.0)
+    with pytest.raises(ValueError, match="odometry x"):
+        ekf.odometry(0.0, bad, 0.0, 0.0)
+
+
+def test_bad_params_name_the_key():
+    with pytest.raises(ValueError, match="gnss_sigma"):
+        EkfParams(gnss_sigma=0.0)
+    with pytest.raises(ValueError, match="unknown keys"):
+        EkfParams.from_dict({"gnss_sigmaa": 0.1})
+
+
+def test_projection_origin_and_round_trip():
+    proj = projector_from_site()
+    # the site origin's geodetic coordinates map to ~(0, 0)
+    lat, lon, alt = proj.to_geodetic(0.0, 0.0, 0.0)
+    assert proj.to_map(lat, lon, alt) == pytest.approx((0.0, 0.0, 0.0), abs=1e-4)
+    # 100 m east / 50 m north round trip, axis order x = east, y = north
+    lat2, lon2, _ = proj.to_geodetic(100.0, 50.0)
+    assert lon2 > lon and lat2 > lat
+    assert proj.to_map(lat2, lon2)[:2] == pytest.approx((100.0, 50.0), abs=1e-4)
+    # the rounded geodetic origin of site.yaml is within 0.2 m of the plane origin
+    x, y, _ = proj.to_map(36.12626, 140.07103)
+    assert math.hypot(x, y) < 0.2
+
+
+def test_projection_matches_zone_ix_origin():
+    # Zone IX origin 36N 139 50'E is plane (0, 0): with a zero map origin the projector returns it.
+    proj = GnssProjector("EPSG:6677", {"easting": 0.0, "northing": 0.0})
+    assert proj.to_map(36.0, 139.0 + 50.0 / 60.0)[:2] == pytest.approx((0.0, 0.0), abs=1e-3)
+
+
+def test_projection_rejects_bad_fix_and_crs():
+    proj = projector_from_site()
+    with pytest.raises(ValueError, match="invalid GNSS fix"):
+        proj.to_map(float("nan"), 140.0)
+    with pytest.raises(ValueError, match="EPSG:999999"):
+        GnssProjector("EPSG:999999", {"easting": 0, "northing": 0})

@@ -1,0 +1,249 @@
+"""EKF localisation of the IC120 in the map frame: track odometry + GNSS position (+ azimuth).
+
+State ``[x, y, yaw, k]`` in ``map`` (REP-105), ``k`` being the odometry scale error (track slip: the
+machine moves ``(1 + k)`` times what the tracks report). Odometry is used as a *relative* motion: the pose
+change between two consecutive ``odom``-frame poses is expressed in the body frame, scaled by ``1 + k`` and
+applied to the estimate, with process noise proportional to the distance driven and the angle turned plus
+a small time-based random walk. Learning ``k`` while GNSS is good keeps a GNSS outage's drift small. GNSS fixes (already projected to the map frame) and azimuths correct the state
+through filterpy's :class:`~filterpy.kalman.ExtendedKalmanFilter`; a measurement whose squared Mahalanobis
+distance exceeds the chi-square gate is rejected (a 5 m multipath jump), and after ``reinit_after_s`` of
+nothing but rejections the filter re-initialises on GNSS (the estimate, not the fix, was wrong).
+
+The map->odom transform (what a TF broadcaster would publish) is ``map_T_base * inv(odom_T_base)``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+__all__ = ["EkfParams", "Ic120Ekf", "wrap_angle", "UpdateResult"]
+
+LOGGER = logging.getLogger(__name__)
+
+
+def wrap_angle(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass(frozen=True)
+class EkfParams:
+    """Noise and gating parameters (config/nav/ic120_nav.yaml ``localization``)."""
+
+    gnss_sigma: float = 0.02
+    azimuth_sigma: float = 0.01
+    odom_slip: float = 0.05
+    odom_yaw_slip: float = 0.02
+    odom_drift_xy: float = 0.002
+    scale_sigma: float = 0.1
+    scale_walk: float = 0.002
+    gate_chi2: float = 13.8
+    gate_chi2_yaw: float = 10.8
+    reinit_after_s: float = 10.0
+    initial_yaw_sigma: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("gnss_sigma", "azimuth_sigma", "gate_chi2", "gate_chi2_yaw", "initial_yaw_sigma"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"localization.{name} must be > 0, got {value!r}")
+        for name in ("odom_slip", "odom_yaw_slip", "odom_drift_xy", "reinit_after_s", "scale_sigma", "scale_walk"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"localization.{name} must be >= 0, got {value!r}")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> EkfParams:
+        """Build from the ``localization`` section; unknown keys (other than geodetic_crs) are an error."""
+        known = set(cls.__dataclass_fields__)
+        extra = set(d) - known - {"geodetic_crs"}
+        if extra:
+            raise ValueError(f"localization: unknown keys {sorted(extra)}; known: {sorted(known)}")
+        return cls(**{k: float(v) for k, v in d.items() if k in known})
+
+
+@dataclass
+class UpdateResult:
+    """Outcome of one measurement: accepted or not, and its squared Mahalanobis distance."""
+
+    accepted: bool
+    mahalanobis2: float
+    reinitialised: bool = False
+
+
+@dataclass
+class _Stats:
+    gnss_accepted: int = 0
+    gnss_rejected: int = 0
+    yaw_accepted: int = 0
+    yaw_rejected: int = 0
+    reinits: int = 0
+    last: dict = field(default_factory=dict)
+
+
+class Ic120Ekf:
+    """The filter. Feed :meth:`odometry`, :meth:`gnss`, :meth:`azimuth`; read :attr:`pose` and :attr:`cov`.
+
+    Times are seconds on any monotonic clock shared by the three inputs (message stamps or sim time).
+    """
+
+    def __init__(self, params: EkfParams | None = None) -> None:
+        self.params = params or EkfParams()
+        self._kf = ExtendedKalmanFilter(dim_x=4, dim_z=2)
+        self.initialised = False
+        self._last_odom: tuple[float, float, float] | None = None
+        self._last_odom_t: float | None = None
+        self._yaw_known = False
+        self._reject_since: float | None = None
+        self._pending_yaw: tuple[float, float] | None = None
+        self.stats = _Stats()
+
+    # --- state ---------------------------------------------------------------------------------
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """Estimated (x, y, yaw) in map."""
+        x = self._kf.x
+        return float(x[0]), float(x[1]), float(x[2])
+
+    @property
+    def cov(self) -> np.ndarray:
+        """3x3 covariance of (x, y, yaw)."""
+        return self._kf.P[:3, :3].copy()
+
+    @property
+    def odom_scale(self) -> float:
+        """Estimated odometry scale error ``k`` (true distance = (1 + k) x reported)."""
+        return float(self._kf.x[3])
+
+    def map_to_odom(self) -> tuple[float, float, float]:
+        """Transform map->odom as (x, y, yaw): the correction REP-105 puts between the two frames."""
+        if self._last_odom is None:
+            return 0.0, 0.0, 0.0
+        mx, my, myaw = self.pose
+        ox, oy, oyaw = self._last_odom
+        yaw = wrap_angle(myaw - oyaw)
+        c, s = math.cos(yaw), math.sin(yaw)
+        return mx - (c * ox - s * oy), my - (s * ox + c * oy), yaw
+
+    # --- inputs --------------------------------------------------------------------------------
+    def odometry(self, t: float, x: float, y: float, yaw: float) -> None:
+        """An odom-frame pose of base_link at time ``t``: predicts with the increment since the last one."""
+        for name, v in (("t", t), ("x", x), ("y", y), ("yaw", yaw)):
+            if not math.isfinite(v):
+                raise ValueError(f"odometry {name} is not finite: {v!r}")
+        if self._last_odom is None or not self.initialised:
+            self._last_odom, self._last_odom_t = (x, y, yaw), t
+            return
+        px, py, pyaw = self._last_odom
+        c, s = math.cos(pyaw), math.sin(pyaw)
+        dxw, dyw = x - px, y - py
+        dx, dy = c * dxw + s * dyw, -s * dxw + c * dyw  # increment in the previous body frame
+        dyaw = wrap_angle(yaw - pyaw)
+        dt = max(0.0, t - (self._last_odom_t if self._last_odom_t is not None else t))
+        self._last_odom, self._last_odom_t = (x, y, yaw), t
+        self._predict(dx, dy, dyaw, dt)
+
+    def _predict(self, dx: float, dy: float, dyaw: float, dt: float) -> None:
+        p = self.params
+        kf = self._kf
+        th = float(kf.x[2])
+        k = float(kf.x[3])
+        c, s = math.cos(th), math.sin(th)
+        wx, wy = c * dx - s * dy, s * dx + c * dy  # reported increment in map axes
+        kf.x = np.array([kf.x[0] + (1 + k) * wx, kf.x[1] + (1 + k) * wy, wrap_angle(th + dyaw), k])
+        jac = np.array([
+            [1.0, 0.0, -(1 + k) * wy, wx],
+            [0.0, 1.0, (1 + k) * wx, wy],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ])
+        dist = math.hypot(dx, dy)
+        sig_xy2 = (p.odom_slip * dist) ** 2 + p.odom_drift_xy**2 * dt
+        sig_yaw2 = (p.odom_yaw_slip * abs(dyaw)) ** 2 + (0.001 * dist) ** 2 + 1e-8 * dt
+        q = np.diag([sig_xy2, sig_xy2, sig_yaw2, (p.scale_walk * dist) ** 2])
+        kf.P = jac @ kf.P @ jac.T + q
+        kf.P = 0.5 * (kf.P + kf.P.T)
+
+    def gnss(self, t: float, x: float, y: float, sigma: float | None = None) -> UpdateResult:
+        """A GNSS fix projected to map (x, y) [m] with 1-sigma ``sigma`` (default ``gnss_sigma``)."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError(f"GNSS fix is not finite: x={x!r} y={y!r}")
+        sig = self.params.gnss_sigma if sigma is None or not math.isfinite(sigma) or sigma <= 0 else sigma
+        r = np.eye(2) * sig**2
+        if not self.initialised:
+            self._initialise(x, y, r)
+            return UpdateResult(True, 0.0, reinitialised=False)
+        z = np.array([x, y])
+        h = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+        innov = z - self._kf.x[:2]
+        s_mat = h @ self._kf.P @ h.T + r
+        d2 = float(innov @ np.linalg.solve(s_mat, innov))
+        if d2 > self.params.gate_chi2:
+            self.stats.gnss_rejected += 1
+            if self._reject_since is None:
+                self._reject_since = t
+            if self.params.reinit_after_s > 0 and t - self._reject_since >= self.params.reinit_after_s:
+                LOGGER.warning("GNSS rejected for %.1f s: re-initialising on the fix", t - self._reject_since)
+                self._initialise(x, y, r, keep_yaw=True)
+                self.stats.reinits += 1
+                return UpdateResult(True, d2, reinitialised=True)
+            return UpdateResult(False, d2)
+        self._reject_since = None
+        self._kf.update(z, lambda _x: h, lambda xs: xs[:2], R=r)
+        self._kf.x[2] = wrap_angle(float(self._kf.x[2]))
+        self.stats.gnss_accepted += 1
+        return UpdateResult(True, d2)
+
+    def azimuth(self, t: float, yaw: float, sigma: float | None = None) -> UpdateResult:
+        """An absolute heading (ENU yaw, rad) from the GNSS compass / IMU."""
+        if not math.isfinite(yaw):
+            raise ValueError(f"azimuth is not finite: {yaw!r}")
+        sig = self.params.azimuth_sigma if sigma is None or not math.isfinite(sigma) or sigma <= 0 else sigma
+        if not self.initialised:
+            self._pending_yaw = (yaw, sig)
+            return UpdateResult(True, 0.0)
+        if not self._yaw_known:
+            self._kf.x[2] = wrap_angle(yaw)
+            self._kf.P[2, :] = 0.0
+            self._kf.P[:, 2] = 0.0
+            self._kf.P[2, 2] = sig**2
+            self._yaw_known = True
+            return UpdateResult(True, 0.0)
+        h = np.array([[0.0, 0.0, 1.0, 0.0]])
+        r = np.array([[sig**2]])
+        innov = wrap_angle(yaw - float(self._kf.x[2]))
+        s_val = float((h @ self._kf.P @ h.T + r)[0, 0])
+        d2 = innov * innov / s_val
+        if d2 > self.params.gate_chi2_yaw:
+            self.stats.yaw_rejected += 1
+            return UpdateResult(False, d2)
+        self._kf.update(
+            np.array([yaw]), lambda _x: h, lambda xs: np.array([xs[2]]), R=r,
+            residual=lambda a, b: np.array([wrap_angle(float(a[0]) - float(b[0]))]),
+        )
+        self._kf.x[2] = wrap_angle(float(self._kf.x[2]))
+        self.stats.yaw_accepted += 1
+        return UpdateResult(True, d2)
+
+    def _initialise(self, x: float, y: float, r: np.ndarray, *, keep_yaw: bool = False) -> None:
+        yaw = float(self._kf.x[2]) if keep_yaw else 0.0
+        yaw_var = float(self._kf.P[2, 2]) if keep_yaw else self.params.initial_yaw_sigma**2
+        if not keep_yaw:
+            self._yaw_known = False
+            if self._pending_yaw is not None:
+                yaw, sig = self._pending_yaw
+                yaw_var = sig**2
+                self._yaw_known = True
+            elif self._last_odom is not None:
+                yaw = self._last_odom[2]  # odometry yaw comes from the machine's azimuth sensor
+        k = float(self._kf.x[3]) if keep_yaw else 0.0
+        k_var = float(self._kf.P[3, 3]) if keep_yaw else self.params.scale_sigma**2
+        self._kf.x = np.array([x, y, wrap_angle(yaw), k])
+        self._kf.P = np.diag([r[0, 0], r[1, 1], yaw_var, k_var])
+        self.initialised = True
+        self._reject_since = None
