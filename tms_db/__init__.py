@@ -6,3 +6,8 @@ schema (database ``rostmsdb``, collections ``task`` and ``parameter``). The back
 ``mongodb://...`` goes through pymongo to a real MongoDB; the default is an embedded on-disk store
 with the same API. The reader/writer nodes expose it to other processes over ROS 2 services/topics.
 """
+
+from tms_db.errors import RecordNotFound, StoreError, ValidationError
+from tms_db.store import DATABASE, Store, default_path, open_store
+
+__all__ = ["open_store", "Store", "StoreError", "RecordNotFound", "ValidationError", "DATABASE", "default_path"]

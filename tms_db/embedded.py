@@ -1,0 +1,439 @@
+"""The embedded backend: a small document store on SQLite, safe across processes.
+
+Why not montydb: DESIGN §5 measured montydb (sqlite storage) losing ``$inc`` updates across processes
+(4 x 1,000 increments left the counter at 177). Here every document is one row holding its JSON body,
+and every read-modify-write (set fields, compare-and-set, increment, add task) runs inside one
+``BEGIN IMMEDIATE`` transaction, so writers in different processes serialise on SQLite's write lock and
+no update is lost. Writers first take an ``flock`` on ``write.lock`` next to the database: the kernel
+wakes the next writer as soon as the lock is free, where SQLite's own busy handler would sleep
+(milliseconds) and poll. The database runs in WAL mode: readers never block writers or each other and
+always see a whole committed document (a row is replaced atomically, so no torn document). With
+``synchronous=NORMAL`` a committed transaction survives the writing process being killed (SIGKILL);
+pass ``synchronous="FULL"`` to also survive power loss at some cost in write rate.
+
+Values keep their types through JSON: bool, int (any size), float, str, null, arrays, sub-documents;
+datetimes are stored as ``{"$date": "<ISO-8601 UTC>"}`` (MongoDB Extended JSON) and read back as
+timezone-aware UTC datetimes; ``_id`` is a ``bson.ObjectId`` kept in its own column.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import fcntl
+import json
+import os
+import sqlite3
+import threading
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+from bson import ObjectId
+
+from tms_db.errors import RecordNotFound, StoreError, ValidationError
+from tms_db.schema import is_number, validate_fields, validate_parameter
+from tms_db.store import (
+    _MISSING,
+    Store,
+    build_task_doc,
+    check_record_name,
+    check_task_id,
+    choose_task_id,
+    now_utc,
+    param_filter_text,
+    values_equal,
+)
+
+__all__ = ["EmbeddedStore", "DB_FILE", "encode_body", "decode_body"]
+
+DB_FILE = "rostmsdb.sqlite3"
+LOCK_FILE = "write.lock"
+SCHEMA_VERSION = "1"
+T = TypeVar("T")
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS documents (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    collection TEXT NOT NULL,
+    oid TEXT NOT NULL,
+    task_id INTEGER,
+    model_name TEXT,
+    record_name TEXT,
+    body TEXT NOT NULL,
+    UNIQUE (collection, oid)
+);
+CREATE UNIQUE INDEX IF NOT EXISTS task_by_id ON documents (task_id) WHERE collection = 'task';
+CREATE UNIQUE INDEX IF NOT EXISTS parameter_by_key ON documents (record_name, model_name)
+    WHERE collection = 'parameter';
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+"""
+
+
+def _default(value: Any) -> Any:
+    if isinstance(value, _dt.datetime):
+        if value.tzinfo is None:
+            value = value.replace(tzinfo=_dt.UTC)
+        value = value.astimezone(_dt.UTC)
+        return {"$date": value.strftime("%Y-%m-%dT%H:%M:%S.") + f"{value.microsecond // 1000:03d}Z"}
+    if isinstance(value, ObjectId):
+        return {"$oid": str(value)}
+    if isinstance(value, tuple):
+        return list(value)
+    raise TypeError(f"unsupported value type {type(value).__name__}")
+
+
+def _hook(obj: dict) -> Any:
+    if len(obj) == 1:
+        if "$date" in obj and isinstance(obj["$date"], str):
+            return _dt.datetime.strptime(obj["$date"], "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=_dt.UTC)
+        if "$oid" in obj and isinstance(obj["$oid"], str):
+            return ObjectId(obj["$oid"])
+    return obj
+
+
+def encode_body(doc: Mapping[str, Any]) -> str:
+    """JSON text of a document without ``_id`` (types preserved; see module docstring)."""
+    return json.dumps({k: v for k, v in doc.items() if k != "_id"}, default=_default, allow_nan=False,
+                      separators=(",", ":"), ensure_ascii=False)
+
+
+def decode_body(oid: str, body: str) -> dict:
+    """The document stored as ``body`` with its ``_id``."""
+    doc = {"_id": ObjectId(oid)}
+    doc.update(json.loads(body, object_hook=_hook))
+    return doc
+
+
+def _key_columns(collection: str, doc: Mapping[str, Any]) -> tuple[Any, Any, Any]:
+    """(task_id, model_name, record_name) index columns of a document."""
+    if collection == "task":
+        tid = doc.get("task_id")
+        return (tid if isinstance(tid, int) and not isinstance(tid, bool) else None), None, None
+    if collection == "parameter":
+        record = doc.get("record_name")
+        model = doc.get("model_name")
+        return None, (model if isinstance(model, str) else ""), (record if isinstance(record, str) else None)
+    return None, None, None
+
+
+class EmbeddedStore(Store):
+    """Document store in ``<directory>/rostmsdb.sqlite3``; one connection per process, shared by its threads."""
+
+    def __init__(self, directory: str | os.PathLike, *, synchronous: str = "NORMAL", busy_timeout_s: float = 60.0) -> None:
+        self.directory = Path(directory)
+        if synchronous.upper() not in ("NORMAL", "FULL"):
+            raise StoreError(f"synchronous {synchronous!r}: expected NORMAL or FULL")
+        self._synchronous = synchronous.upper()
+        self._busy_timeout_s = busy_timeout_s
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(f"embedded store {self.directory}: cannot create directory: {exc.strerror}") from None
+        self.file = self.directory / DB_FILE
+        self._lock = threading.RLock()
+        self._conn: sqlite3.Connection | None = None
+        self._lock_fd: int | None = None
+        self._pid = -1
+        self._connect()
+
+    def __repr__(self) -> str:
+        return f"EmbeddedStore({str(self.directory)!r})"
+
+    # ---- connection ------------------------------------------------------------------------------
+    def _connect(self) -> sqlite3.Connection:
+        if self._conn is not None and self._pid == os.getpid():
+            return self._conn
+        try:
+            conn = sqlite3.connect(self.file, timeout=self._busy_timeout_s, isolation_level=None, check_same_thread=False)
+            conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute(f"PRAGMA synchronous={self._synchronous}")
+            self._lock_fd = os.open(self.directory / LOCK_FILE, os.O_CREAT | os.O_RDWR, 0o666)
+            self._conn = conn
+            self._pid = os.getpid()
+            self._transaction(lambda c: c.executescript(_SCHEMA) and None, script=True)
+            self._transaction(lambda c: c.execute(
+                "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema_version', ?)", (SCHEMA_VERSION,)))
+        except sqlite3.DatabaseError as exc:
+            self._conn = None
+            raise StoreError(f"embedded store {self.file}: cannot open: {exc}") from None
+        return conn
+
+    @contextlib.contextmanager
+    def _write_lock(self) -> Iterator[None]:
+        assert self._lock_fd is not None
+        fcntl.flock(self._lock_fd, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
+
+    def _transaction(self, body: Callable[[sqlite3.Connection], T], *, script: bool = False) -> T:
+        """Run ``body`` in one BEGIN IMMEDIATE transaction under the cross-process write lock."""
+        with self._lock:
+            conn = self._connect()
+            with self._write_lock():
+                if script:  # executescript commits on its own
+                    return body(conn)
+                conn.execute("BEGIN IMMEDIATE")
+                try:
+                    result = body(conn)
+                except BaseException:
+                    conn.execute("ROLLBACK")
+                    raise
+                conn.execute("COMMIT")
+                return result
+
+    def _query(self, sql: str, args: tuple = ()) -> list[tuple]:
+        with self._lock:
+            try:
+                return self._connect().execute(sql, args).fetchall()
+            except sqlite3.DatabaseError as exc:
+                raise StoreError(f"embedded store {self.file}: {exc}") from None
+
+    # ---- tasks -----------------------------------------------------------------------------------
+    def get_task(self, task_id: int) -> dict:
+        check_task_id(task_id)
+        rows = self._query("SELECT oid, body FROM documents WHERE collection='task' AND task_id=?", (task_id,))
+        if not rows:
+            raise RecordNotFound(f"task_id {task_id}: no such task in collection 'task'")
+        return decode_body(*rows[0])
+
+    def add_task(self, xml: str, task_id: int | None = None, description: str = "", model_name: str | None = None,
+                 *, replace: bool = False) -> int:
+        doc = build_task_doc(xml, task_id, description, model_name)
+
+        def insert(conn: sqlite3.Connection) -> int:
+            tid = task_id
+            if tid is None:
+                existing = {}
+                for body, tid_ in conn.execute("SELECT body, task_id FROM documents WHERE collection='task'"):
+                    existing[tid_] = json.loads(body).get("task_sequence", "")
+                tid = choose_task_id(existing, doc["task_sequence"])
+            else:
+                row = conn.execute("SELECT oid FROM documents WHERE collection='task' AND task_id=?", (tid,)).fetchone()
+                if row is not None:
+                    if not replace:
+                        raise StoreError(f"task_id {tid}: already exists (pass replace=True / --replace to overwrite)")
+                    conn.execute("DELETE FROM documents WHERE collection='task' AND task_id=?", (tid,))
+            full = {"task_id": tid, **doc}
+            conn.execute("INSERT INTO documents (collection, oid, task_id, body) VALUES ('task', ?, ?, ?)",
+                         (str(ObjectId()), tid, encode_body(full)))
+            return tid
+
+        return self._transaction(insert)
+
+    def list_tasks(self) -> list[dict]:
+        rows = self._query("SELECT oid, body FROM documents WHERE collection='task' ORDER BY task_id")
+        return [decode_body(*row) for row in rows]
+
+    def remove_task(self, task_id: int) -> None:
+        check_task_id(task_id)
+
+        def delete(conn: sqlite3.Connection) -> None:
+            cur = conn.execute("DELETE FROM documents WHERE collection='task' AND task_id=?", (task_id,))
+            if cur.rowcount == 0:
+                raise RecordNotFound(f"task_id {task_id}: no such task in collection 'task'")
+
+        self._transaction(delete)
+
+    # ---- parameters ------------------------------------------------------------------------------
+    @staticmethod
+    def _select_param(model_name: str | None) -> tuple[str, Callable[[str], tuple]]:
+        if model_name:
+            return ("SELECT seq, oid, body FROM documents WHERE collection='parameter' AND record_name=? "
+                    "AND model_name=?", lambda r: (r, model_name))
+        return ("SELECT seq, oid, body FROM documents WHERE collection='parameter' AND record_name=? "
+                "ORDER BY seq LIMIT 1", lambda r: (r,))
+
+    def _not_found(self, record_name: str, model_name: str | None, fields: Iterable[str] = ()) -> RecordNotFound:
+        fields = list(fields)
+        text = param_filter_text(record_name, model_name) + " not found in collection 'parameter'"
+        if fields:
+            text += f" (setting field(s) {', '.join(map(repr, fields))})"
+        if model_name:
+            others = self._query("SELECT model_name FROM documents WHERE collection='parameter' AND record_name=?",
+                                 (record_name,))
+            if others:
+                text += f"; it exists for model(s) {sorted(o[0] for o in others)}"
+        return RecordNotFound(text)
+
+    def get_parameter(self, model_name: str | None, record_name: str) -> dict:
+        check_record_name(record_name)
+        sql, args = self._select_param(model_name)
+        rows = self._query(sql, args(record_name))
+        if not rows:
+            raise self._not_found(record_name, model_name)
+        return decode_body(*rows[0][1:])
+
+    def get_record(self, record_name: str) -> dict:
+        return self.get_parameter(None, record_name)
+
+    def list_parameters(self, model_name: str | None = None) -> list[dict]:
+        if model_name:
+            rows = self._query("SELECT oid, body FROM documents WHERE collection='parameter' AND model_name=? "
+                               "ORDER BY seq", (model_name,))
+        else:
+            rows = self._query("SELECT oid, body FROM documents WHERE collection='parameter' ORDER BY seq")
+        return [decode_body(*row) for row in rows]
+
+    def _modify(self, record_name: str, model_name: str | None, change: Callable[[dict], T], *,
+                upsert: bool = False, fields: Iterable[str] = ()) -> tuple[T, dict]:
+        """Read-modify-write one parameter document in one transaction; ``change`` edits it in place."""
+        check_record_name(record_name)
+        sql, args = self._select_param(model_name)
+
+        def run(conn: sqlite3.Connection) -> tuple[T, dict]:
+            row = conn.execute(sql, args(record_name)).fetchone()
+            if row is None:
+                if not upsert:
+                    raise self._not_found(record_name, model_name, fields)
+                seq, doc = None, {"_id": ObjectId(), "record_name": record_name}
+                if model_name:
+                    doc["model_name"] = model_name
+            else:
+                seq, doc = row[0], decode_body(row[1], row[2])
+            result = change(doc)
+            if result is False:  # compare-and-set miss: nothing to write
+                return result, doc
+            doc["timestamps"] = now_utc()
+            validate_parameter(doc)
+            _tid, model, record = _key_columns("parameter", doc)
+            if seq is None:
+                conn.execute("INSERT INTO documents (collection, oid, model_name, record_name, body) "
+                             "VALUES ('parameter', ?, ?, ?, ?)", (str(doc["_id"]), model, record, encode_body(doc)))
+            else:
+                conn.execute("UPDATE documents SET body=? WHERE seq=?", (encode_body(doc), seq))
+            return result, doc
+
+        return self._transaction(run)
+
+    def set_fields(self, record_name: str, fields: Mapping[str, Any], *, model_name: str | None = None,
+                   upsert: bool = False) -> dict:
+        validate_fields(record_name, fields, protected=("_id", "record_name", "model_name"))
+        return self._modify(record_name, model_name, lambda doc: doc.update(fields), upsert=upsert, fields=fields)[1]
+
+    def compare_and_set(self, record_name: str, field: str, expected: Any, new: Any, *,
+                        model_name: str | None = None) -> bool:
+        validate_fields(record_name, {field: new}, protected=("_id", "record_name", "model_name"))
+
+        def change(doc: dict) -> bool:
+            if not values_equal(doc.get(field, _MISSING), expected):
+                return False
+            doc[field] = new
+            return True
+
+        return self._modify(record_name, model_name, change, fields=(field,))[0]
+
+    def increment(self, record_name: str, field: str, by: int | float = 1, *, model_name: str | None = None) -> Any:
+        validate_fields(record_name, {field: by}, protected=("_id", "record_name", "model_name"))
+        if not is_number(by):
+            raise ValidationError(f"record {record_name!r}: field {field!r}: increment {by!r} is not a number")
+
+        def change(doc: dict) -> Any:
+            current = doc.get(field, 0)
+            if not is_number(current):
+                raise ValidationError(f"record {record_name!r}: field {field!r}: cannot increment non-number {current!r}")
+            doc[field] = current + by
+            return doc[field]
+
+        return self._modify(record_name, model_name, change, fields=(field,))[0]
+
+    def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
+        validate_parameter(doc)
+        doc = dict(doc)
+        _tid, model, record = _key_columns("parameter", doc)
+
+        def put(conn: sqlite3.Connection) -> None:
+            row = conn.execute("SELECT seq, oid FROM documents WHERE collection='parameter' AND record_name=? "
+                               "AND model_name=?", (record, model)).fetchone()
+            if row is not None:
+                doc.setdefault("_id", ObjectId(row[1]))
+                conn.execute("UPDATE documents SET oid=?, body=? WHERE seq=?", (str(doc["_id"]), encode_body(doc), row[0]))
+            else:
+                oid = str(doc.get("_id") or ObjectId())
+                conn.execute("INSERT INTO documents (collection, oid, model_name, record_name, body) "
+                             "VALUES ('parameter', ?, ?, ?, ?)", (oid, model, record, encode_body(doc)))
+
+        self._transaction(put)
+
+    def remove_parameter(self, record_name: str, *, model_name: str | None = None) -> None:
+        check_record_name(record_name)
+
+        def delete(conn: sqlite3.Connection) -> None:
+            if model_name:
+                cur = conn.execute("DELETE FROM documents WHERE collection='parameter' AND record_name=? AND model_name=?",
+                                   (record_name, model_name))
+            else:
+                cur = conn.execute("DELETE FROM documents WHERE seq = (SELECT seq FROM documents WHERE "
+                                   "collection='parameter' AND record_name=? ORDER BY seq LIMIT 1)", (record_name,))
+            if cur.rowcount == 0:
+                raise self._not_found(record_name, model_name)
+
+        self._transaction(delete)
+
+    # ---- collections -----------------------------------------------------------------------------
+    def collection_names(self) -> list[str]:
+        return [r[0] for r in self._query("SELECT DISTINCT collection FROM documents ORDER BY collection")]
+
+    def export_collection(self, name: str) -> Iterator[dict]:
+        for row in self._query("SELECT oid, body FROM documents WHERE collection=? ORDER BY seq", (name,)):
+            yield decode_body(*row)
+
+    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> int:
+        if not isinstance(name, str) or not name or name.startswith("$"):
+            raise ValidationError(f"collection name {name!r}: must be a non-empty string")
+        docs = [dict(d) for d in docs]
+        for i, doc in enumerate(docs):
+            if not isinstance(doc, dict):
+                raise ValidationError(f"collection {name!r}: document {i} is not an object")
+
+        def put(conn: sqlite3.Connection) -> int:
+            if drop:
+                conn.execute("DELETE FROM documents WHERE collection=?", (name,))
+            for i, doc in enumerate(docs):
+                tid, model, record = _key_columns(name, doc)
+                oid = str(doc.get("_id") or ObjectId())
+                try:
+                    body = encode_body(doc)
+                    conn.execute("INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
+                                 "VALUES (?, ?, ?, ?, ?, ?)", (name, oid, tid, model, record, body))
+                except (TypeError, ValueError) as exc:
+                    raise ValidationError(f"collection {name!r}: document {i} (_id {oid}): {exc}") from None
+                except sqlite3.IntegrityError:
+                    key = f"task_id {tid}" if name == "task" else f"record {record!r} of model {model!r}"
+                    raise StoreError(f"collection {name!r}: document {i} (_id {oid}): duplicate _id or {key}") from None
+            return len(docs)
+
+        return self._transaction(put)
+
+    def check(self) -> list[str]:
+        problems: list[str] = []
+        try:
+            rows = self._query("PRAGMA integrity_check")
+        except StoreError as exc:
+            return [str(exc)]
+        problems += [f"sqlite integrity: {r[0]}" for r in rows if r[0] != "ok"]
+        for seq, collection, oid, tid, model, record, body in self._query(
+            "SELECT seq, collection, oid, task_id, model_name, record_name, body FROM documents ORDER BY seq"
+        ):
+            try:
+                doc = decode_body(oid, body)
+            except (ValueError, TypeError) as exc:
+                problems.append(f"{collection} row {seq} (_id {oid}): body is not a JSON document: {exc}")
+                continue
+            if not isinstance(doc, dict):
+                problems.append(f"{collection} row {seq} (_id {oid}): body is not an object")
+                continue
+            if _key_columns(collection, doc) != (tid, model, record):
+                problems.append(f"{collection} row {seq} (_id {oid}): index columns do not match the document")
+        return problems
+
+    def close(self) -> None:
+        with self._lock:
+            if self._conn is not None and self._pid == os.getpid():
+                self._conn.close()
+                if self._lock_fd is not None:
+                    os.close(self._lock_fd)
+            self._conn = None
+            self._lock_fd = None

@@ -1,0 +1,234 @@
+"""The store API every module uses, and ``open_store`` which picks the backend by URI.
+
+``open_store(uri="mongodb://...")`` -> :class:`tms_db.mongo.MongoStore` (pymongo, a real MongoDB);
+``open_store()`` / ``open_store(path=DIR)`` -> :class:`tms_db.embedded.EmbeddedStore` (SQLite in WAL mode
+under ``DIR``, default ``$TMS_DB_PATH`` else ``~/.local/share/tms/db``). Both implement :class:`Store`
+and behave the same (one test suite runs against both).
+
+Collections and shapes are the original's (database ``rostmsdb``): ``task`` documents
+``{task_id, type: "task", model_name, description, task_sequence}``; ``parameter`` documents
+``{model_name?, type?, record_name, ...payload}`` looked up by (model_name, record_name), and global
+blackboard groups in ``parameter`` looked up by ``record_name`` alone. Every write through
+``set_fields`` / ``compare_and_set`` / ``increment`` stamps ``timestamps`` (UTC datetime, millisecond
+precision, as MongoDB's ``$currentDate``). Values keep their types: bool stays bool, int stays int.
+"""
+
+from __future__ import annotations
+
+import abc
+import datetime as _dt
+import os
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from tms_db.errors import StoreError, ValidationError
+from tms_db.schema import is_number
+
+__all__ = ["Store", "open_store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS"]
+
+DATABASE = "rostmsdb"
+COLLECTIONS = ("task", "parameter")
+_MISSING = object()
+
+
+def default_path() -> Path:
+    """Directory of the embedded store: ``$TMS_DB_PATH`` else ``~/.local/share/tms/db``."""
+    env = os.environ.get("TMS_DB_PATH")
+    return Path(env).expanduser() if env else Path.home() / ".local" / "share" / "tms" / "db"
+
+
+def now_utc() -> _dt.datetime:
+    """Current UTC time truncated to milliseconds (the precision of a BSON Date)."""
+    now = _dt.datetime.now(_dt.UTC)
+    return now.replace(microsecond=now.microsecond // 1000 * 1000)
+
+
+def values_equal(current: Any, expected: Any) -> bool:
+    """Equality as a MongoDB filter sees it: bool never equals a number, 1 equals 1.0, None matches missing."""
+    if current is _MISSING:
+        current = None
+    if isinstance(current, bool) or isinstance(expected, bool):
+        return type(current) is type(expected) and current == expected
+    if is_number(current) and is_number(expected):
+        return current == expected
+    if isinstance(current, list | tuple) and isinstance(expected, list | tuple):
+        return len(current) == len(expected) and all(values_equal(a, b) for a, b in zip(current, expected, strict=True))
+    if isinstance(current, Mapping) and isinstance(expected, Mapping):
+        return list(current) == list(expected) and all(values_equal(current[k], expected[k]) for k in current)
+    return type(current) is type(expected) and current == expected
+
+
+def check_task_id(task_id: Any) -> int:
+    """A task id is a positive int (not a bool); anything else -> ValidationError naming it."""
+    if isinstance(task_id, bool) or not isinstance(task_id, int) or task_id <= 0:
+        raise ValidationError(f"task_id {task_id!r}: must be a positive integer")
+    return task_id
+
+
+def check_record_name(record_name: Any) -> str:
+    if not isinstance(record_name, str) or not record_name:
+        raise ValidationError(f"record_name {record_name!r}: must be a non-empty string")
+    return record_name
+
+
+class Store(abc.ABC):
+    """Tasks, parameters and the global blackboard; one implementation per backend.
+
+    Reads return plain dicts (``_id`` is a ``bson.ObjectId``). Writes are atomic per document;
+    concurrent writers in separate processes never lose updates.
+    """
+
+    database: str = DATABASE
+
+    # ---- tasks ------------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def get_task(self, task_id: int) -> dict:
+        """The task document with ``task_id``; RecordNotFound naming the id when absent."""
+
+    @abc.abstractmethod
+    def add_task(
+        self, xml: str, task_id: int | None = None, description: str = "", model_name: str | None = None,
+        *, replace: bool = False,
+    ) -> int:
+        """Store a behavior tree; returns its task id.
+
+        The XML must parse (ValidationError naming the task and ``task_sequence`` otherwise) and is
+        stored as one line, as the original ``task_generator`` does. Without ``task_id`` the new id is
+        the smallest free positive id, and a tree already stored (same one-line text, or contained in
+        a stored one) is refused naming the existing id. With ``task_id`` taken, StoreError unless
+        ``replace``. ``model_name`` defaults to the machine names found in the XML, comma-joined.
+        """
+
+    @abc.abstractmethod
+    def list_tasks(self) -> list[dict]:
+        """Every task document, by task id."""
+
+    @abc.abstractmethod
+    def remove_task(self, task_id: int) -> None:
+        """Delete a task; RecordNotFound when absent."""
+
+    # ---- parameters / blackboard ------------------------------------------------------------------
+    @abc.abstractmethod
+    def get_parameter(self, model_name: str | None, record_name: str) -> dict:
+        """The record (model_name, record_name); an empty/None model_name looks up by record_name only."""
+
+    @abc.abstractmethod
+    def get_record(self, record_name: str) -> dict:
+        """The first record named ``record_name`` (global blackboard lookup, as ``find_one({record_name})``)."""
+
+    @abc.abstractmethod
+    def list_parameters(self, model_name: str | None = None) -> list[dict]:
+        """Every parameter document (of one model when given), in insertion order."""
+
+    @abc.abstractmethod
+    def set_fields(
+        self, record_name: str, fields: Mapping[str, Any], *, model_name: str | None = None, upsert: bool = False
+    ) -> dict:
+        """Atomically set ``fields`` of one record and stamp ``timestamps``; returns the new document.
+
+        Unknown record (and not ``upsert``): RecordNotFound naming record and fields. A result that
+        breaks the record's shape (e.g. a scalar into a waypoint record): ValidationError naming the
+        field; nothing is written then.
+        """
+
+    @abc.abstractmethod
+    def compare_and_set(
+        self, record_name: str, field: str, expected: Any, new: Any, *, model_name: str | None = None
+    ) -> bool:
+        """Set ``field`` to ``new`` only if it currently equals ``expected`` (type-aware); True if set."""
+
+    @abc.abstractmethod
+    def increment(self, record_name: str, field: str, by: int | float = 1, *, model_name: str | None = None) -> Any:
+        """Atomically add ``by`` to a numeric field (missing counts as 0, as ``$inc``); returns the new value."""
+
+    @abc.abstractmethod
+    def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
+        """Validate and store a whole parameter document, replacing the one with the same (model_name, record_name)."""
+
+    @abc.abstractmethod
+    def remove_parameter(self, record_name: str, *, model_name: str | None = None) -> None:
+        """Delete one record; RecordNotFound when absent."""
+
+    # ---- whole collections (dump / restore) ---------------------------------------------------------
+    @abc.abstractmethod
+    def collection_names(self) -> list[str]:
+        """Names of the collections that hold documents."""
+
+    @abc.abstractmethod
+    def export_collection(self, name: str) -> Iterator[dict]:
+        """Every document of a collection, unchanged (with ``_id``)."""
+
+    @abc.abstractmethod
+    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> int:
+        """Insert documents as they are (like ``mongoimport``); ``drop`` empties the collection first."""
+
+    @abc.abstractmethod
+    def check(self) -> list[str]:
+        """The store's own consistency check: a list of problems, empty when consistent."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release connections and files."""
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **options: Any) -> Store:
+    """Open the store: ``mongodb://`` / ``mongodb+srv://`` URIs via pymongo, otherwise the embedded store.
+
+    ``path`` (embedded only) is a directory, created if missing; default :func:`default_path`.
+    ``options`` go to the backend (``database=`` for MongoDB, default ``rostmsdb`` or the URI's database).
+    """
+    if uri:
+        if uri.startswith(("mongodb://", "mongodb+srv://")):
+            from tms_db.mongo import MongoStore
+
+            return MongoStore(uri, **options)
+        if uri.startswith("file:"):
+            path = uri.removeprefix("file://").removeprefix("file:")
+        else:
+            raise StoreError(f"db uri {uri!r}: unsupported scheme; use mongodb://... or leave it empty for the embedded store")
+    from tms_db.embedded import EmbeddedStore
+
+    return EmbeddedStore(Path(path).expanduser() if path else default_path(), **options)
+
+
+def build_task_doc(xml: str, task_id: int | None, description: str, model_name: str | None) -> dict:
+    """The task document for ``add_task`` (without ``task_id`` when it is still to be chosen)."""
+    from tms_db.schema import detect_model_names, normalise_task_xml
+
+    label = f"task_id {task_id}" if task_id is not None else "new task"
+    if task_id is not None:
+        check_task_id(task_id)
+    if not isinstance(description, str):
+        raise ValidationError(f"{label}: field 'description' must be a string, got {description!r}")
+    sequence = normalise_task_xml(xml, label)
+    if model_name is None:
+        model_name = detect_model_names(sequence)
+    elif not isinstance(model_name, str):
+        raise ValidationError(f"{label}: field 'model_name' must be a string, got {model_name!r}")
+    doc = {"task_id": task_id, "type": "task", "model_name": model_name, "description": description,
+           "task_sequence": sequence}
+    if task_id is None:
+        del doc["task_id"]
+    return doc
+
+
+def choose_task_id(existing: Mapping[int, str], sequence: str) -> int:
+    """Smallest free positive id (the original generator's rule); refuse a tree already stored."""
+    for tid, stored in existing.items():
+        if sequence in stored:
+            raise StoreError(f"task already stored as task_id {tid} (same behavior tree); remove it or pass an explicit id")
+    tid = 1
+    while tid in existing:
+        tid += 1
+    return tid
+
+
+def param_filter_text(record_name: str, model_name: str | None) -> str:
+    return f"record {record_name!r}" + (f" of model {model_name!r}" if model_name else "")
