@@ -1,0 +1,65 @@
+"""The arrival processor: SENSING_ARRIVAL_FLG from the measured IC120 pose.
+
+The flag rises when the IC120 has stood within ``position_tolerance`` and ``yaw_tolerance`` of the
+loading point, slower than ``max_speed``, for ``hold_s`` seconds of (simulated) time; it falls as
+soon as any of these stops holding. Time is injected (``update(t, pose)``), so the same core runs
+on ``/clock`` time, wall time, or in a test.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from tms_sp.frames import Pose2D, wrap_angle
+
+__all__ = ["ArrivalParams", "ArrivalDetector"]
+
+
+@dataclass(frozen=True)
+class ArrivalParams:
+    """Parameters of :class:`ArrivalDetector` (config/tms_sp/sensing.yaml ``arrival``)."""
+
+    position_tolerance: float = 0.6
+    yaw_tolerance: float = math.radians(10.0)
+    max_speed: float = 0.05
+    hold_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("position_tolerance", "yaw_tolerance", "max_speed", "hold_s"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"ArrivalParams: {name} must be >= 0, got {getattr(self, name)}")
+
+
+@dataclass
+class ArrivalDetector:
+    """Stateful arrival check against one target pose."""
+
+    target: Pose2D
+    params: ArrivalParams = field(default_factory=ArrivalParams)
+    _last: tuple[float, Pose2D] | None = None
+    _since: float | None = None
+    speed: float = 0.0
+    distance: float = math.inf
+
+    def update(self, t: float, pose: Pose2D) -> bool:
+        """Feed one pose measured at time ``t`` [s]; returns the current flag value."""
+        if self._last is not None and t > self._last[0]:
+            lt, lp = self._last
+            self.speed = math.hypot(pose.x - lp.x, pose.y - lp.y) / (t - lt)
+        elif self._last is not None and t < self._last[0]:
+            self._since = None  # time jumped back (sim reset): start over
+        self._last = (t, pose)
+        self.distance = math.hypot(pose.x - self.target.x, pose.y - self.target.y)
+        yaw_err = abs(wrap_angle(pose.yaw - self.target.yaw))
+        inside = (
+            self.distance <= self.params.position_tolerance
+            and yaw_err <= self.params.yaw_tolerance
+            and self.speed <= self.params.max_speed
+        )
+        if not inside:
+            self._since = None
+            return False
+        if self._since is None:
+            self._since = t
+        return t - self._since >= self.params.hold_s

@@ -1,0 +1,212 @@
+"""Sensing configuration: config/tms_sp/sensing.yaml + the site and machine files, validated once.
+
+:func:`load_sensing_config` returns a frozen :class:`SensingConfig`; any missing or wrong key raises
+``ConfigError`` with ``file:line: key: problem``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tms_common.config import Where, config_path, load_yaml
+from tms_sp.arrival import ArrivalParams
+from tms_sp.frames import Pose2D
+from tms_sp.heightgrid import GridSpec
+from tms_sp.mound import ExcavationParams
+from tms_sp.vessel import VesselGeometry, VesselParams
+
+__all__ = ["SensingConfig", "MoundShape", "load_sensing_config"]
+
+
+@dataclass(frozen=True)
+class MoundShape:
+    """The mound of config/site.yaml (truncated cone)."""
+
+    cx: float
+    cy: float
+    base_radius: float
+    top_radius: float
+    height: float
+    ground_z: float
+
+    def bank_volume(self) -> float:
+        r1, r2, h = self.base_radius, self.top_radius, self.height
+        return math.pi * h / 3.0 * (r1 * r1 + r1 * r2 + r2 * r2)
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """Everything the sensing processors and node need."""
+
+    blackboard_record: str
+    resolution: float
+    points: dict[str, Pose2D]
+    mound: MoundShape
+    mound_grid: GridSpec
+    excavation: ExcavationParams
+    excavation_model: str
+    excavation_record: str
+    excavation_update_threshold: float
+    vessel_geom: VesselGeometry
+    vessel: VesselParams
+    vessel_model: str
+    release_record: str
+    angle_record: str
+    vessel_update_threshold: float
+    arrival: ArrivalParams
+    arrival_point: str
+    swing_axis_in_base: tuple[float, float]
+
+    @property
+    def zx200_base(self) -> Pose2D:
+        return self.points["zx200_base"]
+
+    def swing_axis_map(self) -> tuple[float, float]:
+        p = self.zx200_base.to_map([self.swing_axis_in_base[0], self.swing_axis_in_base[1], 0.0])
+        return float(p[0]), float(p[1])
+
+
+def _get(data: Any, where: Where, path: tuple[Any, ...], kind: type | tuple[type, ...] = (int, float)) -> Any:
+    node = data
+    for i, key in enumerate(path):
+        if not isinstance(node, dict) or key not in node:
+            raise where.error(path[:i], f"{'.'.join(map(str, path))}: missing key {key!r}")
+        node = node[key]
+    if kind in ((int, float), float) and isinstance(node, bool):
+        raise where.error(path, f"{'.'.join(map(str, path))}: expected a number, got {node!r}")
+    if not isinstance(node, kind):
+        names = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
+        raise where.error(path, f"{'.'.join(map(str, path))}: expected {names}, got {node!r}")
+    return node
+
+
+def _pose(data: Any, where: Where, path: tuple[Any, ...]) -> Pose2D:
+    return Pose2D(
+        x=float(_get(data, where, path + ("x",))),
+        y=float(_get(data, where, path + ("y",))),
+        yaw=float(_get(data, where, path + ("yaw",))),
+    )
+
+
+def load_sensing_config(
+    sensing: str | Path | None = None,
+    site: str | Path | None = None,
+    ic120: str | Path | None = None,
+    zx200: str | Path | None = None,
+) -> SensingConfig:
+    """Load and validate the sensing configuration (defaults: the project's config/ files)."""
+    s, sw = load_yaml(sensing or config_path("tms_sp", "sensing.yaml"))
+    t, tw = load_yaml(site or config_path("site.yaml"))
+    ic, iw = load_yaml(ic120 or config_path("machines", "ic120.yaml"))
+    zx, zw = load_yaml(zx200 or config_path("machines", "zx200.yaml"))
+
+    points: dict[str, Pose2D] = {}
+    pts = _get(t, tw, ("points",), dict)
+    for name, value in pts.items():
+        if isinstance(value, dict) and "yaw" in value:
+            points[name] = _pose(t, tw, ("points", name))
+    for needed in ("zx200_base", "P1", "P2", "P3", "P4", "P5"):
+        if needed not in points:
+            raise tw.error(("points",), f"points: missing pose {needed!r} (x, y, yaw)")
+
+    m = ("mound",)
+    mound = MoundShape(
+        cx=float(_get(t, tw, m + ("center", "x"))),
+        cy=float(_get(t, tw, m + ("center", "y"))),
+        base_radius=float(_get(t, tw, m + ("base_radius",))),
+        top_radius=float(_get(t, tw, m + ("top_radius",))),
+        height=float(_get(t, tw, m + ("height",))),
+        ground_z=float(_get(t, tw, m + ("ground_z",))),
+    )
+    if not 0 <= mound.top_radius < mound.base_radius or mound.height <= 0:
+        raise tw.error(m, "mound: need 0 <= top_radius < base_radius and height > 0")
+
+    res = float(_get(s, sw, ("grid_resolution",)))
+    if res <= 0:
+        raise sw.error(("grid_resolution",), f"grid_resolution: must be > 0, got {res}")
+    e = ("excavation",)
+    margin = float(_get(s, sw, e + ("roi_margin",)))
+    half = mound.base_radius + margin
+    grid = GridSpec(mound.cx - half, mound.cy - half, mound.cx + half, mound.cy + half, res)
+
+    def ex(key: str) -> float:
+        return float(_get(s, sw, e + (key,)))
+
+    try:
+        excavation = ExcavationParams(
+            reach_min=ex("reach_min"),
+            reach_max=ex("reach_max"),
+            bucket_radius=ex("bucket_radius"),
+            penetration_depth=ex("penetration_depth"),
+            drag_length=ex("drag_length"),
+            attack_angle=math.radians(ex("attack_angle_deg")),
+            theta_w_min=math.radians(ex("theta_w_min_deg")),
+            theta_w_max=math.radians(ex("theta_w_max_deg")),
+            distance_penalty=ex("distance_penalty"),
+            min_height=ex("min_height"),
+            min_volume=ex("min_volume"),
+            ground_z=mound.ground_z,
+        )
+    except ValueError as exc:
+        raise sw.error(e, str(exc)) from None
+
+    v = ("vessel",)
+    vessel_cfg = _get(ic, iw, ("vessel",), dict)
+    hinge = _get(ic, iw, ("vessel", "hinge_xyz"), list)
+    geom = VesselGeometry(
+        inner_length=float(_get(ic, iw, ("vessel", "inner_length"))),
+        inner_width=float(_get(ic, iw, ("vessel", "inner_width"))),
+        capacity=float(_get(ic, iw, ("vessel", "capacity"))),
+        hinge_xyz=(float(hinge[0]), float(hinge[1]), float(hinge[2])),
+        floor_above_hinge=float(_get(s, sw, v + ("floor_above_hinge",))),
+        rim_above_hinge=float(_get(s, sw, v + ("rim_above_hinge",))),
+    )
+    del vessel_cfg
+    try:
+        vparams = VesselParams(
+            wall_margin=float(_get(s, sw, v + ("wall_margin",))),
+            clearance=float(_get(s, sw, v + ("clearance",))),
+            carry_theta_w=math.radians(float(_get(s, sw, v + ("carry_theta_w_deg",)))),
+            target_fill=float(_get(s, sw, v + ("target_fill",))),
+        )
+    except ValueError as exc:
+        raise sw.error(v, str(exc)) from None
+
+    a = ("arrival",)
+    point = _get(s, sw, a + ("point",), str)
+    if point not in points:
+        raise sw.error(a + ("point",), f"arrival.point: {point!r} is not a pose in site.yaml points ({sorted(points)})")
+    try:
+        arrival = ArrivalParams(
+            position_tolerance=float(_get(s, sw, a + ("position_tolerance",))),
+            yaw_tolerance=math.radians(float(_get(s, sw, a + ("yaw_tolerance_deg",)))),
+            max_speed=float(_get(s, sw, a + ("max_speed",))),
+            hold_s=float(_get(s, sw, a + ("hold_s",))),
+        )
+    except ValueError as exc:
+        raise sw.error(a, str(exc)) from None
+
+    swing_origin = _get(zx, zw, ("joints", "swing_joint", "origin_xyz"), list)
+    return SensingConfig(
+        blackboard_record=_get(s, sw, ("blackboard_record",), str),
+        resolution=res,
+        points=points,
+        mound=mound,
+        mound_grid=grid,
+        excavation=excavation,
+        excavation_model=_get(s, sw, e + ("model_name",), str),
+        excavation_record=_get(s, sw, e + ("record",), str),
+        excavation_update_threshold=ex("update_threshold"),
+        vessel_geom=geom,
+        vessel=vparams,
+        vessel_model=_get(s, sw, v + ("model_name",), str),
+        release_record=_get(s, sw, v + ("release_record",), str),
+        angle_record=_get(s, sw, v + ("angle_record",), str),
+        vessel_update_threshold=float(_get(s, sw, v + ("update_threshold",))),
+        arrival=arrival,
+        arrival_point=point,
+        swing_axis_in_base=(float(swing_origin[0]), float(swing_origin[1])),
+    )
