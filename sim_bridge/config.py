@@ -186,7 +186,7 @@ class SiteSpec:
 
 @dataclass(frozen=True)
 class SoilSpec:
-    """Height-field site with one mound (paraboloid of revolution)."""
+    """Height-field site with one mound (a truncated cone on flat ground, from ``site.yaml``'s ``mound``)."""
 
     x_min: float
     y_min: float
@@ -194,8 +194,10 @@ class SoilSpec:
     size_y: float
     resolution: float
     mound_center: tuple[float, float]
-    mound_radius: float
+    mound_base_radius: float
+    mound_top_radius: float  # truncated cone; 0 = cone
     mound_height: float
+    ground_z: float
     deposit_radius: float  # [m] disc over which released soil lands on the ground
     dump_radius: float  # [m] disc of a vessel dump pile
 
@@ -384,24 +386,39 @@ def load_plant(
     zx_path = Path(zx200) if zx200 else base / m.string("zx200")
     ic_path = Path(ic120) if ic120 else base / m.string("ic120")
     site_path = Path(site) if site else base / top.string("site")
+    site_data, site_where = load_yaml(site_path)
+    site_r = _Reader(site_data, site_where)
     poses_r = top.sub("initial_poses")
     poses_r.only({"zx200", "ic120"})
-    poses = {name: poses_r.vector(name, 3) for name in ("zx200", "ic120")}
+    poses = {}
+    for name in ("zx200", "ic120"):
+        if isinstance(poses_r.raw(name), str):  # a point name in site.yaml
+            pt = site_r.sub("points").sub(poses_r.string(name))
+            poses[name] = (pt.number("x"), pt.number("y"), pt.number("yaw"))
+        else:
+            poses[name] = poses_r.vector(name, 3)
     s = top.sub("soil")
-    s.only({"grid", "mound", "deposit_radius", "dump_radius"})
+    s.only({"grid", "deposit_radius", "dump_radius"})
     g = s.sub("grid")
     g.only({"x_min", "y_min", "size_x", "size_y", "resolution"})
-    mo = s.sub("mound")
-    mo.only({"center", "radius", "height"})
+    mo = site_r.sub("mound")
+    shape = mo.string("shape")
+    if shape not in ("truncated_cone", "cone"):
+        raise mo._err(mo.path + ("shape",), f"unknown mound shape {shape!r}; expected truncated_cone or cone")
+    c = mo.sub("center")
+    base_radius = mo.number("base_radius", lo=0.0)
+    top_radius = mo.number("top_radius", lo=0.0, hi=base_radius) if shape == "truncated_cone" else 0.0
     soil = SoilSpec(
         x_min=g.number("x_min"),
         y_min=g.number("y_min"),
         size_x=g.number("size_x", lo=1.0),
         size_y=g.number("size_y", lo=1.0),
         resolution=g.number("resolution", lo=0.02, hi=2.0),
-        mound_center=mo.vector("center", 2),  # type: ignore[arg-type]
-        mound_radius=mo.number("radius", lo=0.0),
+        mound_center=(c.number("x"), c.number("y")),
+        mound_base_radius=base_radius,
+        mound_top_radius=top_radius,
         mound_height=mo.number("height", lo=0.0),
+        ground_z=mo.number("ground_z", default=0.0),
         deposit_radius=s.number("deposit_radius", lo=0.0),
         dump_radius=s.number("dump_radius", lo=0.0),
     )

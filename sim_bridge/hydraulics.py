@@ -1,0 +1,112 @@
+"""Hydraulic actuator model: dead time, first-order lag, velocity limits, shared pump flow, end stops.
+
+Per joint and per step ``dt``::
+
+    command --clamp(+-v_max)--> dead time (FIFO of round(T_d/dt) steps) --> first-order lag
+    (v += (u - v)(1 - exp(-dt/tau))) --> pump-flow share --> q += v dt, held at the end stops
+
+The shared pumps: a joint with ``flow_at_limit > 0`` draws ``flow_at_limit * |v| / v_max`` L/min;
+when the sum exceeds ``pump_flow`` every shared joint is slowed by the same factor (a load-sensing
+system dividing flow in proportion). Pure Python floats: this runs every 10 ms step for every joint
+and must stay in the microseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+
+from sim_bridge.config import JointSpec
+
+__all__ = ["DeadTimeLag", "JointBank"]
+
+
+class DeadTimeLag:
+    """A pure delay of ``dead_time`` followed by a first-order lag of ``time_constant``, clamped to ``limit``."""
+
+    def __init__(self, dead_time: float, time_constant: float, limit: float, dt: float) -> None:
+        self.limit = limit
+        steps = max(0, round(dead_time / dt))
+        self._fifo: deque[float] = deque([0.0] * steps, maxlen=steps) if steps else deque()
+        self._alpha = 1.0 if time_constant <= 0 else 1.0 - math.exp(-dt / time_constant)
+        self.value = 0.0
+
+    def step(self, command: float) -> float:
+        """Advance one step with ``command`` and return the lagged output."""
+        u = max(-self.limit, min(self.limit, command))
+        if self._fifo.maxlen:
+            delayed = self._fifo[0]
+            self._fifo.append(u)
+        else:
+            delayed = u
+        self.value += (delayed - self.value) * self._alpha
+        return self.value
+
+    def reset(self, value: float = 0.0) -> None:
+        """Forget the pipeline (replay, teleport)."""
+        for i in range(len(self._fifo)):
+            self._fifo[i] = value
+        self.value = value
+
+
+class JointBank:
+    """The hydraulic joints of one machine with their positions, velocities and the shared pumps."""
+
+    def __init__(self, joints: Sequence[JointSpec], dt: float, *, pump_flow: float = math.inf) -> None:
+        self.specs = tuple(joints)
+        self.names = tuple(j.name for j in joints)
+        self.dt = dt
+        self.pump_flow = pump_flow
+        self.actuators = [DeadTimeLag(j.dead_time, j.time_constant, j.max_velocity, dt) for j in joints]
+        self.q = [0.0] * len(joints)
+        self.v = [0.0] * len(joints)
+        self.command = [0.0] * len(joints)
+        self.flow_scale = 1.0  # last pump-flow scaling (1 = pumps not saturated)
+
+    def set_positions(self, q: dict[str, float]) -> None:
+        for name, value in q.items():
+            i = self.names.index(name)
+            spec = self.specs[i]
+            if spec.lower is not None and spec.upper is not None:
+                value = max(spec.lower, min(spec.upper, value))
+            self.q[i] = value
+
+    def step(self) -> None:
+        """Advance all joints by one ``dt`` with the current ``command`` velocities."""
+        lagged = [act.step(cmd) for act, cmd in zip(self.actuators, self.command, strict=True)]
+        demand = 0.0
+        for spec, v in zip(self.specs, lagged, strict=True):
+            if spec.flow_at_limit > 0.0 and spec.max_velocity > 0.0:
+                demand += spec.flow_at_limit * abs(v) / spec.max_velocity
+        scale = self.pump_flow / demand if demand > self.pump_flow else 1.0
+        self.flow_scale = scale
+        dt = self.dt
+        for i, spec in enumerate(self.specs):
+            v = lagged[i] * scale if spec.flow_at_limit > 0.0 else lagged[i]
+            if scale < 1.0 and spec.flow_at_limit > 0.0:
+                self.actuators[i].value = v  # the flow shortfall is what the joint actually did
+            q = self.q[i] + v * dt
+            if spec.upper is not None and q >= spec.upper and v > 0.0:
+                q, v = spec.upper, 0.0
+                self.actuators[i].value = 0.0
+            elif spec.lower is not None and q <= spec.lower and v < 0.0:
+                q, v = spec.lower, 0.0
+                self.actuators[i].value = 0.0
+            self.q[i] = q
+            self.v[i] = v
+
+    def flows(self) -> list[float]:
+        """Flow [L/min] each joint draws now (0 for joints off the shared pumps)."""
+        return [
+            s.flow_at_limit * abs(v) / s.max_velocity if s.flow_at_limit > 0 and s.max_velocity > 0 else 0.0
+            for s, v in zip(self.specs, self.v, strict=True)
+        ]
+
+    def rest(self) -> None:
+        """Command zero on every joint (the pipeline still drains through dead time and lag)."""
+        for i in range(len(self.command)):
+            self.command[i] = 0.0
+
+    def at_rest(self, tol: float = 1e-3) -> bool:
+        return all(abs(v) < tol for v in self.v)

@@ -1,0 +1,163 @@
+"""Unit tests of the plant core (no ROS, no CAN): hydraulics, tracks, soil, MJCF, GNSS, config errors."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from sim_bridge.config import load_plant, load_zx200
+from sim_bridge.errors import SimConfigError
+from sim_bridge.hydraulics import DeadTimeLag, JointBank
+from sim_bridge.model import SiteModel
+from sim_bridge.plant import Plant
+from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
+from sim_bridge.sensors import Gnss, Noise
+from tms_common.config import config_path
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return load_plant()
+
+
+def test_dead_time_then_first_order_lag():
+    act = DeadTimeLag(dead_time=0.3, time_constant=0.2, limit=1.0, dt=0.01)
+    out = [act.step(0.5) for _ in range(200)]
+    assert all(v == 0.0 for v in out[:30])  # nothing during the dead time
+    assert out[30] > 0.0
+    # one time constant after the dead time: 1 - 1/e of the step
+    assert out[30 + 19] == pytest.approx(0.5 * (1 - math.exp(-1)), rel=0.03)
+    assert out[-1] == pytest.approx(0.5, rel=1e-3)
+
+
+def test_command_above_limit_saturates_at_velocity_limit():
+    act = DeadTimeLag(dead_time=0.0, time_constant=0.1, limit=0.45, dt=0.01)
+    for _ in range(300):
+        v = act.step(5.0)
+    assert v == pytest.approx(0.45, rel=1e-6)
+
+
+def test_joint_stops_at_position_limit(spec):
+    boom = spec.zx200.joint("boom_joint")
+    bank = JointBank([boom], spec.dt)
+    bank.q[0] = -0.5
+    bank.command[0] = 0.4  # + = down, towards the upper limit -0.1
+    for _ in range(800):
+        bank.step()
+    assert bank.q[0] == pytest.approx(boom.upper)
+    assert bank.v[0] == 0.0
+
+
+def test_shared_pump_flow_slows_arm_joints_together(spec):
+    zx = spec.zx200
+    bank = JointBank(zx.joints, spec.dt, pump_flow=zx.pump_flow)
+    bank.set_positions({"boom_joint": -0.2, "arm_joint": 1.0, "bucket_joint": 0.0})
+    names = bank.names
+    sign = {"boom_joint": -1.0, "arm_joint": 1.0, "bucket_joint": 1.0, "swing_joint": 0.0}
+    for i, n in enumerate(names):  # all three at their velocity limits: demand 750 > 424 L/min
+        bank.command[i] = sign[n] * zx.joint(n).max_velocity
+    for _ in range(200):
+        bank.step()
+    assert bank.flow_scale < 1.0
+    assert sum(bank.flows()) == pytest.approx(zx.pump_flow, rel=1e-6)  # the pumps give all they have
+    ratios = [abs(bank.v[i]) / zx.joint(n).max_velocity for i, n in enumerate(names) if n != "swing_joint"]
+    assert max(ratios) < 0.7  # every shared joint is well below its own limit
+    # one joint alone is not flow-limited
+    solo = JointBank(zx.joints, spec.dt, pump_flow=zx.pump_flow)
+    solo.set_positions({"arm_joint": 1.2})
+    solo.command[names.index("arm_joint")] = 1.1
+    for _ in range(300):
+        solo.step()
+    assert solo.v[names.index("arm_joint")] == pytest.approx(1.1, rel=1e-3)
+
+
+def test_tracks_slip_and_odometry_drift(spec):
+    plant = Plant(spec)
+    plant.ic120.set_centre_velocity(1.0, 0.0)
+    x0 = plant.ic120.base.x
+    odo = 0.0
+    for _ in range(1000):
+        plant.step()
+        odo += 0.5 * (plant.ic120.base.vl + plant.ic120.base.vr) * plant.dt
+    travelled = plant.ic120.base.x - x0
+    assert travelled == pytest.approx(odo * (1 - spec.ic120.tracks.slip), rel=1e-6)
+    assert odo - travelled > 0.3  # track odometry over-reads by the slip
+
+
+def test_mjcf_kinematics_match_urdf_zero_pose(spec):
+    model = SiteModel(spec)
+    model.set_base("zx200", 0.0, 0.0, 0.0, 0.0)
+    for name in ("swing_joint", "boom_joint", "arm_joint", "bucket_joint"):
+        model.set_joint(f"zx200_{name}", 0.0)
+    model.forward()
+    # opera_machines.md §c (derived): tip at (10.435, -0.087, 1.957) in base_link at q = 0
+    assert model.bucket_tip() == pytest.approx([10.435, -0.087, 1.957], abs=2e-3)
+    assert "<hfield" in model.xml and "ic120_vessel_joint" in model.xml
+
+
+def test_soil_conserved_over_scripted_dig_load_dump(spec):
+    plant = Plant(spec)
+    plant.set_truth("ic120", 1.2, 6.5, 0.0, {"vessel_joint": 0.0})  # site point P1
+    names = plant.zx200.front.names
+    v0 = plant.total_volume()
+    for _cycle in range(2):
+        for target in DIG_CYCLE:
+            t0 = plant.time
+            while plant.time - t0 < 30.0:
+                q = dict(zip(names, plant.zx200.front.q, strict=True))
+                if pose_reached(q, target):
+                    break
+                plant.zx200.set_front_velocity(servo_velocity(q, target))
+                plant.step()
+            plant.zx200.set_front_velocity(dict.fromkeys(names, 0.0))
+            for _ in range(150):
+                plant.step()
+    loaded = plant.soil.vessel
+    assert plant.soil.dug > 1.0
+    assert loaded > 0.8
+    plant.ic120.set_vessel_target(spec.ic120.vessel.upper)
+    for _ in range(2000):
+        plant.step()
+    plant.ic120.set_vessel_target(0.0)
+    for _ in range(800):
+        plant.step()
+    assert plant.soil.vessel == pytest.approx(0.0, abs=1e-9)
+    assert plant.soil.dumped == pytest.approx(loaded, rel=1e-9)
+    assert plant.total_volume() == pytest.approx(v0, rel=1e-9)
+
+
+def test_gnss_round_trip_and_site_origin(spec):
+    gnss = Gnss(spec.site)
+    lat, lon, alt = gnss.map_to_geodetic(0.0, 0.0, 0.0)
+    assert lat == pytest.approx(36.12626, abs=1e-5)  # opera_machines.md §f
+    assert lon == pytest.approx(140.07103, abs=1e-5)
+    noise = Noise(spec.sensors)
+    errs = []
+    for i in range(200):
+        x, y, z = 10.0 + i, -5.0, 1.0
+        back = gnss.geodetic_to_map(*gnss.fix(x, y, z, noise))
+        errs.append(math.hypot(back[0] - x, back[1] - y))
+    rms = math.sqrt(sum(e * e for e in errs) / len(errs))
+    assert 0.5 * spec.sensors.gnss_sigma_h < rms / math.sqrt(2) < 2 * spec.sensors.gnss_sigma_h
+
+
+def _write_broken(tmp_path: Path, old: str, new: str) -> Path:
+    text = config_path("machines", "zx200.yaml").read_text()
+    assert old in text
+    path = tmp_path / "zx200.yaml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def test_malformed_machine_yaml_names_the_key(tmp_path):
+    bad = _write_broken(tmp_path, "velocity: 0.45", 'velocity: "fast"')
+    with pytest.raises(SimConfigError, match=r"zx200\.yaml:\d+: joints\.boom_joint\.velocity: expected a number"):
+        load_zx200(bad)
+    typo = _write_broken(tmp_path, "pump_flow_lpm:", "pump_flow_lmp:")
+    with pytest.raises(SimConfigError, match=r"hydraulics\.pump_flow_lmp: unknown key"):
+        load_zx200(typo)
+    missing = _write_broken(tmp_path, "arm_joint: 0.4255, ", "")
+    with pytest.raises(SimConfigError, match=r"hydraulics\.dead_time_s\.arm_joint: missing required key"):
+        load_plant(zx200=missing)
