@@ -1,0 +1,684 @@
+"""The ROS-free core of the ``com3_bridge`` converter: commands -> COM3 frames, state frames -> outputs.
+
+:class:`BridgeCore` holds everything the node does except ROS I/O, so unit tests and benchmarks drive
+it with plain numbers and an injected clock:
+
+* Commands (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``, ``machine_setting``) are
+  validated as a whole (unknown joint, NaN, array length, value outside the COM3 range ...). A bad
+  command raises :class:`Com3CommandError` naming topic, joint/field and value, and changes nothing:
+  values are never clipped or wrapped. A good one updates the frame and returns it for an immediate
+  send (event-triggered, then cyclic at the DBC period).
+* ``emg_stop`` is a latch: while set, every motion frame is neutral and motion commands are refused;
+  only an explicit ``False`` clears it (and the cleared channels stay neutral until new commands).
+* Watchdog per channel (front, travel, vessel): no accepted command for ``watchdog_s`` -> the channel
+  goes neutral at once and the diagnostic says which topic went silent and for how long.
+* :meth:`BridgeCore.tick` returns the frames due now (scheduler), with the alive counter in
+  ``Machine_Setting_Cmd`` advanced on every send.
+* :meth:`BridgeCore.on_frame` decodes a received frame into outputs (:class:`JointStateOut`,
+  :class:`OdomOut`, :class:`ImuOut`, :class:`FixOut`); unknown ids, wrong DLC, out-of-range values,
+  error/remote/standard frames are counted per reason and dropped, never raised.
+
+Thread safety: every public method takes the core's lock; the node calls them from the executor thread
+(commands), a sender thread (tick) and a receiver thread (on_frame).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from com3_can.codec import AliveCounter, Com3Codec, load_codec
+from com3_can.errors import Com3CommandError, Com3DecodeError, Com3EncodeError
+from com3_can.scheduler import FrameScheduler
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+
+__all__ = [
+    "BridgeConfig",
+    "BridgeCore",
+    "Tx",
+    "JointStateOut",
+    "OdomOut",
+    "ImuOut",
+    "FixOut",
+    "DiagSnapshot",
+    "POSITION",
+    "VELOCITY",
+    "EFFORT",
+]
+
+_log = logging.getLogger(__name__)
+
+# JointCmd.control_type values (tms_msg/JointCmd)
+POSITION, VELOCITY, EFFORT = 0, 1, 2
+_CONTROL_NAMES = {POSITION: "POSITION", VELOCITY: "VELOCITY", EFFORT: "EFFORT"}
+
+DIAG_OK, DIAG_WARN, DIAG_ERROR = 0, 1, 2
+
+#: ZX200 joint -> Velocity_Cmd_1 signal, Front_Angle signal, Front_Angular_Velocity signal,
+#: (pilot signal for + effort, pilot signal for - effort). Sign convention: swing + = left (CCW),
+#: boom + = down, arm + = crowd, bucket + = crowd (opera_machines.md §a).
+_ZX_JOINTS: Mapping[str, tuple[str, str, str, tuple[str, str]]] = {
+    "swing_joint": ("swing_target_anguler_velocity", "swing_relative_angle", "swing_relative_angular_velocity",
+                    ("swing_left", "swing_right")),
+    "boom_joint": ("boom_target_anguler_velocity", "boom_relative_angle", "boom_relative_angular_velocity",
+                   ("boom_down", "boom_up")),
+    "arm_joint": ("arm_target_anguler_velocity", "arm_relative_angle", "arm_relative_angular_velocity",
+                  ("arm_crowd", "arm_dump")),
+    "bucket_joint": ("bucket_target_anguler_velocity", "bucket_relative_angle", "bucket_relative_angular_velocity",
+                     ("bucket_crowd", "bucket_dump")),
+}
+_TRACKS = ("left_track", "right_track")
+_PILOT_MAX_MPA = 5.0
+
+
+@dataclass(frozen=True)
+class Tx:
+    """One frame to put on the bus."""
+
+    name: str
+    arbitration_id: int
+    data: bytes
+
+
+@dataclass(frozen=True)
+class JointStateOut:
+    """Content of a sensor_msgs/JointState (empty ``position`` means velocities only)."""
+
+    name: tuple[str, ...]
+    position: tuple[float, ...]
+    velocity: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class OdomOut:
+    """Content of a nav_msgs/Odometry: planar pose in ``frame_id`` and body twist."""
+
+    x: float
+    y: float
+    z: float
+    yaw: float
+    v: float
+    yaw_rate: float
+    frame_id: str = "odom"
+
+
+@dataclass(frozen=True)
+class ImuOut:
+    """Orientation (roll, pitch, yaw [rad], ROS conventions) and yaw rate if the frame carries it."""
+
+    roll: float
+    pitch: float
+    yaw: float
+    yaw_rate: float | None
+
+
+@dataclass(frozen=True)
+class FixOut:
+    """Content of a sensor_msgs/NavSatFix (status in NavSatStatus numbering: -1 no fix .. 2 GBAS)."""
+
+    latitude: float
+    longitude: float
+    altitude: float
+    status: int
+    horizontal_accuracy: float | None
+
+
+@dataclass(frozen=True)
+class DiagSnapshot:
+    """One diagnostic status: level (0 OK, 1 WARN, 2 ERROR), message and key/values."""
+
+    level: int
+    message: str
+    values: tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    """Settings of one converter (config/can/<machine>.yaml ``bridge`` + config/machines/<machine>.yaml)."""
+
+    machine: str
+    watchdog_s: float = 0.5
+    diagnostic_period_s: float = 0.5
+    default_setting: Mapping[str, float] = field(default_factory=dict)
+    effort_dead_zone: Mapping[str, float] = field(default_factory=dict)
+    track_gauge: float = 2.0
+    vessel_max_angle: float = 1.134464
+    #: site map origin in the plane-rectangular CRS (ZX200 swing-centre -> odom) and the CRS itself
+    map_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    crs: str = "EPSG:6677"
+
+    def __post_init__(self) -> None:
+        if self.machine not in ("zx200", "ic120"):
+            raise ConfigError(f"com3_bridge: machine must be zx200 or ic120, got {self.machine!r}")
+        if not (math.isfinite(self.watchdog_s) and self.watchdog_s > 0):
+            raise ConfigError(f"com3_bridge: watchdog_s must be > 0 s, got {self.watchdog_s}")
+        if not self.track_gauge > 0:
+            raise ConfigError(f"com3_bridge: track gauge must be > 0 m, got {self.track_gauge}")
+
+    @classmethod
+    def load(cls, machine: str, can_config: Mapping[str, Any] | None = None, **overrides: Any) -> BridgeConfig:
+        """Build from the YAML files of ``machine``; ``overrides`` (e.g. ``watchdog_s``) win."""
+        if machine not in ("zx200", "ic120"):
+            raise ConfigError(f"com3_bridge: machine must be zx200 or ic120, got {machine!r}")
+        if can_config is None:
+            can_config, _ = load_yaml(config_path("can", f"{machine}.yaml"))
+        bridge = dict((can_config or {}).get("bridge") or {})
+        known = {"watchdog_s", "diagnostic_period_s", "default_setting", "effort_dead_zone"}
+        unknown = sorted(set(bridge) - known)
+        if unknown:
+            raise ConfigError(f"config/can/{machine}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
+        geo, _ = load_yaml(config_path("machines", f"{machine}.yaml"))
+        kwargs: dict[str, Any] = {"machine": machine, **bridge}
+        kwargs["track_gauge"] = float(geo["tracks"]["gauge"])
+        if machine == "ic120":
+            kwargs["vessel_max_angle"] = float(geo["vessel"]["max_angle"])
+        site, _ = load_yaml(config_path("site.yaml"))
+        origin = site["map_origin_plane"]
+        kwargs["map_origin"] = (float(origin["easting"]), float(origin["northing"]), float(origin["altitude"]))
+        kwargs["crs"] = str(site["crs"])
+        kwargs.update(overrides)
+        return cls(**kwargs)
+
+
+@dataclass
+class _Channel:
+    """A group of motion frames fed by some topics and guarded by one watchdog."""
+
+    name: str
+    frames: tuple[str, ...]
+    last_cmd: float | None = None  # time of the last accepted command
+    last_topic: str = ""
+    timed_out: bool = False
+
+
+def _finite(topic: str, what: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise Com3CommandError(f"{topic}: {what}: expected a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise Com3CommandError(f"{topic}: {what}: value {v} is not finite")
+    return v
+
+
+class BridgeCore:
+    """Converter state of one machine; see the module docstring.
+
+    Args:
+        config: :class:`BridgeConfig`.
+        now: time [s] of construction on the same monotonic clock later passed to the methods.
+        codec: the machine's codec (default :func:`load_codec`).
+    """
+
+    def __init__(self, config: BridgeConfig, now: float, codec: Com3Codec | None = None) -> None:
+        self.config = config
+        self.machine = config.machine
+        self.codec = codec or load_codec(config.machine)
+        self._lock = threading.RLock()
+        self._alive = AliveCounter()
+        self._values: dict[str, dict[str, float]] = {f: self.codec.neutral(f) for f in self.codec.command_frames}
+        setting = self._values["Machine_Setting_Cmd"]
+        for key, value in config.default_setting.items():
+            if key not in setting or key == "alive_counter":
+                raise ConfigError(
+                    f"config/can/{self.machine}.yaml: bridge.default_setting.{key}: not a settable "
+                    f"Machine_Setting_Cmd signal ({sorted(k for k in setting if k != 'alive_counter')})"
+                )
+            setting[key] = float(value)
+        try:
+            self.codec.encode("Machine_Setting_Cmd", setting)
+        except Com3EncodeError as exc:
+            raise ConfigError(f"config/can/{self.machine}.yaml: bridge.default_setting: {exc}") from None
+        if self.machine == "zx200":
+            self._channels = {
+                "front": _Channel("front", ("Velocity_Cmd_1", "Pilot_Pressure_Cmd_1")),
+                "travel": _Channel("travel", ("Velocity_Cmd_2", "Pilot_Pressure_Cmd_2")),
+            }
+        else:
+            self._channels = {
+                "travel": _Channel("travel", ("Velocity_Cmd",)),
+                "vessel": _Channel("vessel", ("Vessel_Cmd",)),
+            }
+        self._motion_frames = tuple(f for ch in self._channels.values() for f in ch.frames)
+        self._scheduler = FrameScheduler({f: self.codec.cycle_ms(f) / 1000.0 for f in self.codec.command_frames}, now)
+        self._emg = False
+        self.counters: Counter[str] = Counter()
+        self._last_reject = ""
+        self._last_rx_error = ""
+        self._state: dict[str, dict[str, float]] = {}
+        self._machine_alive: int | None = None
+        # odometry (ic120: integrated from track velocities; zx200: swing centre)
+        self._odom_x = self._odom_y = self._odom_yaw = 0.0
+        self._odom_stamp: float | None = None
+        self._track_pos = [0.0, 0.0]
+        self._transformer: Any = None
+
+    # ------------------------------------------------------------------ helpers
+    def _encode(self, name: str) -> Tx:
+        values = self._values[name]
+        if name == "Machine_Setting_Cmd":
+            values["alive_counter"] = float(self._alive.next())
+        return Tx(name, self.codec.frame_id(name), self.codec.encode(name, values))
+
+    def _accept(self, topic: str, channel: str, updates: Mapping[str, Mapping[str, float]], now: float) -> list[Tx]:
+        """Validate ``updates`` (frame -> full signal dict) by encoding, then commit and return the frames."""
+        if self._emg:
+            self.counters["cmd_ignored_emg_stop"] += 1
+            raise Com3CommandError(f"{topic}: refused, emg_stop is latched (publish false on emg_stop to clear)")
+        for frame, values in updates.items():
+            try:
+                self.codec.encode(frame, values)
+            except Com3EncodeError as exc:
+                raise Com3CommandError(f"{topic}: {exc}") from None
+        ch = self._channels[channel]
+        for frame, values in updates.items():
+            self._values[frame] = dict(values)
+        for other in ch.frames:  # a command kind replaces the other kind of the same channel
+            if other not in updates:
+                self._values[other] = self.codec.neutral(other)
+        ch.last_cmd, ch.last_topic, ch.timed_out = now, topic, False
+        self.counters["cmd_accepted"] += 1
+        out = []
+        for frame in ch.frames:
+            out.append(self._encode(frame))
+            self._scheduler.sent(frame, now)
+        return out
+
+    def _reject(self, exc: Com3CommandError) -> None:
+        self.counters["cmd_rejected"] += 1
+        self._last_reject = str(exc)
+
+    def _set_switch(self, signal: str, value: float) -> None:
+        self._values["Machine_Setting_Cmd"][signal] = value
+
+    @staticmethod
+    def _check_joint_cmd(
+        topic: str, allowed: Sequence[str], names: Sequence[str], control_type: int, arrays: Mapping[int, Sequence[float]]
+    ) -> dict[str, float]:
+        if control_type not in (VELOCITY, EFFORT):
+            kind = _CONTROL_NAMES.get(control_type, str(control_type))
+            raise Com3CommandError(
+                f"{topic}: control_type {kind} is not carried by COM3; use VELOCITY (1) or EFFORT (2)"
+            )
+        if not names:
+            raise Com3CommandError(f"{topic}: joint_name is empty")
+        unknown = [n for n in names if n not in allowed]
+        if unknown:
+            raise Com3CommandError(f"{topic}: unknown joint(s) {unknown}; expected some of {list(allowed)}")
+        if len(set(names)) != len(names):
+            raise Com3CommandError(f"{topic}: duplicate joint names {list(names)}")
+        values = arrays[control_type]
+        label = "velocity" if control_type == VELOCITY else "effort"
+        if len(values) != len(names):
+            raise Com3CommandError(f"{topic}: {len(names)} joint names but {len(values)} {label} values")
+        out = {n: _finite(topic, f"{n} {label}", v) for n, v in zip(names, values, strict=True)}
+        if control_type == EFFORT:
+            for n, v in out.items():
+                if not -1.0 <= v <= 1.0:
+                    raise Com3CommandError(f"{topic}: {n} effort {v:g} outside [-1, 1] (normalised lever)")
+        return out
+
+    def _pilot(self, effort: float, dead_zone: float) -> float:
+        if abs(effort) < 0.001:
+            return 0.0
+        return min(abs(effort) + dead_zone, 1.0) * _PILOT_MAX_MPA
+
+    # ------------------------------------------------------------------ commands
+    def front_cmd(
+        self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
+    ) -> list[Tx]:
+        """ZX200 ``front_cmd`` (JointCmd): VELOCITY -> Velocity_Cmd_1, EFFORT -> Pilot_Pressure_Cmd_1."""
+        with self._lock:
+            try:
+                if self.machine != "zx200":
+                    raise Com3CommandError("front_cmd: the ic120 has no front joints")
+                vals = self._check_joint_cmd(
+                    "front_cmd", tuple(_ZX_JOINTS), names, control_type, {VELOCITY: velocity, EFFORT: effort}
+                )
+                if control_type == VELOCITY:
+                    frame = self.codec.neutral("Velocity_Cmd_1")
+                    for joint, v in vals.items():
+                        frame[_ZX_JOINTS[joint][0]] = v
+                    txs = self._accept("front_cmd", "front", {"Velocity_Cmd_1": frame}, now)
+                    self._set_switch("front_signal_switch_command", 2.0)
+                else:
+                    frame = self.codec.neutral("Pilot_Pressure_Cmd_1")
+                    dz = self.config.effort_dead_zone
+                    for joint, e in vals.items():
+                        plus, minus = _ZX_JOINTS[joint][3]
+                        side = plus if e > 0 else minus
+                        frame[side] = self._pilot(e, float(dz.get(side, 0.0)))
+                    txs = self._accept("front_cmd", "front", {"Pilot_Pressure_Cmd_1": frame}, now)
+                    self._set_switch("front_signal_switch_command", 1.0)
+                return txs
+            except Com3CommandError as exc:
+                self._reject(exc)
+                raise
+
+    def tracks_cmd(
+        self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
+    ) -> list[Tx]:
+        """``tracks_cmd`` (JointCmd left_track/right_track): per-track velocity [m/s] (ZX200 also effort)."""
+        with self._lock:
+            try:
+                vals = self._check_joint_cmd("tracks_cmd", _TRACKS, names, control_type, {VELOCITY: velocity, EFFORT: effort})
+                left, right = vals.get("left_track", 0.0), vals.get("right_track", 0.0)
+                if self.machine == "ic120":
+                    if control_type != VELOCITY:
+                        raise Com3CommandError("tracks_cmd: the ic120 takes VELOCITY track commands only")
+                    frame = self.codec.neutral("Velocity_Cmd")
+                    frame.update(target_travel_left_velocity=left, target_travel_right_velocity=right)
+                    txs = self._accept("tracks_cmd", "travel", {"Velocity_Cmd": frame}, now)
+                    self._set_switch("velocity_mode", 1.0)
+                elif control_type == VELOCITY:
+                    frame = self.codec.neutral("Velocity_Cmd_2")
+                    frame.update(target_travel_left_velocity=left, target_travel_right_velocity=right)
+                    txs = self._accept("tracks_cmd", "travel", {"Velocity_Cmd_2": frame}, now)
+                    self._set_switch("travel_signal_switch_command", 2.0)
+                else:
+                    frame = self.codec.neutral("Pilot_Pressure_Cmd_2")
+                    dz = float(self.config.effort_dead_zone.get("tracks", 0.0))
+                    for side, e in (("left", left), ("right", right)):
+                        frame[f"{side}_track_{'forward' if e > 0 else 'backward'}"] = self._pilot(e, dz)
+                    txs = self._accept("tracks_cmd", "travel", {"Pilot_Pressure_Cmd_2": frame}, now)
+                    self._set_switch("travel_signal_switch_command", 1.0)
+                return txs
+            except Com3CommandError as exc:
+                self._reject(exc)
+                raise
+
+    def cmd_vel(self, linear_x: float, angular_z: float, now: float) -> list[Tx]:
+        """``cmd_vel`` (Twist): body-centre velocity [m/s] and yaw rate [rad/s]."""
+        with self._lock:
+            try:
+                v = _finite("cmd_vel", "linear.x", linear_x)
+                w = _finite("cmd_vel", "angular.z", angular_z)
+                frame_name = "Velocity_Cmd_2" if self.machine == "zx200" else "Velocity_Cmd"
+                frame = self.codec.neutral(frame_name)
+                frame.update(target_travel_center_velocity=v, target_travel_yaw_rate=w)
+                txs = self._accept("cmd_vel", "travel", {frame_name: frame}, now)
+                if self.machine == "zx200":
+                    self._set_switch("travel_signal_switch_command", 3.0)
+                else:
+                    self._set_switch("velocity_mode", 0.0)
+                return txs
+            except Com3CommandError as exc:
+                self._reject(exc)
+                raise
+
+    def vessel_cmd(self, angle: float, now: float) -> list[Tx]:
+        """IC120 ``vessel_cmd``: target vessel angle [rad], 0 = lowered, + = raised, up to the machine limit."""
+        with self._lock:
+            try:
+                if self.machine != "ic120":
+                    raise Com3CommandError("vessel_cmd: only the ic120 has a vessel")
+                a = _finite("vessel_cmd", "angle", angle)
+                if not 0.0 <= a <= self.config.vessel_max_angle:
+                    raise Com3CommandError(
+                        f"vessel_cmd: angle {a:g} rad outside [0, {self.config.vessel_max_angle:g}] rad "
+                        "(0 = lowered, + = raised; config/machines/ic120.yaml vessel.max_angle)"
+                    )
+                frame = {"target_vessel_angle": a, "vessel_control_enable": 1.0}
+                return self._accept("vessel_cmd", "vessel", {"Vessel_Cmd": frame}, now)
+            except Com3CommandError as exc:
+                self._reject(exc)
+                raise
+
+    def machine_setting(self, fields: Mapping[str, float], now: float) -> list[Tx]:
+        """``machine_setting``: signal name -> value of Machine_Setting_Cmd (the node maps the ROS message).
+
+        Accepted even while emg_stop is latched (it carries no motion).
+        """
+        with self._lock:
+            try:
+                setting = dict(self._values["Machine_Setting_Cmd"])
+                for key, value in fields.items():
+                    if key not in setting or key == "alive_counter":
+                        raise Com3CommandError(f"machine_setting: unknown field {key!r}")
+                    setting[key] = _finite("machine_setting", key, value)
+                try:
+                    self.codec.encode("Machine_Setting_Cmd", setting)
+                except Com3EncodeError as exc:
+                    raise Com3CommandError(f"machine_setting: {exc}") from None
+                self._values["Machine_Setting_Cmd"] = setting
+                self.counters["cmd_accepted"] += 1
+                tx = self._encode("Machine_Setting_Cmd")
+                self._scheduler.sent("Machine_Setting_Cmd", now)
+                return [tx]
+            except Com3CommandError as exc:
+                self._reject(exc)
+                raise
+
+    def emg_stop(self, stop: bool, now: float) -> list[Tx]:
+        """Set (True) or clear (False) the emergency-stop latch; setting it sends neutral motion frames at once."""
+        with self._lock:
+            if stop:
+                if not self._emg:
+                    _log.warning("%s: emg_stop latched: all motion frames neutral", self.machine)
+                self._emg = True
+                self.counters["emg_stop_set"] += 1
+                return self._neutralise(self._channels.values(), now)
+            if self._emg:
+                _log.warning("%s: emg_stop cleared: motion frames stay neutral until new commands", self.machine)
+                self._emg = False
+                for ch in self._channels.values():
+                    ch.last_cmd, ch.timed_out = None, False
+            return []
+
+    @property
+    def emg_latched(self) -> bool:
+        """True while the emergency-stop latch is set."""
+        return self._emg
+
+    def _neutralise(self, channels: Any, now: float) -> list[Tx]:
+        out = []
+        for ch in channels:
+            for frame in ch.frames:
+                self._values[frame] = self.codec.neutral(frame)
+                out.append(self._encode(frame))
+                self._scheduler.sent(frame, now)
+        return out
+
+    # ------------------------------------------------------------------ cyclic
+    def tick(self, now: float) -> list[Tx]:
+        """Watchdog check, then every frame due at ``now`` (cyclic emission at DBC cycle times)."""
+        with self._lock:
+            out = []
+            for ch in self._channels.values():
+                if ch.last_cmd is not None and not ch.timed_out and now - ch.last_cmd > self.config.watchdog_s:
+                    ch.timed_out = True
+                    self.counters[f"watchdog_{ch.name}"] += 1
+                    _log.warning(
+                        "%s: watchdog: no %s for %.2f s -> neutral %s", self.machine, ch.last_topic,
+                        now - ch.last_cmd, "/".join(ch.frames),
+                    )
+                    out.extend(self._neutralise([ch], now))
+            for name in self._scheduler.due(now):
+                out.append(self._encode(name))
+            self.counters["frames_tx"] += len(out)
+            return out
+
+    def next_wake(self) -> float:
+        """Earliest time :meth:`tick` has something to do (next frame due or watchdog expiry)."""
+        with self._lock:
+            t = self._scheduler.next_due()
+            for ch in self._channels.values():
+                if ch.last_cmd is not None and not ch.timed_out:
+                    t = min(t, ch.last_cmd + self.config.watchdog_s + 1e-4)
+            return t
+
+    def current_values(self, frame_name: str) -> dict[str, float]:
+        """Physical values the next emission of ``frame_name`` will carry (a copy)."""
+        with self._lock:
+            return dict(self._values[frame_name])
+
+    # ------------------------------------------------------------------ receive
+    def on_frame(
+        self,
+        arbitration_id: int,
+        data: bytes,
+        *,
+        is_extended_id: bool = True,
+        is_error_frame: bool = False,
+        is_remote_frame: bool = False,
+        stamp: float = 0.0,
+    ) -> list[JointStateOut | OdomOut | ImuOut | FixOut]:
+        """Decode one received frame; bad frames are counted (``rx_<reason>``) and dropped, never raised.
+
+        ``stamp`` [s] is the ROS time of reception (sim time under ``/clock``), used to integrate odometry.
+        """
+        with self._lock:
+            self.counters["frames_rx"] += 1
+            if is_error_frame or is_remote_frame or not is_extended_id:
+                reason = "error_frame" if is_error_frame else "remote_frame" if is_remote_frame else "standard_id"
+                self.counters[f"rx_{reason}"] += 1
+                return []
+            try:
+                name, values = self.codec.decode(arbitration_id, data)
+            except Com3DecodeError as exc:
+                self.counters[f"rx_{exc.reason}"] += 1
+                self._last_rx_error = str(exc)
+                return []
+            if self.codec.is_command(name):
+                self.counters["rx_command_echo"] += 1  # our own (or another controller's) command frames
+                return []
+            self.counters["rx_ok"] += 1
+            self._state[name] = values
+            handler = _HANDLERS[self.machine].get(name)
+            return handler(self, values, stamp) if handler else []
+
+    # ZX200 state frames
+    def _zx_front_angle(self, values: dict[str, float], stamp: float) -> list[Any]:
+        vel = self._state.get("Front_Angular_Velocity", {})
+        names = tuple(_ZX_JOINTS)
+        return [
+            JointStateOut(
+                names,
+                tuple(values[_ZX_JOINTS[j][1]] for j in names),
+                tuple(vel.get(_ZX_JOINTS[j][2], 0.0) for j in names),
+            )
+        ]
+
+    def _roll_pitch(self, values: dict[str, float], stamp: float) -> list[Any]:
+        az = self._state.get("Vehicle_Azimuth", {})
+        yaw = -az.get("track_body_azimuth", 0.0)
+        rate = az.get("yaw_rate")
+        return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, rate)]
+
+    def _zx_swing_centre(self, values: dict[str, float], stamp: float) -> list[Any]:
+        try:
+            x = self._state["Swing_Center_Position_1"]["swing_center_position_x"]
+            y = self._state["Swing_Center_Position_2"]["swing_center_position_y"]
+        except KeyError:
+            return []
+        z = values["swing_center_position_z"]
+        yaw = -self._state.get("Vehicle_Azimuth", {}).get("track_body_azimuth", 0.0)
+        ox, oy, oz = self.config.map_origin
+        out: list[Any] = [OdomOut(x - ox, y - oy, z - oz, yaw, 0.0, 0.0, frame_id="map")]
+        lat, lon = self._plane_to_geodetic(x, y)
+        out.append(FixOut(lat, lon, z, 2, None))
+        return out
+
+    def _plane_to_geodetic(self, easting: float, northing: float) -> tuple[float, float]:
+        if self._transformer is None:
+            from pyproj import CRS, Transformer
+
+            geo = CRS(self.config.crs).geodetic_crs
+            self._transformer = Transformer.from_crs(self.config.crs, geo, always_xy=True)
+        lon, lat = self._transformer.transform(easting, northing)
+        return float(lat), float(lon)
+
+    def _machine_state(self, values: dict[str, float], stamp: float) -> list[Any]:
+        alive = int(values["alive_counter"])
+        if self._machine_alive is not None and not AliveCounter.is_successor(self._machine_alive, alive):
+            self.counters["machine_alive_skips"] += 1
+        self._machine_alive = alive
+        return []
+
+    # IC120 state frames
+    def _ic_tracks(self, values: dict[str, float], stamp: float) -> list[Any]:
+        vl, vr = values["left_track_velocity"], values["right_track_velocity"]
+        dt = 0.0 if self._odom_stamp is None else min(max(stamp - self._odom_stamp, 0.0), 0.1)
+        self._odom_stamp = stamp
+        v = 0.5 * (vl + vr)
+        w = (vr - vl) / self.config.track_gauge
+        az = self._state.get("Vehicle_Azimuth")
+        if az is not None:
+            self._odom_yaw = -az["track_body_azimuth"]
+        else:
+            self._odom_yaw += w * dt
+        self._odom_x += v * math.cos(self._odom_yaw) * dt
+        self._odom_y += v * math.sin(self._odom_yaw) * dt
+        self._track_pos[0] += vl * dt
+        self._track_pos[1] += vr * dt
+        vessel = self._state.get("Vessel_Angle", {})
+        joints = JointStateOut(
+            ("vessel_joint", "left_track", "right_track"),
+            (vessel.get("vessel_angle", 0.0), self._track_pos[0], self._track_pos[1]),
+            (vessel.get("vessel_angular_velocity", 0.0), vl, vr),
+        )
+        return [OdomOut(self._odom_x, self._odom_y, 0.0, self._odom_yaw, v, w), joints]
+
+    def _ic_gnss(self, values: dict[str, float], stamp: float) -> list[Any]:
+        try:
+            lat = self._state["GNSS_Latitude"]["latitude"]
+            lon = self._state["GNSS_Longitude"]["longitude"]
+        except KeyError:
+            return []
+        status = int(values["fix_status"]) - 1  # DBC 0 no fix .. 3 GBAS -> NavSatStatus -1 .. 2
+        return [FixOut(lat, lon, values["altitude"], status, values["horizontal_accuracy"])]
+
+    # ------------------------------------------------------------------ diagnostics
+    def diagnostics(self, now: float) -> DiagSnapshot:
+        """Level, a message saying why (emg_stop, watchdog, rejects, bad frames) and all counters."""
+        with self._lock:
+            level, message = DIAG_OK, "ok: commands flowing"
+            timed = [ch for ch in self._channels.values() if ch.timed_out]
+            waiting = all(ch.last_cmd is None for ch in self._channels.values())
+            if self._emg:
+                level, message = DIAG_ERROR, "emg_stop latched: neutral motion frames (publish false on emg_stop to clear)"
+            elif timed:
+                level = DIAG_WARN
+                message = "; ".join(
+                    f"watchdog: no {ch.last_topic} for {now - (now if ch.last_cmd is None else ch.last_cmd):.2f} s "
+                    f"(> {self.config.watchdog_s:g} s) -> neutral {'/'.join(ch.frames)}"
+                    for ch in timed
+                )
+            elif waiting:
+                message = "ok: no command yet, neutral frames"
+            errors = sum(v for k, v in self.counters.items() if k.startswith("rx_") and k not in ("rx_ok", "rx_command_echo"))
+            if level == DIAG_OK and (self.counters["cmd_rejected"] or errors):
+                level = DIAG_WARN
+                message += f"; {self.counters['cmd_rejected']} command(s) rejected, {errors} bad frame(s) dropped"
+            values: list[tuple[str, str]] = [("machine", self.machine), ("emg_stop", str(self._emg))]
+            values += [(k, str(v)) for k, v in sorted(self.counters.items())]
+            values.append(("rx_dropped_total", str(errors)))
+            values.append(("last_reject", self._last_reject))
+            values.append(("last_rx_error", self._last_rx_error))
+            values.append(("alive_counter_next", str(self._alive.value)))
+            state = self._state.get("Machine_State")
+            if state:
+                values += [(f"machine_state.{k}", f"{v:g}") for k, v in state.items()]
+            return DiagSnapshot(level, message, tuple(values))
+
+
+_HANDLERS: Mapping[str, Mapping[str, Any]] = {
+    "zx200": {
+        "Front_Angle": BridgeCore._zx_front_angle,
+        "Roll_Pitch_Angle": BridgeCore._roll_pitch,
+        "Swing_Center_Position_3": BridgeCore._zx_swing_centre,
+        "Machine_State": BridgeCore._machine_state,
+    },
+    "ic120": {
+        "Track_Velocity": BridgeCore._ic_tracks,
+        "Roll_Pitch_Angle": BridgeCore._roll_pitch,
+        "GNSS_Altitude_Status": BridgeCore._ic_gnss,
+        "Machine_State": BridgeCore._machine_state,
+    },
+}

@@ -1,0 +1,93 @@
+"""CAN bus construction from configuration: ``socketcan``, ``udp_multicast`` or ``virtual``.
+
+``open_bus({"interface": ..., "channel": ..., **extras})`` returns a ``can.BusABC`` built with
+``ignore_config=True`` so the YAML is the whole truth (no ``~/can.conf`` or environment leaking in).
+A backend that cannot be opened raises :class:`Com3BusError` saying why, e.g. "SocketCAN is not
+available in this kernel" or that ``vcan0`` does not exist.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import can
+
+from com3_can.errors import Com3BusError
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+
+__all__ = ["BACKENDS", "open_bus", "socketcan_available", "load_bus_config"]
+
+_log = logging.getLogger(__name__)
+
+#: interface -> extra keys it accepts besides ``interface`` and ``channel``
+BACKENDS: Mapping[str, frozenset[str]] = {
+    "socketcan": frozenset({"receive_own_messages", "fd"}),
+    "udp_multicast": frozenset({"port", "hop_limit", "fd"}),
+    "virtual": frozenset({"receive_own_messages"}),
+}
+#: keys of a config/can/<machine>.yaml that are not bus options
+_IGNORED_KEYS = frozenset({"bridge"})
+
+
+def socketcan_available() -> bool:
+    """True when the kernel offers AF_CAN raw sockets (SocketCAN)."""
+    if not hasattr(socket, "AF_CAN"):
+        return False
+    try:
+        sock = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+    except OSError:
+        return False
+    sock.close()
+    return True
+
+
+def open_bus(cfg: Mapping[str, Any]) -> can.BusABC:
+    """Open the CAN bus described by ``cfg`` (``interface``, ``channel``, backend extras).
+
+    Raises:
+        ConfigError: unknown interface, missing channel or an extra key the backend does not take.
+        Com3BusError: the backend exists but cannot be opened here (message says why).
+    """
+    interface = cfg.get("interface")
+    if interface not in BACKENDS:
+        raise ConfigError(f"CAN interface {interface!r} unknown; expected one of {', '.join(BACKENDS)}")
+    channel = cfg.get("channel")
+    if not channel:
+        raise ConfigError(f"CAN {interface}: 'channel' is required")
+    extras = {k: v for k, v in cfg.items() if k not in {"interface", "channel"} | _IGNORED_KEYS}
+    unknown = sorted(set(extras) - BACKENDS[interface])
+    if unknown:
+        raise ConfigError(
+            f"CAN {interface}: unknown option(s) {unknown}; accepted: {sorted(BACKENDS[interface])}"
+        )
+    if interface == "socketcan":
+        if not socketcan_available():
+            raise Com3BusError("SocketCAN is not available in this kernel (no AF_CAN sockets); "
+                               "use interface udp_multicast or virtual, or run in a VM with vcan")
+        if not Path("/sys/class/net", str(channel)).exists():
+            raise Com3BusError(
+                f"SocketCAN interface {channel!r} does not exist (create it: ip link add dev {channel} type vcan; "
+                f"ip link set up {channel})"
+            )
+    if interface == "udp_multicast":
+        extras.setdefault("fd", False)
+    try:
+        bus = can.Bus(interface=interface, channel=channel, ignore_config=True, **extras)
+    except (can.CanError, OSError, NotImplementedError, ImportError) as exc:
+        raise Com3BusError(f"cannot open CAN {interface} channel {channel!r}: {exc}") from exc
+    _log.info("opened CAN bus interface=%s channel=%s options=%s", interface, channel, extras)
+    return bus
+
+
+def load_bus_config(machine: str, path: str | Path | None = None) -> dict[str, Any]:
+    """The bus + bridge configuration of ``machine`` (default ``config/can/<machine>.yaml``)."""
+    path = Path(path) if path else config_path("can", f"{machine}.yaml")
+    data, where = load_yaml(path)
+    if not isinstance(data, dict):
+        raise where.error((), "expected a mapping with interface/channel/bridge")
+    return data
