@@ -66,11 +66,12 @@ def test_shared_pump_flow_slows_arm_joints_together(spec):
     assert max(ratios) < 0.7  # every shared joint is well below its own limit
     # one joint alone is not flow-limited
     solo = JointBank(zx.joints, spec.dt, pump_flow=zx.pump_flow)
-    solo.set_positions({"arm_joint": 1.2})
+    solo.set_positions({"arm_joint": 0.7})
     solo.command[names.index("arm_joint")] = 1.1
-    for _ in range(300):
+    for _ in range(160):
         solo.step()
-    assert solo.v[names.index("arm_joint")] == pytest.approx(1.1, rel=1e-3)
+    assert solo.v[names.index("arm_joint")] == pytest.approx(1.1, rel=1e-2)
+    assert solo.flow_scale == 1.0
 
 
 def test_tracks_slip_and_odometry_drift(spec):
