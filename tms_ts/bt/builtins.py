@@ -1,0 +1,517 @@
+"""The BehaviorTree.CPP 3.8 built-in node vocabulary, with its semantics (reference §6).
+
+Controls: Sequence, SequenceStar (v4: SequenceWithMemory), ReactiveSequence, Fallback, ReactiveFallback,
+Parallel, IfThenElse, WhileDoElse. Decorators: Inverter, ForceSuccess, ForceFailure, Repeat,
+RetryUntilSuccessful, KeepRunningUntilFailure, Delay, Timeout. Actions: AlwaysSuccess, AlwaysFailure,
+SetBlackboard, Sleep (v4). SubTree is built by the loader (:mod:`tms_ts.loader`).
+
+Each ``_tick`` follows the corresponding BT.CPP 3.8 ``tick()``; comments name where Python differs.
+The one intended difference: Repeat/RetryUntilSuccessful loop inside one tick while the child finishes
+synchronously, but at most ``ctx.sync_loop_budget`` times per tick, then return RUNNING, so an endless
+synchronous loop cannot make the scheduler deaf to cancel and emergency stop.
+"""
+
+from __future__ import annotations
+
+from tms_ts.bt.core import (
+    FAILURE,
+    IDLE,
+    RUNNING,
+    SUCCESS,
+    ActionNode,
+    ControlNode,
+    DecoratorNode,
+    Port,
+    StatefulNode,
+    Status,
+)
+from tms_ts.errors import TreeRuntimeError
+
+__all__ = ["BUILTINS"]
+
+
+def _idle_error(node: ControlNode | DecoratorNode) -> TreeRuntimeError:
+    return TreeRuntimeError(f"{node.describe()}: a child returned IDLE")
+
+
+# ---------------------------------------------------------------------------------------------
+# controls
+# ---------------------------------------------------------------------------------------------
+class Sequence(ControlNode):
+    """Ticks children in order, remembering the RUNNING child; any FAILURE resets to child 0."""
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.index = 0
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.index = 0
+
+    def _tick(self) -> Status:
+        children = self.children
+        while self.index < len(children):
+            status = children[self.index].execute_tick()
+            if status is RUNNING:
+                return RUNNING
+            if status is FAILURE:
+                self.halt_children()
+                self.index = 0
+                return FAILURE
+            if status is not SUCCESS:
+                raise _idle_error(self)
+            self.index += 1
+        self.halt_children()
+        self.index = 0
+        return SUCCESS
+
+
+class SequenceStar(Sequence):
+    """Sequence with memory: a FAILURE does not reset the index; the failed child is retried next tick."""
+
+    def _tick(self) -> Status:
+        children = self.children
+        while self.index < len(children):
+            status = children[self.index].execute_tick()
+            if status is RUNNING:
+                return RUNNING
+            if status is FAILURE:
+                self.halt_children(self.index)
+                return FAILURE
+            if status is not SUCCESS:
+                raise _idle_error(self)
+            self.index += 1
+        self.halt_children()
+        self.index = 0
+        return SUCCESS
+
+
+class Fallback(ControlNode):
+    """Ticks children in order until one succeeds, remembering the RUNNING child."""
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.index = 0
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.index = 0
+
+    def _tick(self) -> Status:
+        children = self.children
+        while self.index < len(children):
+            status = children[self.index].execute_tick()
+            if status is RUNNING:
+                return RUNNING
+            if status is SUCCESS:
+                self.halt_children()
+                self.index = 0
+                return SUCCESS
+            if status is not FAILURE:
+                raise _idle_error(self)
+            self.index += 1
+        self.halt_children()
+        self.index = 0
+        return FAILURE
+
+
+class ReactiveSequence(ControlNode):
+    """Re-ticks from child 0 every tick; a RUNNING child halts the children after it."""
+
+    def _tick(self) -> Status:
+        children = self.children
+        for i, child in enumerate(children):
+            status = child.execute_tick()
+            if status is RUNNING:
+                self.halt_children(i + 1)
+                return RUNNING
+            if status is FAILURE:
+                self.halt_children()
+                return FAILURE
+            if status is not SUCCESS:
+                raise _idle_error(self)
+        self.halt_children()
+        return SUCCESS
+
+
+class ReactiveFallback(ControlNode):
+    """Re-ticks from child 0 every tick; a RUNNING child halts the children after it."""
+
+    def _tick(self) -> Status:
+        children = self.children
+        for i, child in enumerate(children):
+            status = child.execute_tick()
+            if status is RUNNING:
+                self.halt_children(i + 1)
+                return RUNNING
+            if status is SUCCESS:
+                self.halt_children()
+                return SUCCESS
+            if status is not FAILURE:
+                raise _idle_error(self)
+        self.halt_children()
+        return FAILURE
+
+
+class Parallel(ControlNode):
+    """Ticks every unfinished child each tick; SUCCESS/FAILURE when the thresholds are met.
+
+    A negative threshold t means ``children + t + 1`` (-1 = all). Finished children are skipped
+    (keeping their status) until the Parallel completes; then every child is halted.
+    """
+
+    PORTS = {
+        "success_threshold": Port("int", description="children that must succeed (<0: n+t+1)"),
+        "failure_threshold": Port("int", 1, "children that must fail (<0: n+t+1)"),
+    }
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.skip: set[int] = set()
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.skip = set()
+
+    def _threshold(self, port: str) -> int:
+        value = self.get_input(port)
+        n = len(self.children)
+        return max(n + value + 1, 0) if value < 0 else value
+
+    def _tick(self) -> Status:
+        success_t = self._threshold("success_threshold")
+        failure_t = self._threshold("failure_threshold")
+        n = len(self.children)
+        if n < success_t:
+            raise TreeRuntimeError(f"{self.describe()}: {n} children < success_threshold {success_t}; can never succeed")
+        if n < failure_t:
+            raise TreeRuntimeError(f"{self.describe()}: {n} children < failure_threshold {failure_t}; can never fail")
+        successes = failures = 0
+        for i, child in enumerate(self.children):
+            skipped = i in self.skip
+            status = child.status if skipped else child.execute_tick()
+            if status is SUCCESS:
+                self.skip.add(i)
+                successes += 1
+                if successes == success_t:
+                    self.skip = set()
+                    self.halt_children()
+                    return SUCCESS
+            elif status is FAILURE:
+                self.skip.add(i)
+                failures += 1
+                if failures > n - success_t or failures == failure_t:
+                    self.skip = set()
+                    self.halt_children()
+                    return FAILURE
+            elif status is not RUNNING:
+                raise _idle_error(self)
+        return RUNNING
+
+
+class IfThenElse(ControlNode):
+    """Condition (child 0) ticked once, then the chosen branch until it finishes (2 children + false -> FAILURE)."""
+
+    CHILDREN = (2, 3)
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.branch = 0
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.branch = 0
+
+    def _tick(self) -> Status:
+        if self.branch == 0:
+            cond = self.children[0].execute_tick()
+            if cond is RUNNING:
+                return RUNNING
+            if cond is SUCCESS:
+                self.branch = 1
+            elif cond is FAILURE:
+                if len(self.children) == 3:
+                    self.branch = 2
+                else:
+                    return FAILURE
+            else:
+                raise _idle_error(self)
+        status = self.children[self.branch].execute_tick()
+        if status is RUNNING:
+            return RUNNING
+        self.halt_children()
+        self.branch = 0
+        return status
+
+
+class WhileDoElse(ControlNode):
+    """Condition re-ticked every tick; runs child 1 while it succeeds, child 2 otherwise, halting the other."""
+
+    CHILDREN = (3, 3)
+
+    def _tick(self) -> Status:
+        cond = self.children[0].execute_tick()
+        if cond is RUNNING:
+            return RUNNING
+        if cond is SUCCESS:
+            self.halt_child(2)
+            status = self.children[1].execute_tick()
+        elif cond is FAILURE:
+            self.halt_child(1)
+            status = self.children[2].execute_tick()
+        else:
+            raise _idle_error(self)
+        if status is RUNNING:
+            return RUNNING
+        self.halt_children()
+        return status
+
+
+# ---------------------------------------------------------------------------------------------
+# decorators
+# ---------------------------------------------------------------------------------------------
+class Inverter(DecoratorNode):
+    """SUCCESS <-> FAILURE; RUNNING stays RUNNING."""
+
+    def _tick(self) -> Status:
+        status = self.child.execute_tick()
+        if status is RUNNING:
+            return RUNNING
+        self.halt_child()
+        if status is SUCCESS:
+            return FAILURE
+        if status is FAILURE:
+            return SUCCESS
+        raise _idle_error(self)
+
+
+class ForceSuccess(DecoratorNode):
+    """FAILURE -> SUCCESS once the child finishes."""
+
+    def _tick(self) -> Status:
+        status = self.child.execute_tick()
+        if status is RUNNING:
+            return RUNNING
+        self.halt_child()
+        return SUCCESS
+
+
+class ForceFailure(DecoratorNode):
+    """SUCCESS -> FAILURE once the child finishes."""
+
+    def _tick(self) -> Status:
+        status = self.child.execute_tick()
+        if status is RUNNING:
+            return RUNNING
+        self.halt_child()
+        return FAILURE
+
+
+class KeepRunningUntilFailure(DecoratorNode):
+    """Child SUCCESS -> reset child, RUNNING; child FAILURE -> FAILURE."""
+
+    def _tick(self) -> Status:
+        status = self.child.execute_tick()
+        if status is RUNNING:
+            return RUNNING
+        self.halt_child()
+        return RUNNING if status is SUCCESS else FAILURE
+
+
+class Repeat(DecoratorNode):
+    """Ticks the child ``num_cycles`` times (-1 = forever) while it succeeds; a FAILURE ends it FAILURE.
+
+    Loops inside one tick while the child finishes synchronously (up to ``sync_loop_budget``).
+    """
+
+    PORTS = {"num_cycles": Port("int", description="repetitions, -1 = forever")}
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.count = 0
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.count = 0
+
+    def _tick(self) -> Status:
+        cycles = self.get_input("num_cycles")
+        budget = self.ctx.sync_loop_budget
+        while self.count < cycles or cycles == -1:
+            status = self.child.execute_tick()
+            if status is SUCCESS:
+                self.count += 1
+                self.halt_child()
+                budget -= 1
+                if budget <= 0 and (self.count < cycles or cycles == -1):
+                    return RUNNING
+            elif status is FAILURE:
+                self.count = 0
+                self.halt_child()
+                return FAILURE
+            elif status is RUNNING:
+                return RUNNING
+            else:
+                raise _idle_error(self)
+        self.count = 0
+        return SUCCESS
+
+
+class RetryUntilSuccessful(DecoratorNode):
+    """Re-ticks a failing child up to ``num_attempts`` times (-1 = forever); SUCCESS ends it SUCCESS."""
+
+    PORTS = {"num_attempts": Port("int", description="attempts, -1 = forever")}
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.tries = 0
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.tries = 0
+
+    def _tick(self) -> Status:
+        attempts = self.get_input("num_attempts")
+        budget = self.ctx.sync_loop_budget
+        while self.tries < attempts or attempts == -1:
+            status = self.child.execute_tick()
+            if status is SUCCESS:
+                self.tries = 0
+                self.halt_child()
+                return SUCCESS
+            if status is FAILURE:
+                self.tries += 1
+                self.halt_child()
+                budget -= 1
+                if budget <= 0 and (self.tries < attempts or attempts == -1):
+                    return RUNNING
+            elif status is RUNNING:
+                return RUNNING
+            else:
+                raise _idle_error(self)
+        self.tries = 0
+        return FAILURE
+
+
+class Delay(DecoratorNode):
+    """RUNNING until ``delay_msec`` has passed since the first tick, then ticks the child."""
+
+    PORTS = {"delay_msec": Port("int", description="delay before the child is ticked [ms]")}
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.deadline: float | None = None
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.deadline = None
+
+    def _tick(self) -> Status:
+        if self.deadline is None:
+            msec = self.get_input("delay_msec")
+            if msec < 0:
+                raise TreeRuntimeError(f"{self.describe()}: delay_msec must be >= 0, got {msec}")
+            self.deadline = self.ctx.clock() + msec / 1000.0
+        if self.ctx.clock() < self.deadline:
+            self.feedback_message = f"waiting {self.deadline - self.ctx.clock():.2f} s"
+            return RUNNING
+        status = self.child.execute_tick()
+        if status is not RUNNING:
+            self.deadline = None
+            self.halt_child()
+        return status
+
+
+class Timeout(DecoratorNode):
+    """Halts the child and returns FAILURE if it is still RUNNING ``msec`` after the first tick."""
+
+    PORTS = {"msec": Port("int", description="time limit [ms]")}
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.deadline: float | None = None
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.deadline = None
+
+    def _tick(self) -> Status:
+        now = self.ctx.clock()
+        if self.deadline is None:
+            self.deadline = now + self.get_input("msec") / 1000.0
+        elif now >= self.deadline:
+            self.halt_child()
+            self.deadline = None
+            self.feedback_message = "timed out"
+            return FAILURE
+        status = self.child.execute_tick()
+        if status is not RUNNING:
+            self.deadline = None
+            self.halt_child()
+        return status
+
+
+# ---------------------------------------------------------------------------------------------
+# actions
+# ---------------------------------------------------------------------------------------------
+class AlwaysSuccess(ActionNode):
+    def _tick(self) -> Status:
+        return SUCCESS
+
+
+class AlwaysFailure(ActionNode):
+    def _tick(self) -> Status:
+        return FAILURE
+
+
+class SetBlackboard(ActionNode):
+    """Writes ``value`` as a *string* to ``output_key`` (BT.CPP 3.8: ``{other}`` copies it as text)."""
+
+    PORTS = {"value": Port("str"), "output_key": Port("key")}
+
+    def _tick(self) -> Status:
+        self.set_output("output_key", self.get_input("value"))
+        return SUCCESS
+
+
+class Sleep(StatefulNode):
+    """v4 action: RUNNING for ``msec``, then SUCCESS."""
+
+    PORTS = {"msec": Port("int")}
+
+    def on_start(self) -> Status:
+        self.deadline = self.ctx.clock() + self.get_input("msec") / 1000.0
+        return self.on_running()
+
+    def on_running(self) -> Status:
+        return SUCCESS if self.ctx.clock() >= self.deadline else RUNNING
+
+
+#: BT.CPP id -> class (v3 and v4 spellings)
+BUILTINS: dict[str, type] = {
+    "Sequence": Sequence,
+    "SequenceStar": SequenceStar,
+    "SequenceWithMemory": SequenceStar,
+    "ReactiveSequence": ReactiveSequence,
+    "Fallback": Fallback,
+    "ReactiveFallback": ReactiveFallback,
+    "Parallel": Parallel,
+    "IfThenElse": IfThenElse,
+    "WhileDoElse": WhileDoElse,
+    "Inverter": Inverter,
+    "ForceSuccess": ForceSuccess,
+    "ForceFailure": ForceFailure,
+    "KeepRunningUntilFailure": KeepRunningUntilFailure,
+    "Repeat": Repeat,
+    "RetryUntilSuccessful": RetryUntilSuccessful,
+    "RetryUntilSuccesful": RetryUntilSuccessful,  # BT.CPP 3.x registered this misspelling too
+    "Delay": Delay,
+    "Timeout": Timeout,
+    "AlwaysSuccess": AlwaysSuccess,
+    "AlwaysFailure": AlwaysFailure,
+    "SetBlackboard": SetBlackboard,
+    "Sleep": Sleep,
+}
+
+__all__ += [cls.__name__ for cls in set(BUILTINS.values())]
+_ = IDLE  # re-exported name used by tests

@@ -1,0 +1,329 @@
+"""Base classes that give py_trees behaviours BehaviorTree.CPP 3.8 execution semantics.
+
+py_trees ticks through generators and resets nodes differently from BT.CPP (a py_trees Sequence
+always has memory or not per flag, its Parallel has policies instead of thresholds, its Repeat and
+Retry count across ticks). Task XML written for BT.CPP must behave as it did there, so every node
+here is a :class:`py_trees.behaviour.Behaviour` (status, name, children, ``feedback_message`` and
+the py_trees display tools work on it) whose *execution* follows BT.CPP:
+
+* :meth:`BtNode.execute_tick` is BT.CPP's ``executeTick``: it runs the node's ``_tick`` and stores
+  the status. Parents tick children with it directly (no generators), which keeps the overhead per
+  node to a few microseconds.
+* :meth:`BtNode.halt` is BT.CPP's ``halt``: a RUNNING node is interrupted (``on_halted``) and every
+  node ends IDLE (py_trees ``Status.INVALID``).
+* Ports are declared per class in ``PORTS``; literal values are converted once when the tree is
+  built, ``{key}`` values are read from the blackboard at every tick.
+
+Do not override ``execute_tick`` or ``halt`` in subclasses; fill ``_tick`` / ``on_halted`` (or the
+``on_start`` / ``on_running`` pair of :class:`StatefulNode`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from py_trees.behaviour import Behaviour
+from py_trees.common import Status
+
+from tms_ts.blackboard import MISSING, Blackboard, to_text
+from tms_ts.errors import TreeRuntimeError
+
+__all__ = [
+    "Status",
+    "IDLE",
+    "SUCCESS",
+    "FAILURE",
+    "RUNNING",
+    "Port",
+    "TreeContext",
+    "BtNode",
+    "ActionNode",
+    "StatefulNode",
+    "ControlNode",
+    "DecoratorNode",
+    "convert",
+]
+
+IDLE = Status.INVALID
+SUCCESS = Status.SUCCESS
+FAILURE = Status.FAILURE
+RUNNING = Status.RUNNING
+
+_UNSET: Any = object()
+
+
+@dataclass(frozen=True)
+class Port:
+    """A declared port: ``type`` is str | int | float | bool | any | key; ``default`` _UNSET = required.
+
+    ``key`` ports name a blackboard entry: ``output_key="X"`` and ``output_key="{X}"`` both mean X,
+    as BT.CPP's ``setOutput`` treats them.
+    """
+
+    type: str = "str"
+    default: Any = _UNSET
+    description: str = ""
+
+    @property
+    def required(self) -> bool:
+        return self.default is _UNSET
+
+
+def convert(value: Any, type_: str) -> Any:
+    """Convert ``value`` (text or a typed blackboard value) to a port type; ValueError if it cannot."""
+    if type_ in ("any", "key"):
+        return value
+    if type_ == "str":
+        return to_text(value)
+    if type_ == "bool":
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, int) and value in (0, 1):
+            return bool(value)
+        if isinstance(value, str) and value.strip().lower() in ("true", "1", "false", "0"):
+            return value.strip().lower() in ("true", "1")
+        raise ValueError(f"expected a bool (true/false), got {value!r}")
+    if type_ == "int":
+        if isinstance(value, bool):
+            raise ValueError(f"expected an integer, got {value!r}")
+        if isinstance(value, int):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        if isinstance(value, str):
+            try:
+                return int(value.strip())
+            except ValueError:
+                pass
+        raise ValueError(f"expected an integer, got {value!r}")
+    if type_ == "float":
+        if isinstance(value, bool):
+            raise ValueError(f"expected a number, got {value!r}")
+        if isinstance(value, int | float):
+            return float(value)
+        if isinstance(value, str):
+            try:
+                return float(value.strip())
+            except ValueError:
+                pass
+        raise ValueError(f"expected a number, got {value!r}")
+    raise ValueError(f"unknown port type {type_!r}")
+
+
+@dataclass
+class TreeContext:
+    """What the nodes of one task share: its blackboard, the DB store, the ROS side and a clock.
+
+    ``store`` is a tms_db store (``open_store()``) or None for trees without DB nodes; ``ros`` is the
+    ROS port of the manager (:class:`tms_ts.leaf.RosPort`) or None offline. ``clock`` returns
+    monotonic seconds (injectable for tests and simulated time). ``sync_loop_budget`` bounds how many
+    synchronous iterations a Repeat/RetryUntilSuccessful runs inside one tick before yielding RUNNING
+    (BT.CPP loops forever there, which made the original manager deaf to the emergency stop).
+    """
+
+    blackboard: Blackboard = field(default_factory=Blackboard)
+    store: Any = None
+    ros: Any = None
+    clock: Callable[[], float] = time.monotonic
+    task_id: int = -1
+    sync_loop_budget: int = 1000
+    accept_timeout_s: float = 1.0
+    halt_timeout_s: float = 5.0
+    #: every LeafNode of the tree (filled by the loader; the manager checks their servers at start)
+    leaves: list[Any] = field(default_factory=list)
+    #: halted subtask goals still waiting for CANCELED/ABORTED (see tms_ts.leaf.PendingStop)
+    stops: list[Any] = field(default_factory=list)
+    #: failure reasons reported by leaves, newest last (the task's FAILURE message uses them)
+    failures: list[str] = field(default_factory=list)
+
+    def child(self, blackboard: Blackboard) -> TreeContext:
+        """Same context with another blackboard (non-shared SubTree)."""
+        return TreeContext(
+            blackboard=blackboard,
+            store=self.store,
+            ros=self.ros,
+            clock=self.clock,
+            task_id=self.task_id,
+            sync_loop_budget=self.sync_loop_budget,
+            accept_timeout_s=self.accept_timeout_s,
+            halt_timeout_s=self.halt_timeout_s,
+            leaves=self.leaves,
+            stops=self.stops,
+            failures=self.failures,
+        )
+
+
+class BtNode(Behaviour):
+    """A tree node with BT.CPP semantics (see module docstring). Subclasses fill ``_tick``."""
+
+    PORTS: ClassVar[dict[str, Port]] = {}
+    #: (min, max) number of children; max None = unbounded
+    CHILDREN: ClassVar[tuple[int, int | None]] = (0, 0)
+    #: the XML tag family Groot uses for this node (Action, Condition, Control, Decorator, SubTree)
+    KIND: ClassVar[str] = "Action"
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        node_id: str,
+        ports: dict[str, tuple[bool, Any]] | None = None,
+        ctx: TreeContext | None = None,
+        where: str = "",
+    ) -> None:
+        super().__init__(name)
+        self.node_id = node_id
+        #: port name -> (is_blackboard_key, literal value already converted | key name)
+        self._ports = ports or {}
+        self.ctx = ctx if ctx is not None else TreeContext()
+        self.where = where
+        self.children: list[BtNode] = []
+
+    # -- identity -------------------------------------------------------------------------------
+    def describe(self) -> str:
+        """``ID 'name' (line L, column C)``, the form used in every error message."""
+        label = f"{self.node_id} '{self.name}'" if self.name != self.node_id else self.node_id
+        return f"{label} ({self.where})" if self.where else label
+
+    # -- ports ----------------------------------------------------------------------------------
+    def get_input(self, port: str, default: Any = _UNSET) -> Any:
+        """The value of ``port``: the converted literal, or the blackboard entry for ``{key}``."""
+        spec = self.PORTS.get(port)
+        entry = self._ports.get(port)
+        if entry is None:
+            if default is not _UNSET:
+                return default
+            if spec is not None and not spec.required:
+                return spec.default
+            raise TreeRuntimeError(f"{self.describe()}: port '{port}' is not set")
+        is_key, value = entry
+        if not is_key:
+            return value
+        found = self.ctx.blackboard.get(value)
+        if found is MISSING:
+            if default is not _UNSET:
+                return default
+            raise TreeRuntimeError(f"{self.describe()}: port '{port}' reads blackboard key '{value}', which is not set")
+        type_ = spec.type if spec is not None else "any"
+        if type_ == "key":
+            type_ = "str"
+        try:
+            return convert(found, type_)
+        except ValueError as exc:
+            raise TreeRuntimeError(
+                f"{self.describe()}: port '{port}' reads blackboard key '{value}' = {found!r}: {exc}"
+            ) from None
+
+    def port_key(self, port: str) -> str:
+        """The blackboard key a ``key`` port names (literal ``X`` or ``{X}``)."""
+        entry = self._ports.get(port)
+        if entry is None:
+            spec = self.PORTS.get(port)
+            if spec is not None and not spec.required:
+                return str(spec.default)
+            raise TreeRuntimeError(f"{self.describe()}: port '{port}' is not set")
+        return str(entry[1])
+
+    def set_output(self, port: str, value: Any) -> None:
+        """Write ``value`` to the blackboard entry named by ``port`` (``X`` or ``{X}``)."""
+        self.ctx.blackboard.set(self.port_key(port), value)
+
+    # -- execution (BT.CPP executeTick / halt) --------------------------------------------------
+    def execute_tick(self) -> Status:
+        """Tick this node once and remember its status (do not override)."""
+        status = self._tick()
+        self.status = status
+        return status
+
+    def _tick(self) -> Status:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def update(self) -> Status:
+        """py_trees' update hook: the node's BT.CPP tick logic."""
+        return self._tick()
+
+    def halt(self) -> None:
+        """Interrupt a RUNNING node and reset it to IDLE (do not override; fill ``on_halted``)."""
+        if self.status == RUNNING:
+            self.on_halted()
+        self._reset()
+        self.status = IDLE
+
+    def on_halted(self) -> None:
+        """Hook: the node was RUNNING and is being interrupted (cancel goals, stop timers)."""
+
+    def _reset(self) -> None:
+        """Hook: clear per-run state (indices, counters); composites also halt their children."""
+
+    # -- py_trees compatibility -----------------------------------------------------------------
+    def tick(self):  # noqa: ANN201 - py_trees generator protocol
+        """py_trees' generator protocol: one BT.CPP tick of this subtree, yielding the root."""
+        self.execute_tick()
+        yield self
+
+    def stop(self, new_status: Status = IDLE) -> None:
+        """py_trees' stop: a halt in BT.CPP terms."""
+        self.halt()
+
+    def iter_nodes(self):  # noqa: ANN201
+        """Depth-first iteration over this subtree."""
+        yield self
+        for child in self.children:
+            yield from child.iter_nodes()
+
+
+class ActionNode(BtNode):
+    """A synchronous action/condition: ``_tick`` returns SUCCESS or FAILURE at once."""
+
+
+class StatefulNode(BtNode):
+    """An asynchronous action (BT.CPP StatefulActionNode): ``on_start`` then ``on_running`` per tick."""
+
+    def _tick(self) -> Status:
+        if self.status != RUNNING:
+            return self.on_start()
+        return self.on_running()
+
+    def on_start(self) -> Status:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def on_running(self) -> Status:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class ControlNode(BtNode):
+    """A node with one or more children. ``halt`` halts every child and resets the node's index."""
+
+    KIND = "Control"
+    CHILDREN = (1, None)
+
+    def halt_child(self, index: int) -> None:
+        """BT.CPP haltChild: halt a RUNNING child, leave every child IDLE."""
+        self.children[index].halt()
+
+    def halt_children(self, start: int = 0) -> None:
+        for child in self.children[start:]:
+            child.halt()
+
+    def _reset(self) -> None:
+        self.halt_children()
+
+
+class DecoratorNode(BtNode):
+    """A node with exactly one child."""
+
+    KIND = "Decorator"
+    CHILDREN = (1, 1)
+
+    @property
+    def child(self) -> BtNode:
+        return self.children[0]
+
+    def halt_child(self) -> None:
+        self.children[0].halt()
+
+    def _reset(self) -> None:
+        self.halt_child()

@@ -1,0 +1,41 @@
+"""Errors of the task scheduler.
+
+``TsError`` is the package base (a :class:`tms_common.errors.TmsError`). ``TreeLoadError`` is raised
+before anything runs (malformed XML, unknown node id or port, bad literal, wrong child count); its
+message names the node id and its position in the document. ``TreeRuntimeError`` is raised while
+ticking (a ``{key}`` that is not on the blackboard, a value of the wrong type); the manager turns it
+into the task's FAILURE message. ``SubtaskRecordError`` is raised by the subtask servers when a DB
+record is missing or malformed; it names the record and the field.
+"""
+
+from __future__ import annotations
+
+from tms_common.errors import TmsError
+
+__all__ = ["TsError", "TreeLoadError", "TreeRuntimeError", "SubtaskRecordError", "ExpressionError"]
+
+
+class TsError(TmsError):
+    """Base of every error raised on purpose by tms_ts."""
+
+
+class TreeLoadError(TsError, ValueError):
+    """A task tree cannot be built; the message names the node id, its line and column."""
+
+
+class TreeRuntimeError(TsError, RuntimeError):
+    """A node cannot run (missing blackboard key, value of the wrong type); names node and key."""
+
+
+class ExpressionError(TsError, ValueError):
+    """A ConditionalExpression cannot be parsed or evaluated; names the expression and position."""
+
+
+class SubtaskRecordError(TsError, ValueError):
+    """A subtask's DB record is missing or malformed; the message names the record and the field."""
+
+    def __init__(self, record_name: str, field: str | None, problem: str) -> None:
+        self.record_name = record_name
+        self.field = field
+        where = f"record '{record_name}'" + (f" field '{field}'" if field else "")
+        super().__init__(f"{where}: {problem}")

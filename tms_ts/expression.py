@@ -1,0 +1,282 @@
+"""A safe evaluator for ConditionalExpression strings (no ``eval``, no attribute access, no calls).
+
+The original node substituted blackboard values into the text and handed it to ExprTk. Here the text
+is tokenised and parsed once into a small AST (:func:`compile_expression`), then evaluated against a
+resolver for identifiers at every tick. Grammar (lowest to highest precedence)::
+
+    or:   and ( ("or" | "||") and )*
+    and:  not ( ("and" | "&&") not )*
+    not:  ("not" | "!") not | cmp
+    cmp:  sum ( ("==" | "=" | "!=" | "<" | "<=" | ">" | ">=") sum )?
+    sum:  prod ( ("+" | "-") prod )*
+    prod: unary ( ("*" | "/" | "%") unary )*
+    unary: "-" unary | atom
+    atom: number | 'string' | "string" | true | false | identifier | "(" or ")"
+
+As in ExprTk, booleans are numbers (true = 1, false = 0) and the result is true when non-zero.
+Strings compare only with strings (==, !=, ordering); mixing a string with a number is an
+:class:`ExpressionError`, which the node reports as FAILURE.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from tms_ts.errors import ExpressionError
+
+__all__ = ["Expression", "compile_expression", "evaluate"]
+
+_TOKEN_RE = re.compile(
+    r"""\s*(?:
+        (?P<num>\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?
+      | (?P<str>'[^']*'|"[^"]*")
+      | (?P<op>==|!=|<=|>=|&&|\|\||[-+*/%<>=!()])
+      | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
+    )""",
+    re.VERBOSE,
+)
+_WORD_OPS = {"and": "and", "or": "or", "not": "not", "true": "true", "false": "false"}
+
+
+@dataclass(frozen=True)
+class _Tok:
+    kind: str  # num | str | op | name | end
+    text: str
+    pos: int
+
+
+def _tokenise(text: str) -> list[_Tok]:
+    tokens: list[_Tok] = []
+    pos = 0
+    while True:
+        while pos < len(text) and text[pos].isspace():
+            pos += 1
+        if pos >= len(text):
+            break
+        m = _TOKEN_RE.match(text, pos)
+        if m is None or m.end() == pos:
+            raise ExpressionError(f"expression {text!r}: unexpected character {text[pos]!r} at position {pos}")
+        kind = m.lastgroup or "op"
+        tok = m.group(0).strip()
+        if kind == "num":
+            tok = m.group(0).strip()
+        if kind == "name" and tok.lower() in _WORD_OPS:
+            kind, tok = "op", tok.lower()
+        tokens.append(_Tok(kind, tok, pos))
+        pos = m.end()
+    tokens.append(_Tok("end", "", len(text)))
+    return tokens
+
+
+# AST nodes are tuples: ("num", v) ("str", s) ("var", name) ("un", op, a) ("bin", op, a, b)
+
+
+class _Parser:
+    def __init__(self, text: str) -> None:
+        self.text = text
+        self.toks = _tokenise(text)
+        self.i = 0
+
+    def peek(self) -> _Tok:
+        return self.toks[self.i]
+
+    def take(self) -> _Tok:
+        tok = self.toks[self.i]
+        self.i += 1
+        return tok
+
+    def error(self, tok: _Tok, what: str) -> ExpressionError:
+        shown = tok.text or "end of expression"
+        return ExpressionError(f"expression {self.text!r}: {what} at position {tok.pos} ({shown!r})")
+
+    def parse(self) -> tuple:
+        if self.peek().kind == "end":
+            raise self.error(self.peek(), "empty expression")
+        node = self.or_()
+        if self.peek().kind != "end":
+            raise self.error(self.peek(), "unexpected token")
+        return node
+
+    def _is(self, *ops: str) -> bool:
+        tok = self.peek()
+        return tok.kind == "op" and tok.text in ops
+
+    def or_(self) -> tuple:
+        node = self.and_()
+        while self._is("or", "||"):
+            self.take()
+            node = ("bin", "or", node, self.and_())
+        return node
+
+    def and_(self) -> tuple:
+        node = self.not_()
+        while self._is("and", "&&"):
+            self.take()
+            node = ("bin", "and", node, self.not_())
+        return node
+
+    def not_(self) -> tuple:
+        if self._is("not", "!"):
+            self.take()
+            return ("un", "not", self.not_())
+        return self.cmp()
+
+    def cmp(self) -> tuple:
+        node = self.sum()
+        if self._is("==", "=", "!=", "<", "<=", ">", ">="):
+            op = self.take().text
+            node = ("bin", "==" if op == "=" else op, node, self.sum())
+        return node
+
+    def sum(self) -> tuple:
+        node = self.prod()
+        while self._is("+", "-"):
+            op = self.take().text
+            node = ("bin", op, node, self.prod())
+        return node
+
+    def prod(self) -> tuple:
+        node = self.unary()
+        while self._is("*", "/", "%"):
+            op = self.take().text
+            node = ("bin", op, node, self.unary())
+        return node
+
+    def unary(self) -> tuple:
+        if self._is("-"):
+            self.take()
+            return ("un", "-", self.unary())
+        if self._is("+"):
+            self.take()
+            return self.unary()
+        return self.atom()
+
+    def atom(self) -> tuple:
+        tok = self.take()
+        if tok.kind == "num":
+            return ("num", float(tok.text))
+        if tok.kind == "str":
+            return ("str", tok.text[1:-1])
+        if tok.kind == "name":
+            return ("var", tok.text)
+        if tok.kind == "op" and tok.text in ("true", "false"):
+            return ("num", 1.0 if tok.text == "true" else 0.0)
+        if tok.kind == "op" and tok.text == "(":
+            node = self.or_()
+            if not self._is(")"):
+                raise self.error(self.peek(), "missing ')'")
+            self.take()
+            return node
+        raise self.error(tok, "expected a value")
+
+
+class Expression:
+    """A compiled expression; ``evaluate(resolve)`` looks identifiers up through ``resolve(name)``."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
+        self.ast = _Parser(text).parse()
+        self.names = sorted(_names(self.ast))
+
+    def evaluate(self, resolve: Callable[[str], Any]) -> bool:
+        """True when the expression is non-zero; ExpressionError on a type mismatch or bad name."""
+        value = self._eval(self.ast, resolve)
+        if isinstance(value, str):
+            raise ExpressionError(f"expression {self.text!r}: result is the string {value!r}, not a truth value")
+        return value != 0.0
+
+    def _eval(self, node: tuple, resolve: Callable[[str], Any]) -> float | str:
+        kind = node[0]
+        if kind == "num" or kind == "str":
+            return node[1]
+        if kind == "var":
+            return _as_value(self.text, node[1], resolve(node[1]))
+        if kind == "un":
+            a = self._eval(node[2], resolve)
+            if isinstance(a, str):
+                raise ExpressionError(f"expression {self.text!r}: '{node[1]}' applied to the string {a!r}")
+            return (0.0 if a != 0.0 else 1.0) if node[1] == "not" else -a
+        op = node[1]
+        if op == "and":
+            a = self._truth(node[2], resolve)
+            return 1.0 if a and self._truth(node[3], resolve) else 0.0
+        if op == "or":
+            a = self._truth(node[2], resolve)
+            return 1.0 if a or self._truth(node[3], resolve) else 0.0
+        a = self._eval(node[2], resolve)
+        b = self._eval(node[3], resolve)
+        if isinstance(a, str) != isinstance(b, str):
+            raise ExpressionError(f"expression {self.text!r}: cannot apply '{op}' to {a!r} and {b!r}")
+        if op == "==":
+            return 1.0 if a == b else 0.0
+        if op == "!=":
+            return 1.0 if a != b else 0.0
+        if op in ("<", "<=", ">", ">="):
+            result = {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b}[op]  # type: ignore[operator]
+            return 1.0 if result else 0.0
+        if isinstance(a, str):
+            if op == "+":
+                return a + b  # type: ignore[operator]
+            raise ExpressionError(f"expression {self.text!r}: cannot apply '{op}' to strings")
+        if op == "+":
+            return a + b  # type: ignore[operator]
+        if op == "-":
+            return a - b  # type: ignore[operator]
+        if op == "*":
+            return a * b  # type: ignore[operator]
+        if b == 0.0:
+            raise ExpressionError(f"expression {self.text!r}: division by zero")
+        return a / b if op == "/" else a % b  # type: ignore[operator]
+
+    def _truth(self, node: tuple, resolve: Callable[[str], Any]) -> bool:
+        v = self._eval(node, resolve)
+        if isinstance(v, str):
+            raise ExpressionError(f"expression {self.text!r}: the string {v!r} is not a truth value")
+        return v != 0.0
+
+
+def _as_value(text: str, name: str, value: Any) -> float | str:
+    if isinstance(value, bool):
+        return 1.0 if value else 0.0
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, str):
+        return value
+    raise ExpressionError(f"expression {text!r}: '{name}' has unsupported type {type(value).__name__}")
+
+
+def _names(node: tuple) -> set[str]:
+    if node[0] == "var":
+        return {node[1]}
+    if node[0] in ("un",):
+        return _names(node[2])
+    if node[0] == "bin":
+        return _names(node[2]) | _names(node[3])
+    return set()
+
+
+_CACHE: dict[str, Expression] = {}
+
+
+def compile_expression(text: str) -> Expression:
+    """Parse ``text`` once (cached); ExpressionError names the position of a syntax error."""
+    expr = _CACHE.get(text)
+    if expr is None:
+        expr = Expression(text)
+        if len(_CACHE) < 4096:
+            _CACHE[text] = expr
+    return expr
+
+
+def evaluate(text: str, variables: dict[str, Any]) -> bool:
+    """Evaluate ``text`` with ``variables``; an unknown name is an ExpressionError."""
+
+    def resolve(name: str) -> Any:
+        if name not in variables:
+            raise ExpressionError(f"expression {text!r}: unknown name '{name}'")
+        return variables[name]
+
+    return compile_expression(text).evaluate(resolve)

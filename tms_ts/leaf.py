@@ -1,0 +1,184 @@
+"""LeafNode<Machine>: the asynchronous action client of a subtask server, and safe halting.
+
+``<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose"
+record_name="{pose}"/>`` sends ``{model_name, record_name}`` to ``/<model_name>/<subtask_name>``
+(tms_msg/action/Subtask). Every ``LeafNode*`` id (LeafNodeIc120, LeafNodeZx200, LeafNodeMst2200, ...)
+is this one class; ``model_name`` and ``subtask_name`` must be literals (read once, as the original
+constructor did), ``record_name`` may be a ``{key}`` resolved at each start.
+
+Protocol (reference §4.2, made non-blocking): first tick sends the goal -> RUNNING; not accepted
+within ``ctx.accept_timeout_s`` -> cancel, FAILURE; rejected -> FAILURE naming the action and the
+record (and the server's reason when it published one); SUCCEEDED -> SUCCESS; ABORTED/CANCELED ->
+FAILURE with the server's message.
+
+Halt never blocks the tick: it requests the cancel and registers a :class:`PendingStop` in
+``ctx.stops``. :func:`poll_stops` (called by the manager every tick) resolves it when the goal ends
+CANCELED/ABORTED/SUCCEEDED, or escalates to ``/<model_name>/emg_stop`` after ``ctx.halt_timeout_s``.
+A task being cancelled ends only when every pending stop is resolved, so "CANCELED" means the
+machines are at rest (or their emergency stop is latched). A leaf re-started while its previous goal
+is still stopping waits for that stop before sending the new goal.
+
+The ROS side is the :class:`RosPort` protocol, implemented by the manager node with rclpy; this
+module imports no rclpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from tms_ts.bt.core import FAILURE, RUNNING, SUCCESS, Port, StatefulNode, Status
+from tms_ts.errors import TreeRuntimeError
+
+__all__ = ["SubtaskGoal", "RosPort", "LeafNode", "PendingStop", "poll_stops"]
+
+PENDING, ACCEPTED, REJECTED, SUCCEEDED, ABORTED, CANCELED = "pending", "accepted", "rejected", "succeeded", "aborted", "canceled"
+TERMINAL = frozenset({REJECTED, SUCCEEDED, ABORTED, CANCELED})
+
+
+class SubtaskGoal(Protocol):
+    """One goal in flight. ``state`` is pending|accepted|rejected|succeeded|aborted|canceled."""
+
+    state: str
+    message: str
+    feedback: str
+
+    def cancel(self) -> None: ...
+
+
+class RosPort(Protocol):
+    """What tree nodes need from ROS (implemented by the manager node)."""
+
+    def subtask_server_ready(self, model_name: str, subtask_name: str) -> bool: ...
+
+    def send_subtask_goal(self, model_name: str, subtask_name: str, record_name: str) -> SubtaskGoal: ...
+
+    def emergency_stop(self, model_name: str, reason: str) -> None: ...
+
+    def rejection_reason(self, action: str, record_name: str) -> str | None: ...
+
+    def confirm_seq(self) -> int: ...
+
+    def confirmations(self, since: int) -> list[tuple[int, str]]: ...
+
+
+@dataclass
+class PendingStop:
+    """A halted goal whose CANCELED/ABORTED confirmation is awaited until ``deadline``."""
+
+    leaf: LeafNode
+    goal: SubtaskGoal
+    deadline: float
+    resolved: bool = False
+    escalated: bool = False
+    outcome: str = ""
+
+
+def poll_stops(ctx) -> bool:  # noqa: ANN001 - TreeContext (avoid import cycle in annotations)
+    """Resolve confirmed stops, escalate overdue ones; True when none is left pending."""
+    now = ctx.clock()
+    for stop in ctx.stops:
+        if stop.resolved:
+            continue
+        if stop.goal.state in TERMINAL:
+            stop.resolved = True
+            stop.outcome = f"{stop.leaf.action} confirmed stop ({stop.goal.state})"
+        elif now >= stop.deadline:
+            stop.resolved = stop.escalated = True
+            stop.outcome = f"{stop.leaf.action} did not confirm stop within {ctx.halt_timeout_s:g} s: emergency stop sent"
+            if ctx.ros is not None:
+                ctx.ros.emergency_stop(stop.leaf.model_name, stop.outcome)
+    return all(stop.resolved for stop in ctx.stops)
+
+
+class LeafNode(StatefulNode):
+    """Action client of ``/<model_name>/<subtask_name>``; see the module docstring."""
+
+    PORTS = {
+        "model_name": Port("str", description="machine namespace, e.g. zx200 (literal)"),
+        "subtask_name": Port("str", description="subtask action name (literal)"),
+        "record_name": Port("str", description="DB record the subtask reads ({key} allowed)"),
+    }
+    LITERAL_PORTS = ("model_name", "subtask_name")
+
+    @classmethod
+    def check_ports(cls, attrs: dict[str, str]) -> str | None:
+        for port in cls.LITERAL_PORTS:
+            value = attrs.get(port, "")
+            if value.startswith("{"):
+                return f"port '{port}' must be a literal, got {value!r}"
+            if not value.strip():
+                return f"port '{port}' must not be empty"
+        return None
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.model_name = self.get_input("model_name").strip("/")
+        self.subtask_name = self.get_input("subtask_name").strip("/")
+        self.action = f"/{self.model_name}/{self.subtask_name}"
+        self.goal: SubtaskGoal | None = None
+        self.record = ""
+        self.ctx.leaves.append(self)
+
+    def _ros(self):  # noqa: ANN202
+        if self.ctx.ros is None:
+            raise TreeRuntimeError(f"{self.describe()}: no ROS side to reach {self.action}")
+        return self.ctx.ros
+
+    def _previous_stop_pending(self) -> bool:
+        return any(not s.resolved and s.leaf is self for s in self.ctx.stops)
+
+    def on_start(self) -> Status:
+        self.goal = None
+        self.record = self.get_input("record_name")
+        if self._previous_stop_pending():
+            self.feedback_message = f"waiting for the previous goal of {self.action} to stop"
+            return RUNNING
+        return self._send()
+
+    def _send(self) -> Status:
+        self.goal = self._ros().send_subtask_goal(self.model_name, self.subtask_name, self.record)
+        self.sent_at = self.ctx.clock()
+        self.feedback_message = f"sent {self.action} record '{self.record}'"
+        return RUNNING
+
+    def _fail(self, message: str) -> Status:
+        self.feedback_message = message
+        self.ctx.failures.append(f"{self.describe()}: {message}")
+        self.goal = None
+        return FAILURE
+
+    def on_running(self) -> Status:
+        goal = self.goal
+        if goal is None:
+            if self._previous_stop_pending():
+                return RUNNING
+            return self._send()
+        state = goal.state
+        if state == PENDING:
+            if self.ctx.clock() - self.sent_at > self.ctx.accept_timeout_s:
+                goal.cancel()
+                return self._fail(f"{self.action} did not accept the goal for record '{self.record}' "
+                                  f"within {self.ctx.accept_timeout_s:g} s")
+            return RUNNING
+        if state == ACCEPTED:
+            self.feedback_message = f"{self.action} '{self.record}': {goal.feedback or 'running'}"
+            return RUNNING
+        if state == SUCCEEDED:
+            self.feedback_message = f"{self.action} '{self.record}' succeeded"
+            self.goal = None
+            return SUCCESS
+        if state == REJECTED:
+            reason = self._ros().rejection_reason(self.action, self.record) or goal.message
+            detail = f": {reason}" if reason else ""
+            return self._fail(f"{self.action} rejected the goal for record '{self.record}'{detail}")
+        return self._fail(f"{self.action} {state} record '{self.record}': {goal.message}")
+
+    def on_halted(self) -> None:
+        goal = self.goal
+        self.goal = None
+        if goal is None or goal.state in TERMINAL:
+            return
+        goal.cancel()
+        self.ctx.stops.append(PendingStop(self, goal, self.ctx.clock() + self.ctx.halt_timeout_s))
+        self.feedback_message = f"cancel requested for {self.action}"

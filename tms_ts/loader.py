@@ -1,0 +1,250 @@
+"""BehaviorTree.CPP XML (v3 / Groot-1 and v4) -> a tree of BT.CPP-semantics py_trees behaviours.
+
+Accepted documents::
+
+    <root main_tree_to_execute="BehaviorTree">                 <!-- v3 / Groot 1 -->
+      <BehaviorTree ID="BehaviorTree"> <Sequence> <Action ID="LeafNodeZx200" .../> ... </BehaviorTree>
+      <TreeNodesModel> ... </TreeNodesModel>                     <!-- palette: ignored -->
+    </root>
+    <root BTCPP_format="4" main_tree_to_execute="Main">        <!-- v4 -->
+      <BehaviorTree ID="Main"> <Sequence> <LeafNodeZx200 .../> ... </BehaviorTree>
+    </root>
+
+In both, a node is either its own tag (``<Sequence>``) or a family tag with an ``ID`` (``<Action
+ID="X">``, ``<Condition>``, ``<Control>``, ``<Decorator>``). ``<SubTree ID="T"/>`` inlines tree T:
+with ``__shared_blackboard="true"`` (v3) / ``_autoremap="true"`` (v4) it shares the parent's
+blackboard, otherwise each other attribute remaps a subtree key (``key="{parent_key}"``) or sets it
+to a literal. Without ``main_tree_to_execute`` the document must hold exactly one BehaviorTree.
+
+Everything is checked before anything runs: malformed XML, unknown node ids, unknown or missing
+ports, literals of the wrong type, child counts, unknown or recursive subtrees. Each error is a
+:class:`TreeLoadError` naming the node id and its line/column.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from typing import Any
+
+from tms_ts.blackboard import Blackboard
+from tms_ts.bt.builtins import BUILTINS
+from tms_ts.bt.core import IDLE, RUNNING, BtNode, Status, TreeContext, convert
+from tms_ts.bt.custom import CUSTOM_NODES
+from tms_ts.errors import TreeLoadError
+from tms_ts.leaf import LeafNode
+from tms_ts.xmldoc import Element, parse_xml
+
+__all__ = ["Tree", "load_tree", "node_class", "register_node", "known_ids"]
+
+_FAMILY_TAGS = frozenset({"Action", "Condition", "Control", "Decorator"})
+_SUBTREE_TAGS = frozenset({"SubTree", "SubTreePlus"})
+_KEY_RE = re.compile(r"^\{([^{}]+)\}$")
+
+_REGISTRY: dict[str, type[BtNode]] = {}
+
+
+def register_node(node_id: str, cls: type[BtNode]) -> None:
+    """Add a node type; a duplicate id is refused (plugins must never silently replace built-ins)."""
+    if node_id in _REGISTRY and _REGISTRY[node_id] is not cls:
+        raise ValueError(f"node id {node_id!r} is already registered as {_REGISTRY[node_id].__name__}")
+    _REGISTRY[node_id] = cls
+
+
+for _id, _cls in {**BUILTINS, **CUSTOM_NODES}.items():
+    register_node(_id, _cls)
+
+
+def node_class(node_id: str) -> type[BtNode] | None:
+    """The class for ``node_id``; every ``LeafNode<Machine>`` id is :class:`LeafNode`."""
+    cls = _REGISTRY.get(node_id)
+    if cls is None and node_id.startswith("LeafNode") and len(node_id) > len("LeafNode"):
+        return LeafNode
+    return cls
+
+
+def known_ids() -> list[str]:
+    return sorted(_REGISTRY) + ["LeafNode<Machine>"]
+
+
+class Tree:
+    """A built task tree: ``tick()`` once per scheduler period, ``halt()`` to stop it."""
+
+    def __init__(self, root: BtNode, ctx: TreeContext, source: str) -> None:
+        self.root = root
+        self.ctx = ctx
+        self.source = source
+        self.nodes = list(root.iter_nodes())
+
+    @property
+    def status(self) -> Status:
+        return self.root.status
+
+    @property
+    def leaves(self) -> list[LeafNode]:
+        return self.ctx.leaves
+
+    def tick(self) -> Status:
+        """One BT.CPP ``tickRoot``."""
+        return self.root.execute_tick()
+
+    def halt(self) -> None:
+        """Halt every running node (leaves request cancels; see :func:`tms_ts.leaf.poll_stops`)."""
+        self.root.halt()
+
+    def running_leaves(self) -> list[str]:
+        """``ID 'name'`` of every action (no children) currently RUNNING."""
+        return [n.describe() for n in self.nodes if not n.children and n.status is RUNNING]
+
+    def snapshot(self) -> str:
+        """One line per node: indentation, id, name and status letter (I/R/S/F), for display."""
+        letters = {IDLE: "I", RUNNING: "R", Status.SUCCESS: "S", Status.FAILURE: "F"}
+        lines: list[str] = []
+
+        def walk(node: BtNode, depth: int) -> None:
+            name = f" '{node.name}'" if node.name != node.node_id else ""
+            lines.append(f"{'  ' * depth}{node.node_id}{name} [{letters.get(node.status, '?')}]")
+            for child in node.children:
+                walk(child, depth + 1)
+
+        walk(self.root, 0)
+        return "\n".join(lines)
+
+
+def _describe(el: Element, node_id: str) -> str:
+    name = el.attrib.get("name")
+    return f"{node_id} '{name}'" if name and name != node_id else node_id
+
+
+class _Builder:
+    def __init__(self, doc: Element, source: str, v4: bool) -> None:
+        self.source = source
+        self.v4 = v4
+        self.trees: dict[str, Element] = {}
+        for child in doc.children:
+            if child.tag == "BehaviorTree":
+                tree_id = child.attrib.get("ID")
+                if not tree_id:
+                    if "main_tree_to_execute" in doc.attrib or len([c for c in doc.children if c.tag == "BehaviorTree"]) > 1:
+                        raise self.error(child, "BehaviorTree", "has no ID")
+                    tree_id = "__main__"
+                if tree_id in self.trees:
+                    raise self.error(child, f"BehaviorTree '{tree_id}'", "defined twice")
+                if len(child.children) != 1:
+                    raise self.error(child, f"BehaviorTree '{tree_id}'", f"must have exactly 1 root node, has {len(child.children)}")
+                self.trees[tree_id] = child
+            elif child.tag == "TreeNodesModel":
+                continue
+            elif child.tag == "include":
+                raise self.error(child, "include", "<include> is not supported; put every tree in one document")
+            else:
+                raise self.error(child, child.tag, "unexpected element under <root>")
+
+    def error(self, el: Element, what: str, problem: str) -> TreeLoadError:
+        return TreeLoadError(f"{self.source}: {what} ({el.where}): {problem}")
+
+    def build(self, el: Element, ctx: TreeContext, stack: tuple[str, ...]) -> BtNode:
+        tag = el.tag
+        attrs = dict(el.attrib)
+        if tag in _FAMILY_TAGS or tag in _SUBTREE_TAGS:
+            node_id = attrs.pop("ID", None)
+            if not node_id:
+                raise self.error(el, tag, "has no ID attribute")
+        else:
+            node_id = tag
+            if "ID" in attrs and not self.v4:
+                attrs.pop("ID")
+        if tag in _SUBTREE_TAGS:
+            return self.subtree(el, node_id, attrs, ctx, stack)
+        cls = node_class(node_id)
+        if cls is None:
+            raise self.error(el, node_id, "unknown node ID")
+        name = attrs.pop("name", node_id)
+        where = f"{self.source} {el.where}" if self.source != "<xml>" else el.where
+        ports: dict[str, tuple[bool, Any]] = {}
+        for port, raw in attrs.items():
+            spec = cls.PORTS.get(port)
+            if spec is None:
+                allowed = ", ".join(sorted(cls.PORTS)) or "none"
+                raise self.error(el, _describe(el, node_id), f"unknown port '{port}' (ports of {node_id}: {allowed})")
+            m = _KEY_RE.match(raw)
+            if m:
+                ports[port] = (True, m.group(1))
+            elif spec.type == "key":
+                ports[port] = (False, raw)
+            else:
+                try:
+                    ports[port] = (False, convert(raw, spec.type))
+                except ValueError as exc:
+                    raise self.error(el, _describe(el, node_id), f"port '{port}': {exc}") from None
+        for port, spec in cls.PORTS.items():
+            if spec.required and port not in ports:
+                raise self.error(el, _describe(el, node_id), f"missing required port '{port}'")
+        check: Callable[[dict[str, str]], str | None] | None = getattr(cls, "check_ports", None)
+        if check is not None:
+            problem = check(attrs)
+            if problem:
+                raise self.error(el, _describe(el, node_id), problem)
+        lo, hi = cls.CHILDREN
+        n = len(el.children)
+        if n < lo or (hi is not None and n > hi):
+            want = f"{lo}" if lo == hi else (f"{lo}..{hi}" if hi is not None else f"at least {lo}")
+            raise self.error(el, _describe(el, node_id), f"needs {want} children, has {n}")
+        node = cls(name, node_id=node_id, ports=ports, ctx=ctx, where=where)
+        for child_el in el.children:
+            child = self.build(child_el, ctx, stack)
+            child.parent = node
+            node.children.append(child)
+        return node
+
+    def subtree(self, el: Element, tree_id: str, attrs: dict[str, str], ctx: TreeContext, stack: tuple[str, ...]) -> BtNode:
+        if tree_id not in self.trees:
+            raise self.error(el, f"SubTree '{tree_id}'", f"no BehaviorTree with ID '{tree_id}' in the document")
+        if tree_id in stack:
+            raise self.error(el, f"SubTree '{tree_id}'", f"recursive subtree ({' -> '.join(stack + (tree_id,))})")
+        attrs.pop("name", None)
+        shared = attrs.pop("__shared_blackboard", attrs.pop("_autoremap", attrs.pop("__autoremap", "false")))
+        if str(shared).lower() == "true":
+            sub_ctx = ctx
+        else:
+            remap: dict[str, str] = {}
+            literals: dict[str, Any] = {}
+            for key, raw in attrs.items():
+                m = _KEY_RE.match(raw)
+                if m:
+                    remap[key] = m.group(1)
+                else:
+                    literals[key] = raw
+            bb = Blackboard(parent=ctx.blackboard, remap=remap)
+            for key, value in literals.items():
+                bb.set(key, value)
+            sub_ctx = ctx.child(bb)
+        body = self.trees[tree_id]
+        return self.build(body.children[0], sub_ctx, stack + (tree_id,))
+
+    def main(self, doc: Element, ctx: TreeContext) -> BtNode:
+        if not self.trees:
+            raise self.error(doc, "root", "the document has no <BehaviorTree>")
+        main_id = doc.attrib.get("main_tree_to_execute")
+        if main_id is None:
+            if len(self.trees) != 1:
+                raise self.error(doc, "root", f"main_tree_to_execute is missing and there are {len(self.trees)} trees")
+            main_id = next(iter(self.trees))
+        if main_id not in self.trees:
+            raise self.error(doc, "root", f"main_tree_to_execute='{main_id}' names no BehaviorTree (have: {', '.join(self.trees)})")
+        body = self.trees[main_id]
+        return self.build(body.children[0], ctx, (main_id,))
+
+
+def load_tree(xml: str, ctx: TreeContext | None = None, *, source: str = "<xml>") -> Tree:
+    """Build the main tree of a BT.CPP v3/v4 document; TreeLoadError names the culprit node."""
+    doc = parse_xml(xml, source)
+    if doc.tag != "root":
+        raise TreeLoadError(f"{source}: document element is <{doc.tag}> ({doc.where}), expected <root>")
+    fmt = doc.attrib.get("BTCPP_format")
+    if fmt not in (None, "3", "4"):
+        raise TreeLoadError(f"{source}: root ({doc.where}): unsupported BTCPP_format={fmt!r} (3 or 4)")
+    ctx = ctx if ctx is not None else TreeContext()
+    builder = _Builder(doc, source, v4=fmt == "4")
+    root = builder.main(doc, ctx)
+    return Tree(root, ctx, source)
