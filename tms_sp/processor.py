@@ -1,0 +1,153 @@
+"""SiteSensing: the sensing processors wired to the document store (no rclpy).
+
+The node (:mod:`tms_sp.nodes.sensing`) feeds it sensor data; it runs the pure cores and writes what
+changed through a tms_db store (``open_store``), as the original tms_sp updaters did:
+
+* the excavation target -> ``(zx200, target_excavate_pose)`` (position_with_angle:1 + x,y,z,theta_w,offset,
+  ZX200 base frame), skipped while the record's ``LOCK_FLG`` is true, rewritten only when it moved
+  more than ``update_threshold``;
+* the release target -> ``(zx200, target_release_pose)`` and the swing angle -> ``(zx200, release_angle)``,
+  only while the IC120 stands at the loading point (elsewhere the vessel is not where the ZX200 releases);
+* the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> the global-blackboard
+  record, written on the first assessment and then on every change.
+
+Only ``type: dynamic`` records are written (as the original updaters): :meth:`SiteSensing.check_records`
+raises :class:`SensingError` naming a record that is missing or static.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tms_sp.arrival import ArrivalDetector
+from tms_sp.config import SensingConfig
+from tms_sp.errors import SensingError
+from tms_sp.frames import Pose2D
+from tms_sp.heightgrid import rasterize
+from tms_sp.mound import MoundAssessment, assess_mound
+from tms_sp.vessel import VesselAssessment, assess_vessel, release_in_zx200
+
+__all__ = ["SiteSensing", "FLAGS"]
+
+log = logging.getLogger(__name__)
+FLAGS = ("SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "SENSING_CHECK_MOUND_FLG")
+
+
+@dataclass
+class SiteSensing:
+    """Runs the three processors and writes their results to ``store``."""
+
+    cfg: SensingConfig
+    store: Any
+    ic120_pose: Pose2D | None = None
+    zx200_pose: Pose2D | None = None
+    mound: MoundAssessment | None = None
+    vessel: VesselAssessment | None = None
+    flags: dict[str, bool] = field(default_factory=dict)
+    writes: int = 0
+    _written_flags: dict[str, bool] = field(default_factory=dict)
+    _last_target: tuple[float, float, float] | None = None
+    _last_release: tuple[float, float, float] | None = None
+    _arrival: ArrivalDetector | None = None
+
+    def __post_init__(self) -> None:
+        self._arrival = ArrivalDetector(self.cfg.points[self.cfg.arrival_point], self.cfg.arrival)
+
+    # ---- setup ------------------------------------------------------------------------------------
+    def check_records(self) -> None:
+        """Every record this processor writes exists and is dynamic; else SensingError naming it."""
+        wanted = [
+            (None, self.cfg.blackboard_record),
+            (self.cfg.excavation_model, self.cfg.excavation_record),
+            (self.cfg.vessel_model, self.cfg.release_record),
+            (self.cfg.vessel_model, self.cfg.angle_record),
+        ]
+        for model, record in wanted:
+            try:
+                doc = self.store.get_record(record) if model is None else self.store.get_parameter(model, record)
+            except KeyError as exc:
+                raise SensingError(f"record ({model or '*'}, {record}) not in the DB: seed it first ({exc})") from None
+            if doc.get("type") != "dynamic":
+                raise SensingError(
+                    f"record ({model or '*'}, {record}) has type {doc.get('type')!r}: sensing only writes 'dynamic' records"
+                )
+
+    # ---- inputs -----------------------------------------------------------------------------------
+    def on_ic120_pose(self, t: float, pose: Pose2D) -> bool:
+        """Measured IC120 pose at time ``t`` [s] -> SENSING_ARRIVAL_FLG."""
+        self.ic120_pose = pose
+        arrived = self._arrival.update(t, pose)
+        self._set_flag("SENSING_ARRIVAL_FLG", arrived)
+        return arrived
+
+    def on_zx200_pose(self, pose: Pose2D) -> None:
+        """Measured ZX200 base pose (default: ``points.zx200_base`` of site.yaml)."""
+        self.zx200_pose = pose
+
+    @property
+    def base(self) -> Pose2D:
+        return self.zx200_pose or self.cfg.zx200_base
+
+    def on_mound_points(self, points: np.ndarray) -> MoundAssessment:
+        """Mound points (map frame) -> excavation target + SENSING_CHECK_MOUND_FLG."""
+        grid = rasterize(points, self.cfg.mound_grid, sensor="mound points")
+        axis = self.base.to_map(np.array([*self.cfg.swing_axis_in_base, 0.0]))
+        a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.cfg.excavation)
+        self.mound = a
+        if a.target is not None:
+            fields = a.target.record_fields(self.base)
+            xyz = (fields["x"], fields["y"], fields["z"])
+            if self._moved(self._last_target, xyz, self.cfg.excavation_update_threshold):
+                doc = self.store.get_parameter(self.cfg.excavation_model, self.cfg.excavation_record)
+                if doc.get("LOCK_FLG") is True:
+                    log.debug("excavation target locked (LOCK_FLG): not updated")
+                else:
+                    self.store.set_fields(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model)
+                    self.writes += 1
+                    self._last_target = xyz
+        self._set_flag("SENSING_CHECK_MOUND_FLG", a.has_soil)
+        return a
+
+    def on_vessel_points(self, points: np.ndarray) -> VesselAssessment:
+        """Vessel points (vessel frame, see :mod:`tms_sp.vessel`) -> release target + SENSING_LOADED_FLG."""
+        spec = self.cfg.vessel_geom.grid_spec(self.cfg.resolution)
+        grid = rasterize(points, spec, sensor="vessel points")
+        v = assess_vessel(grid, self.cfg.vessel_geom, self.cfg.vessel)
+        self.vessel = v
+        if self.ic120_pose is not None and self._at_loading_point():
+            pose, angle = release_in_zx200(
+                v.release_xyz, self.ic120_pose, self.base, self.cfg.vessel_geom,
+                self.cfg.swing_axis_in_base, self.cfg.vessel.carry_theta_w,
+            )
+            xyz = (pose["x"], pose["y"], pose["z"])
+            if self._moved(self._last_release, xyz, self.cfg.vessel_update_threshold):
+                self.store.set_fields(self.cfg.release_record, pose, model_name=self.cfg.vessel_model)
+                self.store.set_fields(self.cfg.angle_record, angle, model_name=self.cfg.vessel_model)
+                self.writes += 2
+                self._last_release = xyz
+        self._set_flag("SENSING_LOADED_FLG", v.loaded)
+        return v
+
+    # ---- helpers ----------------------------------------------------------------------------------
+    def _at_loading_point(self) -> bool:
+        target = self.cfg.points[self.cfg.arrival_point]
+        p = self.ic120_pose
+        return math.hypot(p.x - target.x, p.y - target.y) <= self.cfg.arrival.position_tolerance
+
+    @staticmethod
+    def _moved(last: tuple[float, float, float] | None, new: tuple[float, float, float], threshold: float) -> bool:
+        return last is None or math.dist(last, new) > threshold
+
+    def _set_flag(self, name: str, value: bool) -> None:
+        self.flags[name] = value
+        if self._written_flags.get(name) is value:
+            return
+        self.store.set_fields(self.cfg.blackboard_record, {name: bool(value)})
+        self.writes += 1
+        self._written_flags[name] = value
+        log.info("%s -> %s", name, value)
