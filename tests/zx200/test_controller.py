@@ -1,0 +1,114 @@
+"""The arm controller against a first-order-lag + dead-time joint model (no ROS): accuracy and limits."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tms_rc.zx200.controller import ArmController, CartesianTarget, JointTarget, load_controller_config
+from tms_rc.zx200.plant import LagDeadTimePlant
+from tms_rp.zx200 import errors as codes
+from tms_rp.zx200.kinematics import load_kinematics
+
+
+@pytest.fixture(scope="module")
+def kin():
+    return load_kinematics()
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_controller_config()
+
+
+def run(kin, cfg, q0, targets, *, steps=4000, stop_at=None, plant_cfg=None):
+    """Run the loop; check every step's command against pump/velocity/acceleration limits."""
+    ctl = ArmController(kin, cfg)
+    pc = plant_cfg or cfg
+    plant = LagDeadTimePlant(cfg.dt, pc.dead_time_s, pc.lag_s, q0)
+    q, v = np.array(q0, dtype=float), np.zeros(4)
+    ctl.start(targets)
+    log = {"q": [], "u": [], "err": []}
+    for i in range(steps):
+        if stop_at is not None and i == stop_at:
+            ctl.stop()
+        u = ctl.step(q, v)
+        log["u"].append(u)
+        assert np.sum(cfg.flow_per_rad_s * np.abs(u)) <= cfg.pump_flow_lpm * (1 + 1e-3), f"pump flow at step {i}"
+        assert np.all(np.abs(u) <= kin.limits.velocity + 1e-9), f"velocity at step {i}"
+        if len(log["u"]) > 1:
+            acc = np.abs(log["u"][-1] - log["u"][-2]) / cfg.dt
+            # OSQP tolerance 1e-5 on the rate-limit rows: allow 1e-3 rad/s per step (0.1 rad/s^2)
+            assert np.all(acc <= kin.limits.acceleration + 0.1), f"acceleration at step {i}: {acc}"
+        q, v = plant.step(u)
+        log["q"].append(q)
+        assert kin.limits.violation(q) is None, f"joint limit violated at step {i}: {q}"
+        if ctl.reference_tip is not None:
+            log["err"].append(float(np.linalg.norm(kin.tip_position(q) - ctl.reference_tip)))
+        if ctl.status.result is not None:
+            break
+    return ctl, q, log
+
+
+def test_cartesian_2m_move_tracks_spline_and_reaches(kin, cfg):
+    q0 = kin.home
+    p0 = kin.tip_position(q0)
+    goal = p0 + np.array([-2.0, 0.0, 0.0])
+    ctl, q, log = run(kin, cfg, q0, [CartesianTarget(goal, kin.theta_w(q0))])
+    assert ctl.status.result == codes.SUCCESS, ctl.status
+    assert np.linalg.norm(kin.tip_position(q) - goal) < cfg.goal_tolerance_m
+    rms = float(np.sqrt(np.mean(np.square(log["err"]))))
+    assert rms < 0.03, rms
+
+
+def test_joint_target_and_sequence(kin, cfg):
+    q0 = kin.home
+    q1 = np.array([0.8, -0.7, 1.2, 1.0])
+    p2 = kin.tip_position(np.array([0.5, -0.6, 1.5, 0.6]))
+    ctl, q, _ = run(kin, cfg, q0, [JointTarget(q1, "a"), CartesianTarget(p2, 1.5, "b")], steps=6000)
+    assert ctl.status.result == codes.SUCCESS, ctl.status
+    assert np.linalg.norm(kin.tip_position(q) - p2) < cfg.goal_tolerance_m
+    assert abs(kin.theta_w(q) - 1.5) < cfg.goal_tolerance_rad
+
+
+def test_target_beyond_limits_is_held_at_limits_every_step(kin, cfg):
+    # A joint target past the arm's dump (lower) limit: the position level wins over the joint task.
+    q0 = kin.home
+    target = np.array([0.0, -0.5, 0.2, 0.5])
+    ctl, q, log = run(kin, dataclasses.replace(cfg, segment_timeout_margin_s=3.0), q0, [JointTarget(target)], steps=3000)
+    assert min(qq[2] for qq in log["q"]) >= kin.limits.lower[2]
+    assert min(qq[2] for qq in log["q"]) < kin.limits.lower[2] + 0.05  # it did push towards the limit
+    assert ctl.status.result == codes.TIMEOUT, ctl.status
+
+
+def test_ground_collision_outranks_position(kin, cfg):
+    # The tip position task asks for a point below the ground limit: the collision level keeps the tip above it.
+    low = dataclasses.replace(cfg, ground_min_z=-1.0, segment_timeout_margin_s=3.0)
+    q0 = kin.home
+    p0 = kin.tip_position(q0)
+    goal = p0 + np.array([0.0, 0.0, -2.5])  # z ~ -2.0 < -1.0
+    ctl, q, log = run(kin, low, q0, [CartesianTarget(goal, kin.theta_w(q0))], steps=3000)
+    zs = [kin.tip_position(qq)[2] for qq in log["q"]]
+    assert min(zs) >= -1.0 - 0.02, min(zs)
+    assert min(zs) < -0.9  # it went as low as allowed
+    assert ctl.status.result == codes.TIMEOUT
+
+
+def test_cancel_decelerates_within_limits_then_reports_canceled(kin, cfg):
+    q0 = kin.home
+    q1 = np.array([1.5, -0.9, 1.2, 1.0])
+    ctl, q, log = run(kin, cfg, q0, [JointTarget(q1)], steps=3000, stop_at=300)
+    assert ctl.status.result == codes.CANCELED, ctl.status
+    assert np.max(np.abs(log["u"][299])) > 0.05  # it was moving when canceled
+    assert np.max(np.abs(log["u"][-1])) < 1e-4  # and is at rest now
+
+
+def test_mismatched_plant_still_reaches(kin, cfg):
+    # Plant with 2x the dead time and lag the controller assumes: slower convergence, still there.
+    q0 = kin.home
+    goal = kin.tip_position(np.array([-0.4, -0.8, 1.4, 1.2]))
+    plant_cfg = dataclasses.replace(cfg, dead_time_s=cfg.dead_time_s * 2, lag_s=cfg.lag_s * 2)
+    ctl, q, _ = run(kin, cfg, q0, [CartesianTarget(goal, 1.0)], steps=6000, plant_cfg=plant_cfg)
+    assert ctl.status.result == codes.SUCCESS, ctl.status

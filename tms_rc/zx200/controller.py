@@ -1,0 +1,491 @@
+"""The ZX200 arm controller: HEAP-style hierarchical inverse kinematics at 100 Hz.
+
+Every control step turns the measured joint angles into joint-velocity commands by solving
+:class:`~tms_rc.zx200.hqp.HierarchicalQP` with these priorities, highest first:
+
+1. pump flow: ``sum_i flow_i |dq_i| <= pump_flow`` (16 linear rows, one per sign pattern);
+2. joint (cylinder) velocity limits, rate-limited by the acceleration limits;
+3. joint position limits (velocity bounds that shrink towards a limit, so no step crosses it);
+4. ground and self-collision avoidance of the bucket tip and pin (height and distance from the
+   swing axis, linearised with the pinocchio Jacobians);
+5. bucket-edge angle theta_w;          (joint-space segments: the joint reference instead of 5-6)
+6. bucket-tip position;
+7. least joint motion.
+
+References are cubic Hermite splines from the state at segment start to the target; the task rows
+ask for the spline velocity plus PID feedback on the spline position. The plant's command dead time
+and lag are compensated with a Smith predictor: the controller acts on the state predicted for when
+its command takes effect (measured state + commands still in flight), joints' delays are equalised
+in the output, and references are read that far ahead, so the machine follows the spline in time.
+
+Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.zx200.node`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_rc.zx200.hqp import HierarchicalQP, LevelSpec
+from tms_rp.zx200 import errors as codes
+from tms_rp.zx200.kinematics import JOINTS, Zx200Kinematics
+
+__all__ = [
+    "ControllerConfig",
+    "load_controller_config",
+    "HermiteSegment",
+    "JointTarget",
+    "CartesianTarget",
+    "ControllerStatus",
+    "ArmController",
+]
+
+N = len(JOINTS)
+
+
+def _per_joint(data: Any, key: str, source: str) -> np.ndarray:
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: {key}: expected a mapping joint -> value, got {data!r}")
+    try:
+        return np.array([float(data[j]) for j in JOINTS])
+    except KeyError as exc:
+        raise ConfigError(f"{source}: {key}: missing joint {exc}") from None
+    except (TypeError, ValueError):
+        raise ConfigError(f"{source}: {key}: values must be numbers, got {data!r}") from None
+
+
+@dataclass
+class ControllerConfig:
+    """Parameters of :class:`ArmController` (see ``config/tms_rc/zx200_arm_controller.yaml``)."""
+
+    rate_hz: float = 100.0
+    pump_flow_lpm: float = 424.0
+    flow_per_rad_s: np.ndarray = field(default_factory=lambda: np.array([200.0, 660.0, 270.0, 170.0]))
+    position_limit_gain: np.ndarray = field(default_factory=lambda: np.array([0.3, 1.4, 2.5, 3.5]))
+    position_limit_margin: float = 0.01
+    use_acceleration_limits: bool = True
+    ground_min_z: float = -2.5
+    body_min_radius: float = 3.2
+    collision_gain: float = 2.0
+    pid: dict[str, dict[str, float]] = field(
+        default_factory=lambda: {k: {"kp": 1.2, "ki": 0.1, "kd": 0.0, "i_limit": 0.05} for k in ("position", "theta_w", "joint")}
+    )
+    max_tip_speed: float = 0.35
+    max_theta_w_rate: float = 0.35
+    joint_speed_scale: float = 0.6
+    dead_time_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.1))
+    lag_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.15))
+    goal_tolerance_m: float = 0.02
+    goal_tolerance_rad: float = 0.02
+    rest_speed: float = 0.01
+    settle_s: float = 0.3
+    segment_timeout_margin_s: float = 20.0
+    osqp: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+
+def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
+    """Read ``config/tms_rc/zx200_arm_controller.yaml`` (or ``path``); errors name the file and key."""
+    path = Path(path) if path is not None else config_path("tms_rc", "zx200_arm_controller.yaml")
+    data, where = load_yaml(path)
+    src = str(path)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{src}: expected a mapping")
+    try:
+        cfg = ControllerConfig(
+            rate_hz=float(data["rate_hz"]),
+            pump_flow_lpm=float(data["pump_flow_lpm"]),
+            flow_per_rad_s=_per_joint(data["flow_per_rad_s"], "flow_per_rad_s", src),
+            position_limit_gain=_per_joint(data["position_limit_gain"], "position_limit_gain", src),
+            position_limit_margin=float(data["position_limit_margin"]),
+            use_acceleration_limits=bool(data["use_acceleration_limits"]),
+            ground_min_z=float(data["collision"]["ground_min_z"]),
+            body_min_radius=float(data["collision"]["body_min_radius"]),
+            collision_gain=float(data["collision"]["gain"]),
+            pid={k: {kk: float(vv) for kk, vv in v.items()} for k, v in data["pid"].items()},
+            max_tip_speed=float(data["max_tip_speed"]),
+            max_theta_w_rate=float(data["max_theta_w_rate"]),
+            joint_speed_scale=float(data["joint_speed_scale"]),
+            dead_time_s=_per_joint(data["plant_model"]["dead_time_s"], "plant_model.dead_time_s", src),
+            lag_s=_per_joint(data["plant_model"]["lag_s"], "plant_model.lag_s", src),
+            goal_tolerance_m=float(data["goal_tolerance_m"]),
+            goal_tolerance_rad=float(data["goal_tolerance_rad"]),
+            rest_speed=float(data["rest_speed"]),
+            settle_s=float(data["settle_s"]),
+            segment_timeout_margin_s=float(data["segment_timeout_margin_s"]),
+            osqp=dict(data.get("osqp", {})),
+        )
+    except KeyError as exc:
+        raise ConfigError(f"{src}: missing key {exc}") from None
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise ConfigError(f"{src}: bad value: {exc}") from None
+    for key in ("position", "theta_w", "joint"):
+        if key not in cfg.pid:
+            raise where.error(("pid",), f"pid: missing gains for {key!r}")
+    if cfg.rate_hz <= 0 or cfg.pump_flow_lpm <= 0 or cfg.max_tip_speed <= 0:
+        raise ConfigError(f"{src}: rate_hz, pump_flow_lpm and max_tip_speed must be > 0")
+    return cfg
+
+
+# ---------------------------------------------------------------------------------------------- references
+@dataclass(frozen=True)
+class HermiteSegment:
+    """Cubic Hermite curve from ``p0`` to ``p1`` over ``duration`` with end velocities ``v0``, ``v1``."""
+
+    p0: np.ndarray
+    p1: np.ndarray
+    duration: float
+    v0: np.ndarray | None = None
+    v1: np.ndarray | None = None
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(position, velocity) at time ``t`` (clamped to [0, duration])."""
+        dur = self.duration
+        u = min(max(t / dur, 0.0), 1.0) if dur > 0 else 1.0
+        v0 = np.zeros_like(self.p0) if self.v0 is None else self.v0 * dur
+        v1 = np.zeros_like(self.p0) if self.v1 is None else self.v1 * dur
+        h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
+        d00, d10, d01, d11 = 6 * u**2 - 6 * u, 3 * u**2 - 4 * u + 1, -6 * u**2 + 6 * u, 3 * u**2 - 2 * u
+        pos = h00 * self.p0 + h10 * v0 + h01 * self.p1 + h11 * v1
+        if dur <= 0 or t < 0 or t > dur:
+            return pos, np.zeros_like(self.p0)
+        vel = (d00 * self.p0 + d10 * v0 + d01 * self.p1 + d11 * v1) / dur
+        return pos, vel
+
+
+@dataclass(frozen=True)
+class JointTarget:
+    """Move to joint angles ``q`` [rad] (joint order :data:`JOINTS`) along a joint-space spline."""
+
+    q: np.ndarray
+    label: str = ""
+    speed_scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class CartesianTarget:
+    """Move the bucket tip on a straight line to ``position`` [m] with edge angle ``theta_w`` [rad]."""
+
+    position: np.ndarray
+    theta_w: float
+    label: str = ""
+    speed_scale: float = 1.0
+
+
+Target = JointTarget | CartesianTarget
+
+
+@dataclass
+class ControllerStatus:
+    """What the controller is doing: ``mode`` idle | moving | stopping; ``result`` set when a run ends."""
+
+    mode: str = "idle"
+    segment: int = 0
+    segments: int = 0
+    label: str = ""
+    distance_remaining: float = 0.0
+    result: int | None = None
+    message: str = ""
+
+
+class _Pid:
+    def __init__(self, gains: dict[str, float], dim: int, dt: float) -> None:
+        self.kp, self.ki, self.kd = gains.get("kp", 0.0), gains.get("ki", 0.0), gains.get("kd", 0.0)
+        self.limit = gains.get("i_limit", math.inf)
+        self.dt = dt
+        self.integral = np.zeros(dim)
+        self.prev: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.integral[:] = 0.0
+        self.prev = None
+
+    def __call__(self, error: np.ndarray) -> np.ndarray:
+        self.integral = np.clip(self.integral + error * self.dt, -self.limit, self.limit)
+        deriv = np.zeros_like(error) if self.prev is None else (error - self.prev) / self.dt
+        self.prev = error.copy()
+        return self.kp * error + self.ki * self.integral + self.kd * deriv
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+# ---------------------------------------------------------------------------------------------- controller
+class ArmController:
+    """The hierarchical arm controller; call :meth:`step` once per control period.
+
+    Args:
+        kin: the ZX200 kinematic model.
+        cfg: controller parameters.
+    """
+
+    SAFETY_LEVELS = (
+        LevelSpec("pump_flow", "ineq", 2**N),
+        LevelSpec("joint_velocity", "ineq", 2 * N),
+        LevelSpec("position_limits", "ineq", 2 * N),
+        LevelSpec("collision", "ineq", 4),
+    )
+
+    def __init__(self, kin: Zx200Kinematics, cfg: ControllerConfig) -> None:
+        self.kin = kin
+        self.cfg = cfg
+        self.dt = cfg.dt
+        lim = kin.limits
+        osqp_cfg = dict(
+            eps=float(cfg.osqp.get("eps", 1e-5)),
+            max_iter=int(cfg.osqp.get("max_iter", 1000)),
+            regularisation=float(cfg.osqp.get("regularisation", 1e-4)),
+            fix_tolerance=float(cfg.osqp.get("fix_tolerance", 1e-4)),
+            polish=bool(cfg.osqp.get("polish", False)),
+        )
+        self.hqp_cartesian = HierarchicalQP(
+            N,
+            [*self.SAFETY_LEVELS, LevelSpec("theta_w", "eq", 1), LevelSpec("position", "eq", 3), LevelSpec("least_motion", "eq", N)],
+            **osqp_cfg,
+        )
+        self.hqp_joint = HierarchicalQP(
+            N, [*self.SAFETY_LEVELS, LevelSpec("joint", "eq", N), LevelSpec("least_motion", "eq", N)], **osqp_cfg
+        )
+        signs = np.array(list(itertools.product((1.0, -1.0), repeat=N)))
+        self._pump_a = signs * cfg.flow_per_rad_s
+        self._pump_b = np.full(2**N, cfg.pump_flow_lpm)
+        self._eye2 = np.vstack([np.eye(N), -np.eye(N)])
+        self._lower, self._upper = lim.lower, lim.upper
+        # Smith predictor with equalised delays (dead time + lag, as steps).
+        delays = cfg.dead_time_s + cfg.lag_s
+        self._horizon_steps = int(round(float(np.max(delays)) / self.dt))
+        self._extra_steps = [int(round((float(np.max(delays)) - d) / self.dt)) for d in delays]
+        self.preview_s = self._horizon_steps * self.dt
+        self._in_flight: deque[np.ndarray] = deque(maxlen=max(self._horizon_steps, 1))
+        self._out_hist: deque[np.ndarray] = deque(maxlen=max(self._extra_steps) + 1)
+        self.u_prev = np.zeros(N)
+        self.status = ControllerStatus()
+        self._targets: list[Target] = []
+        self._seg: int = 0
+        self._spline: HermiteSegment | None = None
+        self._theta_spline: HermiteSegment | None = None
+        self._seg_time = 0.0
+        self._settled = 0.0
+        self._pid_pos = _Pid(cfg.pid["position"], 3, self.dt)
+        self._pid_th = _Pid(cfg.pid["theta_w"], 1, self.dt)
+        self._pid_q = _Pid(cfg.pid["joint"], N, self.dt)
+        self.last_result = None
+        self._stop_code = codes.CANCELED
+        self.reference_tip: np.ndarray | None = None
+
+    # -------------------------------------------------------------------------- commands
+    def start(self, targets: list[Target]) -> None:
+        """Begin a run through ``targets`` (validated by the planner); replaces any current run."""
+        if not targets:
+            raise ValueError("ArmController.start: empty target list")
+        self._targets = list(targets)
+        self._seg = 0
+        self._spline = None
+        self.status = ControllerStatus(mode="moving", segment=1, segments=len(targets), label=targets[0].label)
+
+    def stop(self, message: str = "canceled") -> None:
+        """Decelerate to rest within the velocity and acceleration limits (result CANCELED once at rest)."""
+        self._stop_code = codes.CANCELED
+        if self.status.mode == "moving" or (self.status.mode == "idle" and np.any(self.u_prev)):
+            self.status = ControllerStatus(mode="stopping", message=message)
+        elif self.status.mode != "stopping":
+            self.status = ControllerStatus(mode="idle", result=codes.CANCELED, message=message)
+
+    # -------------------------------------------------------------------------- helpers
+    def predicted(self, q: np.ndarray) -> np.ndarray:
+        """State expected when the next command takes effect: measured + commands still in flight."""
+        if not self._in_flight:
+            return np.asarray(q, dtype=float).copy()
+        return np.asarray(q, dtype=float) + self.dt * np.sum(self._in_flight, axis=0)
+
+    def _segment_duration(self, q0: np.ndarray, target: Target) -> float:
+        cfg, lim = self.cfg, self.kin.limits
+        scale = cfg.joint_speed_scale * target.speed_scale
+        if isinstance(target, JointTarget):
+            dq = np.abs(self._joint_delta(q0, target.q))
+            t_cart = 0.0
+        else:
+            q1 = self.kin.ik_position_with_angle(target.position, target.theta_w, check_limits=False)
+            dq = np.abs(self._joint_delta(q0, q1))
+            dist = float(np.linalg.norm(target.position - self.kin.tip_position(q0)))
+            dth = abs(target.theta_w - self.kin.theta_w(q0))
+            t_cart = max(1.5 * dist / (cfg.max_tip_speed * target.speed_scale), 1.5 * dth / (cfg.max_theta_w_rate * target.speed_scale))
+        t_vel = float(np.max(1.5 * dq / (scale * lim.velocity)))
+        t_acc = float(np.max(np.sqrt(6.0 * dq / (scale * lim.acceleration))))
+        t_flow = 1.5 * float(np.sum(cfg.flow_per_rad_s * dq)) / (0.8 * cfg.pump_flow_lpm)
+        return max(t_cart, t_vel, t_acc, t_flow, 0.5)
+
+    @staticmethod
+    def _joint_delta(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        d = np.asarray(q1, dtype=float) - q0
+        d[0] = _wrap(d[0])  # continuous swing: shortest way round
+        return d
+
+    def _begin_segment(self, qp: np.ndarray) -> None:
+        target = self._targets[self._seg]
+        dur = self._segment_duration(qp, target)
+        if isinstance(target, JointTarget):
+            self._spline = HermiteSegment(qp.copy(), qp + self._joint_delta(qp, target.q), dur)
+            self._theta_spline = None
+        else:
+            self._spline = HermiteSegment(self.kin.tip_position(qp), np.asarray(target.position, dtype=float), dur)
+            self._theta_spline = HermiteSegment(np.array([self.kin.theta_w(qp)]), np.array([target.theta_w]), dur)
+        self._seg_time = 0.0
+        self._settled = 0.0
+        for pid in (self._pid_pos, self._pid_th, self._pid_q):
+            pid.reset()
+        self.status.segment = self._seg + 1
+        self.status.label = target.label
+
+    # -------------------------------------------------------------------------- safety rows
+    def _safety_tasks(self, qp: np.ndarray, tip: np.ndarray, jt: np.ndarray, pin_p: np.ndarray, jp: np.ndarray):
+        cfg, lim = self.cfg, self.kin.limits
+        vmax = lim.velocity
+        if cfg.use_acceleration_limits:
+            a = lim.acceleration * self.dt
+            hi = np.minimum(vmax, self.u_prev + a)
+            lo = np.maximum(-vmax, self.u_prev - a)
+        else:
+            hi, lo = vmax, -vmax
+        vel = (self._eye2, np.concatenate([hi, -lo]))
+        m = cfg.position_limit_margin
+        k = cfg.position_limit_gain
+        pos = (self._eye2, np.concatenate([k * (self._upper - m - qp), k * (qp - self._lower - m)]))
+        rows, b = [], []
+        so = self.kin.swing_origin
+        kc = cfg.collision_gain
+        for p, j in ((tip, jt), (pin_p, jp)):
+            rows.append(-j[2])
+            b.append(kc * (p[2] - cfg.ground_min_z))
+            rel = p[:2] - so[:2]
+            rho = float(np.linalg.norm(rel))
+            rows.append(-(rel / max(rho, 1e-6)) @ j[:2])
+            b.append(kc * (rho - cfg.body_min_radius))
+        col = (np.array(rows), np.array(b))
+        return [(self._pump_a, self._pump_b), vel, pos, col]
+
+    def _enforce_hard_limits(self, u: np.ndarray) -> np.ndarray:
+        """Final guard against solver tolerance: clip to the velocity/acceleration box, scale to the pump."""
+        vmax = self.kin.limits.velocity
+        if self.cfg.use_acceleration_limits:
+            a = self.kin.limits.acceleration * self.dt
+            u = np.clip(u, np.maximum(-vmax, self.u_prev - a), np.minimum(vmax, self.u_prev + a))
+        else:
+            u = np.clip(u, -vmax, vmax)
+        flow = float(np.sum(self.cfg.flow_per_rad_s * np.abs(u)))
+        if flow > self.cfg.pump_flow_lpm:
+            u = u * (self.cfg.pump_flow_lpm / flow)
+        return u
+
+    # -------------------------------------------------------------------------- the step
+    def step(self, q: np.ndarray, dq: np.ndarray | None = None) -> np.ndarray:
+        """One control period: measured joints ``q`` (and velocities ``dq``) -> joint-velocity command.
+
+        The returned command is what to send now (delays equalised per joint). :attr:`status`
+        reports the phase and, when a run ends, ``result`` (an ErrorCodes value) and ``message``.
+        """
+        q = np.asarray(q, dtype=float)
+        dq = np.zeros(N) if dq is None else np.asarray(dq, dtype=float)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            self.stop("non-finite joint state")
+            q = np.nan_to_num(q)
+        qp = self.predicted(q)
+        tip, jt, pin_p, jp = self.kin.jacobians(qp)
+        tasks = self._safety_tasks(qp, tip, jt, pin_p, jp)
+        st = self.status
+        if st.mode == "moving":
+            if self._spline is None:
+                self._begin_segment(qp)
+            u = self._track(q, qp, dq, tip, jt, tasks)
+        else:
+            res = self.hqp_joint.solve([*tasks, (np.eye(N), np.zeros(N)), (np.eye(N), np.zeros(N))])
+            u = res.x
+            self.last_result = res
+            if st.mode == "stopping":
+                in_flight = max((float(np.max(np.abs(c))) for c in self._out_hist), default=0.0)
+                if self._horizon_steps:
+                    in_flight = max(in_flight, float(np.max(np.abs(np.asarray(self._in_flight)))))
+                if np.max(np.abs(u)) < 1e-4 and np.max(np.abs(dq)) < self.cfg.rest_speed and in_flight < 1e-4:
+                    self.status = ControllerStatus(mode="idle", result=self._stop_code, message=st.message or "canceled")
+            else:
+                u = np.zeros(N) if np.max(np.abs(u)) < 1e-9 else u
+        u = self._enforce_hard_limits(u)
+        self.u_prev = u
+        if self._horizon_steps:
+            self._in_flight.append(u)
+        self._out_hist.append(u)
+        out = np.array([self._out_hist[-1 - min(e, len(self._out_hist) - 1)][i] for i, e in enumerate(self._extra_steps)])
+        return out
+
+    def _track(self, q, qp, dq, tip, jt, tasks) -> np.ndarray:  # noqa: ANN001 - internal
+        cfg = self.cfg
+        target = self._targets[self._seg]
+        self._seg_time += self.dt
+        t_ref = self._seg_time + self.preview_s
+        spline = self._spline
+        assert spline is not None
+        if isinstance(target, JointTarget):
+            q_ref, v_ref = spline.sample(t_ref)
+            err = q_ref - qp
+            err[0] = _wrap(err[0])
+            b = v_ref + self._pid_q(err)
+            res = self.hqp_joint.solve([*tasks, (np.eye(N), b), (np.eye(N), np.zeros(N))])
+            goal_err = self._joint_delta(q, spline.p1)
+            dist = float(np.max(np.abs(goal_err)))
+            self.reference_tip = None
+            reached = dist < cfg.goal_tolerance_rad
+            self.status.distance_remaining = float(np.linalg.norm(self.kin.tip_position(spline.p1) - self.kin.tip_position(q)))
+        else:
+            assert self._theta_spline is not None
+            p_ref, v_ref = spline.sample(t_ref)
+            th_ref, w_ref = self._theta_spline.sample(t_ref)
+            th = self.kin.theta_w(qp)
+            b_th = w_ref + self._pid_th(th_ref - th)
+            b_p = v_ref + self._pid_pos(p_ref - tip)
+            res = self.hqp_cartesian.solve(
+                [*tasks, (self.kin.theta_w_jacobian()[None, :], b_th), (jt, b_p), (np.eye(N), np.zeros(N))]
+            )
+            self.reference_tip = spline.sample(self._seg_time)[0]
+            tip_now = self.kin.tip_position(q)
+            dist = float(np.linalg.norm(spline.p1 - tip_now))
+            th_err = abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(q))
+            reached = dist < cfg.goal_tolerance_m and th_err < cfg.goal_tolerance_rad
+            self.status.distance_remaining = dist
+        self.last_result = res
+        u = res.x
+        last = self._seg == len(self._targets) - 1
+        if self._seg_time >= spline.duration:
+            if reached and (not last or np.max(np.abs(dq)) < cfg.rest_speed):
+                self._settled += self.dt
+            else:
+                self._settled = 0.0
+            if reached and (not last or self._settled >= cfg.settle_s):
+                if last:
+                    self.status = ControllerStatus(
+                        mode="idle", segment=self._seg + 1, segments=len(self._targets), label=target.label,
+                        distance_remaining=self.status.distance_remaining, result=codes.SUCCESS, message="reached",
+                    )
+                    self._spline = None
+                    return u
+                self._seg += 1
+                self._spline = None
+            elif self._seg_time > spline.duration + cfg.segment_timeout_margin_s:
+                self.status = ControllerStatus(
+                    mode="stopping", result=None,
+                    message=f"segment {self._seg + 1} ({target.label or 'move'}) not reached in time: "
+                    f"{self.status.distance_remaining:.3f} remaining",
+                )
+                self._stop_code = codes.TIMEOUT
+        return u

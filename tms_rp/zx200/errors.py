@@ -1,0 +1,43 @@
+"""Errors of ZX200 planning: each carries the ``tms_msg/ErrorCodes`` value an action result reports.
+
+A goal is rejected *before* motion with one of these; the message names the culprit (which joint and
+its limit, which distance and the reachable range, which field is NaN or empty).
+"""
+
+from __future__ import annotations
+
+from tms_common.errors import TmsError
+
+# Mirrors tms_msg/msg/ErrorCodes.msg (kept as plain ints so the pure core needs no rclpy).
+SUCCESS = 1
+FAILURE = 99999
+INVALID_GOAL = 2
+OUT_OF_REACH = 3
+JOINT_LIMIT = 4
+CANCELED = 5
+TIMEOUT = 6
+NO_VALID_CONTROL = 7
+
+
+class PlanningError(TmsError):
+    """A goal cannot be planned; ``code`` is the ErrorCodes value for the action result."""
+
+    code = FAILURE
+
+
+class InvalidGoalError(PlanningError, ValueError):
+    """NaN, infinite, empty or malformed goal."""
+
+    code = INVALID_GOAL
+
+
+class OutOfReachError(PlanningError):
+    """The target lies outside the arm's workspace (message gives the distance and the range)."""
+
+    code = OUT_OF_REACH
+
+
+class JointLimitError(PlanningError):
+    """The target needs a joint outside its position limits (message names the joint and limit)."""
+
+    code = JOINT_LIMIT

@@ -1,0 +1,281 @@
+"""ZX200 arm kinematics: a pinocchio model built from ``config/machines/zx200.yaml``.
+
+The chain is base_link -swing(z)-> body_link -boom(y)-> boom_link -arm(y)-> arm_link -bucket(y)->
+bucket_link, with the bucket tip (``bucket_tip_xyz``) as an operational frame, exactly as the
+zx200_ros2 URDF (reference/opera_machines.md §c). Pinocchio gives forward kinematics and the
+Jacobians of the bucket tip and the bucket pin that the arm controller (``tms_rc.zx200``) uses.
+
+theta_w (the seed paper's bucket-edge angle to the ground plane) is the angle of the bucket pin ->
+bucket tip line below the horizontal x-y plane, in the vertical plane of the front: 0 = edge
+horizontal pointing away from the machine, +pi/2 = tip straight down, negative = tip above the pin.
+Because boom, arm and bucket all turn about parallel y axes, theta_w = boom + arm + bucket + c
+(c = 0 for the ZX200, whose zero pose is "everything straight and horizontal"), so its Jacobian is
+the constant row [0, 1, 1, 1].
+
+Inverse kinematics of (tip position, theta_w) is closed-form: swing from the tip bearing (with the
+front's lateral offset), then a planar two-link problem for boom and arm to the bucket pin. Failures
+name the distance and the reachable range, or the joint and its limit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_rp.zx200.errors import InvalidGoalError, JointLimitError, OutOfReachError
+
+__all__ = ["JOINTS", "JointLimits", "Zx200Kinematics", "load_kinematics"]
+
+JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Position [rad] (lower/upper, +-inf for the continuous swing), velocity [rad/s], acceleration [rad/s^2]."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+
+    def violation(self, q: np.ndarray, margin: float = 0.0) -> tuple[int, float, tuple[float, float]] | None:
+        """First joint outside its limits (index, value, (lower, upper)) or None."""
+        for i in range(len(JOINTS)):
+            if q[i] < self.lower[i] - margin or q[i] > self.upper[i] + margin:
+                return i, float(q[i]), (float(self.lower[i]), float(self.upper[i]))
+        return None
+
+
+def _vec(data: Any, where: str, n: int = 3) -> np.ndarray:
+    if not isinstance(data, (list, tuple)) or len(data) != n:
+        raise ConfigError(f"{where}: expected a list of {n} numbers, got {data!r}")
+    try:
+        return np.array([float(v) for v in data])
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: expected numbers, got {data!r}") from None
+
+
+class Zx200Kinematics:
+    """Pinocchio model of the ZX200 front plus closed-form IK; joint order is :data:`JOINTS`.
+
+    Args:
+        machine: the parsed ``config/machines/zx200.yaml`` mapping.
+        source: file name used in error messages.
+    """
+
+    def __init__(self, machine: dict[str, Any], source: str = "zx200.yaml") -> None:
+        try:
+            joints = machine["joints"]
+            tip = _vec(machine["bucket_tip_xyz"], f"{source}: bucket_tip_xyz")
+        except (KeyError, TypeError) as exc:
+            raise ConfigError(f"{source}: missing key {exc}") from None
+        origins, pitches = [], []
+        lower, upper, vel, acc = [], [], [], []
+        model = pin.Model()
+        model.name = "zx200"
+        parent = 0
+        masses = machine.get("masses", {})
+        bodies = {"swing_joint": "body", "boom_joint": "boom", "arm_joint": "arm", "bucket_joint": "bucket"}
+        for name in JOINTS:
+            if name not in joints:
+                raise ConfigError(f"{source}: joints: missing {name}")
+            spec = joints[name]
+            xyz = _vec(spec.get("origin_xyz"), f"{source}: joints.{name}.origin_xyz")
+            rpy = _vec(spec.get("origin_rpy"), f"{source}: joints.{name}.origin_rpy")
+            axis = _vec(spec.get("axis"), f"{source}: joints.{name}.axis")
+            placement = pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)
+            if np.allclose(axis, [0, 0, 1]):
+                jmodel = pin.JointModelRZ()
+            elif np.allclose(axis, [0, 1, 0]):
+                jmodel = pin.JointModelRY()
+            else:
+                raise ConfigError(f"{source}: joints.{name}.axis: expected [0,0,1] or [0,1,0], got {axis.tolist()}")
+            parent = model.addJoint(parent, jmodel, placement, name)
+            mass = float(masses.get(bodies[name], 1.0))
+            model.appendBodyToJoint(parent, pin.Inertia.FromSphere(mass, 0.5), pin.SE3.Identity())
+            origins.append(xyz)
+            pitches.append(float(rpy[1]))
+            pos = spec.get("position")
+            if pos is None:
+                lower.append(-math.inf)
+                upper.append(math.inf)
+            else:
+                lo, hi = _vec(pos, f"{source}: joints.{name}.position", 2)
+                if not lo < hi:
+                    raise ConfigError(f"{source}: joints.{name}.position: lower {lo} must be < upper {hi}")
+                lower.append(lo)
+                upper.append(hi)
+            vel.append(float(spec.get("velocity", 1.0)))
+            acc.append(float(spec.get("acceleration", 1.0)))
+        bucket_joint = model.getJointId("bucket_joint")
+        self.tip_frame = model.addFrame(pin.Frame("bucket_tip", bucket_joint, pin.SE3(np.eye(3), tip), pin.FrameType.OP_FRAME))
+        self.pin_frame = model.addFrame(pin.Frame("bucket_pin", bucket_joint, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+        self.model = model
+        self.data = model.createData()
+        self.limits = JointLimits(np.array(lower), np.array(upper), np.array(vel), np.array(acc))
+        self.home = np.array([float(machine.get("home_pose", {}).get(n, 0.0)) for n in JOINTS])
+
+        # Planar parameters of the front in the body (post-swing) x-z plane.
+        swing_o, boom_o, arm_o, bucket_o = origins
+        self.swing_origin = swing_o
+        self.boom_foot = np.array([boom_o[0], boom_o[2]])
+        self.lateral = float(boom_o[1] + arm_o[1] + bucket_o[1] + tip[1])
+        self.l_boom = float(math.hypot(arm_o[0], arm_o[2]))
+        self.l_arm = float(math.hypot(bucket_o[0], bucket_o[2]))
+        self.l_bucket = float(math.hypot(tip[0], tip[2]))
+        p1 = pitches[1]
+        p2 = p1 + pitches[2]
+        p3 = p2 + pitches[3]
+        # c_k: angle below horizontal of link k's pin-to-pin vector when its joints are all zero.
+        self.c_boom = p1 + math.atan2(-arm_o[2], arm_o[0])
+        self.c_arm = p2 + math.atan2(-bucket_o[2], bucket_o[0])
+        self.c_bucket = p3 + math.atan2(-tip[2], tip[0])
+        self.bucket_pitch0 = p3  # pitch of bucket_link at q = 0
+        self.tip_local = tip
+
+    # ------------------------------------------------------------------ forward kinematics
+    def forward(self, q: np.ndarray) -> None:
+        """Update joint placements, frame placements and Jacobians of the internal data for ``q``."""
+        pin.computeJointJacobians(self.model, self.data, np.asarray(q, dtype=float))
+        pin.updateFramePlacements(self.model, self.data)
+
+    def tip_position(self, q: np.ndarray) -> np.ndarray:
+        """Bucket tip position in base_link [m]."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return self.data.oMf[self.tip_frame].translation.copy()
+
+    def tip_pose(self, q: np.ndarray) -> pin.SE3:
+        """Pose of the bucket tip frame (bucket_end_link) in base_link."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return pin.SE3(self.data.oMf[self.tip_frame])
+
+    def theta_w(self, q: np.ndarray) -> float:
+        """Bucket-edge angle below the ground plane [rad] (see module docstring)."""
+        return float(q[1] + q[2] + q[3] + self.c_bucket)
+
+    @staticmethod
+    def theta_w_jacobian() -> np.ndarray:
+        """d theta_w / dq, a constant row."""
+        return np.array([0.0, 1.0, 1.0, 1.0])
+
+    def jacobians(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(tip position, tip linear Jacobian 3x4, pin position, pin linear Jacobian 3x4), world-aligned."""
+        self.forward(q)
+        ref = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        jt = pin.getFrameJacobian(self.model, self.data, self.tip_frame, ref)[:3]
+        jp = pin.getFrameJacobian(self.model, self.data, self.pin_frame, ref)[:3]
+        return (
+            self.data.oMf[self.tip_frame].translation.copy(),
+            jt,
+            self.data.oMf[self.pin_frame].translation.copy(),
+            jp,
+        )
+
+    # ------------------------------------------------------------------ inverse kinematics
+    def ik_position_with_angle(self, position: np.ndarray, theta_w: float, *, check_limits: bool = True) -> np.ndarray:
+        """Joint angles that put the bucket tip at ``position`` (base_link) with edge angle ``theta_w``.
+
+        Raises:
+            InvalidGoalError: NaN or infinite input.
+            OutOfReachError: the bucket pin would be outside the boom+arm annulus (message: distance, range).
+            JointLimitError: the unique solution needs a joint outside its limits (message: joint, limit).
+        """
+        x, y, z = (float(v) for v in position)
+        if not all(math.isfinite(v) for v in (x, y, z, theta_w)):
+            raise InvalidGoalError(f"position/theta_w must be finite, got x={x}, y={y}, z={z}, theta_w={theta_w}")
+        swing, radial = self._swing_radial(x, y)
+        zb = z - self.swing_origin[2]
+        pin_x = radial - self.l_bucket * math.cos(theta_w)
+        pin_z = zb + self.l_bucket * math.sin(theta_w)
+        ddx, ddz = pin_x - self.boom_foot[0], pin_z - self.boom_foot[1]
+        dist = math.hypot(ddx, ddz)
+        lo, hi = abs(self.l_boom - self.l_arm), self.l_boom + self.l_arm
+        if not lo <= dist <= hi:
+            raise OutOfReachError(
+                f"bucket pin would be {dist:.3f} m from the boom foot; reachable {lo:.3f} .. {hi:.3f} m "
+                f"(tip ({x:.3f}, {y:.3f}, {z:.3f}), theta_w {theta_w:.3f} rad)"
+            )
+        cos_b = (dist**2 - self.l_boom**2 - self.l_arm**2) / (2 * self.l_boom * self.l_arm)
+        beta = math.acos(max(-1.0, min(1.0, cos_b)))
+        phi_d = math.atan2(-ddz, ddx)
+        phi_boom = phi_d - math.atan2(self.l_arm * math.sin(beta), self.l_boom + self.l_arm * math.cos(beta))
+        qb = phi_boom - self.c_boom
+        qa = beta + self.c_boom - self.c_arm
+        qk = theta_w - self.c_bucket - qb - qa
+        # theta_w is an angle: take the 2*pi branch of the bucket joint that lies within its limits.
+        for turn in (0.0, 2 * math.pi, -2 * math.pi):
+            if self.limits.lower[3] <= qk + turn <= self.limits.upper[3]:
+                qk += turn
+                break
+        q = np.array([swing, qb, qa, qk])
+        if check_limits:
+            self.check_joint_limits(q, what=f"target ({x:.3f}, {y:.3f}, {z:.3f}) theta_w {theta_w:.3f}")
+        return q
+
+    def _swing_radial(self, x: float, y: float) -> tuple[float, float]:
+        dx, dy = x - self.swing_origin[0], y - self.swing_origin[1]
+        r2 = dx * dx + dy * dy
+        if r2 <= self.lateral**2 + 1e-9:
+            raise OutOfReachError(f"target is {math.sqrt(r2):.3f} m from the swing axis: on the axis, unreachable")
+        radial = math.sqrt(r2 - self.lateral**2)
+        swing = math.atan2(dy, dx) - math.atan2(self.lateral, radial)
+        return math.atan2(math.sin(swing), math.cos(swing)), radial
+
+    def swing_for(self, position: np.ndarray) -> float:
+        """Swing angle that puts the front's plane through ``position`` (x, y used)."""
+        return self._swing_radial(float(position[0]), float(position[1]))[0]
+
+    def check_joint_limits(self, q: np.ndarray, what: str = "target", margin: float = 1e-9) -> None:
+        """Raise :class:`JointLimitError` naming the first joint of ``q`` outside its limits."""
+        bad = self.limits.violation(q, margin)
+        if bad is not None:
+            i, value, (lo, hi) = bad
+            raise JointLimitError(
+                f"{what}: {JOINTS[i]} would be {value:.4f} rad, outside its limits [{lo:.4f}, {hi:.4f}] rad"
+            )
+
+    def pose_to_position_with_angle(
+        self, position: np.ndarray, quaternion_xyzw: np.ndarray, *, tolerance: float = 0.035
+    ) -> tuple[np.ndarray, float]:
+        """Convert a bucket-tip pose (bucket_end_link orientation) to (position, theta_w).
+
+        The 4-DOF front can only pitch the bucket in the plane its swing gives: roll must be ~0 and the
+        yaw must be the swing angle that reaches the position (within ``tolerance`` rad).
+        """
+        quat = np.asarray(quaternion_xyzw, dtype=float)
+        pos = np.asarray(position, dtype=float)
+        if quat.shape != (4,) or not np.all(np.isfinite(quat)) or not np.all(np.isfinite(pos)):
+            raise InvalidGoalError(f"pose must be finite: position {pos.tolist()}, orientation {quat.tolist()}")
+        norm = float(np.linalg.norm(quat))
+        if abs(norm - 1.0) > 0.01:
+            raise InvalidGoalError(f"pose orientation quaternion has norm {norm:.4f}, expected 1")
+        rot = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).normalized().toRotationMatrix()
+        swing = self.swing_for(pos)
+        rel = pin.rpy.rpyToMatrix(0.0, 0.0, swing).T @ rot  # should be a pure pitch about y
+        pitch = math.atan2(rel[0, 2], rel[0, 0])
+        error = float(np.linalg.norm(rel - pin.rpy.rpyToMatrix(0.0, pitch, 0.0)))
+        if error > tolerance:
+            raise OutOfReachError(
+                f"orientation unreachable: the bucket at this position can only pitch about the front's y axis "
+                f"(swing {swing:.3f} rad, no roll); the requested orientation is {error:.3f} away from any such "
+                f"(4-DOF front; tolerance {tolerance})"
+            )
+        theta_w = float(pitch - self.bucket_pitch0 + self.c_bucket)
+        theta_w = math.atan2(math.sin(theta_w), math.cos(theta_w))
+        return pos, theta_w
+
+
+def load_kinematics(path: str | Path | None = None) -> Zx200Kinematics:
+    """Build the model from ``config/machines/zx200.yaml`` (or ``path``)."""
+    path = Path(path) if path is not None else config_path("machines", "zx200.yaml")
+    data, _ = load_yaml(path)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level")
+    return Zx200Kinematics(data, str(path))
