@@ -1,0 +1,97 @@
+"""Dump / restore files: MongoDB Extended JSON (canonical), one document per line, readable by ``mongoimport``.
+
+Layout: ``DIR/<database>/<collection>.json`` (``mongoimport --db rostmsdb --collection task
+--file DIR/rostmsdb/task.json``). Canonical mode keeps every type exact across tools: ``{"$numberInt"}``,
+``{"$numberLong"}``, ``{"$numberDouble"}``, ``{"$date"}``, ``{"$oid"}``, plain ``true``/``false``.
+``restore`` also reads JSON arrays (``mongoexport --jsonArray``) and ``mongodump`` BSON files
+(``DIR/rostmsdb/<collection>.bson``), so the original's seed dumps load unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import bson
+from bson import json_util
+
+from tms_db.errors import StoreError
+from tms_db.store import DATABASE, Store
+
+__all__ = ["dump", "restore", "read_collection_file", "dumps_doc"]
+
+_OPTS = json_util.JSONOptions(json_mode=json_util.JSONMode.CANONICAL, tz_aware=True, tzinfo=bson.tz_util.utc)
+
+
+def dumps_doc(doc: dict) -> str:
+    """One document as canonical Extended JSON text."""
+    return json_util.dumps(doc, json_options=_OPTS)
+
+
+def dump(store: Store, directory: str | Path) -> dict[str, int]:
+    """Write every collection to ``directory/<database>/<collection>.json``; returns counts per collection."""
+    out = Path(directory) / (store.database or DATABASE)
+    out.mkdir(parents=True, exist_ok=True)
+    counts = {}
+    for name in store.collection_names():
+        path = out / f"{name}.json"
+        tmp = path.with_suffix(".json.tmp")
+        n = 0
+        with tmp.open("w", encoding="utf-8") as fh:
+            for doc in store.export_collection(name):
+                fh.write(dumps_doc(doc) + "\n")
+                n += 1
+        tmp.replace(path)
+        counts[name] = n
+    return counts
+
+
+def read_collection_file(path: Path) -> Iterator[dict]:
+    """Documents of one dump file (.json lines or array, or .bson); errors name the file and line."""
+    if path.suffix == ".bson":
+        try:
+            with path.open("rb") as fh:
+                yield from bson.decode_file_iter(fh, codec_options=bson.CodecOptions(tz_aware=True))
+        except bson.errors.BSONError as exc:
+            raise StoreError(f"{path}: not a BSON dump: {exc}") from None
+        return
+    text = path.read_text(encoding="utf-8")
+    if text.lstrip().startswith("["):
+        try:
+            docs = json_util.loads(text, json_options=_OPTS)
+        except ValueError as exc:
+            raise StoreError(f"{path}: malformed JSON array: {exc}") from None
+        for i, doc in enumerate(docs):
+            if not isinstance(doc, dict):
+                raise StoreError(f"{path}: element {i} is not a document")
+            yield doc
+        return
+    for lineno, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            doc = json_util.loads(line, json_options=_OPTS)
+        except ValueError as exc:
+            raise StoreError(f"{path}:{lineno}: malformed Extended JSON: {exc}") from None
+        if not isinstance(doc, dict):
+            raise StoreError(f"{path}:{lineno}: not a document")
+        yield doc
+
+
+def restore(store: Store, directory: str | Path, *, drop: bool = False) -> dict[str, int]:
+    """Load ``directory/<database>/*.json|*.bson`` (or ``directory/*.json|*.bson``) into the store."""
+    directory = Path(directory)
+    base = directory / (store.database or DATABASE)
+    if not base.is_dir():
+        base = directory
+    files = sorted(p for p in base.glob("*") if p.suffix in (".json", ".bson") and not p.name.endswith(".metadata.json"))
+    if not files:
+        raise StoreError(f"{directory}: no <collection>.json or .bson files (looked in {base})")
+    counts = {}
+    for path in files:
+        docs = list(read_collection_file(path))
+        try:
+            counts[path.stem] = store.import_documents(path.stem, docs, drop=drop)
+        except StoreError as exc:
+            raise type(exc)(f"{path}: {exc}") from None
+    return counts
