@@ -1,0 +1,85 @@
+"""Start hammer worker processes and check the store afterwards (shared by tests and the bench)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+from tests.rosproc import ROOT
+from tests.tms_db import hammer
+from tms_db import open_store
+
+PY = sys.executable
+
+
+def spawn(role: str, path: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([PY, "-m", "tests.tms_db.hammer", role, "--path", str(path), *extra], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def summary_of(proc: subprocess.Popen, timeout: float) -> dict:
+    out, err = proc.communicate(timeout=timeout)
+    if proc.returncode != 0:
+        raise AssertionError(f"worker exited {proc.returncode}: {err[-2000:]}")
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def read_acks(path: Path) -> tuple[Counter, dict[str, int]]:
+    """Counts of acknowledged ``inc``/``cas`` and the last acknowledged ``set``/``flag`` numbers."""
+    counts: Counter = Counter()
+    last = {"set": 0, "flag": 0}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            kind, _, num = line.partition(" ")
+            counts[kind] += 1
+            if num:
+                last[kind] = max(last[kind], int(num))
+    return counts, last
+
+
+def run_hammer(db: Path, workdir: Path, *, writers: int = 4, readers: int = 4, seconds: float = 5.0,
+               mode: str = "mixed", sample_reads: bool = False) -> tuple[list[dict], list[dict], list[Path], list[Path]]:
+    """Run writers + readers concurrently for ``seconds``; returns their summaries, ack files, sample files."""
+    hammer.prepare(str(db), writers)
+    start_at = f"{time.time() + 2.0:.3f}"  # all workers start together, after interpreter start-up
+    acks = [workdir / f"ack{w}.log" for w in range(writers)]
+    samples = [workdir / f"samples{r}.json" for r in range(readers)]
+    wprocs = [spawn("writer", db, "--wid", str(w), "--seconds", str(seconds), "--ack", str(acks[w]),
+                    "--mode", mode, "--start-at", start_at) for w in range(writers)]
+    rprocs = [spawn("reader", db, "--writers", str(writers), "--seconds", str(seconds), "--start-at", start_at,
+                    *(["--samples", str(samples[r])] if sample_reads else [])) for r in range(readers)]
+    wsum = [summary_of(p, seconds + 60) for p in wprocs]
+    rsum = [summary_of(p, seconds + 60) for p in rprocs]
+    return wsum, rsum, acks, samples
+
+
+def verify_store(db: Path, acks: list[Path], *, exact: bool, mode: str = "mixed", slack: int | None = None) -> list[str]:
+    """Every acknowledged write is present (``exact``: and nothing else, i.e. no write in flight)."""
+    problems = []
+    with open_store(path=db) as store:
+        problems += store.check()
+        totals: Counter = Counter()
+        for w, path in enumerate(acks):
+            counts, last = read_acks(path)
+            totals.update(counts)
+            flag = store.get_record("FLAGS")[f"w{w}"]
+            if not (flag == last["flag"] or (not exact and flag == last["flag"] + 1)):
+                problems.append(f"FLAGS.w{w} = {flag}, last acknowledged {last['flag']}")
+            if mode == "mixed":
+                doc = store.get_record(f"W{w}")
+                problem = hammer.check_w(doc)
+                if problem:
+                    problems.append(problem)
+                if not (doc["seq"] == last["set"] or (not exact and doc["seq"] == last["set"] + 1)):
+                    problems.append(f"W{w}.seq = {doc['seq']}, last acknowledged {last['set']}")
+        if mode == "mixed":
+            doc = store.get_record("HAMMER")
+            slack = 0 if exact else (len(acks) if slack is None else slack)
+            for field, kind in (("counter", "inc"), ("cas", "cas")):
+                if not totals[kind] <= doc[field] <= totals[kind] + slack:
+                    problems.append(f"HAMMER.{field} = {doc[field]}, acknowledged {totals[kind]} (lost updates)")
+    return problems
