@@ -203,7 +203,7 @@ def _run(args: argparse.Namespace) -> int:
             print(", ".join(f"{k}: {v}" for k, v in counts.items()), "restored")
         elif args.cmd == "seed":
             seed_file = Path(args.file) if args.file else repo_root() / PAPER_SEED
-            if not seed_file.is_file():
+            if not args.file and not seed_file.is_file():
                 raise StoreError(f"{seed_file}: the paper seed file does not exist yet "
                                  "(it is written with the paper experiment, issue 9); pass --file SEED.yaml")
             n_tasks, n_params = seed(store, seed_file)
