@@ -60,3 +60,9 @@ if ! fresh "$STAMPS/ament" pyproject.toml scripts/register_ament.py "$STAMPS/pro
   "$VENV/bin/python" scripts/register_ament.py "$VENV"
   touch "$STAMPS/ament"
 fi
+
+if [ ! -x /usr/bin/chromium ]; then
+  # Browser tests of the web panel (tms_ur) need Debian's chromium; failure here is reported, and the
+  # browser tests then skip naming the missing /usr/bin/chromium.
+  bash scripts/install_browser.sh || say "WARNING: chromium could not be installed; web panel browser tests will skip"
+fi

@@ -1,0 +1,109 @@
+// Live view and controls of the TMS web panel. No framework: one websocket, two canvases.
+"use strict";
+const token = new URLSearchParams(location.search).get("token");
+let ws = null;
+let last = null;
+
+function connect() {
+  const url = `ws://${location.host}/ws` + (token ? `?token=${encodeURIComponent(token)}` : "");
+  ws = new WebSocket(url);
+  ws.onopen = () => { setConn(true); };
+  ws.onclose = () => { setConn(false); setTimeout(connect, 1000); };
+  ws.onmessage = (ev) => {
+    const msg = JSON.parse(ev.data);
+    if (msg.type === "state") { last = msg; render(msg); }
+    else if (msg.type === "ack") { addEvent(msg.ok ? "info" : "error", msg.text); }
+  };
+}
+function setConn(ok) { const c = document.getElementById("conn"); c.textContent = ok ? "live" : "disconnected"; c.className = ok ? "ok" : "bad"; }
+function send(cmd) { if (ws && ws.readyState === 1) ws.send(JSON.stringify(cmd)); else addEvent("error", "not connected"); }
+const localEvents = [];
+function addEvent(level, text) { localEvents.push({ level, text }); if (last) render(last); }
+
+function emergency() { send({ op: "emergency" }); }
+document.getElementById("estop").onclick = emergency;
+document.addEventListener("keydown", (e) => { if (e.key === "Escape") { e.preventDefault(); emergency(); } });
+document.getElementById("start").onclick = () => {
+  const ids = document.getElementById("task-ids").value.split(/[\s,]+/).filter(Boolean).map(Number);
+  send({ op: "start", task_ids: ids });
+};
+document.getElementById("confirm").onclick = () => send({ op: "confirm" });
+
+function el(tag, attrs = {}, text = "") { const e = document.createElement(tag); Object.assign(e, attrs); if (text !== "") e.textContent = text; return e; }
+
+function render(s) {
+  const cat = document.querySelector("#catalogue tbody"); cat.replaceChildren();
+  for (const t of s.catalogue) {
+    const tr = el("tr"); const cb = el("input", { type: "checkbox", value: t.task_id, className: "pick" });
+    cb.onchange = () => { document.getElementById("task-ids").value = [...document.querySelectorAll(".pick:checked")].map(c => c.value).join(" "); };
+    const td0 = el("td"); td0.append(cb);
+    tr.append(td0, el("td", {}, String(t.task_id)), el("td", {}, t.model_name), el("td", {}, t.description)); cat.append(tr);
+  }
+  const tb = document.querySelector("#tasks tbody"); tb.replaceChildren();
+  for (const t of s.tasks) {
+    const tr = el("tr", { id: `task-${t.task_id}` });
+    const cancel = el("button", {}, "Cancel"); cancel.onclick = () => send({ op: "cancel", task_id: t.task_id });
+    const td = el("td"); td.append(cancel);
+    tr.append(el("td", {}, String(t.task_id)), el("td", { className: `state state-${t.state}` }, t.state),
+      el("td", {}, t.running.join(", ") + (t.message ? ` — ${t.message}` : "")), td);
+    tb.append(tr);
+  }
+  const flags = document.getElementById("flags"); flags.replaceChildren();
+  for (const [rec, fields] of Object.entries(s.flags)) {
+    const div = el("div"); div.append(el("b", {}, rec + ": "));
+    for (const [k, v] of Object.entries(fields)) div.append(el("span", { className: `flag ${v}` }, `${k}=${v}`));
+    flags.append(div);
+  }
+  const ev = document.getElementById("events"); ev.replaceChildren();
+  for (const e of [...s.events, ...localEvents].slice(-25).reverse()) ev.append(el("li", { className: e.level }, e.text));
+  const soil = document.getElementById("soil"); soil.replaceChildren();
+  for (const [k, v] of Object.entries(s.soil)) soil.append(el("div", { className: "soil" }, `${k}: ${v.toFixed(2)}`));
+  drawMap(s); drawArm(s);
+}
+
+function drawMap(s) {
+  const c = document.getElementById("map"), g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  const pts = [];
+  for (const tr of Object.values(s.trails)) pts.push(...tr);
+  for (const p of Object.values(s.poses)) pts.push([p.x, p.y]);
+  pts.push(...s.plan);
+  if (!pts.length) { g.fillText("waiting for machine poses", 20, 20); return; }
+  let [x0, y0, x1, y1] = [Infinity, Infinity, -Infinity, -Infinity];
+  for (const [x, y] of pts) { x0 = Math.min(x0, x); y0 = Math.min(y0, y); x1 = Math.max(x1, x); y1 = Math.max(y1, y); }
+  const pad = 10, span = Math.max(x1 - x0, y1 - y0, 20) + 2 * pad;
+  const k = Math.min(c.width, c.height) / span;
+  const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+  const X = (x) => c.width / 2 + (x - cx) * k, Y = (y) => c.height / 2 - (y - cy) * k;
+  g.strokeStyle = "#eee"; g.lineWidth = 1;
+  for (let gx = Math.floor((cx - span) / 10) * 10; gx < cx + span; gx += 10) { g.beginPath(); g.moveTo(X(gx), 0); g.lineTo(X(gx), c.height); g.stroke(); }
+  for (let gy = Math.floor((cy - span) / 10) * 10; gy < cy + span; gy += 10) { g.beginPath(); g.moveTo(0, Y(gy)); g.lineTo(c.width, Y(gy)); g.stroke(); }
+  const line = (p, color, w) => { if (p.length < 2) return; g.strokeStyle = color; g.lineWidth = w; g.beginPath(); g.moveTo(X(p[0][0]), Y(p[0][1])); for (const q of p) g.lineTo(X(q[0]), Y(q[1])); g.stroke(); };
+  const colors = { ic120: "#d80", zx200: "#06a" };
+  for (const [m, tr] of Object.entries(s.trails)) line(tr, colors[m] || "#555", 1.5);
+  g.setLineDash([6, 4]); line(s.plan, "#0a0", 2); g.setLineDash([]);
+  const size = { ic120: [6.05, 3.37], zx200: [3.37, 2.8] };
+  for (const [m, p] of Object.entries(s.poses)) {
+    const [L, W] = size[m] || [3, 2];
+    g.save(); g.translate(X(p.x), Y(p.y)); g.rotate(-p.yaw);
+    g.fillStyle = colors[m] || "#555"; g.globalAlpha = 0.8; g.fillRect(-L / 2 * k, -W / 2 * k, L * k, W * k);
+    g.globalAlpha = 1; g.strokeStyle = "#000"; g.beginPath(); g.moveTo(0, 0); g.lineTo(L / 2 * k, 0); g.stroke();
+    if (m === "zx200") { g.rotate(-s.swing); g.strokeStyle = "#06a"; g.lineWidth = 3; g.beginPath(); g.moveTo(0, 0);
+      const reach = s.arm.length ? s.arm[s.arm.length - 1][0] : 6; g.lineTo(reach * k, 0); g.stroke(); }
+    g.restore();
+    g.fillStyle = "#000"; g.fillText(`${m} (${p.x.toFixed(1)}, ${p.y.toFixed(1)})`, X(p.x) + 8, Y(p.y) - 8);
+  }
+}
+
+function drawArm(s) {
+  const c = document.getElementById("arm"), g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  g.fillText("ZX200 arm (side view)", 6, 12);
+  if (!s.arm.length) return;
+  const k = 14, ox = 30, oy = c.height - 60;
+  g.strokeStyle = "#888"; g.beginPath(); g.moveTo(0, oy); g.lineTo(c.width, oy); g.stroke();
+  g.strokeStyle = "#06a"; g.lineWidth = 4; g.beginPath(); g.moveTo(ox, oy);
+  for (const [r, z] of s.arm) g.lineTo(ox + r * k, oy - z * k);
+  g.stroke();
+}
+connect();
