@@ -3,7 +3,8 @@
 A launch file::
 
     name: demo                       # optional, shown in the progress line
-    env: {TMS_EXECUTOR: events}      # optional, added to every node's environment
+    env: {TMS_DB_PATH: runs/db}      # optional, added to every node's environment
+    parameters: {use_sim_time: true} # optional, ROS parameters given to every node (a node's own win)
     nodes:
       - name: talker                 # ROS node name (``-r __node:=talker``); unique
         package: tms_launch          # ament package of the executable
@@ -14,6 +15,8 @@ A launch file::
         arguments: []                # optional extra command-line arguments before ``--ros-args``
         env: {}                      # optional per-node environment
         required: true               # default true: its death stops the launch with an error
+        on_exit: shutdown            # optional: when this node exits 0 the whole launch ends with 0
+                                     # (a job node, e.g. the experiment supervisor); non-zero is an error
         ready_timeout: 30            # seconds to wait until the node is visible on the ROS graph
 
 Every problem (malformed YAML, unknown key, unknown executable, duplicate name) is a
@@ -43,8 +46,10 @@ NODE_KEYS = {
     "env",
     "required",
     "ready_timeout",
+    "on_exit",
 }
-TOP_KEYS = {"name", "nodes", "env"}
+TOP_KEYS = {"name", "nodes", "env", "parameters"}
+ON_EXIT = {"error", "shutdown"}
 
 
 @dataclass(frozen=True)
@@ -62,6 +67,7 @@ class NodeSpec:
     env: dict[str, str] = field(default_factory=dict)
     required: bool = True
     ready_timeout: float = 30.0
+    on_exit: str = "error"
 
     @property
     def fqn(self) -> str:
@@ -145,6 +151,7 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
     if not isinstance(nodes_raw, list) or not nodes_raw:
         raise where.error(("nodes",), "'nodes' must be a non-empty list")
     env = {str(k): str(v) for k, v in _expect(where, ("env",), data.get("env", {}) or {}, dict, "'env'").items()}
+    common_params = _expect(where, ("parameters",), data.get("parameters", {}) or {}, dict, "'parameters'")
     root = repo_root()
     nodes: list[NodeSpec] = []
     seen: dict[str, int] = {}
@@ -183,6 +190,9 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
         node_env = _expect(where, at + ("env",), raw.get("env", {}) or {}, dict, f"node {name!r}: 'env'")
         required = _expect(where, at + ("required",), raw.get("required", True), bool, f"node {name!r}: 'required'")
         timeout = _expect(where, at + ("ready_timeout",), raw.get("ready_timeout", 30.0), (int, float), f"node {name!r}: 'ready_timeout'")
+        on_exit = _expect(where, at + ("on_exit",), raw.get("on_exit", "error"), str, f"node {name!r}: 'on_exit'")
+        if on_exit not in ON_EXIT:
+            raise where.error(at + ("on_exit",), f"node {name!r}: on_exit must be one of {', '.join(sorted(ON_EXIT))}, got {on_exit!r}")
         nodes.append(
             NodeSpec(
                 name=name,
@@ -190,12 +200,13 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
                 executable=raw["executable"],
                 path=exe_path,
                 namespace=namespace,
-                parameters=dict(params),
+                parameters={**common_params, **params},
                 param_files=tuple(param_files),
                 arguments=tuple(str(a) for a in args),
                 env={str(k): str(v) for k, v in node_env.items()},
                 required=required,
                 ready_timeout=float(timeout),
+                on_exit=on_exit,
             )
         )
     title = data.get("name") or Path(path).stem

@@ -6,7 +6,8 @@
   next one, and prints a progress line ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
 * Ctrl-C (SIGINT) or SIGTERM stops everything within 5 s: SIGINT to every node, then SIGTERM after
   2.5 s, then SIGKILL after 4 s.
-* When a required node exits (for any reason) the launcher stops the others and exits 1 naming it.
+* When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
+  except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
 * ``--list`` prints the nodes of the file and exits.
 
 Exit codes: 0 clean stop, 1 a required node died or did not come up, 2 bad launch file.
@@ -111,15 +112,21 @@ class Launcher:
 
     def _dead_required(self) -> Running | None:
         for run in self.running:
-            if run.spec.required and run.proc.poll() is not None:
+            if run.spec.required and run.proc.poll() is not None and not self._finished_job(run):
                 return run
         return None
+
+    @staticmethod
+    def _finished_job(run: Running) -> bool:
+        return run.spec.on_exit == "shutdown" and run.proc.returncode == 0
 
     def _wait_ready(self, run: Running) -> str | None:
         """Wait until ``run`` is visible; returns an error text when it died or timed out."""
         deadline = time.monotonic() + run.spec.ready_timeout
         while time.monotonic() < deadline and not self._stop.is_set():
             if run.proc.poll() is not None:
+                if self._finished_job(run):
+                    return None
                 return f"node {run.spec.name!r} exited with code {run.proc.returncode} before it came up"
             dead = self._dead_required()
             if dead is not None:
@@ -174,6 +181,10 @@ class Launcher:
             if not error and not self._stop.is_set():
                 self.log(f"all {len(nodes)} node(s) of {self.launch.name!r} are up; Ctrl-C stops them")
             while not error and not self._stop.is_set():
+                done = next((r for r in self.running if r.proc.poll() is not None and self._finished_job(r)), None)
+                if done is not None:
+                    self.log(f"{done.spec.name} finished; stopping the launch")
+                    break
                 dead = self._dead_required()
                 if dead is not None:
                     error = f"required node {dead.spec.name!r} exited with code {dead.proc.returncode}"

@@ -157,3 +157,23 @@ def test_bad_launch_file_names_file_and_line_and_starts_nothing(procs, tmp_path,
     assert launcher.wait(60) == 2, launcher.output
     assert expected in launcher.output
     assert "starting" not in launcher.output
+
+
+JOB = """
+parameters: {use_sim_time: false}
+nodes:
+  - {name: server, package: tms_launch, executable: demo_subtask_server, namespace: /job, parameters: {duration_s: 0.3}}
+  - name: client
+    package: tms_launch
+    executable: demo_subtask_client
+    namespace: /job
+    arguments: [--action, /job/demo_subtask]
+    on_exit: shutdown
+"""
+
+
+def test_launcher_ends_cleanly_when_a_job_node_finishes(procs, tmp_path):
+    launcher = _launcher(procs, _write(tmp_path, JOB))
+    assert launcher.wait(90) == 0, launcher.output
+    assert "[client] status SUCCEEDED" in launcher.output
+    assert "client finished; stopping the launch" in launcher.output
