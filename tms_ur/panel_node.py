@@ -13,7 +13,7 @@ default). The websocket pushes the site snapshot at ``rate_hz`` (>= 5 Hz) and ta
 
 Live view inputs: ``/tms_ts/status`` (tms_msg/TaskStatus), global-blackboard records read from tms_db
 (``flag_records``), machine poses (``pose_topics``: geometry_msgs/PoseStamped), the IC120 plan
-(``plan_topic``: nav_msgs/Path), ZX200 joints (``joint_states_topic``), soil (``soil_topic``).
+(``plan_topic``: nav_msgs/Path), ZX200 joints (``joint_states_topic``), soil (``soil_topic``: std_msgs/Float64MultiArray with comma-separated labels in layout.dim[0]).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
     from nav_msgs.msg import Path as PathMsg
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
-    from std_msgs.msg import Bool, Int32, String
+    from std_msgs.msg import Bool, Float64MultiArray, Int32
 
     from tms_msg.msg import TaskIds, TaskStatus
 
@@ -81,7 +81,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
                 self.create_subscription(PoseStamped, topic, lambda m, name=machine: self._on_pose(name, m), 10)
             self.create_subscription(PathMsg, d("plan_topic", "/ic120/plan").value, self._on_plan, 10)
             self.create_subscription(JointState, d("joint_states_topic", "/zx200/joint_states").value, self._on_joints, 10)
-            self.create_subscription(String, d("soil_topic", "/sim/truth/soil_json").value, self._on_soil, 10)
+            self.create_subscription(Float64MultiArray, d("soil_topic", "/sim/truth/soil").value, self._on_soil, 10)
             self._store = None
             self._last_messages: dict[int, str] = {}
             self.create_timer(0.5, self._poll_db)
@@ -116,13 +116,11 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
                 self.site.arm = arm_side_view(joints, self.geometry)
                 self.site.swing = float(joints.get("swing_joint", 0.0))
 
-        def _on_soil(self, msg: String) -> None:
-            try:
-                data = json.loads(msg.data)
-            except json.JSONDecodeError:
-                return
+        def _on_soil(self, msg: Float64MultiArray) -> None:
+            """Soil volumes [m^3]; labels come from ``layout.dim[0].label`` (comma-separated)."""
+            labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
             with self.lock:
-                self.site.soil = {k: float(v) for k, v in data.items() if isinstance(v, (int, float))}
+                self.site.soil = {name: round(float(v), 3) for name, v in zip(labels, msg.data, strict=False)}
 
         def _poll_db(self) -> None:
             """Task catalogue and global-blackboard flags from tms_db (2 Hz)."""
