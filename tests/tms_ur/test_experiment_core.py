@@ -1,0 +1,51 @@
+"""The experiment recorder: events, metrics and report files from a scripted run."""
+
+import json
+
+import pytest
+
+from tms_ur.experiment_core import ExperimentRecorder
+
+
+def _scripted_run() -> ExperimentRecorder:
+    rec = ExperimentRecorder()
+    rec.wall_start, rec.wall_end = 0.0, 20.0
+    t, mound, vessel, dumped = 0.0, 20.0, 0.0, 0.0
+    rec.on_soil(t, mound, 0.0, vessel, dumped)
+    for cycle in range(3):
+        for _ in range(4):  # four passes of 0.7 m^3, 18 s apart
+            t += 18.0
+            mound -= 0.7
+            vessel += 0.7
+            rec.on_soil(t, mound, 0.0, vessel, dumped)
+            rec.on_flags(t, {"SENSING_LOADED_FLG": vessel > 2.5})
+        t += 60.0
+        dumped += vessel
+        vessel = 0.0
+        rec.on_soil(t, mound, 0.0, vessel, dumped)
+        rec.on_truth_pose(t, "ic120", 38.0, 10.0 + cycle, 3.14)
+        rec.on_estimated_pose(t, "ic120", 38.03, 10.04 + cycle)
+    return rec
+
+
+def test_cycles_passes_and_times():
+    rec = _scripted_run()
+    m = rec.metrics()
+    assert m["cycles"] == 3
+    assert m["load_passes"] == 12
+    assert m["soil_moved_m3"] == pytest.approx(8.4)
+    # The first pass of each loading phase has no predecessor in that phase: 3 x 3 pass intervals.
+    assert m["load_pass_time_s"]["n"] == 9 and m["load_pass_time_s"]["median"] == pytest.approx(18.0)
+    assert m["haul_cycle_time_s"]["median"] == pytest.approx(4 * 18.0 + 60.0)
+    assert m["localisation_error_m"]["rms"] == pytest.approx(0.05, abs=1e-6)
+    assert m["real_time_factor"] == pytest.approx(rec.sim_end / 20.0)
+    assert m["flags_timeline"]["SENSING_LOADED_FLG"][1][1] is True
+
+
+def test_report_writes_every_file(tmp_path):
+    rec = _scripted_run()
+    index = rec.report(tmp_path, site={"points": {"P1": {"x": 1.0, "y": 6.5}}, "mound": {"center": {}}})
+    for name in ("metrics.json", "site_map.png", "soil.png", "flags.png", "index.html"):
+        assert (tmp_path / name).stat().st_size > 100, name
+    assert json.loads((tmp_path / "metrics.json").read_text())["cycles"] == 3
+    assert 'src="site_map.png"' in index.read_text()

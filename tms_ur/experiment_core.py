@@ -1,0 +1,239 @@
+"""Pure core of the experiment supervisor: records a run and writes its report.
+
+The recorder is fed time-stamped samples (simulated time ``t`` [s]) by ``tms_ur.experiment_node``:
+soil volumes, truth and estimated poses, bucket-tip truth and estimate, global-blackboard flags and
+task states. From them it derives the events of the earthwork cycle:
+
+* a **load pass** is an increase of the vessel load by more than ``pass_threshold`` m^3;
+* a **haul cycle** ends when soil reaches the dump site (``dumped`` grows by more than ``pass_threshold``).
+
+``report(directory)`` writes ``metrics.json``, ``site_map.png``, ``soil.png``, ``flags.png`` and
+``index.html`` (one page linking them).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["ExperimentRecorder", "Sample"]
+
+
+@dataclass
+class Sample:
+    t: float
+    values: dict[str, float]
+
+
+def _stats(values: list[float]) -> dict[str, float] | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    return {
+        "n": len(values),
+        "mean": round(statistics.fmean(values), 4),
+        "median": round(statistics.median(values), 4),
+        "p95": round(ordered[min(len(ordered) - 1, round(0.95 * (len(ordered) - 1)))], 4),
+        "max": round(ordered[-1], 4),
+    }
+
+
+def _rms(values: list[float]) -> float | None:
+    return round(math.sqrt(sum(v * v for v in values) / len(values)), 4) if values else None
+
+
+@dataclass
+class ExperimentRecorder:
+    """Accumulates one run. All times are simulated seconds; volumes m^3; distances m."""
+
+    pass_threshold: float = 0.05
+    soil: list[Sample] = field(default_factory=list)
+    paths: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
+    loc_errors: list[float] = field(default_factory=list)
+    tip_errors: list[float] = field(default_factory=list)
+    flags: dict[str, list[tuple[float, Any]]] = field(default_factory=dict)
+    task_states: dict[int, list[tuple[float, str]]] = field(default_factory=dict)
+    pass_times: list[float] = field(default_factory=list)
+    cycle_times: list[float] = field(default_factory=list)
+    pass_events: list[float] = field(default_factory=list)
+    dump_events: list[float] = field(default_factory=list)
+    wall_start: float | None = None
+    wall_end: float | None = None
+    sim_start: float | None = None
+    sim_end: float | None = None
+    initial_mound: float | None = None
+    _vessel_ref: float = 0.0
+    _dumped_ref: float = 0.0
+    _last_truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+
+    # -- inputs -------------------------------------------------------------------------------
+    def on_soil(self, t: float, mound: float, bucket: float, vessel: float, dumped: float) -> None:
+        self._clock(t)
+        if self.initial_mound is None:
+            self.initial_mound = mound
+            self._vessel_ref, self._dumped_ref = vessel, dumped
+        self.soil.append(Sample(t, {"mound": mound, "bucket": bucket, "vessel": vessel, "dumped": dumped}))
+        if vessel - self._vessel_ref > self.pass_threshold:
+            if self.pass_events and (not self.dump_events or self.pass_events[-1] > self.dump_events[-1]):
+                self.pass_times.append(t - self.pass_events[-1])
+            self.pass_events.append(t)
+            self._vessel_ref = vessel
+        elif vessel < self._vessel_ref:
+            self._vessel_ref = vessel
+        if dumped - self._dumped_ref > self.pass_threshold:
+            if self.dump_events:
+                self.cycle_times.append(t - self.dump_events[-1])
+            self.dump_events.append(t)
+            self._dumped_ref = dumped
+
+    def on_truth_pose(self, t: float, machine: str, x: float, y: float, yaw: float) -> None:
+        self._clock(t)
+        self._last_truth[machine] = (x, y, yaw)
+        path = self.paths.setdefault(machine, [])
+        if not path or math.hypot(path[-1][1] - x, path[-1][2] - y) > 0.1:
+            path.append((t, x, y))
+
+    def on_estimated_pose(self, t: float, machine: str, x: float, y: float) -> None:
+        truth = self._last_truth.get(machine)
+        if truth is not None:
+            self.loc_errors.append(math.hypot(truth[0] - x, truth[1] - y))
+
+    def on_tip_error(self, error: float) -> None:
+        self.tip_errors.append(error)
+
+    def on_flags(self, t: float, flags: dict[str, Any]) -> None:
+        for key, value in flags.items():
+            series = self.flags.setdefault(key, [])
+            if not series or series[-1][1] != value:
+                series.append((t, value))
+
+    def on_task_state(self, t: float, task_id: int, state: str) -> None:
+        series = self.task_states.setdefault(task_id, [])
+        if not series or series[-1][1] != state:
+            series.append((t, state))
+
+    def _clock(self, t: float) -> None:
+        if self.sim_start is None:
+            self.sim_start = t
+        self.sim_end = t
+
+    # -- derived ------------------------------------------------------------------------------
+    @property
+    def cycles(self) -> int:
+        return len(self.dump_events)
+
+    def soil_moved(self) -> float:
+        if not self.soil:
+            return 0.0
+        return round(self.soil[-1].values["dumped"] - self.soil[0].values["dumped"], 4)
+
+    def metrics(self) -> dict[str, Any]:
+        sim = (self.sim_end or 0.0) - (self.sim_start or 0.0)
+        wall = (self.wall_end or 0.0) - (self.wall_start or 0.0)
+        last = self.soil[-1].values if self.soil else {}
+        return {
+            "cycles": self.cycles,
+            "soil_moved_m3": self.soil_moved(),
+            "mound_initial_m3": self.initial_mound,
+            "mound_final_m3": last.get("mound"),
+            "load_passes": len(self.pass_events),
+            "load_pass_time_s": _stats(self.pass_times),
+            "haul_cycle_time_s": _stats(self.cycle_times),
+            "sim_time_s": round(sim, 2),
+            "wall_time_s": round(wall, 2),
+            "real_time_factor": round(sim / wall, 2) if wall > 0 else None,
+            "localisation_error_m": {"rms": _rms(self.loc_errors), **(_stats(self.loc_errors) or {})},
+            "end_effector_error_m": {"rms": _rms(self.tip_errors), **(_stats(self.tip_errors) or {})},
+            "flags_timeline": {k: [[round(t, 2), v] for t, v in series] for k, series in self.flags.items()},
+            "task_states": {str(k): [[round(t, 2), s] for t, s in v] for k, v in self.task_states.items()},
+            "pass_events_s": [round(t, 2) for t in self.pass_events],
+            "dump_events_s": [round(t, 2) for t in self.dump_events],
+        }
+
+    # -- report -------------------------------------------------------------------------------
+    def report(self, directory: Path, *, site: dict[str, Any] | None = None, title: str = "Earthwork run") -> Path:
+        """Write metrics.json, three PNG plots and index.html into ``directory``; returns index.html."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        directory.mkdir(parents=True, exist_ok=True)
+        metrics = self.metrics()
+        (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
+
+        fig, ax = plt.subplots(figsize=(7, 6))
+        colors = {"ic120": "tab:orange", "zx200": "tab:blue"}
+        for machine, path in self.paths.items():
+            if path:
+                ax.plot([p[1] for p in path], [p[2] for p in path], "-", color=colors.get(machine), label=f"{machine} path")
+                ax.plot(path[-1][1], path[-1][2], "o", color=colors.get(machine))
+        for name, point in ((site or {}).get("points") or {}).items():
+            if isinstance(point, dict) and "x" in point:
+                ax.plot(point["x"], point["y"], "k^")
+                ax.annotate(name, (point["x"], point["y"]), textcoords="offset points", xytext=(4, 4))
+        mound = (site or {}).get("mound") or {}
+        centre = mound.get("center") or {}
+        if "x" in centre:
+            ax.add_patch(plt.Circle((centre["x"], centre["y"]), mound.get("base_radius", 3.0), color="sienna", alpha=0.3,
+                                    label="mound"))
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m] (map)")
+        ax.set_ylabel("y [m] (map)")
+        ax.set_title("Site map: machine paths (truth)")
+        ax.legend(loc="best")
+        fig.savefig(directory / "site_map.png", dpi=90)
+        plt.close(fig)
+
+        fig, ax = plt.subplots(figsize=(8, 4))
+        if self.soil:
+            ts = [s.t for s in self.soil]
+            for key in ("mound", "vessel", "dumped", "bucket"):
+                ax.plot(ts, [s.values[key] for s in self.soil], label=key)
+        for t in self.dump_events:
+            ax.axvline(t, color="grey", lw=0.5)
+        ax.set_xlabel("simulated time [s]")
+        ax.set_ylabel("volume [m^3]")
+        ax.set_title("Mound volume, vessel load and dumped soil")
+        ax.legend(loc="best")
+        fig.savefig(directory / "soil.png", dpi=90)
+        plt.close(fig)
+
+        fig, ax = plt.subplots(figsize=(8, max(2.5, 0.45 * len(self.flags) + 1)))
+        end = self.sim_end or 0.0
+        for row, (key, series) in enumerate(sorted(self.flags.items())):
+            for i, (t, value) in enumerate(series):
+                t_next = series[i + 1][0] if i + 1 < len(series) else end
+                if value is True:
+                    ax.barh(row, t_next - t, left=t, color="tab:green")
+                elif value is not False:
+                    ax.text(t, row, str(value), fontsize=7, va="center")
+        ax.set_yticks(range(len(self.flags)))
+        ax.set_yticklabels(sorted(self.flags))
+        ax.set_xlabel("simulated time [s]")
+        ax.set_title("Global-blackboard flags (green = true)")
+        fig.tight_layout()
+        fig.savefig(directory / "flags.png", dpi=90)
+        plt.close(fig)
+
+        rows = "".join(
+            f"<tr><th>{k}</th><td>{json.dumps(v)}</td></tr>"
+            for k, v in metrics.items()
+            if k not in ("flags_timeline", "task_states", "pass_events_s", "dump_events_s")
+        )
+        html = f"""<!doctype html><html><head><meta charset="utf-8"><title>{title}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:1em auto}} td,th{{text-align:left;padding:2px 8px;border-bottom:1px solid #ddd}}
+img{{max-width:100%;border:1px solid #ccc;margin:4px 0}}</style></head><body>
+<h1>{title}</h1><table>{rows}</table>
+<p><a href="metrics.json">metrics.json</a> (full timelines)</p>
+<h2>Site map</h2><img src="site_map.png" alt="site map">
+<h2>Soil</h2><img src="soil.png" alt="soil volumes">
+<h2>Flags</h2><img src="flags.png" alt="flag timeline">
+</body></html>"""
+        index = directory / "index.html"
+        index.write_text(html)
+        return index

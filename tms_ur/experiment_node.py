@@ -1,0 +1,211 @@
+"""``tms_ur_experiment``: starts the earthwork tasks, shows progress, ends the run and writes the report.
+
+It is the job node of ``config/launch/paper_experiment.yaml`` (``on_exit: shutdown``):
+
+1. waits until the scheduler and the plant are up, then publishes ``task_ids`` on ``/tms_ts/start``;
+2. prints a progress line every ``progress_period_s`` (wall): cycle n, each task's running leaves
+   (the phase of each machine), soil moved, simulated time and real-time factor;
+3. after ``cycles`` haul cycles (soil reached the dump site that many times) it clears
+   ``CONTINUE_FLG`` in the global-blackboard record ``blackboard_record`` so both tasks finish their
+   current cycle and end; it also ends when every task has ended on its own (mound depleted);
+4. writes ``runs/<timestamp>/`` (metrics.json, PNG plots, index.html) and exits 0 when every task
+   ended SUCCESS, 1 otherwise (or on ``timeout_s`` of simulated time).
+
+Inputs: ``/clock``, ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
+``/sim/truth/zx200/bucket_tip``, ``/zx200/joint_states`` (measured, for the end-effector error),
+``/ic120/odometry/global`` (EKF estimate, for the localisation error), and the flags of
+``blackboard_record`` from tms_db.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+from tms_common.config import config_path, load_yaml, repo_root
+from tms_common.node import run_node
+from tms_ur.experiment_core import ExperimentRecorder
+
+STATE_NAMES = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
+DONE = {"SUCCESS", "FAILURE", "CANCELED"}
+
+
+def _yaw(q) -> float:  # noqa: ANN001
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _make_node():  # noqa: ANN202
+    import numpy as np
+    from geometry_msgs.msg import PointStamped, PoseStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from tms_msg.msg import TaskIds, TaskStatus
+
+    class ExperimentNode(Node):
+        def __init__(self) -> None:
+            super().__init__("tms_ur_experiment")
+            d = self.declare_parameter
+            self.task_ids = [int(i) for i in d("task_ids", [1, 2]).value]
+            self.cycles_target = int(d("cycles", 3).value)
+            self.record = d("blackboard_record", "PAPER_BLACKBOARD").value
+            self.timeout = float(d("timeout_s", 3600.0).value)
+            self.progress_period = float(d("progress_period_s", 2.0).value)
+            runs = Path(d("runs_dir", "runs").value)
+            self.run_dir = (runs if runs.is_absolute() else repo_root() / runs) / datetime.now().strftime("%Y%m%d-%H%M%S")
+            self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
+            self.rec = ExperimentRecorder()
+            self.rec.wall_start = time.monotonic()
+            self.sim_t = 0.0
+            self.tasks: dict[int, dict] = {}
+            self.started = False
+            self.stopping = False
+            self.exit_code: int | None = None
+            self._last_progress = 0.0
+            self._zx200_base: tuple[float, float, float] | None = None
+            self._joints: dict[str, float] = {}
+            from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+
+            self._kin, self._joint_order = load_kinematics(), JOINTS
+            self._np = np
+            self.site, _ = load_yaml(config_path("site.yaml"))
+            self._store = None
+            self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
+            self.create_subscription(Clock, "/clock", self._on_clock, 10)
+            self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
+            self.create_subscription(Float64MultiArray, "/sim/truth/soil", self._on_soil, 10)
+            for m in ("ic120", "zx200"):
+                self.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: self._on_pose(m, msg), 10)
+            self.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", self._on_tip, 10)
+            self.create_subscription(JointState, "/zx200/joint_states", self._on_joints, 10)
+            self.create_subscription(Odometry, "/ic120/odometry/global", self._on_estimate, 10)
+            self.create_timer(0.2, self._tick)
+
+        # -- inputs ---------------------------------------------------------------------------
+        def _on_clock(self, msg: Clock) -> None:
+            self.sim_t = msg.clock.sec + msg.clock.nanosec * 1e-9
+
+        def _on_status(self, msg: TaskStatus) -> None:
+            for t in msg.tasks:
+                if t.task_id in self.task_ids:
+                    state = STATE_NAMES.get(t.state, str(t.state))
+                    self.tasks[t.task_id] = {"state": state, "running": list(t.running_leaves), "message": t.message}
+                    self.rec.on_task_state(self.sim_t, t.task_id, state)
+
+        def _on_soil(self, msg: Float64MultiArray) -> None:
+            labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+            v = dict(zip(labels, msg.data, strict=False))
+            if {"mound", "bucket", "vessel", "dumped"} <= v.keys():
+                self.rec.on_soil(self.sim_t, v["mound"], v["bucket"], v["vessel"], v["dumped"])
+
+        def _on_pose(self, machine: str, msg: PoseStamped) -> None:
+            p = msg.pose.position
+            yaw = _yaw(msg.pose.orientation)
+            self.rec.on_truth_pose(self.sim_t, machine, p.x, p.y, yaw)
+            if machine == "zx200":
+                self._zx200_base = (p.x, p.y, yaw)
+
+        def _on_estimate(self, msg: Odometry) -> None:
+            p = msg.pose.pose.position
+            self.rec.on_estimated_pose(self.sim_t, "ic120", p.x, p.y)
+
+        def _on_joints(self, msg: JointState) -> None:
+            self._joints = dict(zip(msg.name, msg.position, strict=False))
+
+        def _on_tip(self, msg: PointStamped) -> None:
+            """End-effector error: truth tip vs FK of the joint angles measured over CAN."""
+            if self._zx200_base is None or not all(j in self._joints for j in self._joint_order):
+                return
+            q = self._np.array([self._joints[j] for j in self._joint_order])
+            local = self._kin.tip_position(q)
+            bx, by, byaw = self._zx200_base
+            c, s = math.cos(byaw), math.sin(byaw)
+            est = (bx + c * local[0] - s * local[1], by + s * local[0] + c * local[1])
+            self.rec.on_tip_error(math.hypot(est[0] - msg.point.x, est[1] - msg.point.y))
+
+        # -- supervision ----------------------------------------------------------------------
+        def _db(self):  # noqa: ANN202
+            if self._store is None:
+                from tms_db import open_store
+
+                self._store = open_store(uri=self.db_uri or None, path=self.db_path or None)
+            return self._store
+
+        def _tick(self) -> None:
+            if self.exit_code is not None:
+                return
+            try:
+                doc = self._db().get_record(self.record)
+                self.rec.on_flags(self.sim_t, {k: v for k, v in doc.items() if k.endswith("_FLG") and isinstance(v, bool)})
+            except KeyError:
+                pass
+            if not self.started:
+                if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0:
+                    self.pub_start.publish(TaskIds(task_ids=self.task_ids))
+                    self.started = True
+                    self.get_logger().info(f"started tasks {self.task_ids}")
+                    print(f"[experiment] started tasks {self.task_ids}", flush=True)
+                return
+            now = time.monotonic()
+            if now - self._last_progress >= self.progress_period:
+                self._last_progress = now
+                self._progress()
+            ended = [tid for tid in self.task_ids if self.tasks.get(tid, {}).get("state") in DONE]
+            if not self.stopping and (self.rec.cycles >= self.cycles_target or self._failed()):
+                self.stopping = True
+                reason = "a task failed" if self._failed() else f"{self.rec.cycles} cycle(s) done"
+                print(f"[experiment] {reason}: clearing CONTINUE_FLG", flush=True)
+                self._db().set_fields(self.record, {"CONTINUE_FLG": False})
+            if len(ended) == len(self.task_ids):
+                self._finish()
+            elif self.sim_t - (self.rec.sim_start or self.sim_t) > self.timeout:
+                print(f"[experiment] timeout: {self.timeout:g} s of simulated time", flush=True)
+                self._finish(timed_out=True)
+
+        def _failed(self) -> bool:
+            return any(t.get("state") == "FAILURE" for t in self.tasks.values())
+
+        def _progress(self) -> None:
+            wall = time.monotonic() - (self.rec.wall_start or 0)
+            rtf = (self.sim_t - (self.rec.sim_start or 0)) / wall if wall > 0 else 0
+            phases = "; ".join(
+                f"task {tid} {info['state']}: {', '.join(info['running']) or '-'}" for tid, info in sorted(self.tasks.items())
+            )
+            print(
+                f"[experiment] cycle {self.rec.cycles}/{self.cycles_target} | passes {len(self.rec.pass_events)} | "
+                f"soil moved {self.rec.soil_moved():.2f} m3 | t_sim {self.sim_t:.0f} s ({rtf:.1f}x) | {phases}",
+                flush=True,
+            )
+
+        def _finish(self, timed_out: bool = False) -> None:
+            self.rec.wall_end = time.monotonic()
+            index = self.rec.report(self.run_dir, site=self.site, title="Paper experiment: two-machine earthwork")
+            metrics = self.rec.metrics()
+            ok = not timed_out and all(self.tasks.get(t, {}).get("state") == "SUCCESS" for t in self.task_ids)
+            for tid in self.task_ids:
+                info = self.tasks.get(tid, {})
+                print(f"[experiment] task {tid}: {info.get('state')} {info.get('message', '')}", flush=True)
+            print(
+                f"[experiment] {'DONE' if ok else 'FAILED'}: {metrics['cycles']} cycle(s), {metrics['soil_moved_m3']} m3 moved, "
+                f"real-time factor {metrics['real_time_factor']}, load pass {metrics['load_pass_time_s']}, report {index}",
+                flush=True,
+            )
+            self.exit_code = 0 if ok else 1
+            raise SystemExit(self.exit_code)
+
+    return ExperimentNode()
+
+
+def main() -> int:
+    code = run_node(_make_node)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
