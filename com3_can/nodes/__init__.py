@@ -1,0 +1,1 @@
+"""rclpy node wrappers of com3_can (console scripts)."""

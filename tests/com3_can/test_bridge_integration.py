@@ -1,0 +1,223 @@
+"""Cross-process: com3_bridge in its own process, a raw python-can peer and a ROS probe in this one.
+
+Runs on the backend chosen by TMS_CAN_TEST_BACKEND (udp_multicast by default, socketcan -> vcan0).
+Timing asserts are deliberately loose (shared 2-core machine); measured figures come from the bench.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from com3_can.codec import AliveCounter, load_codec
+from tests.rosproc import executable
+
+pytestmark = [pytest.mark.integration, pytest.mark.can_backend]
+
+ZX = load_codec("zx200")
+IC = load_codec("ic120")
+NEUTRAL_V1 = ZX.encode("Velocity_Cmd_1", ZX.neutral("Velocity_Cmd_1"))
+
+
+def start_bridge(procs: Callable[..., Any], machine: str, cfg: dict[str, Any], **params: Any) -> Any:
+    cmd = [executable("com3_can", "com3_bridge"), "--ros-args", "-r", f"__ns:=/{machine}",
+           "-p", f"machine:={machine}", "-p", f"can_interface:={cfg['interface']}", "-p", f"can_channel:={cfg['channel']}"]
+    if "port" in cfg:
+        cmd += ["-p", f"can_port:={cfg['port']}"]
+    for key, value in params.items():
+        cmd += ["-p", f"{key}:={value}"]
+    proc = procs(cmd, name=f"com3_bridge_{machine}")
+    assert proc.wait_for("com3_bridge ready", 30), proc.output
+    return proc
+
+
+def spin(node: Any, seconds: float, every: tuple[float, Callable[[], None]] | None = None) -> None:
+    """Spin the probe node for ``seconds``, calling ``every[1]`` each ``every[0]`` s."""
+    end = time.monotonic() + seconds
+    next_call = time.monotonic()
+    while (now := time.monotonic()) < end:
+        if every and now >= next_call:
+            every[1]()
+            next_call = now + every[0]
+        node.executor_for_test.spin_once(timeout_sec=0.005)
+
+
+def wait_subscribers(node: Any, pub: Any, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while pub.get_subscription_count() == 0 and time.monotonic() < end:
+        node.executor_for_test.spin_once(timeout_sec=0.05)
+    assert pub.get_subscription_count() > 0, f"no subscriber on {pub.topic_name}"
+
+
+def front(velocities: list[float]) -> Any:
+    from tms_msg.msg import JointCmd
+
+    return JointCmd(joint_name=["swing_joint", "boom_joint", "arm_joint", "bucket_joint"], control_type=JointCmd.VELOCITY,
+                    velocity=velocities)
+
+
+def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Bool
+
+    from tms_msg.msg import JointCmd
+
+    bridge = start_bridge(procs, "zx200", can_cfg)
+    pub = ros_node.create_publisher(JointCmd, "/zx200/front_cmd", 10)
+    emg = ros_node.create_publisher(Bool, "/zx200/emg_stop", 10)
+    joints: list[JointState] = []
+    diags: list[DiagnosticArray] = []
+    ros_node.create_subscription(JointState, "/zx200/joint_states", joints.append, 50)
+    ros_node.create_subscription(DiagnosticArray, "/zx200/diagnostic", diags.append, 50)
+    wait_subscribers(ros_node, pub)
+    wait_subscribers(ros_node, emg)
+
+    # 1. front_cmd -> the reference bytes of Velocity_Cmd_1, at 100 Hz, alive counter incrementing
+    cmd = front([0.5, 0.1, -0.2, 0.0])
+    spin(ros_node, 0.5, (0.1, lambda: pub.publish(cmd)))
+    t0 = time.monotonic()
+    spin(ros_node, 2.0, (0.1, lambda: pub.publish(cmd)))
+    t1 = time.monotonic()
+    v1 = [(t, m) for t, m in peer.since(t0, ZX.frame_id("Velocity_Cmd_1")) if t < t1]
+    assert v1, bridge.output
+    assert {bytes(m.data).hex() for _, m in v1} == {"c87d707b007de880"}
+    rate = len(v1) / (t1 - t0)
+    gaps = [b[0] - a[0] for a, b in zip(v1, v1[1:], strict=False)]
+    assert 80 <= rate <= 125, f"Velocity_Cmd_1 at {rate:.1f} Hz"
+    assert 0.007 <= statistics.median(gaps) <= 0.0115, f"median period {statistics.median(gaps) * 1e3:.2f} ms"
+    setting = [m for t, m in peer.since(t0, ZX.frame_id("Machine_Setting_Cmd")) if t < t1]
+    alive = [int(ZX.decode(m.arbitration_id, bytes(m.data))[1]["alive_counter"]) for m in setting]
+    assert 30 <= len(alive) <= 50, f"{len(alive)} Machine_Setting_Cmd in 2 s (50 ms cycle)"
+    steps = [AliveCounter.is_successor(a, b) for a, b in zip(alive, alive[1:], strict=False)]
+    assert sum(steps) >= len(steps) - 1, f"alive counter not incrementing: {alive}"
+    assert ZX.decode(setting[-1].arbitration_id, bytes(setting[-1].data))[1]["front_signal_switch_command"] == 2
+
+    # 2. state frames -> joint_states
+    vel = ZX.encode("Front_Angular_Velocity", {"boom_relative_angular_velocity": 0.1, "arm_relative_angular_velocity": -0.2,
+                                               "bucket_relative_angular_velocity": 0.3, "swing_relative_angular_velocity": 0.4})
+    ang = ZX.encode("Front_Angle", {"boom_relative_angle": -0.5, "arm_relative_angle": 1.6, "bucket_relative_angle": 0.5,
+                                    "swing_relative_angle": 0.25})
+
+    def send_state() -> None:
+        peer.send(ZX.frame_id("Front_Angular_Velocity"), vel)
+        peer.send(ZX.frame_id("Front_Angle"), ang)
+        pub.publish(cmd)
+
+    spin(ros_node, 1.0, (0.01, send_state))
+    assert joints, bridge.output
+    last = joints[-1]
+    assert list(last.name) == ["swing_joint", "boom_joint", "arm_joint", "bucket_joint"]
+    assert list(last.position) == pytest.approx([0.25, -0.5, 1.6, 0.5], abs=4e-4)
+    assert list(last.velocity) == pytest.approx([0.4, 0.1, -0.2, 0.3], abs=2e-4)
+
+    # 3. out-of-range command: rejected with a logged reason, bytes unchanged (never wrapped)
+    t_bad = time.monotonic()
+    spin(ros_node, 0.4, (0.1, lambda: pub.publish(front([20.0, 0.0, 0.0, 0.0]))))
+    assert bridge.wait_for("rejected: front_cmd:", 5), bridge.output
+    assert "outside [-16, 16]" in bridge.output
+    assert {bytes(m.data).hex() for _, m in peer.since(t_bad, ZX.frame_id("Velocity_Cmd_1"))} == {"c87d707b007de880"}
+
+    # 4. emg_stop -> neutral within one cycle, stays neutral while commands keep coming
+    spin(ros_node, 0.2, (0.05, lambda: pub.publish(cmd)))
+    t_emg = time.monotonic()
+    emg.publish(Bool(data=True))
+    spin(ros_node, 1.0, (0.05, lambda: pub.publish(cmd)))
+    after = peer.since(t_emg, ZX.frame_id("Velocity_Cmd_1"))
+    first_neutral = next(t for t, m in after if bytes(m.data) == NEUTRAL_V1)
+    assert first_neutral - t_emg < 0.010 + 0.04, f"neutral {1e3 * (first_neutral - t_emg):.1f} ms after emg_stop"
+    assert all(bytes(m.data) == NEUTRAL_V1 for t, m in after if t > first_neutral)
+    assert bridge.wait_for("rejected: front_cmd: refused, emg_stop is latched", 5)
+    assert any("emg_stop latched" in d.status[0].message and d.status[0].level == b"\x02" for d in diags)
+
+    # 5. clear the latch, command once, then silence: the watchdog sends neutral 0.5 s later
+    emg.publish(Bool(data=False))
+    spin(ros_node, 0.3)
+    t_cmd = time.monotonic()
+    pub.publish(cmd)
+    spin(ros_node, 1.2)
+    after = peer.since(t_cmd, ZX.frame_id("Velocity_Cmd_1"))
+    moving = [t for t, m in after if bytes(m.data).hex() == "c87d707b007de880"]
+    assert moving, "command after clearing emg_stop did not go out"
+    first_neutral = next(t for t, m in after if t > moving[0] and bytes(m.data) == NEUTRAL_V1)
+    assert 0.45 <= first_neutral - t_cmd <= 0.5 + 0.010 + 0.06, f"watchdog neutral after {first_neutral - t_cmd:.3f} s"
+    assert all(bytes(m.data) == NEUTRAL_V1 for t, m in after if t >= first_neutral)
+    assert any("watchdog: no front_cmd" in d.status[0].message for d in diags), [d.status[0].message for d in diags[-5:]]
+
+
+def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+    import random
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import NavSatFix
+    from std_msgs.msg import Float64
+
+    bridge = start_bridge(procs, "ic120", can_cfg)
+    vel_pub = ros_node.create_publisher(Twist, "/ic120/cmd_vel", 10)
+    vessel_pub = ros_node.create_publisher(Float64, "/ic120/vessel_cmd", 10)
+    odoms: list[Odometry] = []
+    fixes: list[NavSatFix] = []
+    diags: list[DiagnosticArray] = []
+    ros_node.create_subscription(Odometry, "/ic120/odom_pose", odoms.append, 50)
+    ros_node.create_subscription(NavSatFix, "/ic120/gnss/fix", fixes.append, 50)
+    ros_node.create_subscription(DiagnosticArray, "/ic120/diagnostic", diags.append, 50)
+    wait_subscribers(ros_node, vel_pub)
+    wait_subscribers(ros_node, vessel_pub)
+
+    twist = Twist()
+    twist.linear.x, twist.angular.z = 1.0, 0.2
+
+    def command() -> None:
+        vel_pub.publish(twist)
+        vessel_pub.publish(Float64(data=0.5))
+
+    t0 = time.monotonic()
+    spin(ros_node, 1.0, (0.1, command))
+    vc = peer.since(t0 + 0.5, IC.frame_id("Velocity_Cmd"))
+    assert vc, bridge.output
+    _, values = IC.decode(vc[-1][1].arbitration_id, bytes(vc[-1][1].data))
+    assert values["target_travel_center_velocity"] == pytest.approx(1.0) and values["target_travel_yaw_rate"] == pytest.approx(0.2)
+    _, vessel = IC.decode(IC.frame_id("Vessel_Cmd"), bytes(peer.since(t0 + 0.5, IC.frame_id("Vessel_Cmd"))[-1][1].data))
+    assert vessel == {"target_vessel_angle": pytest.approx(0.5, abs=4e-4), "vessel_control_enable": 1}
+
+    # out-of-range vessel target: logged, not sent
+    vessel_pub.publish(Float64(data=2.0))
+    assert bridge.wait_for("rejected: vessel_cmd: angle 2 rad outside [0, 1.13446]", 10), bridge.output
+
+    # state frames -> odom_pose and gnss/fix, with a storm of garbled frames in between
+    rng = random.Random(7)
+    tv = IC.encode("Track_Velocity", {"left_track_velocity": 0.5, "right_track_velocity": 0.5})
+    gnss = [(IC.frame_id("GNSS_Latitude"), IC.encode("GNSS_Latitude", {"latitude": 36.12626})),
+            (IC.frame_id("GNSS_Longitude"), IC.encode("GNSS_Longitude", {"longitude": 140.07103})),
+            (IC.frame_id("GNSS_Altitude_Status"), IC.encode("GNSS_Altitude_Status", {
+                "altitude": 30.0, "fix_status": 3, "num_satellites": 14, "horizontal_accuracy": 0.02}))]
+    garbled = 0
+
+    def send_state() -> None:
+        nonlocal garbled
+        peer.send(IC.frame_id("Track_Velocity"), tv)
+        for fid, data in gnss:
+            peer.send(fid, data)
+        for _ in range(5):
+            peer.send(rng.getrandbits(29), rng.randbytes(8))  # unknown ids
+            peer.send(IC.frame_id("Vessel_Angle"), rng.randbytes(rng.choice([3, 7])))  # wrong DLC
+            garbled += 2
+        command()
+
+    spin(ros_node, 2.0, (0.01, send_state))
+    spin(ros_node, 0.7)
+    assert odoms and fixes, bridge.output
+    assert odoms[-1].twist.twist.linear.x == pytest.approx(0.5)
+    assert odoms[-1].pose.pose.position.x > 0.3
+    assert (fixes[-1].latitude, fixes[-1].longitude, fixes[-1].status.status) == (
+        pytest.approx(36.12626, abs=1e-9), pytest.approx(140.07103, abs=1e-9), 2)
+    assert bridge.popen.poll() is None, "bridge died on garbled frames"
+    values = {kv.key: kv.value for kv in diags[-1].status[0].values}
+    assert int(values["rx_unknown_id"]) >= 0.9 * garbled / 2 and int(values["rx_bad_dlc"]) >= 0.9 * garbled / 2, values
+    assert int(values["rx_dropped_total"]) >= 0.9 * garbled
