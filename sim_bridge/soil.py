@@ -54,8 +54,11 @@ class HeightField:
         return float((self.h - self.datum).sum() * self.cell_area)
 
     def mound_volume(self) -> float:
-        """Soil above the original ground plane [m^3] (the mound plus any piles)."""
-        return float(np.clip(self.h - self.spec.ground_z, 0.0, None).sum() * self.cell_area)
+        """Soil above the original ground plane [m^3]: mound and piles, minus holes dug below it.
+
+        ``mound_volume() + bucket + vessel`` is conserved exactly.
+        """
+        return float((self.h - self.spec.ground_z).sum() * self.cell_area)
 
     def index(self, x: float, y: float) -> tuple[int, int]:
         """(row, col) of the cell holding (x, y), clamped to the grid."""

@@ -1,0 +1,197 @@
+"""Node ``sim_plant``: the MuJoCo plant on COM3 CAN, publishing ``/clock`` and ``/sim/truth``.
+
+The plant loop runs in its own thread (paced to ``speed`` x real time, or free-running with
+``speed:=0``); the executor only serves parameters. Control goes *only* through the CAN buses of
+``config/can/<machine>.yaml`` (overridable per machine: ``<m>_can_interface``, ``<m>_can_channel``,
+``<m>_can_port``). Published (simulated time stamps, frame ``map``):
+
+* ``/clock`` (rosgraph_msgs/Clock) every step,
+* ``/sim/truth/<machine>/pose`` (geometry_msgs/PoseStamped), ``/sim/truth/<machine>/joint_states``
+  (sensor_msgs/JointState), ``/sim/truth/zx200/bucket_tip`` (geometry_msgs/PointStamped),
+* ``/sim/truth/soil`` (std_msgs/Float64MultiArray ``[mound, bucket, vessel, dumped, total_error]`` m^3,
+  labels in ``layout.dim[0].label``), every ``truth_period_s``,
+* ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
+  ignored_out_of_range, ignored_bad_dlc, ignored_unknown_id, watchdog_trips) and the real-time factor.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering without a display (before mujoco loads)
+
+import logging  # noqa: E402
+import threading  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from rclpy.node import Node  # noqa: E402
+
+from sim_bridge.config import load_plant  # noqa: E402
+from sim_bridge.plant import Plant  # noqa: E402
+from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
+from tms_common.node import run_node  # noqa: E402
+
+SOIL_LABELS = "mound,bucket,vessel,dumped,total_error"
+
+
+class SimPlantNode(Node):
+    """Owns the plant, its buses and the loop thread; publishes clock, truth and diagnostics."""
+
+    def __init__(self) -> None:
+        super().__init__("sim_plant")
+        from builtin_interfaces.msg import Time
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PointStamped, PoseStamped
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+        from com3_can.bus import load_bus_config, open_bus
+        from sim_bridge.can_io import PlantCanIO
+
+        self._Time, self._Clock = Time, Clock
+        self._PoseStamped, self._PointStamped, self._JointState = PoseStamped, PointStamped, JointState
+        self._Float64MultiArray, self._Dim, self._DiagnosticArray = Float64MultiArray, MultiArrayDimension, DiagnosticArray
+        p = self.declare_parameter
+        speed = float(p("speed", 1.0).value)
+        config = str(p("config", "").value) or None
+        watchdog = float(p("watchdog_s", -1.0).value)
+        self._truth_period = float(p("truth_period_s", 0.05).value)
+        record = str(p("record", "").value)
+        replay = str(p("replay", "").value)
+        self._snapshot = str(p("snapshot_png", "").value)
+        status_period = float(p("status_period_s", 1.0).value)
+        spec = load_plant(config)
+        self.plant = Plant(spec)
+        buses = {}
+        for machine in ("zx200", "ic120"):
+            cfg = {k: v for k, v in load_bus_config(machine).items() if k != "bridge"}
+            iface = str(p(f"{machine}_can_interface", "").value)
+            channel = str(p(f"{machine}_can_channel", "").value)
+            port = int(p(f"{machine}_can_port", 0).value)
+            if iface:
+                cfg["interface"] = iface
+                if iface != "udp_multicast":
+                    cfg.pop("port", None)
+            if channel:
+                cfg["channel"] = channel
+            if port:
+                cfg["port"] = port
+            buses[machine] = open_bus(cfg)
+            self.get_logger().info(f"{machine}: CAN {cfg}")
+        self.buses = buses
+        self.io = PlantCanIO(self.plant, buses, watchdog_s=watchdog if watchdog > 0 else spec.watchdog_s)
+        self.recorder = TruthRecorder(record, self._truth_period) if record else None
+        log = TruthLog(replay) if replay else None
+        self.runner = PlantRunner(self.plant, self.io, speed=speed, on_step=self._on_step, replay=log)
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10)
+        self.pose_pub = {m: self.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in ("zx200", "ic120")}
+        self.joint_pub = {
+            m: self.create_publisher(JointState, f"/sim/truth/{m}/joint_states", 10) for m in ("zx200", "ic120")
+        }
+        self.tip_pub = self.create_publisher(PointStamped, "/sim/truth/zx200/bucket_tip", 10)
+        self.soil_pub = self.create_publisher(Float64MultiArray, "/sim/truth/soil", 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/sim/diagnostics", 10)
+        self._next_truth = 0.0
+        self._status_period = status_period
+        self._next_status = 0.0
+        self._thread = threading.Thread(target=self._loop, name="plant_loop", daemon=True)
+        self._thread.start()
+        mode = f"replay of {replay}" if replay else "commands from CAN"
+        self.get_logger().info(f"sim_plant: running at speed {speed} ({'free-running' if speed == 0 else 'paced'}), {mode}")
+
+    def _loop(self) -> None:
+        try:
+            self.runner.run()
+        except Exception as exc:  # noqa: BLE001 - report, then let the process die visibly
+            if not self.context.ok():  # shutting down: publishers are gone, nothing to report
+                return
+            self.get_logger().fatal(f"plant loop crashed: {type(exc).__name__}: {exc}")
+            os._exit(1)
+
+    def _stamp(self, t: float):  # noqa: ANN202
+        sec = int(t)
+        return self._Time(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+
+    def _on_step(self, plant: Plant) -> None:
+        stamp = self._stamp(plant.time)
+        self.clock_pub.publish(self._Clock(clock=stamp))
+        if self.recorder is not None:
+            self.recorder(plant)
+        if plant.time + 1e-9 >= self._next_truth:
+            self._next_truth += self._truth_period
+            self._publish_truth(plant, stamp)
+        if plant.time + 1e-9 >= self._next_status:
+            self._next_status += self._status_period
+            self._publish_status(plant, stamp)
+
+    def _publish_truth(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+        import math
+
+        for m in ("zx200", "ic120"):
+            t = plant.truth(m)
+            msg = self._PoseStamped()
+            msg.header.stamp, msg.header.frame_id = stamp, "map"
+            msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = t.x, t.y, t.z
+            msg.pose.orientation.z, msg.pose.orientation.w = math.sin(t.yaw / 2), math.cos(t.yaw / 2)
+            self.pose_pub[m].publish(msg)
+            bank = plant.zx200.front if m == "zx200" else plant.ic120.vessel
+            js = self._JointState()
+            js.header.stamp = stamp
+            js.name, js.position, js.velocity = list(bank.names), list(bank.q), list(bank.v)
+            self.joint_pub[m].publish(js)
+        tip = plant.bucket_tip()
+        pt = self._PointStamped()
+        pt.header.stamp, pt.header.frame_id = stamp, "map"
+        pt.point.x, pt.point.y, pt.point.z = tip
+        self.tip_pub.publish(pt)
+        soil = self._Float64MultiArray()
+        soil.layout.dim = [self._Dim(label=SOIL_LABELS, size=5, stride=5)]
+        error = plant.total_volume() - plant.initial_volume
+        soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error]
+        self.soil_pub.publish(soil)
+
+    def _publish_status(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+        arr = self._DiagnosticArray()
+        arr.header.stamp = stamp
+        for machine, counters in self.io.counters().items():
+            st = DiagnosticStatus(name=f"sim_plant/{machine}", hardware_id=machine, message="ok")
+            st.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(counters.items())]
+            arr.status.append(st)
+        arr.status.append(
+            DiagnosticStatus(
+                name="sim_plant/loop",
+                message="ok",
+                values=[KeyValue(key="sim_time", value=f"{plant.time:.3f}"),
+                        KeyValue(key="late_steps", value=str(self.runner.late_steps))],
+            )
+        )
+        self.diag_pub.publish(arr)
+
+    def destroy_node(self) -> None:
+        self.runner.stop()
+        self._thread.join(timeout=5.0)
+        if self.recorder is not None:
+            self.recorder.close()
+        if self._snapshot:
+            try:
+                from sim_bridge.render import render_png
+
+                render_png(self.plant, Path(self._snapshot))
+                self.get_logger().info(f"snapshot written to {self._snapshot}")
+            except Exception as exc:  # noqa: BLE001 - rendering is optional
+                self.get_logger().warning(f"no snapshot: {exc}")
+        for bus in self.buses.values():
+            bus.shutdown()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    logging.basicConfig(level=logging.WARNING, format="[sim_plant] %(levelname)s %(name)s: %(message)s")
+    return run_node(SimPlantNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

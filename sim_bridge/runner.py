@@ -1,0 +1,165 @@
+"""The plant loop: pacing (real time, N x real time, or as fast as possible), CAN I/O, truth log, replay.
+
+One loop iteration = poll command frames, watchdog, one plant step (``dt`` of simulated time), state
+frames due, then the ``on_step`` hook (the node publishes ``/clock`` and truth from it). With
+``speed > 0`` the loop sleeps to an absolute deadline ``start + sim_time / speed`` (no drift; a late
+step is not made up by a burst, it shifts the schedule), so in real time the 10 ms frames leave every
+10 ms of wall time. ``speed == 0`` runs as fast as the CPU allows.
+
+Truth log (JSON lines, one record per ``period`` of simulated time)::
+
+    {"t": 1.25, "zx200": {"x":..,"y":..,"z":..,"yaw":.., "joints": {...}}, "ic120": {...},
+     "soil": {"mound": .., "bucket": .., "vessel": .., "dumped": ..}}
+
+Replay drives the models from such a log (latest record at or before the current time) instead of
+from the commands, as OperaSimVR's replay mode does: state frames, ``/clock`` and truth follow the log.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from bisect import bisect_right
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+from sim_bridge.can_io import PlantCanIO
+from sim_bridge.errors import ReplayError
+from sim_bridge.plant import Plant
+
+__all__ = ["PlantRunner", "TruthRecorder", "TruthLog", "truth_record"]
+
+
+def truth_record(plant: Plant) -> dict[str, Any]:
+    """The plant's true state as one JSON-able record."""
+    zx, ic = plant.zx200, plant.ic120
+    return {
+        "t": round(plant.time, 6),
+        "zx200": {"x": zx.base.x, "y": zx.base.y, "z": zx.z, "yaw": zx.base.yaw,
+                  "joints": dict(zip(zx.front.names, zx.front.q, strict=True))},
+        "ic120": {"x": ic.base.x, "y": ic.base.y, "z": ic.z, "yaw": ic.base.yaw,
+                  "joints": {"vessel_joint": ic.vessel_angle}},
+        "soil": {"mound": plant.ground.mound_volume(), "bucket": plant.soil.bucket,
+                 "vessel": plant.soil.vessel, "dumped": plant.soil.dumped},
+    }
+
+
+class TruthRecorder:
+    """Appends truth records to a JSON-lines file every ``period`` simulated seconds."""
+
+    def __init__(self, path: str | Path, period: float) -> None:
+        self.path = Path(path)
+        self.period = period
+        self._next = 0.0
+        self._file: IO[str] = self.path.open("w")
+
+    def __call__(self, plant: Plant) -> None:
+        if plant.time + 1e-9 >= self._next:
+            self._file.write(json.dumps(truth_record(plant)) + "\n")
+            self._next += self.period
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class TruthLog:
+    """A recorded truth log loaded for replay."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            lines = self.path.read_text().splitlines()
+        except OSError as exc:
+            raise ReplayError(f"{self.path}: cannot read the truth log: {exc.strerror}") from None
+        self.records: list[dict[str, Any]] = []
+        for number, line in enumerate(lines, 1):
+            if not line.strip():
+                continue
+            try:
+                rec = json.loads(line)
+                float(rec["t"])
+                for m in ("zx200", "ic120"):
+                    rec[m]["x"], rec[m]["y"], rec[m]["yaw"], rec[m]["joints"]  # noqa: B018 - presence check
+            except (ValueError, KeyError, TypeError) as exc:
+                raise ReplayError(f"{self.path}:{number}: not a truth record ({type(exc).__name__}: {exc})") from None
+            self.records.append(rec)
+        if not self.records:
+            raise ReplayError(f"{self.path}: the truth log holds no records")
+        self.times = [float(r["t"]) for r in self.records]
+
+    @property
+    def duration(self) -> float:
+        return self.times[-1]
+
+    def at(self, t: float) -> dict[str, Any]:
+        """The latest record at or before ``t`` (the first one before the log starts)."""
+        return self.records[max(0, bisect_right(self.times, t + 1e-9) - 1)]
+
+    def apply(self, plant: Plant) -> dict[str, Any]:
+        rec = self.at(plant.time)
+        for m in ("zx200", "ic120"):
+            r = rec[m]
+            plant.set_truth(m, r["x"], r["y"], r["yaw"], r["joints"])
+        return rec
+
+
+class PlantRunner:
+    """Runs the plant loop until ``stop()`` (or ``duration`` simulated seconds)."""
+
+    def __init__(
+        self,
+        plant: Plant,
+        io: PlantCanIO | None,
+        *,
+        speed: float = 1.0,
+        on_step: Callable[[Plant], None] | None = None,
+        replay: TruthLog | None = None,
+    ) -> None:
+        if speed < 0:
+            raise ValueError(f"speed must be >= 0 (0 = as fast as possible), got {speed}")
+        self.plant = plant
+        self.io = io
+        self.speed = speed
+        self.on_step = on_step
+        self.replay = replay
+        if io is not None and replay is not None:
+            io.replay = True
+        self._stop = threading.Event()
+        self.wall_elapsed = 0.0
+        self.late_steps = 0  # steps that started more than one dt (wall, scaled) behind schedule
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def run(self, duration: float | None = None) -> None:
+        plant, io = self.plant, self.io
+        t_sim0 = plant.time
+        wall0 = start = time.perf_counter()
+        dt = plant.dt
+        while not self._stop.is_set():
+            if duration is not None and plant.time - t_sim0 >= duration - 1e-9:
+                break
+            if self.speed > 0:
+                deadline = wall0 + (plant.time - t_sim0) / self.speed
+                delay = deadline - time.perf_counter()
+                if delay > 0:
+                    time.sleep(delay)
+                elif delay < -dt / self.speed:
+                    self.late_steps += 1
+                    wall0 -= delay  # shift the schedule instead of bursting to catch up
+            if io is not None:
+                io.poll()
+                io.watchdog()
+            if self.replay is not None:
+                plant.time += dt
+                plant.steps += 1
+                self.replay.apply(plant)
+            else:
+                plant.step()
+            if io is not None:
+                io.emit()
+            if self.on_step is not None:
+                self.on_step(plant)
+        self.wall_elapsed = time.perf_counter() - start
