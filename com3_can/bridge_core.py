@@ -246,6 +246,7 @@ class BridgeCore:
                 "vessel": _Channel("vessel", ("Vessel_Cmd",)),
             }
         self._motion_frames = tuple(f for ch in self._channels.values() for f in ch.frames)
+        self._command_ids = frozenset(self.codec.frame_id(f) for f in self.codec.command_frames)
         self._scheduler = FrameScheduler({f: self.codec.cycle_ms(f) / 1000.0 for f in self.codec.command_frames}, now)
         self._emg = False
         self.counters: Counter[str] = Counter()
@@ -538,6 +539,9 @@ class BridgeCore:
             if is_error_frame or is_remote_frame or not is_extended_id:
                 reason = "error_frame" if is_error_frame else "remote_frame" if is_remote_frame else "standard_id"
                 self.counters[f"rx_{reason}"] += 1
+                return []
+            if arbitration_id in self._command_ids:  # our own (or another controller's) command frames
+                self.counters["rx_command_echo"] += 1
                 return []
             try:
                 name, values = self.codec.decode(arbitration_id, data)
