@@ -320,3 +320,21 @@ def test_dynamic_targets_seeded_as_sensing_computes_them_for_the_seeded_site():
     assert params[("zx200", CFG.angle_record)]["target_angle"] == pytest.approx(angle["target_angle"], abs=0.01)
     # The release point is within the ZX200's reach (about 9.5 m at ground).
     assert math.hypot(seeded["x"], seeded["y"]) < 9.0
+
+
+def test_site_map_is_current_and_the_route_is_free_on_it():
+    from tms_sp import sitemap
+
+    committed = (ROOT / "config" / "maps" / "site.pgm").read_bytes()
+    assert committed == sitemap.pgm_bytes(sitemap.render(CFG)), "run `python -m tms_sp.sitemap`"
+    meta = yaml.safe_load((ROOT / "config" / "maps" / "site.yaml").read_text())
+    assert meta["image"] == "site.pgm" and meta["resolution"] == sitemap.RESOLUTION
+    img = sitemap.render(CFG)[::-1]  # row 0 = min y
+    ox, oy = meta["origin"][:2]
+
+    def free(x, y):
+        return img[int((y - oy) / meta["resolution"]), int((x - ox) / meta["resolution"])] == 254
+
+    for name in ("P1", "P2", "P3", "P4", "P5", "ic120_start"):
+        assert free(CFG.points[name].x, CFG.points[name].y), name
+    assert not free(CFG.mound.cx, CFG.mound.cy) and not free(0.0, 0.0)
