@@ -572,8 +572,8 @@ class BridgeCore:
     def _roll_pitch(self, values: dict[str, float], stamp: float) -> list[Any]:
         az = self._state.get("Vehicle_Azimuth", {})
         yaw = -az.get("track_body_azimuth", 0.0)
-        rate = az.get("yaw_rate")
-        return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, rate)]
+        rate = az.get("yaw_rate")  # clockwise-positive like the azimuth -> ROS angular z = -yaw_rate
+        return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, None if rate is None else -rate)]
 
     def _zx_swing_centre(self, values: dict[str, float], stamp: float) -> list[Any]:
         try:
