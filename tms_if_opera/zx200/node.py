@@ -1,0 +1,172 @@
+"""``zx200_planner``: the ZX200 planning actions of contract [D], in the ``/zx200`` namespace.
+
+Serves ``tms_rp_zx200_change_pose`` (Zx200ChangePose), ``tms_rp_zx200_excavate_simple``
+(Zx200ExcavateSimple) and ``tms_rp_zx200_release_simple`` (Zx200ReleaseSimple). Each goal is planned
+and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
+goal ends at once (no motion) with ``error_code`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT and a
+``message`` naming the joint or distance. Valid goals run phase by phase through the arm controller's
+action ``arm_controller/move`` (node ``zx200_arm_controller``); feedback ``state`` is the phase
+(approach, penetrate, drag, curl, lift / swing, open / moving i/n). Cancel is forwarded; the goal
+ends CANCELED once the controller reports the arm at rest.
+
+Parameters: ``machine_config``, ``planner_config``, ``controller_config`` (YAML paths; defaults in config/).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from tms_common.node import run_node
+
+__all__ = ["main"]
+
+
+def _make_node():  # noqa: ANN202
+    from rclpy.action import ActionClient, ActionServer, CancelResponse
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+
+    from tms_msg.action import Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
+    from tms_msg.msg import Zx200PositionWithAngle
+    from tms_rc.zx200.controller import JointTarget, load_controller_config
+    from tms_rp.zx200 import errors as codes
+    from tms_rp.zx200.errors import PlanningError
+    from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+    from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+
+    class PlannerNode(Node):
+        """Validates and sequences ZX200 goals; motion is delegated to ``arm_controller/move``."""
+
+        def __init__(self) -> None:
+            super().__init__("zx200_planner")
+            kin = load_kinematics(self.declare_parameter("machine_config", "").value or None)
+            pcfg = load_planner_config(self.declare_parameter("planner_config", "").value or None)
+            ccfg = load_controller_config(self.declare_parameter("controller_config", "").value or None)
+            self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.ground_min_z)
+            self._q: np.ndarray | None = None
+            self._lock = threading.Lock()
+            group = ReentrantCallbackGroup()
+            self.create_subscription(JointState, "joint_states", self._on_state, 20, callback_group=group)
+            self._ctl = ActionClient(self, Zx200ChangePose, "arm_controller/move", callback_group=group)
+            accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
+            ActionServer(self, Zx200ChangePose, "tms_rp_zx200_change_pose", execute_callback=self._change_pose,
+                         cancel_callback=accept, callback_group=group)
+            ActionServer(self, Zx200ExcavateSimple, "tms_rp_zx200_excavate_simple", execute_callback=self._excavate,
+                         cancel_callback=accept, callback_group=group)
+            ActionServer(self, Zx200ReleaseSimple, "tms_rp_zx200_release_simple", execute_callback=self._release,
+                         cancel_callback=accept, callback_group=group)
+            self.get_logger().info("zx200_planner ready")
+
+        def _on_state(self, msg: JointState) -> None:
+            idx = {n: i for i, n in enumerate(msg.name)}
+            if all(n in idx for n in JOINTS):
+                with self._lock:
+                    self._q = np.array([msg.position[idx[n]] for n in JOINTS])
+
+        # -------------------------------------------------------------- common execution
+        def _run(self, handle, action_type, plan) -> object:  # noqa: ANN001
+            result = action_type.Result()
+            try:
+                with self._lock:
+                    q = None if self._q is None else self._q.copy()
+                targets = plan(q)
+            except PlanningError as exc:
+                self.get_logger().warning(f"goal rejected before motion: {exc}")
+                result.error_code.val = exc.code
+                result.message = str(exc)
+                handle.abort()
+                return result
+            if not self._ctl.wait_for_server(timeout_sec=5.0):
+                result.error_code.val = codes.NO_VALID_CONTROL
+                result.message = "arm controller action arm_controller/move is not available"
+                handle.abort()
+                return result
+            for target in targets:
+                code, message = self._segment(handle, action_type, target)
+                if code != codes.SUCCESS:
+                    result.error_code.val = code
+                    result.message = f"{target.label}: {message}"
+                    if code == codes.CANCELED:
+                        handle.canceled()
+                    else:
+                        handle.abort()
+                    return result
+            result.error_code.val = codes.SUCCESS
+            result.message = "done"
+            handle.succeed()
+            return result
+
+        def _segment(self, handle, action_type, target) -> tuple[int, str]:  # noqa: ANN001
+            goal = Zx200ChangePose.Goal()
+            if isinstance(target, JointTarget):
+                from trajectory_msgs.msg import JointTrajectoryPoint
+
+                goal.trajectory.joint_names = list(JOINTS)
+                goal.trajectory.header.frame_id = target.label
+                goal.trajectory.points = [JointTrajectoryPoint(positions=[float(v) for v in target.q])]
+            else:
+                pwa = Zx200PositionWithAngle()
+                pwa.position.x, pwa.position.y, pwa.position.z = (float(v) for v in target.position)
+                pwa.theta_w = float(target.theta_w)
+                goal.position_with_angle_sequence = [pwa]
+            fb = action_type.Feedback()
+            fb.state = target.label
+            handle.publish_feedback(fb)
+            send = self._ctl.send_goal_async(goal)
+            while not send.done():
+                time.sleep(0.01)
+            gh = send.result()
+            if not gh.accepted:
+                return codes.NO_VALID_CONTROL, "arm controller rejected the segment"
+            res_future = gh.get_result_async()
+            cancel_sent = False
+            while not res_future.done():
+                if handle.is_cancel_requested and not cancel_sent:
+                    gh.cancel_goal_async()
+                    cancel_sent = True
+                time.sleep(0.02)
+            res = res_future.result().result
+            if cancel_sent:
+                return codes.CANCELED, "canceled, arm at rest"
+            return res.error_code.val, res.message
+
+        # -------------------------------------------------------------- the three actions
+        def _change_pose(self, handle):  # noqa: ANN001, ANN202
+            g = handle.request
+
+            def plan(q):  # noqa: ANN001, ANN202
+                return self.planner.change_pose(
+                    joint_names=list(g.trajectory.joint_names),
+                    joint_points=[list(p.positions) for p in g.trajectory.points],
+                    poses=[([p.position.x, p.position.y, p.position.z],
+                            [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]) for p in g.pose_sequence],
+                    positions_with_angle=[([p.position.x, p.position.y, p.position.z], p.theta_w)
+                                          for p in g.position_with_angle_sequence],
+                    current_q=q,
+                )
+
+            return self._run(handle, Zx200ChangePose, plan)
+
+        def _excavate(self, handle):  # noqa: ANN001, ANN202
+            p = handle.request.position_with_angle
+            return self._run(handle, Zx200ExcavateSimple, lambda _q: self.planner.excavate(
+                [p.position.x, p.position.y, p.position.z], p.theta_w, p.offset))
+
+        def _release(self, handle):  # noqa: ANN001, ANN202
+            def plan(q):  # noqa: ANN001, ANN202
+                if q is None:
+                    raise PlanningError("no joint_states received yet")
+                return self.planner.release(handle.request.target_angle, q)
+
+            return self._run(handle, Zx200ReleaseSimple, plan)
+
+    return PlannerNode()
+
+
+def main() -> int:
+    """Console script ``zx200_planner``."""
+    return run_node(_make_node, executor="multi")

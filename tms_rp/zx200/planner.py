@@ -1,0 +1,187 @@
+"""ZX200 motion planning: planning goals -> validated controller targets, rejected before any motion.
+
+* :meth:`Zx200Planner.change_pose` — joint angles, bucket-tip poses or position + theta_w targets;
+* :meth:`Zx200Planner.excavate` — approach above the target, penetrate, drag towards the machine by
+  ``offset``, curl, lift clear;
+* :meth:`Zx200Planner.release` — swing to the target angle (front held), open (dump) the bucket.
+
+Every target is checked here (finite, non-empty, reachable, inside the joint limits, above the
+ground limit); failures raise :class:`~tms_rp.zx200.errors.PlanningError` subclasses whose message
+names the joint or the distance. The targets are consumed by :class:`tms_rc.zx200.controller.ArmController`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_rc.zx200.controller import CartesianTarget, JointTarget
+from tms_rp.zx200.errors import InvalidGoalError
+from tms_rp.zx200.kinematics import JOINTS, Zx200Kinematics
+
+__all__ = ["PlannerConfig", "load_planner_config", "Zx200Planner"]
+
+
+@dataclass
+class PlannerConfig:
+    """Excavation/release geometry (``config/tms_rp/zx200_planner.yaml``)."""
+
+    approach_height: float = 1.0
+    penetrate_depth: float = 0.3
+    penetrate_theta_w: float = 1.3
+    drag_default: float = 1.0
+    curl_theta_w: float = 2.6
+    lift_height: float = 1.5
+    release_open_bucket: float = -0.5
+    dig_speed_scale: float = 0.5
+    limit_margin: float = 0.005
+
+
+def load_planner_config(path: str | Path | None = None) -> PlannerConfig:
+    """Read the planner YAML; unknown or non-numeric keys are reported with the file name."""
+    path = Path(path) if path is not None else config_path("tms_rp", "zx200_planner.yaml")
+    data, _ = load_yaml(path)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping")
+    known = PlannerConfig.__dataclass_fields__
+    for key in data:
+        if key not in known:
+            raise ConfigError(f"{path}: unknown key {key!r} (known: {', '.join(known)})")
+    try:
+        return PlannerConfig(**{k: float(v) for k, v in data.items()})
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{path}: bad value: {exc}") from None
+
+
+def _finite(values: Any, what: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    if arr.size == 0:
+        raise InvalidGoalError(f"{what} is empty")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidGoalError(f"{what} contains NaN or infinity: {arr.tolist()}")
+    return arr
+
+
+class Zx200Planner:
+    """Turns planning goals into controller targets after validating every one of them."""
+
+    def __init__(self, kin: Zx200Kinematics, cfg: PlannerConfig | None = None, ground_min_z: float = -2.5) -> None:
+        self.kin = kin
+        self.cfg = cfg or PlannerConfig()
+        self.ground_min_z = ground_min_z
+
+    # ------------------------------------------------------------------ validation helpers
+    def _check_joints(self, q: np.ndarray, what: str) -> np.ndarray:
+        self.kin.check_joint_limits(q, what=what)
+        return q
+
+    def _cartesian(self, position: Any, theta_w: float, what: str, **kw: Any) -> CartesianTarget:
+        pos = _finite(position, f"{what} position")
+        if pos.shape != (3,):
+            raise InvalidGoalError(f"{what} position must have 3 coordinates, got {pos.tolist()}")
+        th = float(_finite([theta_w], f"{what} theta_w")[0])
+        if pos[2] < self.ground_min_z:
+            raise InvalidGoalError(
+                f"{what}: tip z {pos[2]:.3f} m is below the ground/dig limit {self.ground_min_z:.3f} m "
+                f"({self.ground_min_z - pos[2]:.3f} m too deep)"
+            )
+        self.kin.ik_position_with_angle(pos, th)  # raises OutOfReachError / JointLimitError with the reason
+        return CartesianTarget(pos, th, **kw)
+
+    # ------------------------------------------------------------------ goals
+    def change_pose(
+        self,
+        *,
+        joint_names: list[str] | None = None,
+        joint_points: list[list[float]] | None = None,
+        poses: list[tuple[list[float], list[float]]] | None = None,
+        positions_with_angle: list[tuple[list[float], float]] | None = None,
+        current_q: np.ndarray | None = None,
+    ) -> list[JointTarget | CartesianTarget]:
+        """Targets of one change_pose goal; exactly one of the three forms must be non-empty.
+
+        Joint points may name a subset of the joints (others are held at ``current_q``); unknown names
+        (other than the IK dummy ``bucket_end_joint``, which is ignored) are rejected.
+        """
+        given = [bool(joint_points), bool(poses), bool(positions_with_angle)]
+        if sum(given) == 0:
+            raise InvalidGoalError("change_pose goal is empty: no trajectory point, pose or position_with_angle")
+        if sum(given) > 1:
+            raise InvalidGoalError("change_pose goal mixes trajectory, pose_sequence and position_with_angle_sequence")
+        targets: list[JointTarget | CartesianTarget] = []
+        if joint_points:
+            names = list(joint_names or [])
+            for name in names:
+                if name not in JOINTS and name != "bucket_end_joint":
+                    raise InvalidGoalError(f"trajectory joint name {name!r} is not a ZX200 front joint {JOINTS}")
+            base = np.asarray(current_q if current_q is not None else self.kin.home, dtype=float)
+            for k, point in enumerate(joint_points):
+                vals = _finite(point, f"trajectory point {k + 1}")
+                if len(vals) != len(names):
+                    raise InvalidGoalError(
+                        f"trajectory point {k + 1} has {len(vals)} positions for {len(names)} joint names"
+                    )
+                q = base.copy()
+                for name, v in zip(names, vals, strict=True):
+                    if name in JOINTS:
+                        q[JOINTS.index(name)] = v
+                targets.append(JointTarget(self._check_joints(q, f"trajectory point {k + 1}"), f"joint pose {k + 1}"))
+                base = q
+        elif poses:
+            for k, (pos, quat) in enumerate(poses):
+                p, th = self.kin.pose_to_position_with_angle(_finite(pos, f"pose {k + 1} position"), _finite(quat, f"pose {k + 1} orientation"))
+                targets.append(self._cartesian(p, th, f"pose {k + 1}", label=f"pose {k + 1}"))
+        else:
+            for k, (pos, th) in enumerate(positions_with_angle or []):
+                targets.append(self._cartesian(pos, th, f"position_with_angle {k + 1}", label=f"position {k + 1}"))
+        return self._label(targets, "moving")
+
+    @staticmethod
+    def _label(targets: list, prefix: str) -> list:
+        n = len(targets)
+        return [type(t)(**{**t.__dict__, "label": f"{prefix} {i + 1}/{n}"}) for i, t in enumerate(targets)]
+
+    def excavate(self, position: Any, theta_w: float, offset: float = 0.0) -> list[JointTarget | CartesianTarget]:
+        """approach (joint move above the target) -> penetrate -> drag -> curl -> lift, all validated."""
+        cfg = self.cfg
+        pos = _finite(position, "excavate position")
+        if pos.shape != (3,):
+            raise InvalidGoalError(f"excavate position must have 3 coordinates, got {pos.tolist()}")
+        th = float(_finite([theta_w], "excavate theta_w")[0])
+        drag = float(_finite([offset], "excavate offset")[0]) or cfg.drag_default
+        radial = pos[:2] - self.kin.swing_origin[:2]
+        dist = float(np.linalg.norm(radial))
+        if dist < 1e-6:
+            raise InvalidGoalError("excavate position is on the swing axis")
+        inward = -radial / dist
+        above = pos + np.array([0.0, 0.0, cfg.approach_height])
+        bottom = pos - np.array([0.0, 0.0, cfg.penetrate_depth])
+        dragged = bottom + np.append(inward * drag, 0.0)
+        lifted = dragged + np.array([0.0, 0.0, cfg.lift_height])
+        slow = cfg.dig_speed_scale
+        q_above = self.kin.ik_position_with_angle(above, th)  # reason names joint/distance
+        return [
+            JointTarget(q_above, "approach"),
+            self._cartesian(bottom, cfg.penetrate_theta_w, "penetrate", label="penetrate", speed_scale=slow),
+            self._cartesian(dragged, cfg.penetrate_theta_w, "drag", label="drag", speed_scale=slow),
+            self._cartesian(dragged, cfg.curl_theta_w, "curl", label="curl", speed_scale=slow),
+            self._cartesian(lifted, cfg.curl_theta_w, "lift", label="lift"),
+        ]
+
+    def release(self, target_angle: float, current_q: np.ndarray) -> list[JointTarget]:
+        """swing to ``target_angle`` with the front as it is, then open the bucket (dump)."""
+        ang = float(_finite([target_angle], "release target_angle")[0])
+        q = _finite(current_q, "current joint state").copy()
+        q[0] = math.atan2(math.sin(ang), math.cos(ang))
+        lim = self.kin.limits
+        m = self.cfg.limit_margin
+        q[1:] = np.clip(q[1:], lim.lower[1:] + m, lim.upper[1:] - m)
+        opened = q.copy()
+        opened[3] = max(self.cfg.release_open_bucket, lim.lower[3] + m)
+        return [JointTarget(q, "swing"), JointTarget(self._check_joints(opened, "open"), "open")]
