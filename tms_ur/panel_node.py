@@ -9,7 +9,7 @@ default). The websocket pushes the site snapshot at ``rate_hz`` (>= 5 Hz) and ta
 | start task ids | ``/tms_ts/start`` (tms_msg/TaskIds) |
 | cancel one id | ``/tms_ts/cancel`` (std_msgs/Int32) |
 | emergency stop | ``/emergency_signal`` (std_msgs/Bool true) |
-| confirm | ``/tms_ts/confirm`` (std_msgs/Bool true), answers WaitForClick nodes |
+| confirm | ``/tms_ts/confirm`` (std_msgs/String "yes"), answers WaitForClick nodes |
 
 Live view inputs: ``/tms_ts/status`` (tms_msg/TaskStatus), global-blackboard records read from tms_db
 (``flag_records``), machine poses (``pose_topics``: geometry_msgs/PoseStamped), the IC120 plan
@@ -44,7 +44,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
     from nav_msgs.msg import Path as PathMsg
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
-    from std_msgs.msg import Bool, Float64MultiArray, Int32
+    from std_msgs.msg import Bool, Float64MultiArray, Int32, String
 
     from tms_msg.msg import TaskIds, TaskStatus
 
@@ -72,7 +72,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
             self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
             self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", 10)
             self.pub_emergency = self.create_publisher(Bool, "/emergency_signal", 10)
-            self.pub_confirm = self.create_publisher(Bool, "/tms_ts/confirm", 10)
+            self.pub_confirm = self.create_publisher(String, "/tms_ts/confirm", 10)
             self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
             for entry in pose_topics:
                 machine, _, topic = entry.partition(":")
@@ -163,7 +163,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
             if cmd.op == "emergency":
                 self.pub_emergency.publish(Bool(data=True))
                 return "EMERGENCY STOP sent on /emergency_signal"
-            self.pub_confirm.publish(Bool(data=True))
+            self.pub_confirm.publish(String(data="yes"))
             return "confirmation sent"
 
         def snapshot(self) -> str:

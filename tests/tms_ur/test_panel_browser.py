@@ -24,7 +24,7 @@ def _spin_until(node, predicate, timeout: float) -> bool:
 
 
 def test_buttons_publish_start_cancel_confirm_and_escape_is_emergency(procs, ros_node, browser_page, tmp_path):
-    from std_msgs.msg import Bool, Int32
+    from std_msgs.msg import Bool, Int32, String
 
     from tms_msg.msg import TaskIds
 
@@ -36,7 +36,7 @@ def test_buttons_publish_start_cancel_confirm_and_escape_is_emergency(procs, ros
     ros_node.create_subscription(TaskIds, "/tms_ts/start", lambda m: got["start"].append(list(m.task_ids)), 10)
     ros_node.create_subscription(Int32, "/tms_ts/cancel", lambda m: got["cancel"].append(m.data), 10)
     ros_node.create_subscription(Bool, "/emergency_signal", lambda m: got["emergency"].append(m.data), 10)
-    ros_node.create_subscription(Bool, "/tms_ts/confirm", lambda m: got["confirm"].append(m.data), 10)
+    ros_node.create_subscription(String, "/tms_ts/confirm", lambda m: got["confirm"].append(m.data), 10)
     page = browser_page
     page.goto(f"http://127.0.0.1:{port}/")
     page.wait_for_selector("#conn.ok", timeout=20000)
@@ -49,7 +49,7 @@ def test_buttons_publish_start_cancel_confirm_and_escape_is_emergency(procs, ros
     page.keyboard.press("Escape")
     assert _spin_until(ros_node, lambda: got["start"] and got["emergency"] and got["confirm"], 20), got
     assert got["start"][0] == [3, 4]
-    assert got["emergency"][0] is True and got["confirm"][0] is True
+    assert got["emergency"][0] is True and got["confirm"][0] == "yes"
     page.wait_for_selector("#events li:has-text('EMERGENCY STOP sent')", timeout=10000)
     # A malformed id is refused with the reason, nothing published.
     page.fill("#task-ids", "x")
