@@ -1,3 +1,4 @@
+# Tests, benchmarks and the demo run in their own network namespace (scripts/isolated.sh): only loopback.
 # Every target bootstraps .venv on first use (scripts/bootstrap.sh; idempotent, quick when nothing changed).
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -10,14 +11,14 @@ setup:
 	@$(BOOT)
 
 test: setup
-	$(PY) -m pytest tests $(PYTEST_ARGS)
+	scripts/isolated.sh $(PY) -m pytest tests $(PYTEST_ARGS)
 
 bench: setup
-	$(PY) -m tests.bench $(BENCH_ARGS)
+	scripts/isolated.sh $(PY) -m tests.bench $(BENCH_ARGS)
 
 DEMO_LAUNCH ?= config/launch/demo_three.yaml
 demo: setup
-	$(VENV)/bin/tms-launch $(DEMO_LAUNCH) $(DEMO_ARGS)
+	scripts/isolated.sh $(VENV)/bin/tms-launch $(DEMO_LAUNCH) $(DEMO_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .
