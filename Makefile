@@ -16,9 +16,9 @@ test: setup
 bench: setup
 	scripts/isolated.sh $(PY) -m tests.bench $(BENCH_ARGS)
 
-DEMO_LAUNCH ?= config/launch/demo_three.yaml
+DEMO_LAUNCH ?= config/launch/paper_experiment.yaml
 demo: setup
-	scripts/isolated.sh $(VENV)/bin/tms-launch $(DEMO_LAUNCH) $(DEMO_ARGS)
+	scripts/isolated.sh scripts/demo.sh $(DEMO_LAUNCH) $(DEMO_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .
