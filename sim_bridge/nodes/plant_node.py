@@ -61,6 +61,7 @@ class SimPlantNode(Node):
         replay = str(p("replay", "").value)
         self._snapshot = str(p("snapshot_png", "").value)
         status_period = float(p("status_period_s", 1.0).value)
+        self._rt_priority = int(p("realtime_priority", 0).value)
         spec = load_plant(config)
         self.plant = Plant(spec)
         buses = {}
@@ -101,6 +102,11 @@ class SimPlantNode(Node):
         self.get_logger().info(f"sim_plant: running at speed {speed} ({'free-running' if speed == 0 else 'paced'}), {mode}")
 
     def _loop(self) -> None:
+        if self._rt_priority > 0:  # SCHED_FIFO for the loop thread only (needs CAP_SYS_NICE / root)
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self._rt_priority))
+            except OSError as exc:
+                self.get_logger().warning(f"realtime_priority {self._rt_priority} refused ({exc}); normal scheduling")
         try:
             self.runner.run()
         except Exception as exc:  # noqa: BLE001 - report, then let the process die visibly

@@ -162,3 +162,24 @@ def test_malformed_machine_yaml_names_the_key(tmp_path):
     missing = _write_broken(tmp_path, "arm_joint: 0.4255, ", "")
     with pytest.raises(SimConfigError, match=r"hydraulics\.dead_time_s\.arm_joint: missing required key"):
         load_plant(zx200=missing)
+
+
+def test_truth_record_and_replay(spec, tmp_path):
+    from sim_bridge.errors import ReplayError
+    from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder
+
+    plant = Plant(spec)
+    plant.ic120.set_centre_velocity(1.0, 0.2)
+    plant.zx200.set_front_velocity({"swing_joint": 0.5})
+    rec = TruthRecorder(tmp_path / "truth.jsonl", 0.1)
+    PlantRunner(plant, None, speed=0.0, on_step=rec).run(duration=5.0)
+    rec.close()
+    final = (plant.ic120.base.x, plant.ic120.base.y, plant.zx200.front.q[0])
+    log = TruthLog(tmp_path / "truth.jsonl")
+    replayed = Plant(spec)
+    PlantRunner(replayed, None, speed=0.0, replay=log).run(duration=log.duration)
+    assert (replayed.ic120.base.x, replayed.ic120.base.y, replayed.zx200.front.q[0]) == pytest.approx(final, abs=0.11)
+    assert replayed.ic120.base.x > spec.initial_poses["ic120"][0] + 2.0  # it really moved
+    (tmp_path / "bad.jsonl").write_text('{"t": 0}\n')
+    with pytest.raises(ReplayError, match=r"bad\.jsonl:1: not a truth record"):
+        TruthLog(tmp_path / "bad.jsonl")
