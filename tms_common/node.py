@@ -62,6 +62,9 @@ def run_node(
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - report any crash with the node's name, then exit non-zero
+        if not rclpy.ok():
+            # Shutdown (SIGINT/SIGTERM) raced with a callback whose handles were already torn down.
+            return 0
         name = node.get_name() if node is not None else getattr(factory, "__name__", "node")
         print(f"[{name}] fatal: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
         import traceback

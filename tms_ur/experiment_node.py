@@ -68,6 +68,7 @@ def _make_node():  # noqa: ANN202
             self.stopping = False
             self.exit_code: int | None = None
             self._last_progress = 0.0
+            self._t0 = (time.monotonic(), 0.0)  # (wall, sim) when the tasks were started
             self._zx200_base: tuple[float, float, float] | None = None
             self._joints: dict[str, float] = {}
             from tms_rp.zx200.kinematics import JOINTS, load_kinematics
@@ -149,6 +150,7 @@ def _make_node():  # noqa: ANN202
                 if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0:
                     self.pub_start.publish(TaskIds(task_ids=self.task_ids))
                     self.started = True
+                    self._t0 = (time.monotonic(), self.sim_t)
                     self.get_logger().info(f"started tasks {self.task_ids}")
                     print(f"[experiment] started tasks {self.task_ids}", flush=True)
                 return
@@ -172,8 +174,8 @@ def _make_node():  # noqa: ANN202
             return any(t.get("state") == "FAILURE" for t in self.tasks.values())
 
         def _progress(self) -> None:
-            wall = time.monotonic() - (self.rec.wall_start or 0)
-            rtf = (self.sim_t - (self.rec.sim_start or 0)) / wall if wall > 0 else 0
+            wall = time.monotonic() - self._t0[0]
+            rtf = (self.sim_t - self._t0[1]) / wall if wall > 0 else 0.0
             phases = "; ".join(
                 f"task {tid} {info['state']}: {', '.join(info['running']) or '-'}" for tid, info in sorted(self.tasks.items())
             )
@@ -184,7 +186,9 @@ def _make_node():  # noqa: ANN202
             )
 
         def _finish(self, timed_out: bool = False) -> None:
-            self.rec.wall_end = time.monotonic()
+            # Real-time factor over the run itself (from the start command), not the nodes' start-up.
+            self.rec.wall_start, self.rec.sim_start = self._t0
+            self.rec.wall_end, self.rec.sim_end = time.monotonic(), self.sim_t
             index = self.rec.report(self.run_dir, site=self.site, title="Paper experiment: two-machine earthwork")
             metrics = self.rec.metrics()
             ok = not timed_out and all(self.tasks.get(t, {}).get("state") == "SUCCESS" for t in self.task_ids)
