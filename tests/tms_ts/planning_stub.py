@@ -1,0 +1,87 @@
+"""Small real planning action servers for tms_ts integration tests (stand-in for tms_rp, contract D).
+
+``python -m tests.tms_ts.planning_stub --ros-args -p model_names:=zx200,ic120 -p duration_s:=0.5``
+serves every ZX200 and IC120 planning action under each ``/<model_name>/``. Each goal runs ``duration_s`` then
+succeeds; a cancel stops it at once and ends CANCELED (the "machine at rest" confirmation), unless
+``ignore_cancel`` is true. Prints ``GOAL <action>``, ``DONE <action>``, ``CANCELED <action>`` lines.
+"""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.action import ActionServer, CancelResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+
+from tms_msg.action import (
+    FollowWaypoints,
+    NavigateThroughPoses,
+    NavigateToPose,
+    SetDumpAngle,
+    Zx200ChangePose,
+    Zx200ExcavateSimple,
+    Zx200ReleaseSimple,
+)
+from tms_msg.msg import ErrorCodes
+
+ACTIONS = {
+    "tms_rp_zx200_change_pose": Zx200ChangePose,
+    "tms_rp_zx200_excavate_simple": Zx200ExcavateSimple,
+    "tms_rp_zx200_release_simple": Zx200ReleaseSimple,
+    "navigate_to_pose": NavigateToPose,
+    "navigate_through_poses": NavigateThroughPoses,
+    "follow_waypoints": FollowWaypoints,
+    "set_dump_angle": SetDumpAngle,
+}
+
+
+def _result(action_type, ok: bool):  # noqa: ANN001, ANN202
+    res = action_type.Result()
+    if hasattr(res, "error_code") and hasattr(res.error_code, "val"):
+        res.error_code.val = ErrorCodes.SUCCESS if ok else ErrorCodes.CANCELED
+    elif hasattr(res, "error_code"):
+        res.error_code = 0 if ok else 9006
+    else:
+        res.success = ok
+    return res
+
+
+class PlanningStub(Node):
+    def __init__(self) -> None:
+        super().__init__("planning_stub")
+        models = [m.strip() for m in str(self.declare_parameter("model_names", "zx200,ic120").value).split(",")]
+        self.duration = float(self.declare_parameter("duration_s", 0.5).value)
+        self.ignore_cancel = bool(self.declare_parameter("ignore_cancel", False).value)
+        group = ReentrantCallbackGroup()
+        self.action_servers = [
+            ActionServer(self, t, f"/{m}/{name}", execute_callback=lambda gh, n=f"/{m}/{name}", t=t: self._run(gh, n, t),
+                         cancel_callback=lambda _gh: CancelResponse.ACCEPT, callback_group=group)
+            for m in models
+            for name, t in ACTIONS.items()
+        ]
+        print(f"planning stub ready {models}", flush=True)
+
+    def _run(self, gh, name: str, action_type):  # noqa: ANN001, ANN202
+        print(f"GOAL {name}", flush=True)
+        end = time.monotonic() + self.duration
+        while time.monotonic() < end:
+            if gh.is_cancel_requested and not self.ignore_cancel:
+                time.sleep(0.05)  # "bring the machine to rest"
+                gh.canceled()
+                print(f"CANCELED {name}", flush=True)
+                return _result(action_type, False)
+            time.sleep(0.01)
+        if gh.is_cancel_requested:
+            gh.canceled()
+            print(f"CANCELED {name}", flush=True)
+            return _result(action_type, False)
+        gh.succeed()
+        print(f"DONE {name}", flush=True)
+        return _result(action_type, True)
+
+
+if __name__ == "__main__":
+    from tms_ts.nodes import run_threaded
+
+    raise SystemExit(run_threaded(PlanningStub, threads=32))

@@ -1,0 +1,177 @@
+"""``tms_ts_manager``: runs many tasks at once, each its own tree and local blackboard.
+
+Topics (contract E):
+
+=========================  =====================  =================================================
+topic                      type                   meaning
+=========================  =====================  =================================================
+``/tms_ts/start``          tms_msg/TaskIds        start these task ids (tree loaded from tms_db)
+``/tms_ts/cancel``         std_msgs/Int32         cancel one task id
+``/emergency_signal``      std_msgs/Bool          ``true`` cancels every task
+``/tms_ts/status``         tms_msg/TaskStatus     every task: state, running leaves, message, tree
+``/tms_ts/tick_stats``     std_msgs/String        JSON: ticks, missed ticks, tick durations (1 Hz)
+``/tms_ts/confirm``        std_msgs/String        WaitForClick answers (see tms_ts.nodes.ros_port)
+=========================  =====================  =================================================
+
+Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
+``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``db_uri`` (""), ``db_path`` ("" = tms_db default).
+A task is ticked at the fixed rate; a tick that starts more than half a period late counts as missed.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool, Int32, String
+
+from tms_common.node import run_node
+from tms_msg.msg import TaskIds, TaskState, TaskStatus
+from tms_ts.bt.core import TreeContext
+from tms_ts.errors import TsError
+from tms_ts.loader import load_tree
+from tms_ts.nodes.ros_port import ManagerRosPort
+from tms_ts.task import CANCELED, FAILED, SUCCEEDED, TaskRun
+
+__all__ = ["TaskManager", "main"]
+
+_STATE = {SUCCEEDED: TaskState.SUCCESS, FAILED: TaskState.FAILURE, CANCELED: TaskState.CANCELED}
+
+
+class TaskManager(Node):
+    """The task scheduler manager node (see the module docstring)."""
+
+    def __init__(self) -> None:
+        super().__init__("tms_ts_manager")
+        p = self.declare_parameter
+        self.tick_rate = float(p("tick_rate_hz", 20.0).value)
+        status_rate = float(p("status_rate_hz", 2.0).value)
+        self.server_wait_s = float(p("server_wait_s", 5.0).value)
+        self.accept_timeout_s = float(p("accept_timeout_s", 1.0).value)
+        self.halt_timeout_s = float(p("halt_timeout_s", 5.0).value)
+        db_uri = str(p("db_uri", "").value)
+        db_path = str(p("db_path", "").value)
+        for name, value in (("tick_rate_hz", self.tick_rate), ("status_rate_hz", status_rate)):
+            if not value > 0:
+                raise ValueError(f"tms_ts_manager: parameter {name} must be > 0, got {value}")
+        from tms_db import open_store
+
+        self.store = open_store(uri=db_uri or None, path=db_path or None)
+        self.ros = ManagerRosPort(self)
+        self.runs: dict[int, TaskRun] = {}
+        self.finished: dict[int, TaskState] = {}
+        reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(TaskIds, "/tms_ts/start", self._on_start, reliable)
+        self.create_subscription(Int32, "/tms_ts/cancel", self._on_cancel, reliable)
+        self.create_subscription(Bool, "/emergency_signal", self._on_emergency, reliable)
+        self.status_pub = self.create_publisher(TaskStatus, "/tms_ts/status", reliable)
+        self.stats_pub = self.create_publisher(String, "/tms_ts/tick_stats", 10)
+        self.period = 1.0 / self.tick_rate
+        self._stats = {"ticks": 0, "missed": 0, "max_tick_ms": 0.0, "sum_tick_ms": 0.0, "max_late_ms": 0.0}
+        self._last_tick: float | None = None
+        self.create_timer(self.period, self._tick)
+        self.create_timer(1.0 / status_rate, self._publish_status)
+        self.create_timer(1.0, self._publish_stats)
+        self.get_logger().info(f"tms_ts_manager ready: {self.tick_rate:g} Hz, db {db_uri or db_path or 'default'}")
+
+    # commands ----------------------------------------------------------------------------------
+    def _on_start(self, msg: TaskIds) -> None:
+        for task_id in msg.task_ids:
+            self.start_task(int(task_id))
+        self._publish_status()
+
+    def start_task(self, task_id: int) -> None:
+        run = self.runs.get(task_id)
+        if run is not None and not run.done:
+            self.get_logger().warning(f"task {task_id} is already running; start ignored")
+            return
+        try:
+            doc = self.store.get_task(task_id)
+            xml = doc.get("task_sequence", "")
+            ctx = TreeContext(store=self.store, ros=self.ros, task_id=task_id,
+                              accept_timeout_s=self.accept_timeout_s, halt_timeout_s=self.halt_timeout_s)
+            tree = load_tree(xml, ctx, source=f"task {task_id}")
+        except (TsError, KeyError, ValueError) as exc:
+            message = f"cannot start task {task_id}: {exc}"
+            self.get_logger().error(message)
+            self.runs.pop(task_id, None)
+            self.finished[task_id] = TaskState(task_id=task_id, state=TaskState.FAILURE, message=message)
+            return
+        self.finished.pop(task_id, None)
+        self.runs[task_id] = TaskRun(task_id, tree, server_wait_s=self.server_wait_s)
+        self.get_logger().info(f"task {task_id} started ({len(tree.nodes)} nodes, {len(tree.leaves)} leaves)")
+
+    def _on_cancel(self, msg: Int32) -> None:
+        run = self.runs.get(int(msg.data))
+        if run is None or run.done:
+            self.get_logger().warning(f"cancel: task {msg.data} is not running")
+            return
+        run.cancel("canceled by /tms_ts/cancel")
+        self._publish_status()
+
+    def _on_emergency(self, msg: Bool) -> None:
+        if not msg.data:
+            return
+        active = [r for r in self.runs.values() if not r.done]
+        for run in active:
+            run.cancel("canceled by /emergency_signal")
+        if active:
+            self.get_logger().warning(f"emergency signal: canceling tasks {[r.task_id for r in active]}")
+            self._publish_status()
+
+    # ticking -----------------------------------------------------------------------------------
+    def _tick(self) -> None:
+        start = time.monotonic()
+        if self._last_tick is not None:
+            late = start - self._last_tick - self.period
+            if late > 0.5 * self.period:
+                self._stats["missed"] += int(late / self.period + 0.5)
+            self._stats["max_late_ms"] = max(self._stats["max_late_ms"], late * 1000.0)
+        self._last_tick = start
+        changed = False
+        for run in list(self.runs.values()):
+            if run.done:
+                continue
+            before = run.state
+            run.step()
+            changed |= run.state != before
+        took = (time.monotonic() - start) * 1000.0
+        self._stats["ticks"] += 1
+        self._stats["sum_tick_ms"] += took
+        self._stats["max_tick_ms"] = max(self._stats["max_tick_ms"], took)
+        if changed:
+            self._publish_status()
+
+    def _publish_stats(self) -> None:
+        s = dict(self._stats)
+        s["active_tasks"] = sum(1 for r in self.runs.values() if not r.done)
+        s["mean_tick_ms"] = s.pop("sum_tick_ms") / max(1, s["ticks"])
+        s["tick_rate_hz"] = self.tick_rate
+        self.stats_pub.publish(String(data=json.dumps(s)))
+
+    def _publish_status(self) -> None:
+        msg = TaskStatus()
+        msg.stamp = self.get_clock().now().to_msg()
+        for task_id, run in sorted(self.runs.items()):
+            state = TaskState(task_id=task_id, message=run.message)
+            state.state = _STATE.get(run.state, TaskState.RUNNING)
+            if not run.done:
+                state.message = f"{run.state}: {run.message}" if run.message else run.state
+            state.running_leaves = run.running_leaves()
+            state.tree_snapshot = run.tree.snapshot()
+            msg.tasks.append(state)
+        msg.tasks.extend(s for tid, s in sorted(self.finished.items()) if tid not in self.runs)
+        self.status_pub.publish(msg)
+
+    def destroy_node(self) -> None:
+        for run in self.runs.values():
+            if not run.done:
+                run.cancel("manager shutting down")
+        self.store.close()
+        super().destroy_node()
+
+
+def main() -> int:
+    return run_node(TaskManager, executor="single")

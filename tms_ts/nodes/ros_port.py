@@ -1,0 +1,134 @@
+"""rclpy implementation of :class:`tms_ts.leaf.RosPort` used by the manager.
+
+Everything is asynchronous (futures with done-callbacks) so the manager's single-threaded executor
+keeps ticking while goals are accepted, run and cancelled.
+
+Topics: ``/tms_ts/confirm`` (std_msgs/String; WaitForClick answers, "yes" / "no" / "<task_id>:yes"),
+``/tms_ts/subtask_rejections`` (std_msgs/String JSON ``{action, record_name, reason}``, published
+by the subtask servers just before they reject a goal), ``/<model_name>/emg_stop`` (std_msgs/Bool
+true, the escalation when a halted subtask never confirms its stop).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool, String
+
+from tms_msg.action import Subtask
+from tms_ts.leaf import ABORTED, ACCEPTED, CANCELED, PENDING, REJECTED, SUCCEEDED
+
+__all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "REJECTIONS_TOPIC"]
+
+CONFIRM_TOPIC = "/tms_ts/confirm"
+REJECTIONS_TOPIC = "/tms_ts/subtask_rejections"
+_STATUS = {GoalStatus.STATUS_SUCCEEDED: SUCCEEDED, GoalStatus.STATUS_CANCELED: CANCELED, GoalStatus.STATUS_ABORTED: ABORTED}
+
+
+class RosGoal:
+    """One Subtask goal: ``state`` follows the action protocol through future callbacks."""
+
+    def __init__(self, client: ActionClient, goal: Subtask.Goal) -> None:
+        self.state = PENDING
+        self.message = ""
+        self.feedback = ""
+        self._handle = None
+        self._cancel_wanted = False
+        future = client.send_goal_async(goal, feedback_callback=self._on_feedback)
+        future.add_done_callback(self._on_response)
+
+    def _on_feedback(self, msg) -> None:  # noqa: ANN001
+        self.feedback = msg.feedback.state
+
+    def _on_response(self, future) -> None:  # noqa: ANN001
+        handle = future.result()
+        if handle is None or not handle.accepted:
+            self.state = REJECTED
+            return
+        self._handle = handle
+        self.state = ACCEPTED
+        handle.get_result_async().add_done_callback(self._on_result)
+        if self._cancel_wanted:
+            handle.cancel_goal_async()
+
+    def _on_result(self, future) -> None:  # noqa: ANN001
+        res = future.result()
+        self.message = res.result.message
+        self.state = _STATUS.get(res.status, ABORTED)
+
+    def cancel(self) -> None:
+        self._cancel_wanted = True
+        if self._handle is not None and self.state == ACCEPTED:
+            self._handle.cancel_goal_async()
+
+
+class ManagerRosPort:
+    """Action clients, confirm inbox, rejection reasons and emergency-stop publishers of one node."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self._clients: dict[str, ActionClient] = {}
+        self._emg: dict[str, object] = {}
+        self._confirm: list[tuple[int, str]] = []
+        self._seq = 0
+        self._rejections: dict[tuple[str, str], str] = {}
+        self._lock = threading.Lock()
+        reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        node.create_subscription(String, CONFIRM_TOPIC, self._on_confirm, reliable)
+        node.create_subscription(String, REJECTIONS_TOPIC, self._on_rejection, reliable)
+
+    def _client(self, model_name: str, subtask_name: str) -> ActionClient:
+        name = f"/{model_name}/{subtask_name}"
+        client = self._clients.get(name)
+        if client is None:
+            client = self._clients[name] = ActionClient(self.node, Subtask, name)
+        return client
+
+    # RosPort -----------------------------------------------------------------------------------
+    def subtask_server_ready(self, model_name: str, subtask_name: str) -> bool:
+        return self._client(model_name, subtask_name).server_is_ready()
+
+    def send_subtask_goal(self, model_name: str, subtask_name: str, record_name: str) -> RosGoal:
+        goal = Subtask.Goal(model_name=model_name, record_name=record_name)
+        return RosGoal(self._client(model_name, subtask_name), goal)
+
+    def emergency_stop(self, model_name: str, reason: str) -> None:
+        pub = self._emg.get(model_name)
+        if pub is None:
+            pub = self._emg[model_name] = self.node.create_publisher(Bool, f"/{model_name}/emg_stop", 10)
+        pub.publish(Bool(data=True))
+        self.node.get_logger().error(f"emergency stop /{model_name}/emg_stop: {reason}")
+
+    def rejection_reason(self, action: str, record_name: str) -> str | None:
+        with self._lock:
+            return self._rejections.get((action, record_name))
+
+    def confirm_seq(self) -> int:
+        with self._lock:
+            return self._seq
+
+    def confirmations(self, since: int) -> list[tuple[int, str]]:
+        with self._lock:
+            return [(s, t) for s, t in self._confirm if s > since]
+
+    # subscriptions -----------------------------------------------------------------------------
+    def _on_confirm(self, msg: String) -> None:
+        with self._lock:
+            self._seq += 1
+            self._confirm.append((self._seq, msg.data))
+            del self._confirm[:-100]
+
+    def _on_rejection(self, msg: String) -> None:
+        try:
+            data = json.loads(msg.data)
+            key = (str(data["action"]), str(data["record_name"]))
+            reason = str(data["reason"])
+        except (ValueError, KeyError, TypeError):
+            return
+        with self._lock:
+            self._rejections[key] = reason

@@ -1,0 +1,242 @@
+"""``tms_ts_subtasks``: the subtask action servers of one machine (contract E).
+
+For ``machine`` zx200 or ic120 it serves every subtask of :mod:`tms_ts.subtask_specs` at
+``/<model_name>/<subtask_name>`` (tms_msg/action/Subtask). On a goal it reads the DB record
+(model_name, record_name) *at that moment*; a missing or malformed record is rejected and the reason
+(record and field) is logged and published on ``/tms_ts/subtask_rejections``. An accepted goal is
+sent to the planning action ``/<model_name>/<planning>`` (contract D), its feedback mirrored as
+``state``, its result mirrored as success/message. A cancel is forwarded to planning, which brings
+the machine to rest; the subtask reports CANCELED only after planning confirmed. If planning does not
+confirm within ``stop_timeout_s`` the node latches ``/<model_name>/emg_stop`` and aborts the goal.
+ZX200 change_pose / excavate_simple set the record's ``LOCK_FLG`` false when a result arrives (so
+sensing may update the excavation target again), as the original subtasks did.
+
+Parameters: ``machine`` (required), ``model_name`` (default = machine), ``planning_wait_s`` (5.0),
+``stop_timeout_s`` (5.0), ``db_uri``, ``db_path``.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+from action_msgs.msg import GoalStatus
+from geometry_msgs.msg import Point, Pose, PoseStamped
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool, String
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from tms_msg.action import (
+    FollowWaypoints,
+    NavigateThroughPoses,
+    NavigateToPose,
+    SetDumpAngle,
+    Subtask,
+    Zx200ChangePose,
+    Zx200ExcavateSimple,
+    Zx200ReleaseSimple,
+)
+from tms_msg.msg import ErrorCodes, Zx200PositionWithAngle
+from tms_ts.errors import SubtaskRecordError
+from tms_ts.nodes.ros_port import REJECTIONS_TOPIC
+from tms_ts.subtask_specs import SubtaskSpec, subtasks_for
+
+__all__ = ["SubtaskServers", "main", "planning_goal", "planning_ok"]
+
+def _pose(p: dict) -> Pose:
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = p["x"], p["y"], p["z"]
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = p["qx"], p["qy"], p["qz"], p["qw"]
+    return pose
+
+
+def _stamped(p: dict) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id = "map"
+    msg.pose = _pose(p)
+    return msg
+
+
+def _pwa(d: dict) -> Zx200PositionWithAngle:
+    return Zx200PositionWithAngle(position=Point(x=d["x"], y=d["y"], z=d["z"]), theta_w=d["theta_w"],
+                                  offset=d.get("offset", 0.0))
+
+
+def planning_goal(plan: dict):  # noqa: ANN201 - one of the planning goal types
+    """Plain goal data from :mod:`tms_ts.subtask_specs` -> the planning action's goal message."""
+    kind = plan["kind"]
+    if kind == "change_pose":
+        goal = Zx200ChangePose.Goal()
+        if plan["mode"] == "joints":
+            goal.trajectory = JointTrajectory(joint_names=list(plan["joints"]))
+            goal.trajectory.points = [JointTrajectoryPoint(positions=list(plan["joints"].values()))]
+        elif plan["mode"] == "pose":
+            goal.pose_sequence = [_pose(plan["pose"])]
+        else:
+            goal.position_with_angle_sequence = [_pwa(plan["pwa"])]
+        return goal
+    if kind == "excavate":
+        return Zx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
+    if kind == "release":
+        return Zx200ReleaseSimple.Goal(target_angle=plan["target_angle"])
+    if kind == "dump":
+        return SetDumpAngle.Goal(target_angle=plan["target_angle"])
+    if kind == "navigate_to_pose":
+        return NavigateToPose.Goal(pose=_stamped(plan["pose"]))
+    if kind == "follow_waypoints":
+        return FollowWaypoints.Goal(poses=[_stamped(p) for p in plan["poses"]])
+    return NavigateThroughPoses.Goal(poses=[_stamped(p) for p in plan["poses"]])
+
+
+def planning_ok(kind: str, result) -> tuple[bool, str]:  # noqa: ANN001
+    """(success, message) of a planning result: ZX200 error_code.val == SUCCESS, Nav2 error_code == 0."""
+    if kind in ("change_pose", "excavate", "release"):
+        return result.error_code.val == ErrorCodes.SUCCESS, f"error_code {result.error_code.val}: {result.message}"
+    if kind == "dump":
+        return bool(result.success), result.message
+    return result.error_code == 0, f"error_code {result.error_code}: {result.error_msg}"
+
+
+def _feedback_text(fb) -> str:  # noqa: ANN001
+    for field in ("state", "current_waypoint", "distance_remaining", "current_error"):
+        if hasattr(fb, field):
+            return f"{field}={getattr(fb, field)}"
+    return ""
+
+
+class SubtaskServers(Node):
+    """All subtask action servers of one machine (see the module docstring)."""
+
+    def __init__(self) -> None:
+        super().__init__("tms_ts_subtasks")
+        machine = str(self.declare_parameter("machine", "").value)
+        self.model_name = str(self.declare_parameter("model_name", machine).value) or machine
+        self.planning_wait_s = float(self.declare_parameter("planning_wait_s", 5.0).value)
+        self.stop_timeout_s = float(self.declare_parameter("stop_timeout_s", 5.0).value)
+        db_uri = str(self.declare_parameter("db_uri", "").value)
+        db_path = str(self.declare_parameter("db_path", "").value)
+        specs = subtasks_for(machine)  # ValueError naming the valid machines
+        from tms_db import open_store
+
+        self.store = open_store(uri=db_uri or None, path=db_path or None)
+        self.store_lock = threading.Lock()
+        group = ReentrantCallbackGroup()
+        reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.rejections = self.create_publisher(String, REJECTIONS_TOPIC, reliable)
+        self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
+        self.planners: dict[str, ActionClient] = {}
+        self.action_servers = []
+        for spec in specs:
+            action_type = self._kind_type(spec)
+            planning = f"/{self.model_name}/{spec.planning_action}"
+            if planning not in self.planners:
+                self.planners[planning] = ActionClient(self, action_type, planning, callback_group=group)
+            self.action_servers.append(ActionServer(
+                self, Subtask, f"/{self.model_name}/{spec.name}",
+                execute_callback=lambda gh, s=spec: self._execute(gh, s),
+                goal_callback=lambda goal, s=spec: self._on_goal(goal, s),
+                cancel_callback=lambda _gh: CancelResponse.ACCEPT,
+                callback_group=group,
+            ))
+        self.get_logger().info(f"subtask servers for /{self.model_name}: {', '.join(s.name for s in specs)}")
+
+    @staticmethod
+    def _kind_type(spec: SubtaskSpec):  # noqa: ANN205
+        return {"tms_rp_zx200_change_pose": Zx200ChangePose, "tms_rp_zx200_excavate_simple": Zx200ExcavateSimple,
+                "tms_rp_zx200_release_simple": Zx200ReleaseSimple, "set_dump_angle": SetDumpAngle,
+                "navigate_to_pose": NavigateToPose, "follow_waypoints": FollowWaypoints,
+                "navigate_through_poses": NavigateThroughPoses}[spec.planning_action]
+
+    def _plan(self, goal: Subtask.Goal, spec: SubtaskSpec) -> dict:
+        from tms_db.errors import RecordNotFound
+
+        model = goal.model_name or self.model_name
+        try:
+            with self.store_lock:
+                doc = self.store.get_parameter(model, goal.record_name)
+        except RecordNotFound:
+            raise SubtaskRecordError(goal.record_name, None, f"not found in parameter (model_name '{model}')") from None
+        return spec.build(doc, goal.record_name)
+
+    def _on_goal(self, goal: Subtask.Goal, spec: SubtaskSpec) -> GoalResponse:
+        try:
+            self._plan(goal, spec)
+        except SubtaskRecordError as exc:
+            action = f"/{self.model_name}/{spec.name}"
+            reason = str(exc)
+            self.rejections.publish(String(data=json.dumps({"action": action, "record_name": goal.record_name,
+                                                            "reason": reason})))
+            self.get_logger().error(f"{action}: goal rejected: {reason}")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _finish(self, gh, spec: SubtaskSpec, how: str, message: str) -> Subtask.Result:  # noqa: ANN001
+        if spec.clears_lock_flg:
+            try:
+                with self.store_lock:
+                    self.store.set_fields(gh.request.record_name, {"LOCK_FLG": False},
+                                          model_name=gh.request.model_name or self.model_name)
+            except Exception as exc:  # noqa: BLE001 - a bookkeeping write must not hide the result
+                self.get_logger().warning(f"LOCK_FLG of '{gh.request.record_name}' not cleared: {exc}")
+        getattr(gh, how)()
+        self.get_logger().info(f"/{self.model_name}/{spec.name} '{gh.request.record_name}' {how}: {message}")
+        return Subtask.Result(success=how == "succeed", message=message)
+
+    def _execute(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
+        record = gh.request.record_name
+        try:
+            plan = self._plan(gh.request, spec)
+        except SubtaskRecordError as exc:
+            return self._finish(gh, spec, "abort", str(exc))
+        planning = f"/{self.model_name}/{spec.planning_action}"
+        client = self.planners[planning]
+        if not client.wait_for_server(timeout_sec=self.planning_wait_s):
+            return self._finish(gh, spec, "abort", f"planning server {planning} not available")
+        done = threading.Event()
+
+        def on_feedback(msg) -> None:  # noqa: ANN001
+            gh.publish_feedback(Subtask.Feedback(state=_feedback_text(msg.feedback)))
+
+        send = client.send_goal_async(planning_goal(plan), feedback_callback=on_feedback)
+        send.add_done_callback(lambda _f: done.set())
+        while not done.wait(0.02):
+            if gh.is_cancel_requested and not send.done():
+                pass  # keep waiting: the handle is needed to cancel planning
+        handle = send.result()
+        if handle is None or not handle.accepted:
+            return self._finish(gh, spec, "abort", f"planning {planning} rejected the goal for record '{record}'")
+        done.clear()
+        result_future = handle.get_result_async()
+        result_future.add_done_callback(lambda _f: done.set())
+        cancel_deadline = None
+        while not done.wait(0.02):
+            if gh.is_cancel_requested and cancel_deadline is None:
+                handle.cancel_goal_async()
+                cancel_deadline = time.monotonic() + self.stop_timeout_s
+            if cancel_deadline is not None and time.monotonic() > cancel_deadline:
+                self.emg.publish(Bool(data=True))
+                return self._finish(gh, spec, "abort", f"planning {planning} did not confirm the stop within "
+                                    f"{self.stop_timeout_s:g} s: /{self.model_name}/emg_stop latched")
+        res = result_future.result()
+        ok, detail = planning_ok(plan["kind"], res.result)
+        if gh.is_cancel_requested:
+            status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
+                res.status, "ABORTED")
+            return self._finish(gh, spec, "canceled", f"canceled; planning {planning} confirmed stop ({status})")
+        if res.status == GoalStatus.STATUS_SUCCEEDED and ok:
+            return self._finish(gh, spec, "succeed", f"{spec.name} '{record}' done")
+        return self._finish(gh, spec, "abort", f"planning {planning} failed for record '{record}': {detail}")
+
+    def destroy_node(self) -> None:
+        self.store.close()
+        super().destroy_node()
+
+
+def main() -> int:
+    from tms_ts.nodes import run_threaded
+
+    return run_threaded(SubtaskServers, threads=32)

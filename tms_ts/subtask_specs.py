@@ -1,0 +1,175 @@
+"""What every subtask reads from its DB record and which planning action it calls (no rclpy).
+
+``SUBTASKS`` maps a subtask action name (DESIGN §3, reference §4.4/§4.5) to a :class:`SubtaskSpec`:
+the planning action (relative to the machine namespace, contract D), its kind, and ``build(doc,
+record_name) -> dict`` that validates the record and returns the planning goal as plain data.
+A missing or malformed field raises :class:`SubtaskRecordError` naming the record and the field.
+
+Planning goal data (``kind`` -> keys):
+
+* ``change_pose``: ``mode`` joints|pose|position_with_angle and ``joints`` {name: rad} | ``pose``
+  {x..qw} | ``pwa`` {x, y, z, theta_w}
+* ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
+* ``navigate_to_pose``: ``pose`` {x, y, z, qx..qw}; ``follow_waypoints`` / ``navigate_through_poses``:
+  ``poses`` [{x, y, z, qx..qw}, ...] in frame ``map``. ``_deg`` variants give yaw in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from tms_ts.errors import SubtaskRecordError
+
+__all__ = ["SubtaskSpec", "SUBTASKS", "subtasks_for", "ZX200_JOINTS"]
+
+ZX200_JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
+_QUAT = ("qx", "qy", "qz", "qw")
+
+
+def _num(doc: dict, record: str, field: str, default: Any = None) -> float:
+    if field not in doc:
+        if default is not None:
+            return float(default)
+        raise SubtaskRecordError(record, field, "missing")
+    value = doc[field]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(float(value)):
+        raise SubtaskRecordError(record, field, f"must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _arr(doc: dict, record: str, field: str) -> list[float]:
+    if field not in doc:
+        raise SubtaskRecordError(record, field, "missing")
+    value = doc[field]
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        value = [value]
+    if not isinstance(value, list) or not value:
+        raise SubtaskRecordError(record, field, f"must be a non-empty array of numbers, got {value!r}")
+    for i, v in enumerate(value):
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
+            raise SubtaskRecordError(record, f"{field}[{i}]", f"must be a finite number, got {v!r}")
+    return [float(v) for v in value]
+
+
+def _flag(doc: dict, field: str) -> bool:
+    value = doc.get(field, 0)
+    return not isinstance(value, bool) and isinstance(value, int | float) and value > 0.5 or value is True
+
+
+def _yaw_quat(yaw_deg: float) -> dict[str, float]:
+    half = math.radians(yaw_deg) / 2.0
+    return {"qx": 0.0, "qy": 0.0, "qz": math.sin(half), "qw": math.cos(half)}
+
+
+def _unit_quat(record: str, q: dict[str, float]) -> dict[str, float]:
+    norm = math.sqrt(sum(v * v for v in q.values()))
+    if norm < 1e-6:
+        raise SubtaskRecordError(record, "qw", "quaternion qx,qy,qz,qw has zero length")
+    return {k: v / norm for k, v in q.items()}
+
+
+def build_change_pose(doc: dict, record: str) -> dict:
+    if _flag(doc, "trajectory"):
+        return {"kind": "change_pose", "mode": "joints", "joints": {j: _num(doc, record, j) for j in ZX200_JOINTS}}
+    if _flag(doc, "pose"):
+        pose = {k: _num(doc, record, k) for k in ("x", "y", "z")}
+        pose.update(_unit_quat(record, {k: _num(doc, record, k) for k in _QUAT}))
+        return {"kind": "change_pose", "mode": "pose", "pose": pose}
+    if _flag(doc, "position_with_angle"):
+        return {"kind": "change_pose", "mode": "position_with_angle",
+                "pwa": {k: _num(doc, record, k) for k in ("x", "y", "z", "theta_w")}}
+    raise SubtaskRecordError(record, "trajectory|pose|position_with_angle", "no target kind selected (one must be 1)")
+
+
+def build_excavate(doc: dict, record: str) -> dict:
+    if not _flag(doc, "position_with_angle"):
+        raise SubtaskRecordError(record, "position_with_angle", "must be 1 for an excavation target")
+    pwa = {k: _num(doc, record, k) for k in ("x", "y", "z", "theta_w")}
+    pwa["offset"] = _num(doc, record, "offset", 0.0)
+    return {"kind": "excavate", "pwa": pwa}
+
+
+def build_release(doc: dict, record: str) -> dict:
+    return {"kind": "release", "target_angle": _num(doc, record, "target_angle")}
+
+
+def build_dump(doc: dict, record: str) -> dict:
+    return {"kind": "dump", "target_angle": _num(doc, record, "target_angle")}
+
+
+def build_nav_pose(deg: bool) -> Callable[[dict, str], dict]:
+    def build(doc: dict, record: str) -> dict:
+        pose = {"x": _num(doc, record, "x"), "y": _num(doc, record, "y"), "z": _num(doc, record, "z", 0.0)}
+        if deg:
+            pose.update(_yaw_quat(_num(doc, record, "yaw")))
+        else:
+            pose.update(_unit_quat(record, {k: _num(doc, record, k) for k in _QUAT}))
+        return {"kind": "navigate_to_pose", "pose": pose}
+
+    return build
+
+
+def build_poses(kind: str, deg: bool) -> Callable[[dict, str], dict]:
+    def build(doc: dict, record: str) -> dict:
+        xs, ys = _arr(doc, record, "x"), _arr(doc, record, "y")
+        zs = _arr(doc, record, "z") if "z" in doc else [0.0] * len(xs)
+        fields = ["yaw"] if deg else list(_QUAT)
+        extra = {f: _arr(doc, record, f) for f in fields}
+        n = len(xs)
+        for name, values in [("y", ys), ("z", zs), *extra.items()]:
+            if len(values) == 1 and n > 1 and name not in ("y", "z"):
+                extra[name] = values * n  # navigate_through_poses: one orientation for all poses
+            elif len(values) != n:
+                raise SubtaskRecordError(record, name, f"has {len(values)} elements, x has {n}")
+        poses = []
+        for i in range(n):
+            pose = {"x": xs[i], "y": ys[i], "z": zs[i]}
+            if deg:
+                pose.update(_yaw_quat(extra["yaw"][i]))
+            else:
+                pose.update(_unit_quat(record, {k: extra[k][i] for k in _QUAT}))
+            poses.append(pose)
+        return {"kind": kind, "poses": poses}
+
+    return build
+
+
+@dataclass(frozen=True)
+class SubtaskSpec:
+    """A subtask: its machine family, planning action (relative name) and record -> goal builder."""
+
+    name: str
+    machine: str
+    planning_action: str
+    build: Callable[[dict, str], dict]
+    #: the original non-plan ZX200 change_pose / excavate_simple set LOCK_FLG=false when a result arrives
+    clears_lock_flg: bool = False
+
+
+_SPECS = [
+    SubtaskSpec("subtask_zx200_change_pose", "zx200", "tms_rp_zx200_change_pose", build_change_pose, True),
+    SubtaskSpec("subtask_zx200_excavate_simple", "zx200", "tms_rp_zx200_excavate_simple", build_excavate, True),
+    SubtaskSpec("subtask_zx200_release_simple", "zx200", "tms_rp_zx200_release_simple", build_release),
+    SubtaskSpec("st_ic120_follow_waypoints", "ic120", "follow_waypoints", build_poses("follow_waypoints", False)),
+    SubtaskSpec("st_ic120_follow_waypoints_deg", "ic120", "follow_waypoints", build_poses("follow_waypoints", True)),
+    SubtaskSpec("st_ic120_navigate_anywhere", "ic120", "navigate_to_pose", build_nav_pose(False)),
+    SubtaskSpec("st_ic120_navigate_anywhere_deg", "ic120", "navigate_to_pose", build_nav_pose(True)),
+    SubtaskSpec("st_ic120_navigate_through_poses", "ic120", "navigate_through_poses",
+                build_poses("navigate_through_poses", False)),
+    SubtaskSpec("st_ic120_navigate_through_poses_deg", "ic120", "navigate_through_poses",
+                build_poses("navigate_through_poses", True)),
+    SubtaskSpec("st_ic120_release_soil", "ic120", "set_dump_angle", build_dump),
+]
+SUBTASKS: dict[str, SubtaskSpec] = {s.name: s for s in _SPECS}
+
+
+def subtasks_for(machine: str) -> list[SubtaskSpec]:
+    """Every subtask of a machine family (``zx200`` or ``ic120``); ValueError naming the valid ones."""
+    specs = [s for s in _SPECS if s.machine == machine]
+    if not specs:
+        valid = sorted({s.machine for s in _SPECS})
+        raise ValueError(f"unknown machine {machine!r}: expected one of {', '.join(valid)}")
+    return specs
