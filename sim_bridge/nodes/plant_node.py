@@ -10,6 +10,9 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
   (sensor_msgs/JointState), ``/sim/truth/zx200/bucket_tip`` (geometry_msgs/PointStamped),
 * ``/sim/truth/soil`` (std_msgs/Float64MultiArray ``[mound, bucket, vessel, dumped, total_error]`` m^3,
   labels in ``layout.dim[0].label``), every ``truth_period_s``,
+* ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/ic120/vessel_points``
+  (PointCloud2, ``ic120/vessel``): LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every
+  ``scan_period_s`` of simulated time (0.5 s), noise ``scan_noise_m`` (0.02 m),
 * ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
   ignored_out_of_range, ignored_bad_dlc, ignored_unknown_id, watchdog_trips) and the real-time factor.
 """
@@ -93,6 +96,14 @@ class SimPlantNode(Node):
         self.tip_pub = self.create_publisher(PointStamped, "/sim/truth/zx200/bucket_tip", 10)
         self.soil_pub = self.create_publisher(Float64MultiArray, "/sim/truth/soil", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/sim/diagnostics", 10)
+        from sensor_msgs.msg import PointCloud2, PointField
+
+        self._PointCloud2, self._PointField = PointCloud2, PointField
+        self._scan_period = float(p("scan_period_s", 0.5).value)
+        self._scan_noise = float(p("scan_noise_m", 0.02).value)
+        self._next_scan = 0.0
+        self.mound_pub = self.create_publisher(PointCloud2, "/sim/sensors/mound/points", 2)
+        self.vessel_pub = self.create_publisher(PointCloud2, "/sim/sensors/ic120/vessel_points", 2)
         self._next_truth = 0.0
         self._status_period = status_period
         self._next_status = 0.0
@@ -127,6 +138,9 @@ class SimPlantNode(Node):
         if plant.time + 1e-9 >= self._next_truth:
             self._next_truth += self._truth_period
             self._publish_truth(plant, stamp)
+        if self._scan_period > 0 and plant.time + 1e-9 >= self._next_scan:
+            self._next_scan += self._scan_period
+            self._publish_scans(plant, stamp)
         if plant.time + 1e-9 >= self._next_status:
             self._next_status += self._status_period
             self._publish_status(plant, stamp)
@@ -156,6 +170,35 @@ class SimPlantNode(Node):
         error = plant.total_volume() - plant.initial_volume
         soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error]
         self.soil_pub.publish(soil)
+
+    def _cloud(self, points, frame: str, stamp):  # noqa: ANN001, ANN202
+        from sim_bridge.scanners import pack_xyz
+
+        msg = self._PointCloud2()
+        msg.header.stamp, msg.header.frame_id = stamp, frame
+        data, n = pack_xyz(points)
+        msg.height, msg.width = 1, n
+        msg.fields = [self._PointField(name=c, offset=4 * i, datatype=self._PointField.FLOAT32, count=1)
+                      for i, c in enumerate("xyz")]
+        msg.is_bigendian, msg.point_step, msg.row_step, msg.is_dense = False, 12, 12 * n, True
+        msg.data = data
+        return msg
+
+    def _publish_scans(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+        import numpy as np
+
+        from sim_bridge.scanners import mound_scan, vessel_scan
+
+        if not hasattr(self, "_scan_rng"):
+            self._scan_rng = np.random.default_rng(plant.spec.sensors.seed + 1)
+        soil = plant.spec.soil
+        pts = mound_scan(plant.ground, soil.mound_center, soil.mound_base_radius + 1.5, noise=self._scan_noise,
+                         rng=self._scan_rng)
+        self.mound_pub.publish(self._cloud(pts, "map", stamp))
+        ic = plant.spec.ic120
+        pts = vessel_scan(plant.soil.vessel, ic.inner_length, ic.inner_width, noise=self._scan_noise,
+                          rng=self._scan_rng)
+        self.vessel_pub.publish(self._cloud(pts, "ic120/vessel", stamp))
 
     def _publish_status(self, plant: Plant, stamp) -> None:  # noqa: ANN001
         from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
