@@ -1,0 +1,212 @@
+"""tms_ts figures: tick overhead per node, leaf round trip through a subtask server, 10 tasks at 50 Hz.
+
+1. A 200-node tree (ReactiveSequence over groups of AlwaysSuccess / SetLocalBlackboard /
+   ConditionalExpression, ending in a RUNNING KeepRunningUntilFailure) ticks all 200 nodes per tick;
+   time per tick / 200 = overhead per node (goal < 20 us).
+2. LeafNode round trip: this process sends Subtask goals exactly as the manager does (ManagerRosPort)
+   to a ``tms_ts_subtasks`` process, which reads the DB record and calls a planning stub process that
+   succeeds at once; goal sent -> SUCCEEDED seen.
+3. A ``tms_ts_manager`` at 50 Hz running 10 tasks (endless loops of a LeafNode, a DB read, a DB write
+   and an expression) against subtask servers and planning stubs; its ``/tms_ts/tick_stats`` gives
+   ticks, missed ticks and tick durations.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+import time
+
+from tests.bench.stats import summary_ms
+from tests.rosproc import ROOT, Proc, executable, isolated_domain, ros_env
+
+N_GOALS = 100
+LOAD_SECONDS = 30.0
+
+
+def _tree_200(mixed: bool = True) -> str:
+    group = ('<Sequence><AlwaysSuccess/><Action ID="SetLocalBlackboard" value="{i}" output_key="k{i}"/>'
+             '<Condition ID="ConditionalExpression" conditional_expression="k{i} == {i} and FLG == true"/></Sequence>')
+    if not mixed:
+        group = "<Sequence><AlwaysSuccess/><AlwaysSuccess/><AlwaysSuccess/></Sequence>"
+    body = "".join(group.format(i=i) for i in range(49))
+    xml = (f'<root><BehaviorTree ID="B"><ReactiveSequence><AlwaysSuccess/>{body}'
+           f"<KeepRunningUntilFailure><AlwaysSuccess/></KeepRunningUntilFailure></ReactiveSequence></BehaviorTree></root>")
+    return xml
+
+
+def _tick_overhead() -> list[str]:
+    from tms_ts.bt.core import RUNNING
+    from tms_ts.loader import load_tree
+
+    out = []
+    for label, xml in (("mixed (SetLocalBlackboard, ConditionalExpression, AlwaysSuccess)", _tree_200()),
+                       ("AlwaysSuccess only", _tree_200(mixed=False))):
+        tree = load_tree(xml)
+        tree.ctx.blackboard.set("FLG", True)
+        assert len(tree.nodes) == 200, len(tree.nodes)
+        assert tree.tick() is RUNNING
+        n = 2000
+        samples = []
+        for _ in range(5):
+            start = time.perf_counter()
+            for _ in range(n):
+                tree.tick()
+            samples.append((time.perf_counter() - start) / n)
+        best = min(samples)
+        out.append(f"tick overhead, 200-node tree, {label}: {best / 200 * 1e6:.2f} us/node "
+                   f"({best * 1e3:.3f} ms/tick, best of 5 x {n} ticks)")
+    return out
+
+
+def _seed(db: str) -> None:
+    from tms_db import open_store
+
+    with open_store(path=db) as store:
+        store.upsert_parameter({"model_name": "zx200", "type": "static", "record_name": "initial_pose", "trajectory": 1,
+                                "swing_joint": 0.0, "boom_joint": -0.3, "arm_joint": 1.2, "bucket_joint": 0.5})
+        store.upsert_parameter({"model_name": "ic120", "type": "static", "record_name": "load_point",
+                                "x": 10.0, "y": 2.0, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0})
+        store.upsert_parameter({"record_name": "BENCH_BB", "type": "dynamic", "FLG": True, "N": 0})
+        for i in range(10):
+            model, leaf, subtask, record = (("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose")
+                                            if i % 2 else ("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere",
+                                                           "load_point"))
+            xml = (f'<root><BehaviorTree ID="B"><Repeat num_cycles="-1"><Sequence>'
+                   f'<Action ID="{leaf}" model_name="{model}" subtask_name="{subtask}" record_name="{record}"/>'
+                   f'<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" mongo_param_name="FLG"/>'
+                   f'<Action ID="MongoValueWriter" input_value="{i}" mongo_record_name="BENCH_BB" mongo_param_name="T{i}"/>'
+                   f'<Condition ID="ConditionalExpression" conditional_expression="flg == true"/>'
+                   f"</Sequence></Repeat></BehaviorTree></root>")
+            store.add_task(xml, task_id=100 + i, description=f"bench task {i}")
+
+
+def _start_servers(domain: int, db: str, duration: float) -> list[Proc]:
+    env = ros_env(domain, PYTHONPATH=str(ROOT))
+    procs = [Proc([sys.executable, "-m", "tests.tms_ts.planning_stub", "--ros-args", "-p", f"duration_s:={duration}"],
+                  env, name="stub")]
+    for machine in ("zx200", "ic120"):
+        procs.append(Proc([str(executable("tms_ts", "tms_ts_subtasks")), "--ros-args", "-p", f"machine:={machine}",
+                           "-p", f"db_path:={db}", "-p", "planning_wait_s:=30.0"], env, name=machine))
+    for p in procs:
+        if not p.wait_for("ready" if p.name == "stub" else "subtask servers", 60):
+            raise RuntimeError(f"{p.name} did not start:\n{p.output}")
+    return procs
+
+
+def _round_trip(domain: int, db: str) -> str:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from tms_ts.leaf import ACCEPTED, PENDING, SUCCEEDED
+    from tms_ts.nodes.ros_port import ManagerRosPort
+
+    procs = _start_servers(domain, db, 0.0)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("bench_leaf", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    port = ManagerRosPort(node)
+    times: list[float] = []
+    try:
+        deadline = time.monotonic() + 30
+        while not port.subtask_server_ready("zx200", "subtask_zx200_change_pose") and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        for i in range(N_GOALS + 5):
+            start = time.perf_counter()
+            goal = port.send_subtask_goal("zx200", "subtask_zx200_change_pose", "initial_pose")
+            limit = time.monotonic() + 30
+            while goal.state in (PENDING, ACCEPTED) and time.monotonic() < limit:
+                ex.spin_once(timeout_sec=0.01)
+            if goal.state != SUCCEEDED:
+                raise RuntimeError(f"goal {i} ended {goal.state}: {goal.message}")
+            if i >= 5:  # warm-up
+                times.append(time.perf_counter() - start)
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        for p in procs:
+            p.kill()
+    return f"leaf goal -> result through tms_ts_subtasks (DB read + planning goal): {summary_ms(times)}"
+
+
+def _ten_tasks(domain: int, db: str) -> str:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Bool, String
+
+    from tms_msg.msg import TaskIds, TaskState, TaskStatus
+
+    procs = _start_servers(domain, db, 0.2)
+    env = ros_env(domain)
+    manager = Proc([str(executable("tms_ts", "tms_ts_manager")), "--ros-args", "-p", f"db_path:={db}",
+                    "-p", "tick_rate_hz:=50.0", "-p", "server_wait_s:=30.0"], env, name="manager")
+    procs.append(manager)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("bench_probe", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    stats: list[dict] = []
+    status: list[TaskStatus] = []
+    node.create_subscription(String, "/tms_ts/tick_stats", lambda m: stats.append(json.loads(m.data)), 10)
+    node.create_subscription(TaskStatus, "/tms_ts/status", status.append, 10)
+    start_pub = node.create_publisher(TaskIds, "/tms_ts/start", 10)
+    emg_pub = node.create_publisher(Bool, "/emergency_signal", 10)
+
+    def spin(seconds: float, until=None) -> None:  # noqa: ANN001
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+            if until is not None and until():
+                return
+
+    try:
+        if not manager.wait_for("tms_ts_manager ready", 60):
+            raise RuntimeError(manager.output)
+        spin(30, lambda: start_pub.get_subscription_count() > 0)
+        start_pub.publish(TaskIds(task_ids=list(range(100, 110))))
+
+        def all_running() -> bool:
+            return bool(status) and sum(1 for t in status[-1].tasks if t.state == TaskState.RUNNING
+                                        and t.running_leaves) == 10
+
+        spin(60, all_running)
+        base = stats[-1] if stats else {"ticks": 0, "missed": 0}
+        spin(LOAD_SECONDS)
+        last = stats[-1]
+        failed = [t for t in status[-1].tasks if t.state != TaskState.RUNNING]
+        emg_pub.publish(Bool(data=True))
+        spin(30, lambda: status and all(t.state == TaskState.CANCELED for t in status[-1].tasks))
+        canceled = sum(1 for t in status[-1].tasks if t.state == TaskState.CANCELED)
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        for p in procs:
+            p.kill()
+    ticks = last["ticks"] - base["ticks"]
+    missed = last["missed"] - base["missed"]
+    return (f"10 tasks at 50 Hz for {LOAD_SECONDS:g} s: {ticks} ticks (expected {int(LOAD_SECONDS * 50)}), "
+            f"missed {missed}, mean tick {last['mean_tick_ms']:.2f} ms, max tick {last['max_tick_ms']:.1f} ms, "
+            f"max late {last['max_late_ms']:.1f} ms; tasks not running at the end: {len(failed)}; "
+            f"after /emergency_signal {canceled}/10 CANCELED")
+
+
+def main() -> None:
+    for line in _tick_overhead():
+        print(line, flush=True)
+    with tempfile.TemporaryDirectory() as tmp, isolated_domain() as domain:
+        db = f"{tmp}/db"
+        _seed(db)
+        print(_round_trip(domain, db), flush=True)
+        print(_ten_tasks(domain, db), flush=True)
+
+
+if __name__ == "__main__":
+    main()
