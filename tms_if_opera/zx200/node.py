@@ -112,6 +112,7 @@ def _make_node():  # noqa: ANN202
                 pwa = Zx200PositionWithAngle()
                 pwa.position.x, pwa.position.y, pwa.position.z = (float(v) for v in target.position)
                 pwa.theta_w = float(target.theta_w)
+                pwa.offset = float(target.speed_scale)  # internal action: offset carries the speed scale
                 goal.position_with_angle_sequence = [pwa]
             fb = action_type.Feedback()
             fb.state = target.label

@@ -4,7 +4,8 @@ In the machine namespace (``/zx200``): subscribes ``joint_states`` (sensor_msgs/
 front joints), publishes ``front_cmd`` (tms_msg/JointCmd, VELOCITY) every period (contract [A] of the
 COM3 converter), and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ChangePose)
 that the planner (``zx200_planner``) uses: joint targets in ``trajectory`` (one point per target),
-Cartesian targets in ``position_with_angle_sequence``; feedback ``state`` names the segment. Cancel
+Cartesian targets in ``position_with_angle_sequence`` (on this internal action ``offset`` in (0, 1] is the
+segment's speed scale, e.g. the planner's slow dig phases; 0 = full speed); feedback ``state`` names the segment. Cancel
 decelerates within the limits and the goal ends CANCELED only when the arm is at rest.
 
 Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
@@ -97,7 +98,8 @@ def _make_node():  # noqa: ANN202
                 out.append(JointTarget(q, goal.trajectory.header.frame_id or f"joint {k + 1}"))
             for k, pwa in enumerate(goal.position_with_angle_sequence):
                 p = np.array([pwa.position.x, pwa.position.y, pwa.position.z])
-                out.append(CartesianTarget(p, pwa.theta_w, f"position {k + 1}"))
+                scale = pwa.offset if 0.0 < pwa.offset <= 1.0 else 1.0
+                out.append(CartesianTarget(p, pwa.theta_w, f"position {k + 1}", speed_scale=scale))
             return out
 
         def _execute(self, handle):  # noqa: ANN001, ANN202

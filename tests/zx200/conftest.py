@@ -1,0 +1,149 @@
+"""zx200 fixtures: the whole arm stack in separate processes, driven over ROS and COM3 CAN.
+
+``arm_stack(ic120_pose=...)`` starts ``sim_plant`` (MuJoCo plant, CAN only), ``com3_bridge`` (machine
+zx200), ``zx200_arm_controller`` and ``zx200_planner`` on this test's ROS domain and its own
+udp_multicast group/port (or vcan0 with ``TMS_CAN_TEST_BACKEND=socketcan``), all with ``use_sim_time``.
+The returned :class:`ArmStack` sends planning goals and reads the plant's truth (bucket tip, soil).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.rosproc import executable
+
+#: Real-time factor of the plant in the integration tests (1.0: the nodes are timed against wall-clock
+#: CAN/DDS transport; the controller's dead-time model assumes real-time transport delays).
+SIM_SPEED = float(os.environ.get("ZX200_TEST_SIM_SPEED", "1.0"))
+
+
+def _zx_bus(domain: int) -> dict[str, Any]:
+    backend = os.environ.get("TMS_CAN_TEST_BACKEND", "udp_multicast")
+    if backend == "socketcan":
+        from com3_can.bus import socketcan_available
+
+        channel = os.environ.get("TMS_CAN_TEST_CHANNEL", "vcan0")
+        if not socketcan_available() or not Path("/sys/class/net", channel).exists():
+            pytest.skip(f"SocketCAN interface {channel} is not available in this kernel")
+        return {"interface": "socketcan", "channel": channel}
+    rng = random.Random(os.getpid() * 7907 + domain + time.monotonic_ns())
+    return {"interface": "udp_multicast", "channel": f"239.76.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
+            "port": 47000 + domain * 20 + rng.randrange(0, 18)}
+
+
+class ArmStack:
+    """The test process's view of the running stack: action clients and truth subscribers."""
+
+    def __init__(self, node: Any) -> None:
+        from geometry_msgs.msg import PointStamped
+        from rclpy.action import ActionClient
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+
+        from tms_msg.action import Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
+
+        self.node = node
+        self.tip: list[float] | None = None
+        self.soil: list[float] | None = None
+        self.q: list[float] | None = None
+        self.dq_log: list[tuple[float, list[float], list[float]]] = []
+        self.feedback: list[str] = []
+        node.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip",
+                                 lambda m: setattr(self, "tip", [m.point.x, m.point.y, m.point.z]), 10)
+        node.create_subscription(Float64MultiArray, "/sim/truth/soil", lambda m: setattr(self, "soil", list(m.data)), 10)
+        node.create_subscription(JointState, "/zx200/joint_states", self._on_js, 50)
+        self.clients = {
+            "change_pose": ActionClient(node, Zx200ChangePose, "/zx200/tms_rp_zx200_change_pose"),
+            "excavate": ActionClient(node, Zx200ExcavateSimple, "/zx200/tms_rp_zx200_excavate_simple"),
+            "release": ActionClient(node, Zx200ReleaseSimple, "/zx200/tms_rp_zx200_release_simple"),
+        }
+        self.types = {"change_pose": Zx200ChangePose, "excavate": Zx200ExcavateSimple, "release": Zx200ReleaseSimple}
+        self._lock = threading.Lock()
+
+    def _on_js(self, msg: Any) -> None:
+        self.q = list(msg.position[:4])
+        self.dq_log.append((time.monotonic(), list(msg.position[:4]), list(msg.velocity[:4])))
+
+    def spin(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.node.executor_for_test.spin_once(timeout_sec=0.01)
+
+    def spin_until(self, pred: Callable[[], bool], timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if pred():
+                return True
+            self.node.executor_for_test.spin_once(timeout_sec=0.02)
+        return pred()
+
+    def send(self, kind: str, goal: Any, timeout: float = 10.0) -> Any:
+        """Send ``goal``; returns the goal handle (accepted or not)."""
+        client = self.clients[kind]
+        assert client.wait_for_server(timeout_sec=timeout), f"{kind} action server not available"
+
+        def on_fb(fb: Any) -> None:
+            self.feedback.append(fb.feedback.state)
+
+        fut = client.send_goal_async(goal, feedback_callback=on_fb)
+        assert self.spin_until(fut.done, timeout), f"{kind}: no goal response"
+        return fut.result()
+
+    def result(self, handle: Any, timeout: float) -> tuple[int, Any]:
+        """(GoalStatus, result) of an accepted goal, spinning until it ends."""
+        fut = handle.get_result_async()
+        assert self.spin_until(fut.done, timeout), f"goal did not end within {timeout} s (feedback {self.feedback[-3:]})"
+        res = fut.result()
+        return res.status, res.result
+
+    def run(self, kind: str, goal: Any, timeout: float = 90.0) -> tuple[int, Any]:
+        handle = self.send(kind, goal)
+        assert handle.accepted, f"{kind} goal not accepted"
+        return self.result(handle, timeout)
+
+
+@pytest.fixture
+def arm_stack(procs, domain: int, ros_node, tmp_path: Path) -> Iterator[Callable[..., ArmStack]]:
+    """``arm_stack(ic120_pose="ic120_start")`` -> :class:`ArmStack` once every node is ready."""
+
+    def start(*, ic120_pose: str = "ic120_start", speed: float = SIM_SPEED) -> ArmStack:
+        from tms_common.config import config_path
+
+        text = config_path("sim", "plant.yaml").read_text().replace("ic120: ic120_start", f"ic120: {ic120_pose}")
+        cfg_file = tmp_path / "plant.yaml"
+        cfg_file.write_text(text)
+        bus = _zx_bus(domain)
+        sim_args = [str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", f"speed:={speed}",
+                    "-p", f"config:={cfg_file}", "-p", f"zx200_can_interface:={bus['interface']}",
+                    "-p", f"zx200_can_channel:={bus['channel']}"]
+        bridge_args = [str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200",
+                       "-p", "machine:=zx200", "-p", f"can_interface:={bus['interface']}",
+                       "-p", f"can_channel:={bus['channel']}", "-p", "use_sim_time:=true"]
+        if "port" in bus:
+            sim_args += ["-p", f"zx200_can_port:={bus['port']}"]
+            bridge_args += ["-p", f"can_port:={bus['port']}"]
+        sim = procs(sim_args, name="sim_plant")
+        assert sim.wait_for("sim_plant: running", 90), sim.output
+        bridge = procs(bridge_args, name="com3_bridge")
+        assert bridge.wait_for("com3_bridge ready", 60), bridge.output
+        ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200",
+                     "-p", "use_sim_time:=true"], name="zx200_arm_controller")
+        planner = procs([str(executable("tms_if_opera", "zx200_planner")), "--ros-args", "-r", "__ns:=/zx200",
+                         "-p", "use_sim_time:=true"], name="zx200_planner")
+        assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+        assert planner.wait_for("zx200_planner ready", 60), planner.output
+        stack = ArmStack(ros_node)
+        stack.procs = {"sim": sim, "bridge": bridge, "controller": ctl, "planner": planner}
+        assert stack.spin_until(lambda: stack.q is not None and stack.tip is not None and stack.soil is not None, 30), \
+            "no joint_states / truth from the plant"
+        return stack
+
+    yield start

@@ -1,0 +1,173 @@
+"""The ZX200 arm stack in the MuJoCo plant over COM3 CAN, every node its own process.
+
+sim_plant (CAN only) <-> com3_bridge (zx200) <-> zx200_arm_controller <-> zx200_planner <- this test.
+Accuracy is checked against the plant's ground truth (``/sim/truth/zx200/bucket_tip``, ZX200 base at
+the map origin, see config/site.yaml ``points.zx200_base``) and soil against ``/sim/truth/soil``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from tms_common.config import config_path, load_yaml
+from tms_rp.zx200 import errors as codes
+from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+
+pytestmark = pytest.mark.integration
+
+SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
+TOL_M, TOL_RAD = 0.03, math.radians(2.0)
+KIN = load_kinematics()
+
+
+def joint_goal(q):  # noqa: ANN001, ANN201
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    from tms_msg.action import Zx200ChangePose
+
+    g = Zx200ChangePose.Goal()
+    g.trajectory.joint_names = list(JOINTS)
+    g.trajectory.points = [JointTrajectoryPoint(positions=[float(v) for v in q])]
+    return g
+
+
+def pwa_goal(p, theta_w):  # noqa: ANN001, ANN201
+    from tms_msg.action import Zx200ChangePose
+    from tms_msg.msg import Zx200PositionWithAngle
+
+    g = Zx200ChangePose.Goal()
+    pwa = Zx200PositionWithAngle()
+    pwa.position.x, pwa.position.y, pwa.position.z = (float(v) for v in p)
+    pwa.theta_w = float(theta_w)
+    g.position_with_angle_sequence = [pwa]
+    return g
+
+
+def pose_goal(q):  # noqa: ANN001, ANN201
+    from geometry_msgs.msg import Pose
+
+    from tms_msg.action import Zx200ChangePose
+
+    m = KIN.tip_pose(np.asarray(q, dtype=float))
+    x, y, z, w = (float(v) for v in __import__("pinocchio").Quaternion(m.rotation).coeffs())
+    g = Zx200ChangePose.Goal()
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in m.translation)
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = x, y, z, w
+    g.pose_sequence = [pose]
+    return g
+
+
+def settled_tip(stack) -> np.ndarray:  # noqa: ANN001
+    stack.spin(0.5)
+    return np.array(stack.tip)
+
+
+def test_change_pose_reaches_rejects_and_cancels_in_the_plant(arm_stack) -> None:
+    stack = arm_stack()
+    # 1. joint goal: tip (truth) and joints (measured over CAN) at the target
+    q1 = np.array([0.3, -0.7, 1.6, 1.0])
+    status, res = stack.run("change_pose", joint_goal(q1))
+    assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
+    q = np.array(stack.q)
+    assert np.max(np.abs(q - q1)) < TOL_RAD, q
+    tip = settled_tip(stack)
+    assert np.linalg.norm(tip - KIN.tip_position(q1)) < TOL_M, (tip, KIN.tip_position(q1))
+
+    # 2. position + theta_w goal
+    p2, th2 = np.array([6.0, 1.5, 2.5]), 1.4
+    status, res = stack.run("change_pose", pwa_goal(p2, th2))
+    assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
+    tip = settled_tip(stack)
+    assert np.linalg.norm(tip - p2) < TOL_M, (tip, p2)
+    assert abs(KIN.theta_w(np.array(stack.q)) - th2) < TOL_RAD
+
+    # 3. pose goal (position + quaternion of a reachable tip pose)
+    q3 = np.array([-0.2, -0.6, 1.9, 1.3])
+    status, res = stack.run("change_pose", pose_goal(q3))
+    assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
+    tip = settled_tip(stack)
+    assert np.linalg.norm(tip - KIN.tip_position(q3)) < TOL_M, (tip, KIN.tip_position(q3))
+    assert abs(KIN.theta_w(np.array(stack.q)) - KIN.theta_w(q3)) < TOL_RAD
+
+    # 4. rejections before motion, with the reason
+    before = np.array(stack.tip)
+    status, res = stack.run("change_pose", pwa_goal([18.0, 0.0, 1.0], 1.5), timeout=20)
+    assert status == ABORTED and res.error_code.val == codes.OUT_OF_REACH, res.message
+    assert "m from the boom foot" in res.message, res.message
+    status, res = stack.run("change_pose", joint_goal([0.0, 0.3, 1.6, 1.0]), timeout=20)
+    assert status == ABORTED and res.error_code.val == codes.JOINT_LIMIT and "boom_joint" in res.message, res.message
+    status, res = stack.run("change_pose", pwa_goal([6.0, float("nan"), 2.0], 1.4), timeout=20)
+    assert status == ABORTED and res.error_code.val == codes.INVALID_GOAL and "NaN" in res.message, res.message
+    from tms_msg.action import Zx200ChangePose
+
+    status, res = stack.run("change_pose", Zx200ChangePose.Goal(), timeout=20)
+    assert status == ABORTED and res.error_code.val == codes.INVALID_GOAL and "empty" in res.message, res.message
+    stack.spin(1.0)
+    assert np.linalg.norm(np.array(stack.tip) - before) < 0.005, "a rejected goal moved the arm"
+
+    # 5. cancel mid-motion: CANCELED only once the arm is at rest
+    handle = stack.send("change_pose", joint_goal([1.2, -0.5, 1.3, 0.5]))
+    assert handle.accepted
+    assert stack.spin_until(lambda: stack.q is not None and abs(stack.q[0] - q3[0]) > 0.15, 30), "did not start moving"
+    cancel = handle.cancel_goal_async()
+    assert stack.spin_until(cancel.done, 10)
+    status, res = stack.result(handle, 60)
+    t_end = time.monotonic()
+    assert status == CANCELED and res.error_code.val == codes.CANCELED, (status, res.message)
+    _, _, v = min((s for s in stack.dq_log if s[0] >= t_end - 0.3), key=lambda s: abs(s[0] - t_end))
+    assert max(abs(x) for x in v) < 0.02, f"CANCELED while moving: {v}"
+    q_c = np.array(stack.q)
+    stack.spin(2.0)
+    assert np.max(np.abs(np.array(stack.q) - q_c)) < 0.01, "arm kept moving after CANCELED"
+    for name, p in stack.procs.items():
+        assert p.popen.poll() is None, f"{name} died:\n{p.output[-2000:]}"
+
+
+def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) -> None:
+    from tms_msg.action import Zx200ExcavateSimple, Zx200ReleaseSimple
+
+    site, _ = load_yaml(config_path("site.yaml"))
+    base = site["points"]["zx200_base"]
+    assert (base["x"], base["y"], base["yaw"]) == (0.0, 0.0, 0.0), "test assumes the ZX200 base at the map origin"
+    mound = site["mound"]
+    stack = arm_stack(ic120_pose="P1")
+    mound0, bucket0, vessel0 = stack.soil[:3]
+    # Target on the near slope of the mound, 0.35 m below its surface, as tms_sp computes it.
+    cx = mound["center"]["x"]
+    x = cx - 0.65
+    r = abs(x - cx)
+    surface = mound["ground_z"] + mound["height"] * (1.0 if r <= mound["top_radius"] else
+                                                      (mound["base_radius"] - r) / (mound["base_radius"] - mound["top_radius"]))
+    g = Zx200ExcavateSimple.Goal()
+    g.position_with_angle.position.x, g.position_with_angle.position.y = x, mound["center"]["y"]
+    g.position_with_angle.position.z = surface - 0.35
+    g.position_with_angle.theta_w = math.radians(45.0)
+    g.position_with_angle.offset = 1.5
+    stack.feedback.clear()
+    status, res = stack.run("excavate", g, timeout=180)
+    assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
+    assert {"approach", "penetrate", "drag", "curl", "lift"} <= set(stack.feedback), stack.feedback
+    stack.spin(1.0)
+    mound1, bucket1, vessel1 = stack.soil[:3]
+    assert bucket1 > 0.2, stack.soil
+    assert mound1 < mound0 - 0.2, (mound0, mound1)
+
+    # Over the vessel (IC120 at P1, left of the ZX200), then open the bucket.
+    p1 = site["points"]["P1"]
+    swing = math.atan2(p1["y"] - KIN.swing_origin[1], p1["x"] - KIN.swing_origin[0])
+    q_carry = np.array(stack.q)
+    q_carry[0] = swing
+    status, res = stack.run("change_pose", joint_goal([swing, -0.75, 1.6, 1.9]), timeout=120)
+    assert status == SUCCEEDED, res.message
+    stack.feedback.clear()
+    status, res = stack.run("release", Zx200ReleaseSimple.Goal(target_angle=swing), timeout=120)
+    assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
+    assert {"swing", "open"} <= set(stack.feedback), stack.feedback
+    stack.spin(3.0)
+    vessel2 = stack.soil[2]
+    assert vessel2 > vessel1 + 0.5 * bucket1, stack.soil
