@@ -143,3 +143,34 @@ def test_counters():
 def test_blackboard_value_checker():
     assert _run('<Action ID="BlackboardValueChecker" key="a"/>', None, a=1.0).tick() is SUCCESS
     assert _run('<Action ID="BlackboardValueChecker" key="a"/>', None).tick() is FAILURE
+
+
+class _Inbox:
+    """The confirm-topic side of RosPort, in memory (the manager fills it from /tms_ts/confirm)."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[int, str]] = []
+
+    def confirm_seq(self) -> int:
+        return len(self.items)
+
+    def confirmations(self, since: int) -> list[tuple[int, str]]:
+        return [(s, t) for s, t in self.items if s > since]
+
+    def say(self, text: str) -> None:
+        self.items.append((len(self.items) + 1, text))
+
+
+def test_wait_for_click_is_non_blocking_and_honours_task_prefix():
+    inbox = _Inbox()
+    inbox.say("yes")  # before the node started: ignored
+    t = load_tree('<root><BehaviorTree ID="B"><Action ID="WaitForClick" button_info="Load done?"/></BehaviorTree></root>',
+                  TreeContext(ros=inbox, task_id=3))
+    assert t.tick() is RUNNING and "Load done?" in t.root.feedback_message
+    inbox.say("4:yes")  # for another task
+    assert t.tick() is RUNNING
+    inbox.say("3:yes")
+    assert t.tick() is SUCCESS
+    assert t.tick() is RUNNING  # a new wait
+    inbox.say("no")
+    assert t.tick() is FAILURE
