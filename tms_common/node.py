@@ -22,15 +22,19 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["run_node", "make_executor"]
 
 
-def make_executor(kind: str | None = None):  # noqa: ANN201 - rclpy executors share no public base type hint
-    """Build an rclpy executor by name: ``single`` (default), ``multi`` or ``events``."""
+def make_executor(kind: str | None = None, *, threads: int = 8):  # noqa: ANN201 - no public base type hint
+    """Build an rclpy executor by name: ``single`` (default), ``multi`` or ``events``.
+
+    ``multi`` gets ``threads`` threads (not rclpy's default of one per CPU: with 2 CPUs, two action goals
+    waiting on downstream goals would take every thread and no cancel could be served).
+    """
     import rclpy.executors
 
     kind = kind or os.environ.get("TMS_EXECUTOR", "single")
     if kind == "single":
         return rclpy.executors.SingleThreadedExecutor()
     if kind == "multi":
-        return rclpy.executors.MultiThreadedExecutor()
+        return rclpy.executors.MultiThreadedExecutor(num_threads=threads)
     if kind == "events":
         from rclpy.experimental import EventsExecutor
 
