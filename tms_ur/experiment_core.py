@@ -205,7 +205,7 @@ class ExperimentRecorder:
 
         fig, ax = plt.subplots(figsize=(8, max(2.5, 0.45 * len(self.flags) + 1)))
         end = self.sim_end or 0.0
-        for row, (key, series) in enumerate(sorted(self.flags.items())):
+        for row, (_key, series) in enumerate(sorted(self.flags.items())):
             for i, (t, value) in enumerate(series):
                 t_next = series[i + 1][0] if i + 1 < len(series) else end
                 if value is True:
