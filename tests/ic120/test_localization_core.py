@@ -131,3 +131,26 @@ def test_projection_rejects_bad_fix_and_crs():
         proj.to_map(float("nan"), 140.0)
     with pytest.raises(ValueError, match="EPSG:999999"):
         GnssProjector("EPSG:999999", {"easting": 0, "northing": 0})
+
+
+def test_estimate_drift_is_recovered_not_gated_forever():
+    # The odometry over-reports motion by 40 % for 5 s (a stalled plant, heavy slip): the estimate runs
+    # ahead; the GNSS stream stays continuous, so the filter must follow it back instead of rejecting it.
+    samples = simulate(40.0)
+    ekf = Ic120Ekf(EkfParams())
+    ox = oy = 0.0
+    prev = None
+    errors = []
+    for s in samples:
+        if prev is not None:
+            dx, dy = s.odom[0] - prev[0], s.odom[1] - prev[1]
+            f = 1.4 if 10.0 <= s.t < 15.0 else 1.0
+            ox, oy = ox + f * dx, oy + f * dy
+        prev = s.odom
+        ekf.odometry(s.t, ox, oy, s.odom[2])
+        ekf.gnss(s.t, *s.gnss)
+        ekf.azimuth(s.t, s.azimuth)
+        errors.append(math.hypot(ekf.pose[0] - s.truth[0], ekf.pose[1] - s.truth[1]))
+    errors = np.array(errors)
+    assert errors[160:].max() < 0.1, f"max error after the stall {errors[160:].max():.3f} m"
+    assert ekf.stats.reinits == 0

@@ -9,6 +9,13 @@ through filterpy's :class:`~filterpy.kalman.ExtendedKalmanFilter`; a measurement
 distance exceeds the chi-square gate is rejected (a 5 m multipath jump), and after ``reinit_after_s`` of
 nothing but rejections the filter re-initialises on GNSS (the estimate, not the fix, was wrong).
 
+Gating alone cannot tell a GNSS jump from an estimate that drifted (odometry slipping far beyond its
+model): both give a large innovation, and rejecting a correct GNSS stream lets the drift run on. So each
+fix is also checked for *continuity*: the step from the previous fix must match the odometry step within
+``jump_threshold`` + 50 % of the step. A gated-out fix whose stream has been continuous since the last
+accepted fix means the estimate drifted: the position covariance is inflated by the innovation and the
+fix is used. A discontinuous step (a jump) keeps the stream rejected until it agrees with the estimate again.
+
 The map->odom transform (what a TF broadcaster would publish) is ``map_T_base * inv(odom_T_base)``.
 """
 
@@ -45,10 +52,11 @@ class EkfParams:
     gate_chi2: float = 13.8
     gate_chi2_yaw: float = 10.8
     reinit_after_s: float = 10.0
+    jump_threshold: float = 0.5
     initial_yaw_sigma: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("gnss_sigma", "azimuth_sigma", "gate_chi2", "gate_chi2_yaw", "initial_yaw_sigma"):
+        for name in ("gnss_sigma", "azimuth_sigma", "gate_chi2", "gate_chi2_yaw", "initial_yaw_sigma", "jump_threshold"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"localization.{name} must be > 0, got {value!r}")
@@ -83,6 +91,7 @@ class _Stats:
     yaw_accepted: int = 0
     yaw_rejected: int = 0
     reinits: int = 0
+    gnss_drift_recoveries: int = 0
     last: dict = field(default_factory=dict)
 
 
@@ -101,6 +110,8 @@ class Ic120Ekf:
         self._yaw_known = False
         self._reject_since: float | None = None
         self._pending_yaw: tuple[float, float] | None = None
+        self._last_fix: tuple[float, float, tuple[float, float, float] | None] | None = None
+        self._chain_ok = True
         self.stats = _Stats()
 
     # --- state ---------------------------------------------------------------------------------
@@ -183,6 +194,17 @@ class Ic120Ekf:
         innov = z - self._kf.x[:2]
         s_mat = h @ self._kf.P @ h.T + r
         d2 = float(innov @ np.linalg.solve(s_mat, innov))
+        continuous = self._fix_continuous(x, y)
+        self._last_fix = (x, y, self._last_odom)
+        if d2 > self.params.gate_chi2 and continuous and self._chain_ok:
+            # The fixes move as the odometry says (no jump since the last accepted fix), yet disagree with
+            # the estimate: the estimate drifted (slip beyond the model, a stalled plant). Inflate P along
+            # the innovation so the update is consistent instead of rejecting GNSS for good.
+            self._kf.P[:2, :2] += np.outer(innov, innov)
+            self.stats.gnss_drift_recoveries += 1
+            d2 = float(innov @ np.linalg.solve(h @ self._kf.P @ h.T + r, innov))
+        if not continuous:
+            self._chain_ok = False
         if d2 > self.params.gate_chi2:
             self.stats.gnss_rejected += 1
             if self._reject_since is None:
@@ -194,10 +216,24 @@ class Ic120Ekf:
                 return UpdateResult(True, d2, reinitialised=True)
             return UpdateResult(False, d2)
         self._reject_since = None
+        self._chain_ok = True
         self._kf.update(z, lambda _x: h, lambda xs: xs[:2], R=r)
         self._kf.x[2] = wrap_angle(float(self._kf.x[2]))
         self.stats.gnss_accepted += 1
         return UpdateResult(True, d2)
+
+    def _fix_continuous(self, x: float, y: float) -> bool:
+        """True if the step from the previous fix matches the odometry step (no GNSS jump in between)."""
+        if self._last_fix is None or self._last_fix[2] is None or self._last_odom is None:
+            return True
+        fx, fy, (ox0, oy0, _) = self._last_fix
+        ox1, oy1, _ = self._last_odom
+        _, _, rot = self.map_to_odom()
+        c, s = math.cos(rot), math.sin(rot)
+        k = 1.0 + float(self._kf.x[3])
+        dxo, dyo = k * (c * (ox1 - ox0) - s * (oy1 - oy0)), k * (s * (ox1 - ox0) + c * (oy1 - oy0))
+        mismatch = math.hypot((x - fx) - dxo, (y - fy) - dyo)
+        return mismatch <= self.params.jump_threshold + 0.5 * math.hypot(dxo, dyo)
 
     def azimuth(self, t: float, yaw: float, sigma: float | None = None) -> UpdateResult:
         """An absolute heading (ENU yaw, rad) from the GNSS compass / IMU."""
