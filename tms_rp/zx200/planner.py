@@ -22,7 +22,7 @@ import numpy as np
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_rc.zx200.controller import CartesianTarget, JointTarget
-from tms_rp.zx200.errors import InvalidGoalError
+from tms_rp.zx200.errors import InvalidGoalError, JointLimitError, PlanningError
 from tms_rp.zx200.kinematics import JOINTS, Zx200Kinematics
 
 __all__ = ["PlannerConfig", "load_planner_config", "Zx200Planner"]
@@ -33,14 +33,15 @@ class PlannerConfig:
     """Excavation/release geometry (``config/tms_rp/zx200_planner.yaml``)."""
 
     approach_height: float = 1.0
-    penetrate_depth: float = 0.3
-    penetrate_theta_w: float = 1.3
+    penetrate_depth: float = 0.0
+    drag_end_theta_w: float = 1.6
     drag_default: float = 1.0
     curl_theta_w: float = 2.6
     lift_height: float = 1.5
     release_open_bucket: float = -0.5
     dig_speed_scale: float = 0.5
     limit_margin: float = 0.005
+    dig_joint_margin: float = 0.06
 
 
 def load_planner_config(path: str | Path | None = None) -> PlannerConfig:
@@ -147,31 +148,74 @@ class Zx200Planner:
         n = len(targets)
         return [type(t)(**{**t.__dict__, "label": f"{prefix} {i + 1}/{n}"}) for i, t in enumerate(targets)]
 
+    def _holds(self, position: np.ndarray, theta_w: float, joint_margin: float) -> bool:
+        try:
+            q = self.kin.ik_position_with_angle(position, theta_w, check_limits=False)
+        except PlanningError:
+            return False
+        return self.kin.limits.violation(q, margin=-joint_margin) is None  # margin < 0: inside
+
+    def feasible_theta_w(self, position: np.ndarray, theta_w: float) -> float:
+        """``theta_w`` moved to the nearest angle the arm can hold at ``position`` with every joint at least
+        ``limit_margin`` inside its limits (the controller keeps its own margin from the limits).
+
+        Raises OutOfReachError / JointLimitError (with the reason) when no angle reaches the point.
+        """
+        m = self.cfg.dig_joint_margin
+        if self._holds(position, theta_w, m):
+            return float(theta_w)
+        grid = np.arange(-math.pi / 2, 3 * math.pi / 2, 0.005)
+        ok = np.array([th for th in grid if self._holds(position, float(th), m)])
+        if ok.size == 0:
+            self.kin.ik_position_with_angle(position, theta_w)  # raises with the reason
+            raise JointLimitError(f"no bucket angle keeps every joint {m} rad inside its limits at {position.tolist()}")
+        return float(ok[np.argmin(np.abs(ok - theta_w))])
+
     def excavate(self, position: Any, theta_w: float, offset: float = 0.0) -> list[JointTarget | CartesianTarget]:
-        """approach (joint move above the target) -> penetrate -> drag -> curl -> lift, all validated."""
+        """approach -> penetrate -> drag -> curl -> lift at one excavation target, all validated.
+
+        ``position`` is the bucket-tip point the excavation penetrates to (ZX200 base frame; tms_sp
+        writes ``surface - penetration_depth``), ``penetrate_depth`` of the config goes that much deeper.
+        ``theta_w`` is the edge angle at entry (approach and penetrate); where the arm cannot hold that
+        angle at the point it is moved to the nearest reachable one (the excavation still happens at the
+        requested point). The drag runs ``offset`` (or ``drag_default``) towards the machine while the
+        edge turns to at least ``drag_end_theta_w`` (the bucket keeps its soil once out of the ground),
+        then the bucket curls to ``curl_theta_w`` and lifts ``lift_height``.
+        """
         cfg = self.cfg
         pos = _finite(position, "excavate position")
         if pos.shape != (3,):
             raise InvalidGoalError(f"excavate position must have 3 coordinates, got {pos.tolist()}")
         th = float(_finite([theta_w], "excavate theta_w")[0])
         drag = float(_finite([offset], "excavate offset")[0]) or cfg.drag_default
+        if drag < 0:
+            raise InvalidGoalError(f"excavate offset {drag} is negative (drag length towards the machine)")
         radial = pos[:2] - self.kin.swing_origin[:2]
         dist = float(np.linalg.norm(radial))
         if dist < 1e-6:
             raise InvalidGoalError("excavate position is on the swing axis")
         inward = -radial / dist
-        above = pos + np.array([0.0, 0.0, cfg.approach_height])
         bottom = pos - np.array([0.0, 0.0, cfg.penetrate_depth])
+        if bottom[2] < self.ground_min_z:
+            raise InvalidGoalError(
+                f"excavate: tip z {bottom[2]:.3f} m is below the ground/dig limit {self.ground_min_z:.3f} m"
+            )
+        above = bottom + np.array([0.0, 0.0, cfg.approach_height])
         dragged = bottom + np.append(inward * drag, 0.0)
         lifted = dragged + np.array([0.0, 0.0, cfg.lift_height])
+        th_in = self.feasible_theta_w(bottom, th)
+        th_above = self.feasible_theta_w(above, th_in)
+        th_drag = self.feasible_theta_w(dragged, max(th_in, cfg.drag_end_theta_w))
+        th_curl = self.feasible_theta_w(dragged, cfg.curl_theta_w)
+        th_lift = self.feasible_theta_w(lifted, th_curl)
         slow = cfg.dig_speed_scale
-        q_above = self.kin.ik_position_with_angle(above, th)  # reason names joint/distance
+        q_above = self.kin.ik_position_with_angle(above, th_above)  # reason names joint/distance
         return [
             JointTarget(q_above, "approach"),
-            self._cartesian(bottom, cfg.penetrate_theta_w, "penetrate", label="penetrate", speed_scale=slow),
-            self._cartesian(dragged, cfg.penetrate_theta_w, "drag", label="drag", speed_scale=slow),
-            self._cartesian(dragged, cfg.curl_theta_w, "curl", label="curl", speed_scale=slow),
-            self._cartesian(lifted, cfg.curl_theta_w, "lift", label="lift"),
+            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=slow),
+            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=slow),
+            self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=slow),
+            self._cartesian(lifted, th_lift, "lift", label="lift"),
         ]
 
     def release(self, target_angle: float, current_q: np.ndarray) -> list[JointTarget]:

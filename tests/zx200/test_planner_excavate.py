@@ -1,0 +1,46 @@
+"""excavate_simple planning: tms_sp's target (penetration point, entry angle, drag offset) as intended."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tms_rp.zx200.errors import InvalidGoalError, OutOfReachError
+from tms_rp.zx200.kinematics import load_kinematics
+from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+
+KIN = load_kinematics()
+PLAN = Zx200Planner(KIN, load_planner_config())
+
+
+def test_seed_target_penetrates_at_the_point_drags_offset_and_keeps_soil() -> None:
+    cfg = PLAN.cfg
+    # config/seeds/paper.yaml target_excavate_pose (tms_sp output): 45 deg is not holdable there,
+    # so the entry angle is the nearest holdable one; the tip still goes exactly to the point.
+    targets = PLAN.excavate([5.85, -0.05, 1.15], math.radians(45.0), 1.5)
+    labels = [t.label for t in targets]
+    assert labels == ["approach", "penetrate", "drag", "curl", "lift"]
+    pen, drag, curl, lift = targets[1:]
+    assert np.allclose(pen.position, [5.85, -0.05, 1.15 - cfg.penetrate_depth])
+    assert math.radians(45.0) < pen.theta_w < math.radians(45.0) + 0.3
+    r0 = np.linalg.norm(pen.position[:2] - KIN.swing_origin[:2])
+    r1 = np.linalg.norm(drag.position[:2] - KIN.swing_origin[:2])
+    assert r0 - r1 == pytest.approx(1.5, abs=1e-6)  # offset = drag length towards the machine
+    assert drag.theta_w >= cfg.drag_end_theta_w - 1e-9 and curl.theta_w >= drag.theta_w
+    assert lift.position[2] == pytest.approx(drag.position[2] + cfg.lift_height)
+    for t in (pen, drag, curl, lift):  # every phase reachable with the joints inside their margins
+        q = KIN.ik_position_with_angle(t.position, t.theta_w)
+        assert KIN.limits.violation(q, margin=-cfg.dig_joint_margin + 1e-6) is None
+    # a holdable entry angle is kept as given
+    assert PLAN.excavate([5.85, -0.05, 1.15], 1.2, 1.5)[1].theta_w == pytest.approx(1.2)
+
+
+def test_bad_excavate_goals_are_rejected_with_the_reason() -> None:
+    with pytest.raises(InvalidGoalError, match="NaN"):
+        PLAN.excavate([5.85, float("nan"), 1.15], 1.0, 1.5)
+    with pytest.raises(InvalidGoalError, match="negative"):
+        PLAN.excavate([5.85, 0.0, 1.15], 1.0, -1.0)
+    with pytest.raises(OutOfReachError, match="boom foot"):
+        PLAN.excavate([15.0, 0.0, 1.0], 1.0, 1.0)
