@@ -1,9 +1,15 @@
-"""ZX200 arm benchmark (pure core, first-order-lag + dead-time plant; no ROS, no MuJoCo).
+"""ZX200 arm benchmark: (1) the pure core against the first-order-lag + dead-time model, (2) the whole
+stack (sim_plant MuJoCo + com3_bridge + zx200_arm_controller + zx200_planner, separate processes, COM3
+CAN over udp_multicast) with goals sent over ROS and accuracy from the plant's truth.
 
-Prints: success rate of 100 random reachable targets of each kind (joint / pose / position+theta_w)
+Prints for each: success rate of 100 random reachable targets of each kind (joint / pose / position+theta_w)
 within 3 cm and 2 deg with zero limit violations, QP solve time per control step (median, p99), the RMS
 tip tracking error of a 2 m Cartesian move, and the period jitter of a 100 Hz control loop.
-Run: ``.venv/bin/python -m tests.bench zx200`` (``ZX200_BENCH_N`` = targets per kind, default 100).
+Run: ``.venv/bin/python -m tests.bench zx200`` (``ZX200_BENCH_N`` = targets per kind, default 100, for the
+core; ``ZX200_BENCH_PLANT_N`` for the plant, default = ZX200_BENCH_N; ``ZX200_BENCH_PLANT=0`` skips the plant).
+In the plant: limit violations = joint_states samples outside the position limits (> 1 mrad) or above the
+velocity limits (> 2 %); the 2 m move reports the truth tip's RMS distance from the straight reference line;
+jitter is the period of ``/zx200/front_cmd`` as received by the probe.
 """
 
 from __future__ import annotations
@@ -45,7 +51,7 @@ def _run(kin, cfg, q0, targets, solve_times, max_steps=8000):
     return ctl.status, q, violations, errs
 
 
-def main() -> None:
+def core() -> None:
     kin = load_kinematics()
     cfg = load_controller_config()
     planner = Zx200Planner(kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
@@ -122,6 +128,131 @@ def main() -> None:
     jitter = np.abs(np.array(periods) - cfg.dt)
     print(f"  100 Hz loop (5 s, controller + plant in one thread): period {summary_ms(periods)}; "
           f"|period - 10 ms| median {1000 * np.median(jitter):.3f} ms, p99 {1000 * np.percentile(jitter, 99):.3f} ms")
+
+
+def plant() -> None:  # noqa: PLR0915 - one campaign
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from tests.rosproc import Proc, executable, isolated_domain, ros_env
+    from tests.zx200.conftest import ArmStack
+    from tests.zx200.test_plant_integration import joint_goal, pose_goal, pwa_goal
+    from tms_msg.msg import JointCmd
+
+    kin = load_kinematics()
+    cfg = load_controller_config()
+    n = int(os.environ.get("ZX200_BENCH_PLANT_N", os.environ.get("ZX200_BENCH_N", "100")))
+    rng = np.random.default_rng(11)
+    lo = np.array([-1.5, -1.0, 0.8, -0.3])
+    hi = np.array([1.5, -0.2, 2.4, 2.1])
+    with isolated_domain() as domain:
+        port = 48000 + domain * 7 % 1000
+        bus = ["-p", "zx200_can_interface:=udp_multicast", "-p", f"zx200_can_channel:=239.77.{domain}.9",
+               "-p", f"zx200_can_port:={port}"]
+        env = ros_env(domain)
+        procs = [Proc([str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", "speed:=1.0", *bus], env, name="sim")]
+        try:
+            assert procs[0].wait_for("sim_plant: running", 90), procs[0].output
+            procs.append(Proc([str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200",
+                               "-p", "machine:=zx200", "-p", "can_interface:=udp_multicast",
+                               "-p", f"can_channel:=239.77.{domain}.9", "-p", f"can_port:={port}",
+                               "-p", "use_sim_time:=true"], env, name="bridge"))
+            for pkg, exe in (("tms_rc", "zx200_arm_controller"), ("tms_if_opera", "zx200_planner")):
+                procs.append(Proc([str(executable(pkg, exe)), "--ros-args", "-r", "__ns:=/zx200", "-p", "use_sim_time:=true"],
+                                  env, name=exe))
+            for p, text in zip(procs[1:], ("com3_bridge ready", "zx200_arm_controller ready", "zx200_planner ready"), strict=True):
+                assert p.wait_for(text, 60), p.output
+            os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+            ctx = Context()
+            rclpy.init(context=ctx, domain_id=domain)
+            node = rclpy.create_node("zx200_bench_probe", context=ctx)
+            node.executor_for_test = SingleThreadedExecutor(context=ctx)
+            node.executor_for_test.add_node(node)
+            cmd_t: list[float] = []
+            node.create_subscription(JointCmd, "/zx200/front_cmd", lambda _m: cmd_t.append(time.monotonic()), 100)
+            st = ArmStack(node)
+            assert st.spin_until(lambda: st.q is not None and st.tip is not None, 30), "no state from the plant"
+            print(f"zx200 bench in the MuJoCo plant over CAN: {n} random reachable targets per kind (speed 1.0)")
+            violations = 0
+
+            def count_violations(since: float) -> int:
+                bad = 0
+                for t, q, v in st.dq_log:
+                    if t >= since and (kin.limits.violation(np.array(q), margin=1e-3) is not None
+                                       or np.any(np.abs(v) > kin.limits.velocity * 1.02)):
+                        bad += 1
+                return bad
+
+            t_campaign = time.monotonic()
+            for kind in ("joint", "pose", "position_with_angle"):
+                ok = 0
+                worst_p = worst_a = 0.0
+                t0 = time.monotonic()
+                for _ in range(n):
+                    while True:
+                        qg = rng.uniform(lo, hi)
+                        tip, _, pin_p, _ = kin.jacobians(qg)
+                        rho = [np.linalg.norm(x[:2] - kin.swing_origin[:2]) for x in (tip, pin_p)]
+                        if min(rho) > cfg.body_min_radius + 0.3 and min(tip[2], pin_p[2]) > 0.3:
+                            break
+                    goal = {"joint": joint_goal, "pose": pose_goal}.get(kind)
+                    g = goal(qg) if goal else pwa_goal(kin.tip_position(qg), kin.theta_w(qg))
+                    status, res = st.run("change_pose", g, timeout=120)
+                    st.spin(0.3)
+                    q_end = np.array(st.q)
+                    perr = float(np.linalg.norm(np.array(st.tip) - kin.tip_position(qg)))
+                    if kind == "joint":
+                        d = q_end - qg
+                        d[0] = math.atan2(math.sin(d[0]), math.cos(d[0]))
+                        aerr = float(np.max(np.abs(d)))
+                    else:
+                        aerr = abs(kin.theta_w(q_end) - kin.theta_w(qg))
+                    worst_p, worst_a = max(worst_p, perr), max(worst_a, aerr)
+                    if status == 4 and perr < 0.03 and aerr < math.radians(2):
+                        ok += 1
+                    else:
+                        print(f"    miss: status {status} {res.message!r} {100 * perr:.1f} cm {math.degrees(aerr):.2f} deg")
+                print(f"  {kind:20s}: {ok}/{n} within 3 cm / 2 deg ({100.0 * ok / n:.0f}%), worst {100 * worst_p:.2f} cm / "
+                      f"{math.degrees(worst_a):.2f} deg, {time.monotonic() - t0:.0f} s")
+            violations = count_violations(t_campaign)
+            print(f"  limit violations over the run (joint_states samples): {violations} of "
+                  f"{sum(1 for t, _, _ in st.dq_log if t >= t_campaign)}")
+            # 2 m Cartesian move (tip 2 m towards the machine, constant theta_w) from a mid pose
+            q0 = np.array([0.0, -0.6, 1.5, 1.0])
+            st.run("change_pose", joint_goal(q0), timeout=120)
+            st.spin(1.0)
+            p0 = np.array(st.tip)
+            p1 = p0 + np.array([-2.0, 0.0, 0.0])
+            th0 = kin.theta_w(np.array(st.q))
+            tips: list[np.ndarray] = []
+            from geometry_msgs.msg import PointStamped
+
+            node.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip",
+                                     lambda m: tips.append(np.array([m.point.x, m.point.y, m.point.z])), 100)
+            cmd_t.clear()
+            status, res = st.run("change_pose", pwa_goal(p1, th0), timeout=120)
+            u = (p1 - p0) / np.linalg.norm(p1 - p0)
+            dev = [float(np.linalg.norm((t - p0) - np.clip((t - p0) @ u, 0, 2.0) * u)) for t in tips]
+            print(f"  2 m Cartesian move: status {status}, RMS distance from the straight reference line "
+                  f"{1000 * math.sqrt(np.mean(np.square(dev))):.1f} mm, max {1000 * max(dev):.1f} mm "
+                  f"({len(dev)} truth samples), end error {1000 * float(np.linalg.norm(np.array(st.tip) - p1)):.1f} mm")
+            periods = np.diff(np.array(cmd_t))
+            jit = np.abs(periods - cfg.dt)
+            print(f"  front_cmd period at the probe (100 Hz, sim time at speed 1.0): {summary_ms(list(periods))}; "
+                  f"|period - 10 ms| median {1000 * np.median(jit):.3f} ms, p99 {1000 * np.percentile(jit, 99):.3f} ms")
+            node.executor_for_test.shutdown()
+            node.destroy_node()
+            rclpy.shutdown(context=ctx)
+        finally:
+            for p in procs:
+                p.kill()
+
+
+def main() -> None:
+    core()
+    if os.environ.get("ZX200_BENCH_PLANT", "1") != "0":
+        plant()
 
 
 if __name__ == "__main__":

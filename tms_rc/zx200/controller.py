@@ -445,8 +445,9 @@ class ArmController:
             goal_err = self._joint_delta(q, spline.p1)
             dist = float(np.max(np.abs(goal_err)))
             self.reference_tip = None
-            reached = dist < cfg.goal_tolerance_rad
             self.status.distance_remaining = float(np.linalg.norm(self.kin.tip_position(spline.p1) - self.kin.tip_position(q)))
+            # joints within tolerance AND the tip (a small swing error is centimetres at full reach)
+            reached = dist < cfg.goal_tolerance_rad and self.status.distance_remaining < cfg.goal_tolerance_m
         else:
             assert self._theta_spline is not None
             p_ref, v_ref = spline.sample(t_ref)
