@@ -24,6 +24,7 @@ from tms_common.node import run_node
 __all__ = ["main", "make_node"]
 
 REST_V, REST_W, REST_TIMEOUT = 0.02, 0.02, 5.0
+POSE_WAIT = 5.0  # [s] a goal arriving before the first pose waits this long for one
 
 
 @dataclass
@@ -73,6 +74,7 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             self._pose_t = -math.inf
             self._vel = (0.0, 0.0)
             self._active: _Active | None = None
+            self._pose_waiters: list = []
             self.pub_cmd = self.create_publisher(Twist, "cmd_vel", 10)
             self.create_subscription(Odometry, "odometry/global", self._on_pose, 20)
             latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -97,6 +99,10 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             self._pose = (p.position.x, p.position.y, yaw)
             self._pose_t = self._now()
             self._vel = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
+            for waiter in self._pose_waiters:
+                if not waiter.done():
+                    waiter.set_result(True)
+            self._pose_waiters.clear()
 
         def _on_map(self, msg: OccupancyGrid) -> None:
             info = msg.info
@@ -136,7 +142,10 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
                     o, pos = ps.pose.orientation, ps.pose.position
                     poses.append(validate_pose(pos.x, pos.y, o.z, o.w, o.x, o.y, index=i))
                 if self._pose is None or self._now() - self._pose_t > self.pose_timeout:
-                    raise errors.LocalizationError("no recent pose on odometry/global: is ic120_localization running?")
+                    if not await self._wait_pose(POSE_WAIT):
+                        raise errors.LocalizationError(
+                            f"no pose on odometry/global for {POSE_WAIT:g} s: is ic120_localization running?"
+                        )
                 self.core.start(poses, yaw_at_each=kind != "navigate_through_poses")
             except errors.NavError as exc:
                 self._log.warning(f"{kind}: rejected: {exc}")
@@ -147,6 +156,16 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             self._active = act
             self._log.info(f"{kind}: {len(poses)} pose(s), first ({poses[0][0]:.2f}, {poses[0][1]:.2f})")
             return await fut
+
+        async def _wait_pose(self, seconds: float) -> bool:
+            """Wait (without blocking the executor) for a fresh pose, e.g. just after start-up."""
+            waiter = Future()
+            self._pose_waiters.append(waiter)
+            timer = self.create_timer(seconds, lambda: waiter.done() or waiter.set_result(False))
+            ok = await waiter
+            timer.cancel()
+            self.destroy_timer(timer)
+            return bool(ok)
 
         def _result(self, action, code: int, msg: str, missed: list[int] | None = None):  # noqa: ANN001, ANN202
             res = action.Result()
