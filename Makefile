@@ -5,12 +5,16 @@ PY := $(VENV)/bin/python
 BOOT := bash scripts/bootstrap.sh
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 
-.PHONY: setup test bench demo lint clean
+.PHONY: setup vm-setup test bench demo lint clean
 
 setup:
 	@$(BOOT)
 
-test: setup
+# SocketCAN VM tools for tests/vcan (qemu, Debian kernel, busybox-static, virtme-ng); idempotent, TMS_VM=0 skips
+vm-setup: setup
+	@bash scripts/vm/setup.sh
+
+test: setup vm-setup
 	scripts/isolated.sh $(PY) -m pytest tests $(PYTEST_ARGS)
 
 bench: setup

@@ -22,7 +22,7 @@ progress interface-up "$(ip -brief link show "$IFACE" | tr -s ' ')"
 # Writable places for tools that write under $HOME (ROS logs) or next to the code (bytecode).
 export HOME=/tmp/vmhome ROS_LOG_DIR=/tmp/vmhome/roslog PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST AMENT_PREFIX_PATH="$REPO/.venv"
-export TMS_CAN_TEST_BACKEND=socketcan TMS_CAN_TEST_CHANNEL="$IFACE" TMS_IN_VCAN_VM=1
+export TMS_CAN_TEST_BACKEND=socketcan TMS_CAN_TEST_CHANNEL="$IFACE" TMS_IN_VCAN_VM=1 TMS_TEST_TIME_SCALE="$TIME_SCALE"
 mkdir -p "$HOME"
 
 set --

@@ -68,6 +68,7 @@ class VmConfig:
     memory: str
     module: str
     interface: str
+    time_scale: float
     pytest_args: tuple[str, ...]
 
 
@@ -79,6 +80,7 @@ _FIELDS: dict[str, type | tuple[type, ...]] = {
     "memory": str,
     "module": str,
     "interface": str,
+    "time_scale": (int, float),
     "pytest_args": list,
 }
 
@@ -103,11 +105,14 @@ def load_config(path: Path = DEFAULT_CONFIG) -> VmConfig:
     if data["timeout_s"] <= 0 or not 0 < data["boot_timeout_s"] <= data["timeout_s"]:
         raise VmConfigError(f"{path}: need 0 < boot_timeout_s <= timeout_s, got "
                             f"boot_timeout_s={data['boot_timeout_s']} timeout_s={data['timeout_s']}")
+    if data["time_scale"] <= 0:
+        raise VmConfigError(f"{path}: time_scale must be > 0, got {data['time_scale']}")
     if not re.fullmatch(r"[A-Za-z0-9_-]+", data["module"]) or not re.fullmatch(r"[A-Za-z0-9_.-]+", data["interface"]):
         raise VmConfigError(f"{path}: module/interface must be plain names, got "
                             f"{data['module']!r}/{data['interface']!r}")
     return VmConfig(**{**data, "timeout_s": float(data["timeout_s"]),
                        "boot_timeout_s": float(data["boot_timeout_s"]),
+                       "time_scale": float(data["time_scale"]),
                        "pytest_args": tuple(str(a) for a in data["pytest_args"])})
 
 
@@ -241,7 +246,7 @@ def run_vm(cfg: VmConfig, pre: Prereqs, outdir: Path, extra_pytest_args: list[st
     """Boot once, run the tests in the guest, and classify the outcome; never blocks past ``cfg.timeout_s``."""
     outdir.mkdir(parents=True, exist_ok=True)
     (outdir / "job.env").write_text(
-        f"REPO={shlex.quote(str(ROOT))}\nMODULE={cfg.module}\nIFACE={cfg.interface}\n")
+        f"REPO={shlex.quote(str(ROOT))}\nMODULE={cfg.module}\nIFACE={cfg.interface}\nTIME_SCALE={cfg.time_scale:g}\n")
     (outdir / "pytest_args").write_text("\n".join([*cfg.pytest_args, *(extra_pytest_args or [])]) + "\n")
     env = dict(os.environ, PATH=f"{VENV / 'bin'}:{os.environ.get('PATH', '/usr/bin:/bin')}")
     console = outdir / "console.log"
