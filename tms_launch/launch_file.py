@@ -5,6 +5,7 @@ A launch file::
     name: demo                       # optional, shown in the progress line
     env: {TMS_DB_PATH: runs/db}      # optional, added to every node's environment
     parameters: {use_sim_time: true} # optional, ROS parameters given to every node (a node's own win)
+    startup: sequential              # or parallel: start every process at once, then wait for each
     nodes:
       - name: talker                 # ROS node name (``-r __node:=talker``); unique
         package: tms_launch          # ament package of the executable
@@ -48,7 +49,8 @@ NODE_KEYS = {
     "ready_timeout",
     "on_exit",
 }
-TOP_KEYS = {"name", "nodes", "env", "parameters"}
+TOP_KEYS = {"name", "nodes", "env", "parameters", "startup"}
+STARTUP = {"sequential", "parallel"}
 ON_EXIT = {"error", "shutdown"}
 
 
@@ -94,6 +96,7 @@ class LaunchFile:
     name: str
     nodes: tuple[NodeSpec, ...]
     env: dict[str, str]
+    startup: str = "sequential"
 
 
 def _param_literal(value: Any) -> str:
@@ -210,7 +213,10 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
             )
         )
     title = data.get("name") or Path(path).stem
-    return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env)
+    startup = _expect(where, ("startup",), data.get("startup", "sequential"), str, "'startup'")
+    if startup not in STARTUP:
+        raise where.error(("startup",), f"startup must be one of {', '.join(sorted(STARTUP))}, got {startup!r}")
+    return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env, startup=startup)
 
 
 __all__ = ["NodeSpec", "LaunchFile", "parse_launch_file", "resolve_executable", "ConfigError"]

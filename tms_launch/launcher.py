@@ -3,7 +3,9 @@
 * Starts nodes in file order, each in its own process group, with stdout and stderr merged and
   every line prefixed ``[node_name]``.
 * Waits until each node is visible on the ROS graph (its name and namespace) before starting the
-  next one, and prints a progress line ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
+  next one (``startup: sequential``, the default) or starts all at once and then waits for each
+  (``startup: parallel``, quicker for big launches), and prints progress lines
+  ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
 * Ctrl-C (SIGINT) or SIGTERM stops everything within 5 s: SIGINT to every node, then SIGTERM after
   2.5 s, then SIGKILL after 4 s.
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
@@ -120,9 +122,9 @@ class Launcher:
     def _finished_job(run: Running) -> bool:
         return run.spec.on_exit == "shutdown" and run.proc.returncode == 0
 
-    def _wait_ready(self, run: Running) -> str | None:
+    def _wait_ready(self, run: Running, started: float | None = None) -> str | None:
         """Wait until ``run`` is visible; returns an error text when it died or timed out."""
-        deadline = time.monotonic() + run.spec.ready_timeout
+        deadline = (started or time.monotonic()) + run.spec.ready_timeout
         while time.monotonic() < deadline and not self._stop.is_set():
             if run.proc.poll() is not None:
                 if self._finished_job(run):
@@ -168,7 +170,20 @@ class Launcher:
         nodes = self.launch.nodes
         error: str | None = None
         try:
-            for index, spec in enumerate(nodes, 1):
+            if self.launch.startup == "parallel":
+                began = time.monotonic()
+                for index, spec in enumerate(nodes, 1):
+                    self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.package}/{spec.executable})")
+                    self.start(spec)
+                for run in list(self.running):
+                    if self._stop.is_set():
+                        break
+                    error = self._wait_ready(run, began)
+                    if error:
+                        break
+                    up = [r.spec.name for r in self.running if r.ready]
+                    self.log(f"running {len(up)}/{len(nodes)}: {', '.join(up)}")
+            for index, spec in enumerate(nodes if self.launch.startup == "sequential" else (), 1):
                 if self._stop.is_set():
                     break
                 self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.package}/{spec.executable})")

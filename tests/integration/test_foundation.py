@@ -176,3 +176,13 @@ def test_launcher_ends_cleanly_when_a_job_node_finishes(procs, tmp_path):
     assert launcher.wait(90) == 0, launcher.output
     assert "[client] status SUCCEEDED" in launcher.output
     assert "client finished; stopping the launch" in launcher.output
+
+
+def test_launcher_parallel_startup_brings_all_nodes_up(procs, tmp_path):
+    launcher = _launcher(procs, _write(tmp_path, "startup: parallel\n" + THREE_NODES))
+    assert launcher.wait_for("all 3 node(s) of 'three' are up", timeout=90), launcher.output
+    starts = [i for i, line in enumerate(launcher.lines) if "[tms-launch] starting" in line]
+    first_running = next(i for i, line in enumerate(launcher.lines) if "[tms-launch] running" in line)
+    assert len(starts) == 3 and max(starts) < first_running  # all started before any was waited for
+    launcher.signal(2)
+    assert launcher.wait(10) == 0
