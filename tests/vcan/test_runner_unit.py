@@ -41,6 +41,8 @@ def test_shipped_config_loads_and_bounds_the_run_well_under_ci_limit():
         (lambda t: t.replace("boot_timeout_s: 240", "boot_timeout_s: 5000"), "need 0 < boot_timeout_s <= timeout_s"),
         (lambda t: t.replace("time_scale: 6", "time_scale: 0"), "time_scale must be > 0"),
         (lambda t: t.replace("cpus: 2", "cpus: 2\nram: 1G"), "unknown key(s) ['ram']"),
+        (lambda t: t.replace("known_failures:", "known_failures:\n  test_x: no reason given\n  other:"),
+         "known_failures: each key must be a test id"),
         (lambda t: "\n".join(line for line in t.splitlines() if not line.startswith("interface:")),
          "missing key 'interface'"),
     ],
@@ -80,6 +82,17 @@ def test_preflight_names_every_missing_tool(tmp_path, monkeypatch):
     assert "qemu-system-x86_64 not found (install: apt-get install qemu-system-x86)" in text
     assert "busybox not found (install: apt-get install busybox-static)" in text
     assert "virtme-ng not installed" in text
+
+
+def test_junit_cases_name_each_outcome(tmp_path):
+    (tmp_path / "junit.xml").write_text(
+        '<testsuites><testsuite tests="3" failures="1" errors="0" skipped="1">'
+        '<testcase classname="tests.a" name="ok" file="tests/a.py"/>'
+        '<testcase classname="tests.a" name="bad" file="tests/a.py"><failure message="x"/></testcase>'
+        '<testcase classname="tests.b" name="skip"><skipped message="y"/></testcase>'
+        '</testsuite></testsuites>')
+    assert vm.junit_cases(tmp_path / "junit.xml") == {
+        "tests/a.py::ok": "passed", "tests/a.py::bad": "failed", "tests/b.py::skip": "skipped"}
 
 
 def test_junit_summary_and_progress_parsing(tmp_path):
