@@ -56,6 +56,13 @@ function render(s) {
   }
   const ev = document.getElementById("events"); ev.replaceChildren();
   for (const e of [...s.events, ...localEvents].slice(-25).reverse()) ev.append(el("li", { className: e.level }, e.text));
+  const poses = document.querySelector("#poses tbody"); poses.replaceChildren();
+  for (const [m, p] of Object.entries(s.poses)) {
+    const tr = el("tr", { id: `pose-${m}` });
+    tr.append(el("td", {}, m), el("td", { className: "x" }, p.x.toFixed(2)), el("td", { className: "y" }, p.y.toFixed(2)), el("td", {}, p.yaw.toFixed(2)));
+    poses.append(tr);
+  }
+  document.getElementById("arm-state").textContent = s.arm.length ? `ZX200 swing ${s.swing.toFixed(2)} rad, bucket tip ${s.arm[s.arm.length - 1][0].toFixed(1)} m out, ${s.arm[s.arm.length - 1][1].toFixed(1)} m high` : "";
   const soil = document.getElementById("soil"); soil.replaceChildren();
   for (const [k, v] of Object.entries(s.soil)) soil.append(el("div", { className: "soil" }, `${k}: ${v.toFixed(2)}`));
   drawMap(s); drawArm(s);
