@@ -60,7 +60,7 @@ class VesselParams:
 
     wall_margin: float = 0.45
     clearance: float = 0.6
-    carry_theta_w: float = math.radians(-20.0)
+    carry_theta_w: float = math.radians(85.0)
     target_fill: float = 0.8
     smooth_width: float = 0.5   # [m] box filter before picking the lowest spot
 
@@ -113,7 +113,7 @@ def release_in_zx200(
     zx200: Pose2D,
     geom: VesselGeometry,
     swing_axis_in_base: tuple[float, float] = (0.0, 0.0),
-    carry_theta_w: float = math.radians(-20.0),
+    carry_theta_w: float = math.radians(85.0),
 ) -> tuple[dict[str, float | int], dict[str, float]]:
     """Vessel-frame release point -> (``target_release_pose`` fields, ``release_angle`` fields).
 

@@ -1,0 +1,106 @@
+"""Every ZX200 target the paper experiment can send passes the ZX200 planner's own validation.
+
+The seed's ZX200 records and what tms_sp writes live (excavation targets over a mound being dug, release
+points over the IC120 vessel at P1 with its arrival tolerances and any load shape) go through the same
+path as in the stack: record -> ``tms_ts.subtask_specs`` goal data -> ``tms_rp.zx200.planner``
+(change_pose / excavate / release), so a target the planner would reject (JOINT_LIMIT, OUT_OF_REACH,
+INVALID_GOAL) fails here instead of stalling the experiment. No ROS.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.tms_sp.treeutil import load_seed
+from tms_rc.zx200.controller import load_controller_config
+from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_sp import synthetic as syn
+from tms_sp.config import load_sensing_config
+from tms_sp.frames import Pose2D
+from tms_sp.heightgrid import rasterize
+from tms_sp.mound import assess_mound
+from tms_sp.vessel import assess_vessel, release_in_zx200
+
+KIN = load_kinematics()
+PLANNER = Zx200Planner(KIN, load_planner_config(), ground_min_z=load_controller_config().ground_min_z)
+CFG = load_sensing_config()
+SPILL_ANGLE = 1.2  # config/machines/zx200.yaml hydraulics.bucket.release_tip_angle: spills below this
+
+
+def _seed_zx200() -> dict[str, dict]:
+    return {d["record_name"]: d for d in load_seed()["parameters"] if d.get("model_name") == "zx200"}
+
+
+def _validate(record: str, doc: dict) -> None:
+    """Plan the record as the ZX200 subtask servers + planner would (raises the planner's error)."""
+    q_home = np.asarray(KIN.home, dtype=float)
+    if "trajectory" in doc:
+        names = [j for j in (*JOINTS, "bucket_end_joint") if j in doc]
+        PLANNER.change_pose(joint_names=names, joint_points=[[float(doc[j]) for j in names]], current_q=q_home)
+    elif record == CFG.excavation_record:
+        PLANNER.excavate([doc["x"], doc["y"], doc["z"]], doc["theta_w"], doc.get("offset", 0.0))
+    elif "position_with_angle" in doc:
+        PLANNER.change_pose(positions_with_angle=[([doc["x"], doc["y"], doc["z"]], doc["theta_w"])])
+    elif "target_angle" in doc:
+        PLANNER.release(doc["target_angle"], q_home)
+    else:
+        raise AssertionError(f"{record}: unknown ZX200 record shape {sorted(doc)}")
+
+
+@pytest.mark.parametrize("record", sorted(_seed_zx200()))
+def test_every_seeded_zx200_record_passes_planner_validation(record):
+    _validate(record, _seed_zx200()[record])
+
+
+def test_carry_angle_holds_the_soil():
+    assert CFG.vessel.carry_theta_w > SPILL_ANGLE + 0.2, "carry angle would spill the bucket (theta_w convention)"
+
+
+def _vessel_grid(volume: float, cx: float, rng: np.random.Generator):
+    g = CFG.vessel_geom
+    spec = g.grid_spec(CFG.resolution)
+    surface = syn.vessel_heap(volume, g.inner_length, g.inner_width, cx=cx) if volume > 0 else (lambda x, y: 0 * x)
+    pts = syn.scan(surface, (spec.x_min, spec.x_max), (spec.y_min, spec.y_max), 6000, rng, noise=0.02)
+    return rasterize(pts, spec, sensor="vessel")
+
+
+def test_every_sensed_release_target_passes_planner_validation():
+    """IC120 anywhere tms_sp accepts as arrived at P1 (+-0.6 m, +-10 deg) x load shapes up to the target fill."""
+    rng = np.random.default_rng(11)
+    p1 = CFG.points["P1"]
+    tol, yaw_tol = CFG.arrival.position_tolerance, CFG.arrival.yaw_tolerance
+    cap = CFG.vessel_geom.capacity
+    checked = 0
+    for volume in (0.0, 0.3 * cap, 0.6 * cap, CFG.vessel.target_fill * cap):
+        for cx in (-1.0, 0.0, 1.0):
+            va = assess_vessel(_vessel_grid(volume, cx, rng), CFG.vessel_geom, CFG.vessel)
+            for dx, dy, dyaw in ((0, 0, 0), (tol, 0, 0), (-tol, 0, 0), (0, tol, yaw_tol), (0, -tol, -yaw_tol)):
+                ic = Pose2D(x=p1.x + dx, y=p1.y + dy, yaw=p1.yaw + dyaw)
+                pose, angle = release_in_zx200(va.release_xyz, ic, CFG.zx200_base, CFG.vessel_geom,
+                                               CFG.swing_axis_in_base, CFG.vessel.carry_theta_w)
+                _validate(CFG.release_record, pose)
+                _validate(CFG.angle_record, angle)
+                checked += 1
+    assert checked == 60
+
+
+def test_every_sensed_excavation_target_passes_planner_validation():
+    """Excavation targets over the seeded mound while it is dug down pass by pass."""
+    rng = np.random.default_rng(12)
+    m = CFG.mound
+    surface = syn.truncated_cone(m.cx, m.cy, m.base_radius, m.top_radius, m.height, m.ground_z)
+    xg, yg = CFG.mound_grid.centres()
+    seen = 0
+    for _ in range(12):
+        z = surface(xg, yg) + rng.normal(0.0, 0.02, xg.shape)
+        grid = rasterize(np.column_stack([xg.ravel(), yg.ravel(), z.ravel()]), CFG.mound_grid)
+        a = assess_mound(grid, CFG.swing_axis_map(), CFG.excavation)
+        if a.target is None:
+            break
+        fields = a.target.record_fields(CFG.zx200_base)
+        _validate(CFG.excavation_record, fields)
+        seen += 1
+        surface = syn.dig_pit(surface, a.target.x, a.target.y, radius=0.7, depth=0.5)
+    assert seen >= 5
