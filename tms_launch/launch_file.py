@@ -18,7 +18,7 @@ A launch file::
         required: true               # default true: its death stops the launch with an error
         on_exit: shutdown            # optional: when this node exits 0 the whole launch ends with 0
                                      # (a job node, e.g. the experiment supervisor); non-zero is an error
-        ready_timeout: 30            # seconds to wait until the node is visible on the ROS graph
+        ready_timeout: 90            # seconds to wait until the node is visible on the ROS graph
 
 Every problem (malformed YAML, unknown key, unknown executable, duplicate name) is a
 :class:`~tms_common.errors.ConfigError` naming the file and line; nothing is started.
@@ -68,7 +68,7 @@ class NodeSpec:
     arguments: tuple[str, ...] = ()
     env: dict[str, str] = field(default_factory=dict)
     required: bool = True
-    ready_timeout: float = 30.0
+    ready_timeout: float = 90.0
     on_exit: str = "error"
 
     @property
@@ -192,7 +192,7 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
         args = _expect(where, at + ("arguments",), raw.get("arguments", []) or [], list, f"node {name!r}: 'arguments'")
         node_env = _expect(where, at + ("env",), raw.get("env", {}) or {}, dict, f"node {name!r}: 'env'")
         required = _expect(where, at + ("required",), raw.get("required", True), bool, f"node {name!r}: 'required'")
-        timeout = _expect(where, at + ("ready_timeout",), raw.get("ready_timeout", 30.0), (int, float), f"node {name!r}: 'ready_timeout'")
+        timeout = _expect(where, at + ("ready_timeout",), raw.get("ready_timeout", 90.0), (int, float), f"node {name!r}: 'ready_timeout'")
         on_exit = _expect(where, at + ("on_exit",), raw.get("on_exit", "error"), str, f"node {name!r}: 'on_exit'")
         if on_exit not in ON_EXIT:
             raise where.error(at + ("on_exit",), f"node {name!r}: on_exit must be one of {', '.join(sorted(ON_EXIT))}, got {on_exit!r}")
