@@ -19,8 +19,8 @@ if [ "${TMS_VM:-1}" = "0" ]; then
   exit 0
 fi
 
-# One setup at a time (parallel make targets or shells).
-exec 8>"$PWD/.vm-setup.lock"
+# One setup at a time (parallel make targets or shells); the lock lives outside the work tree.
+exec 8>"${TMPDIR:-/tmp}/tms-vm-setup.lock"
 flock 8
 
 # A kernel image under /boot whose modules directory has vcan (the running kernel is not needed).
