@@ -379,7 +379,7 @@ def load_plant(
     path = Path(path) if path else config_path("sim", "plant.yaml")
     data, where = load_yaml(path)
     top = _Reader(data, where)
-    top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "soil", "sensors"})
+    top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "initial_front", "soil", "sensors"})
     m = top.sub("machines")
     m.only({"zx200", "ic120"})
     base = config_path()
@@ -430,8 +430,15 @@ def load_plant(
         imu_sigma=sn.number("imu_sigma", lo=0.0),
         seed=int(sn.number("seed", lo=0)),
     )
+    zx = load_zx200(zx_path)
+    if top.has("initial_front"):  # ZX200 front joints at start (default: the machine file's home_pose)
+        import dataclasses
+
+        names = list(zx.home_pose)
+        front = top.per_name("initial_front", names)
+        zx = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
     return PlantSpec(
-        zx200=load_zx200(zx_path),
+        zx200=zx,
         ic120=load_ic120(ic_path),
         site=load_site(site_path),
         soil=soil,

@@ -31,6 +31,13 @@ from tms_ur.experiment_core import ExperimentRecorder
 
 STATE_NAMES = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
 DONE = {"SUCCESS", "FAILURE", "CANCELED"}
+# Action servers the paper trees need (contracts D and E): planning and subtask servers of both machines.
+DEFAULT_ACTIONS = (
+    "/zx200/tms_rp_zx200_change_pose", "/zx200/tms_rp_zx200_excavate_simple", "/zx200/tms_rp_zx200_release_simple",
+    "/ic120/follow_waypoints", "/ic120/navigate_to_pose", "/ic120/set_dump_angle",
+    "/zx200/subtask_zx200_change_pose", "/zx200/subtask_zx200_excavate_simple", "/zx200/subtask_zx200_release_simple",
+    "/ic120/st_ic120_follow_waypoints", "/ic120/st_ic120_navigate_anywhere", "/ic120/st_ic120_release_soil",
+)
 
 
 def _yaw(q) -> float:  # noqa: ANN001
@@ -57,6 +64,9 @@ def _make_node():  # noqa: ANN202
             self.record = d("blackboard_record", "PAPER_BLACKBOARD").value
             self.timeout = float(d("timeout_s", 3600.0).value)
             self.progress_period = float(d("progress_period_s", 2.0).value)
+            # Tasks start only once every planning and subtask action server is on the graph: with the
+            # launcher's parallel start-up a leaf sent before its server exists fails the task at once.
+            self.wait_for_actions = [str(a) for a in d("wait_for_actions", list(DEFAULT_ACTIONS)).value]
             runs = Path(d("runs_dir", "runs").value)
             self.run_dir = (runs if runs.is_absolute() else repo_root() / runs) / datetime.now().strftime("%Y%m%d-%H%M%S")
             self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
@@ -147,7 +157,7 @@ def _make_node():  # noqa: ANN202
             except KeyError:
                 pass
             if not self.started:
-                if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0:
+                if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0 and not self._missing_actions():
                     self.pub_start.publish(TaskIds(task_ids=self.task_ids))
                     self.started = True
                     self._t0 = (time.monotonic(), self.sim_t)
@@ -169,6 +179,14 @@ def _make_node():  # noqa: ANN202
             elif self.sim_t - (self.rec.sim_start or self.sim_t) > self.timeout:
                 print(f"[experiment] timeout: {self.timeout:g} s of simulated time", flush=True)
                 self._finish(timed_out=True)
+
+        def _missing_actions(self) -> list[str]:
+            # the server publishes <action>/_action/status (clients only subscribe to it)
+            missing = [a for a in self.wait_for_actions if self.count_publishers(f"{a}/_action/status") == 0]
+            if missing and time.monotonic() - self._last_progress >= self.progress_period:
+                self._last_progress = time.monotonic()
+                print(f"[experiment] waiting for action server(s): {', '.join(missing)}", flush=True)
+            return missing
 
         def _failed(self) -> bool:
             return any(t.get("state") == "FAILURE" for t in self.tasks.values())

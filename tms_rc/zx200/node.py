@@ -45,6 +45,13 @@ def _make_node():  # noqa: ANN202
             machine_path = self.declare_parameter("machine_config", "").value or None
             self.kin = load_kinematics(machine_path)
             self.cfg = load_controller_config(cfg_path)
+            rate = float(self.declare_parameter("rate_hz", 0.0).value)  # 0 = rate_hz of the config file
+            if rate < 0:
+                raise ValueError(f"zx200_arm_controller: rate_hz must be >= 0, got {rate}")
+            if rate > 0:  # e.g. 50 Hz in the two-machine launch, whose /clock comes every 20 ms
+                import dataclasses
+
+                self.cfg = dataclasses.replace(self.cfg, rate_hz=rate)
             self.ctl = ArmController(self.kin, self.cfg)
             self._lock = threading.Lock()
             self._q: np.ndarray | None = None
