@@ -99,7 +99,8 @@ def test_frame_written_by_raw_socket_is_decoded_through_open_bus(raw_can):
 @pytest.mark.integration
 def test_converter_node_frames_on_vcan0_read_by_raw_socket(procs, ros_node, raw_can):
     """com3_bridge on socketcan: a front_cmd becomes Velocity_Cmd_1 with the right id and bytes on vcan0; when
-    commands stop, the watchdog puts neutral bytes on the wire; a Front_Angle written raw reaches joint_states.
+    commands stop, the watchdog puts neutral bytes on the wire; garbled raw frames do not kill it and a valid
+    Front_Angle written raw then reaches joint_states; once emg_stop is latched, commands never reach the wire.
 
     One bridge process serves all three checks (its start-up under software emulation costs tens of seconds).
     """
@@ -143,7 +144,14 @@ def test_converter_node_frames_on_vcan0_read_by_raw_socket(procs, ros_node, raw_
     neutral = velocity_cmd_1_bytes(0.0, 0.0, 0.0, 0.0)
     assert wait_for_frame(VELOCITY_CMD_1, neutral, timeout=30.0, publish=False), (
         f"no neutral Velocity_Cmd_1 after commands stopped\n{bridge.output}")
-    # 3. state direction: raw writer -> vcan0 -> converter -> joint_states
+    # 3. garbled frames from the wire (unknown id, wrong DLC, standard id), paced, must not kill the converter
+    for i in range(30):
+        raw_send(raw_can, 0x18FFFFF0 + (i % 8), bytes([i] * 8))
+        raw_send(raw_can, FRONT_ANGLE, bytes([0xFF] * 3))
+        raw_can.send(CAN_FRAME.pack(0x123, 8, bytes(8)))
+        spin(timeout_sec=0.02)
+    assert bridge.popen.poll() is None, f"com3_bridge died on garbled frames\n{bridge.output}"
+    # 4. state direction: raw writer -> vcan0 -> converter -> joint_states
     deadline = time.monotonic() + 60.0
     got: dict[str, float] = {}
     while time.monotonic() < deadline and not got:
@@ -159,3 +167,28 @@ def test_converter_node_frames_on_vcan0_read_by_raw_socket(procs, ros_node, raw_
     assert got["arm_joint"] == pytest.approx(-1.0, abs=1e-3)
     assert got["bucket_joint"] == pytest.approx(0.25, abs=1e-3)
     assert got["swing_joint"] == pytest.approx(0.0, abs=1e-3)
+    # 5. emg_stop latch: after it is set, commands are refused and only neutral frames are on the wire
+    from std_msgs.msg import Bool
+
+    emg = ros_node.create_publisher(Bool, "/zx200/emg_stop", 10)
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline and not bridge.wait_for("emg_stop latched", 0.2):
+        emg.publish(Bool(data=True))
+        spin(timeout_sec=0.05)
+    assert bridge.wait_for("emg_stop latched", 1.0), f"emg_stop never latched\n{bridge.output}"
+    drain_end = time.monotonic() + 1.0  # drop what was queued before the latch took effect
+    while time.monotonic() < drain_end and raw_recv(raw_can) is not None:
+        pass
+    leaked: list[bytes] = []
+    neutral_seen = 0
+    end = time.monotonic() + 5.0
+    while time.monotonic() < end:
+        pub.publish(cmd)
+        spin(timeout_sec=0.02)
+        frame = raw_recv(raw_can)
+        if frame and frame[0] == VELOCITY_CMD_1:
+            neutral_seen += frame[2] == neutral
+            if frame[2] != neutral:
+                leaked.append(frame[2])
+    assert not leaked, f"motion frames on the wire while emg_stop is latched: {[d.hex() for d in leaked[:5]]}"
+    assert neutral_seen > 0, "no Velocity_Cmd_1 at all while emg_stop is latched"
