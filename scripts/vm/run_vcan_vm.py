@@ -69,6 +69,7 @@ class VmConfig:
     module: str
     interface: str
     time_scale: float
+    boot_attempts: int
     pytest_args: tuple[str, ...]
     known_failures: dict[str, str] = field(default_factory=dict)
 
@@ -82,6 +83,7 @@ _FIELDS: dict[str, type | tuple[type, ...]] = {
     "module": str,
     "interface": str,
     "time_scale": (int, float),
+    "boot_attempts": int,
     "pytest_args": list,
     "known_failures": dict,
 }
@@ -111,6 +113,8 @@ def load_config(path: Path = DEFAULT_CONFIG) -> VmConfig:
     bad = [k for k, v in known.items() if not (isinstance(k, str) and "::" in k and isinstance(v, str) and v.strip())]
     if bad:
         raise VmConfigError(f"{path}: known_failures: each key must be a test id 'file::name' with a reason, got {bad}")
+    if not 1 <= data["boot_attempts"] <= 3:
+        raise VmConfigError(f"{path}: boot_attempts must be 1..3, got {data['boot_attempts']}")
     if data["time_scale"] <= 0:
         raise VmConfigError(f"{path}: time_scale must be > 0, got {data['time_scale']}")
     if not re.fullmatch(r"[A-Za-z0-9_-]+", data["module"]) or not re.fullmatch(r"[A-Za-z0-9_.-]+", data["interface"]):
@@ -205,6 +209,7 @@ class VmResult:
     tests: dict[str, int] = field(default_factory=dict)
     known_failed: dict[str, str] = field(default_factory=dict)
     known_passed: list[str] = field(default_factory=list)
+    boot_failures: list[str] = field(default_factory=list)
     guest_failure: str = ""
     outdir: str = ""
 
@@ -275,28 +280,45 @@ def run_vm(cfg: VmConfig, pre: Prereqs, outdir: Path, extra_pytest_args: list[st
     progress_file = outdir / "progress"
     start = time.monotonic()
     phases: dict[str, float] = {}
-    with console.open("wb") as log:
-        proc = subprocess.Popen(vng_command(cfg, pre, outdir), stdin=subprocess.DEVNULL, stdout=log,
-                                stderr=subprocess.STDOUT, env=env, cwd=ROOT, start_new_session=True)
-        timed_out = ""
-        try:
-            while proc.poll() is None:
-                elapsed = time.monotonic() - start
-                for phase, _ in read_progress(progress_file):
-                    phases.setdefault(phase, round(elapsed, 1))
-                if "guest-started" not in phases and elapsed > cfg.boot_timeout_s:
-                    timed_out = (f"VM boot timed out: the guest script had not started after {cfg.boot_timeout_s:.0f} s "
-                                 f"(kernel {pre.kernel_version})")
-                elif elapsed > cfg.timeout_s:
-                    last = max(phases, key=phases.__getitem__) if phases else "boot"
-                    timed_out = f"VM timed out after {cfg.timeout_s:.0f} s (last phase reached: {last})"
-                if timed_out:
+    boot_failures: list[str] = []
+    for attempt in range(1, cfg.boot_attempts + 1):
+        # A retry only for a boot that never reached the guest script (qemu crash, boot hang), and only
+        # while a whole boot still fits in the overall bound.
+        if attempt > 1 and time.monotonic() - start + cfg.boot_timeout_s > cfg.timeout_s:
+            break
+        progress_file.unlink(missing_ok=True)
+        phases = {}
+        attempt_start = time.monotonic()
+        with console.open("ab") as log:
+            log.write(f"--- {TAG} boot attempt {attempt}\n".encode())
+            log.flush()
+            proc = subprocess.Popen(vng_command(cfg, pre, outdir), stdin=subprocess.DEVNULL, stdout=log,
+                                    stderr=subprocess.STDOUT, env=env, cwd=ROOT, start_new_session=True)
+            timed_out = ""
+            try:
+                while proc.poll() is None:
+                    elapsed = time.monotonic() - start
+                    for phase, _ in read_progress(progress_file):
+                        phases.setdefault(phase, round(elapsed, 1))
+                    if "guest-started" not in phases and time.monotonic() - attempt_start > cfg.boot_timeout_s:
+                        timed_out = (f"VM boot timed out: the guest script had not started after "
+                                     f"{cfg.boot_timeout_s:.0f} s (kernel {pre.kernel_version})")
+                    elif elapsed > cfg.timeout_s:
+                        last = max(phases, key=phases.__getitem__) if phases else "boot"
+                        timed_out = f"VM timed out after {cfg.timeout_s:.0f} s (last phase reached: {last})"
+                    if timed_out:
+                        _kill_group(proc)
+                        break
+                    time.sleep(POLL_S)
+            finally:
+                if proc.poll() is None:
                     _kill_group(proc)
-                    break
-                time.sleep(POLL_S)
-        finally:
-            if proc.poll() is None:
-                _kill_group(proc)
+        for phase, _ in read_progress(progress_file):
+            phases.setdefault(phase, round(time.monotonic() - start, 1))
+        if "guest-started" in phases:
+            break
+        boot_failures.append(timed_out or f"qemu/vng exited {proc.returncode} before the guest script ran")
+        print(f"{TAG} boot attempt {attempt} failed: {boot_failures[-1]}", flush=True)
     wall = round(time.monotonic() - start, 1)
     for phase, _ in read_progress(progress_file):
         phases.setdefault(phase, wall)
@@ -314,14 +336,15 @@ def run_vm(cfg: VmConfig, pre: Prereqs, outdir: Path, extra_pytest_args: list[st
             result.tests = {}
     failed = {case for case, outcome in cases.items() if outcome in ("failed", "error")}
     stale = sorted(case for case in cfg.known_failures if cases.get(case) == "passed")
+    result.boot_failures = boot_failures
     if timed_out:
         result.reason = f"{timed_out}; console tail:\n{_tail(console)}"
     elif proc.returncode in GUEST_FAILURES and fails:
         result.guest_failure = fails[-1]
         result.reason = f"VM {GUEST_FAILURES[proc.returncode]} failed: {fails[-1]}"
     elif "guest-started" not in phases:
-        result.reason = (f"VM failed before the guest script ran (vng exit {proc.returncode}); "
-                         f"console tail:\n{_tail(console)}")
+        result.reason = (f"VM failed before the guest script ran (vng exit {proc.returncode}; boot attempts: "
+                         f"{boot_failures}); console tail:\n{_tail(console)}")
     elif proc.returncode != 0 and not (proc.returncode == 1 and failed and failed <= set(cfg.known_failures)):
         unknown = sorted(failed - set(cfg.known_failures))
         result.reason = (f"tests failed inside the VM (pytest exit {proc.returncode}); {_summary_line(outdir)}"
