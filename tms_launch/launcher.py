@@ -37,9 +37,10 @@ _PR_SET_PDEATHSIG = 1
 
 
 def _die_with_parent() -> None:
-    """Child-side: receive SIGTERM if the launcher itself dies, so no node outlives it."""
+    """Child-side: receive SIGKILL if the launcher itself dies, so no node outlives it (SIGTERM is not
+    enough: a node stuck in a callback ignores it)."""
     try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
     except OSError:
         pass
     os.setpgrp()
