@@ -56,6 +56,12 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
             channel = str(self.declare_parameter("can_channel", "").value)
             port = int(self.declare_parameter("can_port", 0).value)
             watchdog = float(self.declare_parameter("watchdog_s", 0.5).value)
+            # joint_states at most once per this period [s of the node clock] per joint set; 0 = every
+            # state frame (100 Hz for the ZX200 front). Every subscriber pays per message.
+            self._js_period = float(self.declare_parameter("joint_states_period_s", 0.0).value)
+            if self._js_period < 0:
+                raise ConfigError(f"com3_bridge: joint_states_period_s must be >= 0, got {self._js_period}")
+            self._js_last: dict[tuple[str, ...], float] = {}
             if machine not in ("zx200", "ic120"):
                 raise ConfigError(f"com3_bridge: parameter machine must be zx200 or ic120, got {machine!r}")
             cfg = load_bus_config(machine, can_config or None)
@@ -141,6 +147,11 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
 
         def _publish(self, out: Any, stamp: Any) -> None:
             if isinstance(out, JointStateOut):
+                if self._js_period > 0:
+                    key, t = tuple(out.name), stamp.sec + stamp.nanosec * 1e-9
+                    if t - self._js_last.get(key, -1e18) < self._js_period - 1e-6:
+                        return
+                    self._js_last[key] = t
                 js = JointState()
                 js.header.stamp = stamp
                 js.name, js.position, js.velocity = list(out.name), list(out.position), list(out.velocity)
