@@ -12,7 +12,8 @@ function connect() {
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);
     if (msg.type === "state") { last = msg; render(msg); }
-    else if (msg.type === "ack") { addEvent(msg.ok ? "info" : "error", msg.text); }
+    // acks are also logged by the server and arrive with the next snapshot
+    else if (msg.type === "ack" && !msg.ok) { console.warn(msg.text); }
   };
 }
 function setConn(ok) { const c = document.getElementById("conn"); c.textContent = ok ? "live" : "disconnected"; c.className = ok ? "ok" : "bad"; }
