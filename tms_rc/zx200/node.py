@@ -24,6 +24,9 @@ from tms_common.node import run_node
 __all__ = ["main"]
 
 
+JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states
+
+
 def _make_node():  # noqa: ANN202
     from rclpy.action import ActionServer, CancelResponse, GoalResponse
     from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -89,8 +92,13 @@ def _make_node():  # noqa: ANN202
             self._pub.publish(msg)
 
         def _on_goal(self, goal) -> GoalResponse:  # noqa: ANN001
+            # Right after start-up the first joint_states may still be on its way (the plant, the CAN
+            # converter and this node start together): wait a bounded time before refusing.
+            deadline = time.monotonic() + JOINT_STATES_WAIT_S
+            while self._q is None and time.monotonic() < deadline:
+                time.sleep(0.05)
             if self._q is None:
-                self.get_logger().warning("goal rejected: no joint_states received yet")
+                self.get_logger().warning(f"goal rejected: no joint_states received within {JOINT_STATES_WAIT_S:g} s")
                 return GoalResponse.REJECT
             return GoalResponse.ACCEPT
 
