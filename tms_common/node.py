@@ -47,10 +47,12 @@ def run_node(
     args: Sequence[str] | None = None,
     *,
     executor: str | None = None,
+    threads: int = 8,
 ) -> int:
     """Initialise rclpy, create the node with ``factory`` and spin until shutdown.
 
-    Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when the node raised; the exception is
+    ``threads`` sizes the ``multi`` executor. Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when
+    the node raised; the exception is
     printed with the node's name so a launcher log shows which node died and why.
     """
     import rclpy
@@ -60,7 +62,7 @@ def run_node(
     node = None
     try:
         node = factory()
-        spinner = make_executor(executor)
+        spinner = make_executor(executor, threads=threads)
         spinner.add_node(node)
         spinner.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
