@@ -3,6 +3,7 @@
 const token = new URLSearchParams(location.search).get("token");
 let ws = null;
 let last = null;
+const picked = new Set();
 
 function connect() {
   const url = `ws://${location.host}/ws` + (token ? `?token=${encodeURIComponent(token)}` : "");
@@ -35,8 +36,12 @@ function el(tag, attrs = {}, text = "") { const e = document.createElement(tag);
 function render(s) {
   const cat = document.querySelector("#catalogue tbody"); cat.replaceChildren();
   for (const t of s.catalogue) {
-    const tr = el("tr"); const cb = el("input", { type: "checkbox", value: t.task_id, className: "pick" });
-    cb.onchange = () => { document.getElementById("task-ids").value = [...document.querySelectorAll(".pick:checked")].map(c => c.value).join(" "); };
+    // The table is rebuilt on every snapshot: the selection lives in `picked`, not in the DOM.
+    const tr = el("tr"); const cb = el("input", { type: "checkbox", value: t.task_id, className: "pick", checked: picked.has(t.task_id) });
+    cb.onchange = () => {
+      if (cb.checked) picked.add(t.task_id); else picked.delete(t.task_id);
+      document.getElementById("task-ids").value = [...picked].sort((a, b) => a - b).join(" ");
+    };
     const td0 = el("td"); td0.append(cb);
     tr.append(td0, el("td", {}, String(t.task_id)), el("td", {}, t.model_name), el("td", {}, t.description)); cat.append(tr);
   }
