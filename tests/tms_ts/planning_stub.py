@@ -8,6 +8,8 @@ succeeds; a cancel stops it at once and ends CANCELED (the "machine at rest" con
 
 from __future__ import annotations
 
+import sys
+import threading
 import time
 
 from rclpy.action import ActionServer, CancelResponse
@@ -36,6 +38,16 @@ ACTIONS = {
 }
 
 
+_PRINT_LOCK = threading.Lock()
+
+
+def _say(line: str) -> None:
+    """One whole line per write: ``print`` from two executor threads can interleave two lines into one."""
+    with _PRINT_LOCK:
+        sys.stdout.write(line + "\n")
+        sys.stdout.flush()
+
+
 def _result(action_type, ok: bool):  # noqa: ANN001, ANN202
     res = action_type.Result()
     if hasattr(res, "error_code") and hasattr(res.error_code, "val"):
@@ -60,24 +72,24 @@ class PlanningStub(Node):
             for m in models
             for name, t in ACTIONS.items()
         ]
-        print(f"planning stub ready {models}", flush=True)
+        _say(f"planning stub ready {models}")
 
     def _run(self, gh, name: str, action_type):  # noqa: ANN001, ANN202
-        print(f"GOAL {name}", flush=True)
+        _say(f"GOAL {name}")
         end = time.monotonic() + self.duration
         while time.monotonic() < end:
             if gh.is_cancel_requested and not self.ignore_cancel:
                 time.sleep(0.05)  # "bring the machine to rest"
                 gh.canceled()
-                print(f"CANCELED {name}", flush=True)
+                _say(f"CANCELED {name}")
                 return _result(action_type, False)
             time.sleep(0.01)
         if gh.is_cancel_requested:
             gh.canceled()
-            print(f"CANCELED {name}", flush=True)
+            _say(f"CANCELED {name}")
             return _result(action_type, False)
         gh.succeed()
-        print(f"DONE {name}", flush=True)
+        _say(f"DONE {name}")
         return _result(action_type, True)
 
 
