@@ -37,8 +37,15 @@ def _idle_error(node: ControlNode | DecoratorNode) -> TreeRuntimeError:
 # ---------------------------------------------------------------------------------------------
 # controls
 # ---------------------------------------------------------------------------------------------
-class Sequence(ControlNode):
-    """Ticks children in order, remembering the RUNNING child; any FAILURE resets to child 0."""
+class _MemoryWalk(ControlNode):
+    """Ticks children in order, remembering the RUNNING child, until one returns ``STOP_ON``.
+
+    Sequence stops on FAILURE and Fallback on SUCCESS; a child returning the other outcome lets the walk
+    go on to the next child, and when every child has, the walk returns that outcome (``GO_ON``).
+    """
+
+    STOP_ON: Status
+    GO_ON: Status
 
     def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
         super().__init__(*args, **kwargs)
@@ -48,109 +55,78 @@ class Sequence(ControlNode):
         super()._reset()
         self.index = 0
 
+    def _stopped(self) -> None:
+        """The walk ended on ``STOP_ON``: halt and start from child 0 next time."""
+        self.halt_children()
+        self.index = 0
+
     def _tick(self) -> Status:
         children = self.children
         while self.index < len(children):
             status = children[self.index].execute_tick()
             if status is RUNNING:
                 return RUNNING
-            if status is FAILURE:
-                self.halt_children()
-                self.index = 0
-                return FAILURE
-            if status is not SUCCESS:
+            if status is self.STOP_ON:
+                self._stopped()
+                return status
+            if status is not self.GO_ON:
                 raise _idle_error(self)
             self.index += 1
         self.halt_children()
         self.index = 0
-        return SUCCESS
+        return self.GO_ON
+
+
+class Sequence(_MemoryWalk):
+    """Ticks children in order, remembering the RUNNING child; any FAILURE resets to child 0."""
+
+    STOP_ON, GO_ON = FAILURE, SUCCESS
 
 
 class SequenceStar(Sequence):
     """Sequence with memory: a FAILURE does not reset the index; the failed child is retried next tick."""
 
-    def _tick(self) -> Status:
-        children = self.children
-        while self.index < len(children):
-            status = children[self.index].execute_tick()
-            if status is RUNNING:
-                return RUNNING
-            if status is FAILURE:
-                self.halt_children(self.index)
-                return FAILURE
-            if status is not SUCCESS:
-                raise _idle_error(self)
-            self.index += 1
-        self.halt_children()
-        self.index = 0
-        return SUCCESS
+    def _stopped(self) -> None:
+        self.halt_children(self.index)
 
 
-class Fallback(ControlNode):
+class Fallback(_MemoryWalk):
     """Ticks children in order until one succeeds, remembering the RUNNING child."""
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
-        super().__init__(*args, **kwargs)
-        self.index = 0
-
-    def _reset(self) -> None:
-        super()._reset()
-        self.index = 0
-
-    def _tick(self) -> Status:
-        children = self.children
-        while self.index < len(children):
-            status = children[self.index].execute_tick()
-            if status is RUNNING:
-                return RUNNING
-            if status is SUCCESS:
-                self.halt_children()
-                self.index = 0
-                return SUCCESS
-            if status is not FAILURE:
-                raise _idle_error(self)
-            self.index += 1
-        self.halt_children()
-        self.index = 0
-        return FAILURE
+    STOP_ON, GO_ON = SUCCESS, FAILURE
 
 
-class ReactiveSequence(ControlNode):
-    """Re-ticks from child 0 every tick; a RUNNING child halts the children after it."""
+class _ReactiveWalk(ControlNode):
+    """Re-ticks from child 0 every tick until one returns ``STOP_ON``; a RUNNING child halts the ones after it."""
+
+    STOP_ON: Status
+    GO_ON: Status
 
     def _tick(self) -> Status:
-        children = self.children
-        for i, child in enumerate(children):
+        for i, child in enumerate(self.children):
             status = child.execute_tick()
             if status is RUNNING:
                 self.halt_children(i + 1)
                 return RUNNING
-            if status is FAILURE:
+            if status is self.STOP_ON:
                 self.halt_children()
-                return FAILURE
-            if status is not SUCCESS:
+                return status
+            if status is not self.GO_ON:
                 raise _idle_error(self)
         self.halt_children()
-        return SUCCESS
+        return self.GO_ON
 
 
-class ReactiveFallback(ControlNode):
-    """Re-ticks from child 0 every tick; a RUNNING child halts the children after it."""
+class ReactiveSequence(_ReactiveWalk):
+    """Re-ticks from child 0 every tick; a RUNNING child halts the children after it; FAILURE stops."""
 
-    def _tick(self) -> Status:
-        children = self.children
-        for i, child in enumerate(children):
-            status = child.execute_tick()
-            if status is RUNNING:
-                self.halt_children(i + 1)
-                return RUNNING
-            if status is SUCCESS:
-                self.halt_children()
-                return SUCCESS
-            if status is not FAILURE:
-                raise _idle_error(self)
-        self.halt_children()
-        return FAILURE
+    STOP_ON, GO_ON = FAILURE, SUCCESS
+
+
+class ReactiveFallback(_ReactiveWalk):
+    """Re-ticks from child 0 every tick; a RUNNING child halts the children after it; SUCCESS stops."""
+
+    STOP_ON, GO_ON = SUCCESS, FAILURE
 
 
 class Parallel(ControlNode):
