@@ -246,61 +246,59 @@ class WhileDoElse(ControlNode):
 # ---------------------------------------------------------------------------------------------
 # decorators
 # ---------------------------------------------------------------------------------------------
-class Inverter(DecoratorNode):
+class _MapOutcome(DecoratorNode):
+    """Passes RUNNING through; once the child finishes, halts it and returns ``_outcome(status)``."""
+
+    def _outcome(self, status: Status) -> Status:
+        raise NotImplementedError
+
+    def _tick(self) -> Status:
+        status = self.child.execute_tick()
+        if status is RUNNING:
+            return RUNNING
+        self.halt_child()
+        if status is not SUCCESS and status is not FAILURE:
+            raise _idle_error(self)
+        return self._outcome(status)
+
+
+class Inverter(_MapOutcome):
     """SUCCESS <-> FAILURE; RUNNING stays RUNNING."""
 
-    def _tick(self) -> Status:
-        status = self.child.execute_tick()
-        if status is RUNNING:
-            return RUNNING
-        self.halt_child()
-        if status is SUCCESS:
-            return FAILURE
-        if status is FAILURE:
-            return SUCCESS
-        raise _idle_error(self)
+    def _outcome(self, status: Status) -> Status:
+        return FAILURE if status is SUCCESS else SUCCESS
 
 
-class ForceSuccess(DecoratorNode):
+class ForceSuccess(_MapOutcome):
     """FAILURE -> SUCCESS once the child finishes."""
 
-    def _tick(self) -> Status:
-        status = self.child.execute_tick()
-        if status is RUNNING:
-            return RUNNING
-        self.halt_child()
+    def _outcome(self, status: Status) -> Status:
         return SUCCESS
 
 
-class ForceFailure(DecoratorNode):
+class ForceFailure(_MapOutcome):
     """SUCCESS -> FAILURE once the child finishes."""
 
-    def _tick(self) -> Status:
-        status = self.child.execute_tick()
-        if status is RUNNING:
-            return RUNNING
-        self.halt_child()
+    def _outcome(self, status: Status) -> Status:
         return FAILURE
 
 
-class KeepRunningUntilFailure(DecoratorNode):
+class KeepRunningUntilFailure(_MapOutcome):
     """Child SUCCESS -> reset child, RUNNING; child FAILURE -> FAILURE."""
 
-    def _tick(self) -> Status:
-        status = self.child.execute_tick()
-        if status is RUNNING:
-            return RUNNING
-        self.halt_child()
+    def _outcome(self, status: Status) -> Status:
         return RUNNING if status is SUCCESS else FAILURE
 
 
-class Repeat(DecoratorNode):
-    """Ticks the child ``num_cycles`` times (-1 = forever) while it succeeds; a FAILURE ends it FAILURE.
+class _CountedLoop(DecoratorNode):
+    """Re-ticks the child while it returns ``GO_ON``, at most ``COUNT_PORT`` times (-1 = forever).
 
-    Loops inside one tick while the child finishes synchronously (up to ``sync_loop_budget``).
+    The child's other outcome ends the loop with that outcome; running out of rounds ends it with
+    ``GO_ON``. Loops inside one tick while the child finishes synchronously (up to ``sync_loop_budget``).
     """
 
-    PORTS = {"num_cycles": Port("int", description="repetitions, -1 = forever")}
+    COUNT_PORT: str
+    GO_ON: Status
 
     def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
         super().__init__(*args, **kwargs)
@@ -311,62 +309,39 @@ class Repeat(DecoratorNode):
         self.count = 0
 
     def _tick(self) -> Status:
-        cycles = self.get_input("num_cycles")
+        rounds = self.get_input(self.COUNT_PORT)
         budget = self.ctx.sync_loop_budget
-        while self.count < cycles or cycles == -1:
+        while self.count < rounds or rounds == -1:
             status = self.child.execute_tick()
-            if status is SUCCESS:
-                self.count += 1
-                self.halt_child()
-                budget -= 1
-                if budget <= 0 and (self.count < cycles or cycles == -1):
-                    return RUNNING
-            elif status is FAILURE:
-                self.count = 0
-                self.halt_child()
-                return FAILURE
-            elif status is RUNNING:
+            if status is RUNNING:
                 return RUNNING
+            self.halt_child()
+            if status is self.GO_ON:
+                self.count += 1
+                budget -= 1
+                if budget <= 0 and (self.count < rounds or rounds == -1):
+                    return RUNNING
+            elif status is SUCCESS or status is FAILURE:
+                self.count = 0
+                return status
             else:
                 raise _idle_error(self)
         self.count = 0
-        return SUCCESS
+        return self.GO_ON
 
 
-class RetryUntilSuccessful(DecoratorNode):
+class Repeat(_CountedLoop):
+    """Ticks the child ``num_cycles`` times (-1 = forever) while it succeeds; a FAILURE ends it FAILURE."""
+
+    PORTS = {"num_cycles": Port("int", description="repetitions, -1 = forever")}
+    COUNT_PORT, GO_ON = "num_cycles", SUCCESS
+
+
+class RetryUntilSuccessful(_CountedLoop):
     """Re-ticks a failing child up to ``num_attempts`` times (-1 = forever); SUCCESS ends it SUCCESS."""
 
     PORTS = {"num_attempts": Port("int", description="attempts, -1 = forever")}
-
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
-        super().__init__(*args, **kwargs)
-        self.tries = 0
-
-    def _reset(self) -> None:
-        super()._reset()
-        self.tries = 0
-
-    def _tick(self) -> Status:
-        attempts = self.get_input("num_attempts")
-        budget = self.ctx.sync_loop_budget
-        while self.tries < attempts or attempts == -1:
-            status = self.child.execute_tick()
-            if status is SUCCESS:
-                self.tries = 0
-                self.halt_child()
-                return SUCCESS
-            if status is FAILURE:
-                self.tries += 1
-                self.halt_child()
-                budget -= 1
-                if budget <= 0 and (self.tries < attempts or attempts == -1):
-                    return RUNNING
-            elif status is RUNNING:
-                return RUNNING
-            else:
-                raise _idle_error(self)
-        self.tries = 0
-        return FAILURE
+    COUNT_PORT, GO_ON = "num_attempts", FAILURE
 
 
 class Delay(DecoratorNode):
