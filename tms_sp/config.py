@@ -185,6 +185,7 @@ def load_sensing_config(
             yaw_tolerance=math.radians(float(_get(s, sw, a + ("yaw_tolerance_deg",)))),
             max_speed=float(_get(s, sw, a + ("max_speed",))),
             hold_s=float(_get(s, sw, a + ("hold_s",))),
+            speed_window_s=float(_get(s, sw, a + ("speed_window_s",))),
         )
     except ValueError as exc:
         raise sw.error(a, str(exc)) from None

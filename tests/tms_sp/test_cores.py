@@ -168,11 +168,12 @@ def test_release_in_zx200_frame_and_swing_angle_at_loading_point():
 
 def test_arrival_needs_position_heading_stillness_and_hold_time():
     target = Pose2D(1.2, 6.5, 0.0)
-    det = ArrivalDetector(target, ArrivalParams(position_tolerance=0.5, yaw_tolerance=math.radians(10), max_speed=0.05, hold_s=1.0))
+    det = ArrivalDetector(target, ArrivalParams(position_tolerance=0.5, yaw_tolerance=math.radians(10), max_speed=0.05,
+                                                hold_s=0.5, speed_window_s=0.5))
     # Approaching in reverse at 0.5 m/s: never arrived while moving.
     flags = [det.update(t * 0.1, Pose2D(1.2 + 3.0 - 0.05 * t, 6.5, 0.0)) for t in range(60)]
     assert not any(flags)
-    # Stopped at 0.2 m from the point: the flag rises after hold_s.
+    # Stopped at 0.2 m from the point: the flag rises after speed_window_s + hold_s.
     t0 = 6.0
     stopped = [det.update(t0 + k * 0.1, Pose2D(1.4, 6.5, 0.02)) for k in range(25)]
     assert not stopped[5] and stopped[-1]
@@ -183,6 +184,22 @@ def test_arrival_needs_position_heading_stillness_and_hold_time():
     assert not any(det2.update(k * 0.1, Pose2D(1.2, 6.5, math.pi)) for k in range(30))
     # Leaving drops it at once.
     assert not det.update(t0 + 2.6, Pose2D(1.6, 6.5, 0.0))
+
+
+def test_arrival_flag_does_not_flicker_with_millimetre_jitter_at_50_hz():
+    """A standing machine's contact jitter (1 mm at 50 Hz = 0.05 m/s between samples) keeps the flag up."""
+    target = Pose2D(1.2, 6.5, 0.0)
+    det = ArrivalDetector(target, ArrivalParams(position_tolerance=0.5, yaw_tolerance=math.radians(10), max_speed=0.05,
+                                                hold_s=0.5, speed_window_s=0.5))
+    rng = np.random.default_rng(3)
+    flags = [det.update(k * 0.02, Pose2D(1.3 + rng.uniform(-1e-3, 1e-3), 6.5 + rng.uniform(-1e-3, 1e-3), 0.0))
+             for k in range(300)]
+    first = flags.index(True)
+    assert 0.9 <= first * 0.02 <= 1.1, first
+    assert all(flags[first:]), "flag fell while the machine stood still"
+    # Creeping at 0.1 m/s (e.g. sliding) keeps it down.
+    det2 = ArrivalDetector(target, det.params)
+    assert not any(det2.update(k * 0.02, Pose2D(1.0 + 0.002 * k, 6.5, 0.0)) for k in range(150))
 
 
 def test_bad_parameters_name_the_key(tmp_path):
