@@ -64,6 +64,9 @@ def _make_node():  # noqa: ANN202
             self.record = d("blackboard_record", "PAPER_BLACKBOARD").value
             self.timeout = float(d("timeout_s", 3600.0).value)
             self.progress_period = float(d("progress_period_s", 2.0).value)
+            # The flags are polled from the DB (no change stream in the embedded store): fast enough to see
+            # LOADED_FLG's short true phase, which a 5 Hz poll missed.
+            flags_period = float(d("flags_period_s", 0.05).value)
             # Tasks start only once every planning and subtask action server is on the graph: with the
             # launcher's parallel start-up a leaf sent before its server exists fails the task at once.
             self.wait_for_actions = [str(a) for a in d("wait_for_actions", list(DEFAULT_ACTIONS)).value]
@@ -96,6 +99,7 @@ def _make_node():  # noqa: ANN202
             self.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", self._on_tip, 10)
             self.create_subscription(JointState, "/zx200/joint_states", self._on_joints, 10)
             self.create_subscription(Odometry, "/ic120/odometry/global", self._on_estimate, 10)
+            self.create_timer(flags_period, self._sample_flags)
             self.create_timer(0.2, self._tick)
 
         # -- inputs ---------------------------------------------------------------------------
@@ -148,14 +152,18 @@ def _make_node():  # noqa: ANN202
                 self._store = open_store(uri=self.db_uri or None, path=self.db_path or None)
             return self._store
 
-        def _tick(self) -> None:
+        def _sample_flags(self) -> None:
             if self.exit_code is not None:
                 return
             try:
                 doc = self._db().get_record(self.record)
-                self.rec.on_flags(self.sim_t, {k: v for k, v in doc.items() if k.endswith("_FLG") and isinstance(v, bool)})
             except KeyError:
-                pass
+                return  # not seeded yet: the tasks cannot start either
+            self.rec.on_flags(self.sim_t, {k: v for k, v in doc.items() if k.endswith("_FLG") and isinstance(v, bool)})
+
+        def _tick(self) -> None:
+            if self.exit_code is not None:
+                return
             if not self.started:
                 if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0 and not self._missing_actions():
                     self.pub_start.publish(TaskIds(task_ids=self.task_ids))
