@@ -200,6 +200,7 @@ class SoilSpec:
     ground_z: float
     deposit_radius: float  # [m] disc over which released soil lands on the ground
     dump_radius: float  # [m] disc of a vessel dump pile
+    mound_region_margin: float  # [m] beyond the base radius still counted as the mound (spills at its foot)
 
 
 @dataclass(frozen=True)
@@ -398,7 +399,7 @@ def load_plant(
         else:
             poses[name] = poses_r.vector(name, 3)
     s = top.sub("soil")
-    s.only({"grid", "deposit_radius", "dump_radius"})
+    s.only({"grid", "deposit_radius", "dump_radius", "mound_region_margin"})
     g = s.sub("grid")
     g.only({"x_min", "y_min", "size_x", "size_y", "resolution"})
     mo = site_r.sub("mound")
@@ -421,6 +422,7 @@ def load_plant(
         ground_z=mo.number("ground_z", default=0.0),
         deposit_radius=s.number("deposit_radius", lo=0.0),
         dump_radius=s.number("dump_radius", lo=0.0),
+        mound_region_margin=s.number("mound_region_margin", lo=0.0),
     )
     sn = top.sub("sensors")
     sn.only({"gnss_sigma_h", "gnss_sigma_v", "imu_sigma", "seed"})

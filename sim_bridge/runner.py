@@ -41,7 +41,8 @@ def truth_record(plant: Plant) -> dict[str, Any]:
                   "joints": dict(zip(zx.front.names, zx.front.q, strict=True))},
         "ic120": {"x": ic.base.x, "y": ic.base.y, "z": ic.z, "yaw": ic.base.yaw,
                   "joints": {"vessel_joint": ic.vessel_angle}},
-        "soil": {"mound": plant.ground.mound_volume(), "bucket": plant.soil.bucket,
+        "soil": {"mound": plant.ground.mound_volume(), "ground": plant.ground.ground_soil_volume(),
+                 "bucket": plant.soil.bucket,
                  "vessel": plant.soil.vessel, "dumped": plant.soil.dumped},
     }
 

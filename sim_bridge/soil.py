@@ -48,17 +48,28 @@ class HeightField:
             h = spec.mound_height * slope_part
         self.h = spec.ground_z + h
         self.datum = spec.ground_z - 10.0  # volume reference plane
+        self._mound_mask: np.ndarray | None = None
 
     def volume(self) -> float:
         """Ground volume above the datum [m^3]."""
         return float((self.h - self.datum).sum() * self.cell_area)
 
-    def mound_volume(self) -> float:
-        """Soil above the original ground plane [m^3]: mound and piles, minus holes dug below it.
+    def ground_soil_volume(self) -> float:
+        """Soil above the original ground plane anywhere [m^3]: mound and piles, minus holes dug below it.
 
-        ``mound_volume() + bucket + vessel`` is conserved exactly.
+        ``ground_soil_volume() + bucket + vessel`` is conserved exactly.
         """
         return float((self.h - self.spec.ground_z).sum() * self.cell_area)
+
+    def mound_volume(self) -> float:
+        """Soil above the ground plane within ``mound_base_radius + mound_region_margin`` of the mound
+        centre [m^3]: what is left to dig, without the dump piles elsewhere on the site."""
+        spec = self.spec
+        if self._mound_mask is None:
+            gx, gy = np.meshgrid(self.xs, self.ys)
+            radius = spec.mound_base_radius + spec.mound_region_margin
+            self._mound_mask = np.hypot(gx - spec.mound_center[0], gy - spec.mound_center[1]) <= radius
+        return float((self.h - spec.ground_z)[self._mound_mask].sum() * self.cell_area)
 
     def index(self, x: float, y: float) -> tuple[int, int]:
         """(row, col) of the cell holding (x, y), clamped to the grid."""

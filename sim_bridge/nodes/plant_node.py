@@ -8,7 +8,7 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
 * ``/clock`` (rosgraph_msgs/Clock) every step,
 * ``/sim/truth/<machine>/pose`` (geometry_msgs/PoseStamped), ``/sim/truth/<machine>/joint_states``
   (sensor_msgs/JointState), ``/sim/truth/zx200/bucket_tip`` (geometry_msgs/PointStamped),
-* ``/sim/truth/soil`` (std_msgs/Float64MultiArray ``[mound, bucket, vessel, dumped, total_error]`` m^3,
+* ``/sim/truth/soil`` (std_msgs/Float64MultiArray ``[mound, bucket, vessel, dumped, total_error, ground]`` m^3,
   labels in ``layout.dim[0].label``), every ``truth_period_s``,
 * ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/ic120/vessel_points``
   (PointCloud2, ``ic120/vessel``): LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every
@@ -34,7 +34,7 @@ from sim_bridge.plant import Plant  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
 from tms_common.node import run_node  # noqa: E402
 
-SOIL_LABELS = "mound,bucket,vessel,dumped,total_error"
+SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 
 
 class SimPlantNode(Node):
@@ -172,9 +172,10 @@ class SimPlantNode(Node):
         pt.point.x, pt.point.y, pt.point.z = tip
         self.tip_pub.publish(pt)
         soil = self._Float64MultiArray()
-        soil.layout.dim = [self._Dim(label=SOIL_LABELS, size=5, stride=5)]
+        soil.layout.dim = [self._Dim(label=SOIL_LABELS, size=6, stride=6)]
         error = plant.total_volume() - plant.initial_volume
-        soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error]
+        soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error,
+                     plant.ground.ground_soil_volume()]
         self.soil_pub.publish(soil)
 
     def _cloud(self, points, frame: str, stamp):  # noqa: ANN001, ANN202
