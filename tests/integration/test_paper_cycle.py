@@ -99,7 +99,7 @@ def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path):
     assert reports, f"no report written (exit {code}):\n{tail}"
     m = json.loads(reports[-1].read_text())
     summary = {k: m.get(k) for k in ("cycles", "soil_moved_m3", "load_passes", "load_pass_time_s", "real_time_factor",
-                                     "sim_time_s", "task_states")}
+                                     "sim_time_s", "task_states", "mound_initial_m3", "mound_final_m3")}
     print("paper cycle:", json.dumps(summary))
 
     # Both tasks SUCCESS, the launch ended cleanly through the supervisor.
@@ -109,9 +109,10 @@ def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path):
         assert m["task_states"][tid][-1][1] == "SUCCESS", m["task_states"]
 
     # Soil: loaded into the vessel (a pass), then dumped at the dump site (soil_moved = dumped volume).
-    # (metrics' mound volume is all soil on the ground, dump pile included, so it is not a check here.)
     assert m["cycles"] >= 1 and m["load_passes"] >= 1, summary
     assert m["soil_moved_m3"] > 0.04, summary
+    # What was dumped left the mound (its volume counts only the mound's area, not the dump pile).
+    assert m["mound_initial_m3"] - m["mound_final_m3"] >= 0.9 * m["soil_moved_m3"], summary
     first_pass, first_dump = m["pass_events_s"][0], m["dump_events_s"][0]
     assert first_pass < first_dump, (first_pass, first_dump)
 
