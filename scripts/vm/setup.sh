@@ -6,8 +6,8 @@
 # (target vm-setup) after scripts/bootstrap.sh.
 #
 # Never fails the build: where a piece cannot be installed (not root, no apt-get, registry unreachable) it
-# says which and goes on; the VM test then skips naming what is missing (or fails when TMS_VM_REQUIRED=1 / on
-# CI). TMS_VM=0 turns the whole thing off (the VM test then skips saying so).
+# says which and goes on; the VM test then skips naming what is missing (it fails instead only when
+# TMS_VM_REQUIRED=1 is set). TMS_VM=0 turns the whole thing off (the VM test then skips saying so).
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 VENV="$PWD/.venv"

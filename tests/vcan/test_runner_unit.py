@@ -115,3 +115,18 @@ def test_vng_command_boots_without_kvm_and_shares_only_the_output_dir_read_write
     assert cmd[cmd.index("--overlay-rwdir") + 1] == str(ROOT)  # repo writable in the guest only
     assert "--rw" not in cmd
     assert cmd[-1].endswith(f"guest.sh {tmp_path}")
+
+
+def test_unavailable_vm_skips_naming_why_even_on_ci(monkeypatch):
+    """A missing VM is the environment's doing: the VM test skips with the runner's reason, CI=true or not;
+    only TMS_VM_REQUIRED=1 makes it a failure."""
+    from tests.vcan import test_vm
+
+    monkeypatch.setenv("TMS_VM", "0")
+    monkeypatch.setenv("CI", "true")
+    monkeypatch.delenv("TMS_VM_REQUIRED", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="VM UNAVAILABLE: disabled by TMS_VM=0"):
+        test_vm._runner("--check", timeout=60)
+    monkeypatch.setenv("TMS_VM_REQUIRED", "1")
+    with pytest.raises(pytest.fail.Exception, match="required here .* disabled by TMS_VM=0"):
+        test_vm._runner("--check", timeout=60)

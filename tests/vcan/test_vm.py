@@ -5,9 +5,10 @@ code the host runs on udp_multicast, marker ``can_backend``) and tests/vcan/test
 checks). Two more runs prove the VM's own failures end the run with their reason instead of hanging: a boot
 that does not finish in time, and a kernel module that is not there.
 
-Where the VM cannot be had (no qemu, no kernel image, no virtme-ng) these tests skip naming what is missing,
-except when ``TMS_VM_REQUIRED=1`` or ``CI=true``: there a missing VM is a failure, since CI is where the
-SocketCAN result must show.
+Where the VM cannot be had (no qemu, no kernel image, no virtme-ng, ``TMS_VM=0``) these tests skip naming
+what is missing: that is the environment, not the code, so it must not fail ``make test``. Only an explicit
+``TMS_VM_REQUIRED=1`` (a CI job that has provisioned the VM tools and wants to be told if they vanish) turns
+a missing VM into a failure. ``CI=true`` alone does not: CI machines differ in what they may install.
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ PYTEST_TIMEOUT_S = int(_vm_timeout_s()) + 120
 
 
 def _vm_required() -> bool:
-    return os.environ.get("TMS_VM_REQUIRED") == "1" or os.environ.get("CI", "").lower() == "true"
+    """True only when the caller asked for the VM explicitly (``TMS_VM_REQUIRED=1``)."""
+    return os.environ.get("TMS_VM_REQUIRED") == "1"
 
 
 def _runner(*args: str | Path, timeout: float) -> subprocess.CompletedProcess[str]:
@@ -51,7 +53,7 @@ def _runner(*args: str | Path, timeout: float) -> subprocess.CompletedProcess[st
     if proc.returncode == EXIT_UNAVAILABLE:
         reason = proc.stderr.strip() or proc.stdout.strip()
         if _vm_required():
-            pytest.fail(f"the SocketCAN VM is required here (CI=true or TMS_VM_REQUIRED=1) but: {reason}")
+            pytest.fail(f"the SocketCAN VM is required here (TMS_VM_REQUIRED=1) but: {reason}")
         pytest.skip(reason)
     return proc
 
