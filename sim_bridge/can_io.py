@@ -13,6 +13,11 @@ The plant is driven *only* through these frames, as the real machines are. Per m
   ``Vessel_Cmd`` (enable 1: target angle; 0: hold).
 * Watchdog: no motion command frame for ``watchdog_s`` of simulated time -> the machine is brought to
   rest (commands zeroed; the hydraulics drain through their dead time and lag) and the trip counted.
+* Pilot cut-off (``Pilot_Cutoff_Cmd`` of :mod:`com3_can.pilot_cutoff`, a TMS extension beside COM3):
+  1 engages the hydraulic lock after the machine's ``pilot_cutoff.solenoid_delay_s`` (simulated), 0
+  releases it at once; ``Machine_State`` reports ``lock_cmd_state`` (requested) and
+  ``pilot_shutoff_valve_state`` (0 locked / 1 unlocked). Ignored when the machine YAML has no
+  ``pilot_cutoff`` section.
 * State frames are emitted at their DBC cycle times (simulated time) with values clipped into their
   signal ranges; sensors (GNSS, IMU) carry seeded noise.
 
@@ -34,6 +39,8 @@ import can
 
 from com3_can.codec import Com3Codec, load_codec
 from com3_can.errors import Com3DecodeError
+from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
+from com3_can.pilot_cutoff import cutoff_codec
 from com3_can.scheduler import FrameScheduler
 from sim_bridge.plant import Plant
 from sim_bridge.sensors import Gnss, Noise
@@ -72,6 +79,9 @@ class _Side:
         self.alive = 0
         self.counters: Counter[str] = Counter()
         self.pilot: dict[str, float] = {}
+        self.cutoff_requested = False
+        self.cutoff_at: float | None = None  # simulated time the requested cut-off takes effect
+        self.cutoff_engaged = False
 
     def encode(self, frame: str, values: dict[str, float]) -> can.Message:
         rng = self.ranges[frame]
@@ -111,6 +121,45 @@ class PlantCanIO:
         }
         self._builders = {"zx200": self._zx200_state, "ic120": self._ic120_state}
         self.replay = False  # True: commands are counted but not applied (the plant follows a log)
+        self._cutoff = cutoff_codec()
+
+    def _machine(self, side: _Side):  # noqa: ANN202 - Zx200 | Ic120
+        return self.plant.zx200 if side.machine == "zx200" else self.plant.ic120
+
+    def _on_cutoff(self, side: _Side, msg: can.Message, now: float) -> None:
+        try:
+            _, values = self._cutoff.decode(msg.arbitration_id, bytes(msg.data))
+        except Com3DecodeError as exc:
+            side.counters[f"ignored_{exc.reason}"] += 1
+            return
+        side.counters["received"] += 1
+        if self.replay:
+            return
+        want = values["pilot_cutoff_cmd"] >= 0.5
+        spec = self._machine(side).spec.pilot_cutoff
+        if spec is None:
+            side.counters["ignored_no_pilot_cutoff"] += 1
+            return
+        if want and not side.cutoff_requested:
+            side.cutoff_at = now + spec.solenoid_delay
+            side.counters["pilot_cutoff_requests"] += 1
+        elif not want and side.cutoff_requested:
+            side.cutoff_at = None
+            if side.cutoff_engaged:
+                side.cutoff_engaged = False
+                self._machine(side).set_pilot_cutoff(False)
+                log.warning("%s: pilot cut-off released", side.machine)
+        side.cutoff_requested = want
+
+    def apply_cutoffs(self) -> None:
+        """Engage every requested pilot cut-off whose solenoid delay has passed (call every step)."""
+        now = self.plant.time
+        for side in self.sides.values():
+            if side.cutoff_at is not None and now + 1e-9 >= side.cutoff_at:
+                side.cutoff_at = None
+                side.cutoff_engaged = True
+                self._machine(side).set_pilot_cutoff(True)
+                log.warning("%s: pilot cut-off engaged (hydraulic lock)", side.machine)
 
     # -- receive ---------------------------------------------------------------------------------
     def poll(self) -> int:
@@ -131,6 +180,9 @@ class PlantCanIO:
         side = self.sides[machine]
         if msg.arbitration_id in side.state_ids:
             side.counters["echo"] += 1
+            return
+        if msg.arbitration_id == self._cutoff.frame_id(CUTOFF_FRAME):
+            self._on_cutoff(side, msg, now)
             return
         try:
             name, values = side.codec.decode(msg.arbitration_id, bytes(msg.data))
@@ -215,6 +267,7 @@ class PlantCanIO:
     # -- watchdog --------------------------------------------------------------------------------
     def watchdog(self) -> None:
         """Bring to rest every machine whose motion commands stopped ``watchdog_s`` ago."""
+        self.apply_cutoffs()
         now = self.plant.time
         for side in self.sides.values():
             if not side.resting and now - side.last_motion > self.watchdog_s:
@@ -252,7 +305,9 @@ class PlantCanIO:
 
     def _machine_state(self, side: _Side) -> dict[str, float]:
         values = dict.fromkeys(side.ranges["Machine_State"], 0.0)
-        values.update(pilot_shutoff_valve_state=1.0, engine_state=1.0, control_state=1.0 if side.resting else 0.0)
+        values.update(pilot_shutoff_valve_state=0.0 if side.cutoff_engaged else 1.0, engine_state=1.0,
+                      lock_cmd_state=1.0 if side.cutoff_requested else 0.0,
+                      control_state=1.0 if side.resting else 0.0)
         values["alive_counter"] = float(self._alive(side))
         if "hydraulic_oil_temp" in values:
             values["hydraulic_oil_temp"] = 50.0

@@ -26,6 +26,7 @@ __all__ = [
     "SoilSpec",
     "SensorSpec",
     "PlantSpec",
+    "CutoffSpec",
     "load_zx200",
     "load_ic120",
     "load_plant",
@@ -119,6 +120,21 @@ class JointSpec:
 
 
 @dataclass(frozen=True)
+class CutoffSpec:
+    """Pilot cut-off (hydraulic lock): the pilot shut-off solenoid vents the pilot line, spools spring to neutral.
+
+    ``solenoid_delay`` [s] from the cut-off command on the bus to pilot pressure gone; then every actuator
+    output decays to zero with ``front_time_constant`` (main spools centring, cylinders held) or
+    ``tracks_time_constant`` (travel spools centring, travel motors braked), bypassing the proportional
+    command path's dead time.
+    """
+
+    solenoid_delay: float
+    front_time_constant: float
+    tracks_time_constant: float
+
+
+@dataclass(frozen=True)
 class TrackSpec:
     """Skid-steer undercarriage: limits, actuator lag and slip."""
 
@@ -148,6 +164,7 @@ class Zx200Spec:
     spill_time: float  # [s] to empty a full bucket when fully open
     cut_min_speed: float  # [m/s] the edge only cuts while moving at least this fast
     source: str
+    pilot_cutoff: CutoffSpec | None = None  # None: no pilot cut-off modelled (section absent)
 
     def joint(self, name: str) -> JointSpec:
         for j in self.joints:
@@ -172,6 +189,7 @@ class Ic120Spec:
     dump_time: float  # [s] to empty a full vessel when fully raised
     dump_distance: float  # [m] behind the hinge where the dumped pile is centred
     source: str
+    pilot_cutoff: CutoffSpec | None = None  # None: no pilot cut-off modelled (section absent)
 
 
 @dataclass(frozen=True)
@@ -244,6 +262,19 @@ def _tracks(r: _Reader, hyd: _Reader, footprint: tuple[float, float]) -> TrackSp
     )
 
 
+def _cutoff(top: _Reader) -> CutoffSpec | None:
+    """The optional ``pilot_cutoff:`` section of a machine YAML."""
+    if not top.has("pilot_cutoff"):
+        return None
+    c = top.sub("pilot_cutoff")
+    c.only({"source", "solenoid_delay_s", "front_time_constant_s", "tracks_time_constant_s"})
+    return CutoffSpec(
+        solenoid_delay=c.number("solenoid_delay_s", lo=0.0, hi=1.0),
+        front_time_constant=c.number("front_time_constant_s", lo=0.0, hi=1.0),
+        tracks_time_constant=c.number("tracks_time_constant_s", lo=0.0, hi=1.0),
+    )
+
+
 def _limits(r: _Reader) -> tuple[float | None, float | None]:
     value = r.raw("position")
     if value is None:
@@ -306,6 +337,7 @@ def load_zx200(path: str | Path | None = None) -> Zx200Spec:
         spill_time=b.number("spill_time_s", lo=0.01),
         cut_min_speed=b.number("cut_min_speed", lo=0.0),
         source=str(path),
+        pilot_cutoff=_cutoff(top),
     )
 
 
@@ -348,6 +380,7 @@ def load_ic120(path: str | Path | None = None) -> Ic120Spec:
         dump_time=hv.number("dump_time_s", lo=0.01),
         dump_distance=hv.number("dump_distance", lo=0.0),
         source=str(path),
+        pilot_cutoff=_cutoff(top),
     )
 
 

@@ -1,5 +1,8 @@
 """Hydraulic actuator model: dead time, first-order lag, velocity limits, shared pump flow, end stops.
 
+Pilot cut-off (:meth:`JointBank.set_cutoff`): the command path is bypassed, the queued pilot signal is
+vented and every output decays to zero with the spool-centring time constant (no dead time).
+
 Per joint and per step ``dt``::
 
     command --clamp(+-v_max)--> dead time (FIFO of round(T_d/dt) steps) --> first-order lag
@@ -43,6 +46,16 @@ class DeadTimeLag:
         self.value += (delayed - self.value) * self._alpha
         return self.value
 
+    def vent(self) -> None:
+        """Pilot cut-off engaged: the pilot pressure queued in the dead time is gone (FIFO zeroed)."""
+        for i in range(len(self._fifo)):
+            self._fifo[i] = 0.0
+
+    def step_vented(self, alpha: float) -> float:
+        """One step with the pilot cut off: the output decays to zero with ``alpha`` (spools centring)."""
+        self.value -= self.value * alpha
+        return self.value
+
     def reset(self, value: float = 0.0) -> None:
         """Forget the pipeline (replay, teleport)."""
         for i in range(len(self._fifo)):
@@ -63,6 +76,21 @@ class JointBank:
         self.v = [0.0] * len(joints)
         self.command = [0.0] * len(joints)
         self.flow_scale = 1.0  # last pump-flow scaling (1 = pumps not saturated)
+        self.cut_alpha: float | None = None  # pilot cut off: per-step decay factor of every output
+
+    def set_cutoff(self, time_constant: float | None) -> None:
+        """Engage (a spool-centring time constant [s]) or release (None) the pilot cut-off.
+
+        Engaging vents the dead-time pipelines and zeroes the commands: after a release nothing moves
+        until a new command arrives (and then through the normal dead time).
+        """
+        if time_constant is None:
+            self.cut_alpha = None
+            return
+        for act in self.actuators:
+            act.vent()
+        self.rest()
+        self.cut_alpha = 1.0 if time_constant <= 0 else 1.0 - math.exp(-self.dt / time_constant)
 
     def set_positions(self, q: dict[str, float]) -> None:
         for name, value in q.items():
@@ -74,7 +102,10 @@ class JointBank:
 
     def step(self) -> None:
         """Advance all joints by one ``dt`` with the current ``command`` velocities."""
-        lagged = [act.step(cmd) for act, cmd in zip(self.actuators, self.command, strict=True)]
+        if self.cut_alpha is not None:
+            lagged = [act.step_vented(self.cut_alpha) for act in self.actuators]
+        else:
+            lagged = [act.step(cmd) for act, cmd in zip(self.actuators, self.command, strict=True)]
         demand = 0.0
         for spec, v in zip(self.specs, lagged, strict=True):
             if spec.flow_at_limit > 0.0 and spec.max_velocity > 0.0:

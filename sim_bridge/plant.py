@@ -59,6 +59,14 @@ class Zx200:
         self.front.rest()
         self.base.rest()
 
+    def set_pilot_cutoff(self, engaged: bool) -> None:
+        """Pilot cut-off (hydraulic lock) on/off; no-op when the machine YAML has no ``pilot_cutoff``."""
+        c = self.spec.pilot_cutoff
+        if c is None:
+            return
+        self.front.set_cutoff(c.front_time_constant if engaged else None)
+        self.base.set_cutoff(c.tracks_time_constant if engaged else None)
+
     def at_rest(self) -> bool:
         return self.front.at_rest() and self.base.at_rest()
 
@@ -111,6 +119,16 @@ class Ic120:
         self.vessel_target = None
         self.vessel.rest()
         self.base.rest()
+
+    def set_pilot_cutoff(self, engaged: bool) -> None:
+        """Pilot cut-off (hydraulic lock) on/off; no-op when the machine YAML has no ``pilot_cutoff``."""
+        c = self.spec.pilot_cutoff
+        if c is None:
+            return
+        if engaged:
+            self.vessel_target = None
+        self.vessel.set_cutoff(c.front_time_constant if engaged else None)
+        self.base.set_cutoff(c.tracks_time_constant if engaged else None)
 
     def at_rest(self) -> bool:
         return self.vessel.at_rest() and self.base.at_rest()

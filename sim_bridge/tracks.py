@@ -37,11 +37,26 @@ class SkidSteer:
         self.w = 0.0  # true yaw rate [rad/s]
         self.vl = 0.0  # measured track speeds [m/s]
         self.vr = 0.0
+        self.cut_alpha: float | None = None  # pilot cut off: per-step decay factor of the track speeds
+
+    def set_cutoff(self, time_constant: float | None) -> None:
+        """Engage (travel spools centring + motor brake time constant [s]) or release (None) the pilot cut-off."""
+        if time_constant is None:
+            self.cut_alpha = None
+            return
+        self.left.vent()
+        self.right.vent()
+        self.rest()
+        self.cut_alpha = 1.0 if time_constant <= 0 else 1.0 - math.exp(-self.dt / time_constant)
 
     def step(self) -> None:
         s = self.spec
-        self.vl = self.left.step(self.command[0])
-        self.vr = self.right.step(self.command[1])
+        if self.cut_alpha is not None:
+            self.vl = self.left.step_vented(self.cut_alpha)
+            self.vr = self.right.step_vented(self.cut_alpha)
+        else:
+            self.vl = self.left.step(self.command[0])
+            self.vr = self.right.step(self.command[1])
         self.v = 0.5 * (self.vl + self.vr) * (1.0 - s.slip)
         self.w = (self.vr - self.vl) / s.gauge * (1.0 - s.yaw_slip)
         yaw_mid = self.yaw + 0.5 * self.w * self.dt

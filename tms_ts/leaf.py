@@ -18,6 +18,14 @@ A task being cancelled ends only when every pending stop is resolved, so "CANCEL
 machines are at rest (or their emergency stop is latched). A leaf re-started while its previous goal
 is still stopping waits for that stop before sending the new goal.
 
+Hydraulic lock: a task cancel engages ``/<model_name>/lock`` of every machine with a goal in flight
+(:meth:`tms_ts.task.TaskRun.cancel`); the next goal a leaf sends to that machine releases it first.
+
+Lost server: while a goal is accepted the leaf checks that its subtask server is still available; if
+it stays unavailable for ``ctx.server_lost_s`` (the process died, e.g. SIGKILL) the leaf latches
+``/<model_name>/emg_stop`` (the machine's state is unknown: nothing may keep driving it; an operator
+clears the latch), records the action in ``ctx.lost_servers`` and ends FAILURE naming the server.
+
 The ROS side is the :class:`RosPort` protocol, implemented by the manager node with rclpy; this
 module imports no rclpy.
 """
@@ -54,6 +62,8 @@ class RosPort(Protocol):
     def send_subtask_goal(self, model_name: str, subtask_name: str, record_name: str) -> SubtaskGoal: ...
 
     def emergency_stop(self, model_name: str, reason: str) -> None: ...
+
+    # optional: ``lock(model_name, engaged, reason)`` (hydraulic lock; ports without it skip locking)
 
     def rejection_reason(self, action: str, record_name: str) -> str | None: ...
 
@@ -118,6 +128,7 @@ class LeafNode(StatefulNode):
         self.action = f"/{self.model_name}/{self.subtask_name}"
         self.goal: SubtaskGoal | None = None
         self.record = ""
+        self.lost_since: float | None = None
         self.ctx.leaves.append(self)
 
     def _ros(self):  # noqa: ANN202
@@ -137,7 +148,12 @@ class LeafNode(StatefulNode):
         return self._send()
 
     def _send(self) -> Status:
-        self.goal = self._ros().send_subtask_goal(self.model_name, self.subtask_name, self.record)
+        ros = self._ros()
+        lock = getattr(ros, "lock", None)
+        if lock is not None:
+            lock(self.model_name, False, f"new goal {self.action}")
+        self.lost_since = None
+        self.goal = ros.send_subtask_goal(self.model_name, self.subtask_name, self.record)
         self.sent_at = self.ctx.clock()
         self.feedback_message = f"sent {self.action} record '{self.record}'"
         return RUNNING
@@ -162,6 +178,18 @@ class LeafNode(StatefulNode):
                                   f"within {self.ctx.accept_timeout_s:g} s")
             return RUNNING
         if state == ACCEPTED:
+            if not self._ros().subtask_server_ready(self.model_name, self.subtask_name):
+                now = self.ctx.clock()
+                if self.lost_since is None:
+                    self.lost_since = now
+                elif now - self.lost_since >= self.ctx.server_lost_s:
+                    reason = (f"subtask server {self.action} lost while running record '{self.record}' "
+                              f"(unavailable for {now - self.lost_since:.1f} s)")
+                    self.ctx.lost_servers.append(self.action)
+                    self._ros().emergency_stop(self.model_name, reason)
+                    return self._fail(reason + f": /{self.model_name}/emg_stop latched")
+            else:
+                self.lost_since = None
             self.feedback_message = f"{self.action} '{self.record}': {goal.feedback or 'running'}"
             return RUNNING
         if state == SUCCEEDED:

@@ -4,6 +4,8 @@ States: ``starting`` (waiting, bounded, for every leaf's subtask server), ``runn
 scheduler period), ``stopping`` (halted after a cancel or an error; waiting until every halted subtask
 confirms its stop, see :func:`tms_ts.leaf.poll_stops`), then one of ``success``, ``failure``,
 ``canceled``. A cancelled task ends ``canceled`` (never ``failure``) once its machines are at rest.
+A cancel first engages the hydraulic lock (``/<model>/lock``) of every machine with a goal in flight,
+so the machine stops within the lock response instead of the command path's dead time.
 """
 
 from __future__ import annotations
@@ -95,7 +97,23 @@ class TaskRun:
         if self.state == STARTING:
             self._finish(CANCELED, reason)
             return
+        self.lock_active_machines(reason)
         self._stop(CANCELED, reason)
+
+    def active_machines(self) -> list[str]:
+        """Model names of the leaves with a goal in flight (sent, not finished)."""
+        from tms_ts.leaf import TERMINAL
+
+        return sorted({leaf.model_name for leaf in self.ctx.leaves
+                       if leaf.goal is not None and leaf.goal.state not in TERMINAL})
+
+    def lock_active_machines(self, reason: str) -> None:
+        """Engage the hydraulic lock of every machine this task is driving (ports without ``lock``: no-op)."""
+        lock = getattr(self.ctx.ros, "lock", None)
+        if lock is None:
+            return
+        for model in self.active_machines():
+            lock(model, True, f"task {self.task_id}: {reason}")
 
     def _stop(self, final: str, message: str) -> None:
         self.tree.halt()

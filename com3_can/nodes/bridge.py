@@ -8,6 +8,11 @@ Three threads touch the core (it locks): the executor (command callbacks send th
 a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thread (state frames ->
 ``joint_states``, ``odom_pose``, ``imu``, ``gnss/fix``). ``diagnostic`` is published every
 ``diagnostic_period_s`` and at once when its level or message changes.
+
+Pilot cut-off (:mod:`com3_can.pilot_cutoff`): ``lock`` (std_msgs/Bool, reliable) true engages the
+hydraulic lock (``Pilot_Cutoff_Cmd`` = 1 at once, then every 100 ms), false releases it; a latched
+``emg_stop`` engages it too. Motion commands are still accepted while locked (the machine ignores
+them until the release); the emg_stop latch still refuses them.
 """
 
 from __future__ import annotations
@@ -35,6 +40,8 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
     from com3_can.bridge_core import BridgeConfig, BridgeCore, FixOut, ImuOut, JointStateOut, OdomOut, Tx
     from com3_can.bus import load_bus_config, open_bus
     from com3_can.errors import Com3CommandError
+    from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
+    from com3_can.pilot_cutoff import CutoffSender
     from tms_common.errors import ConfigError
     from tms_msg.msg import CrawlerCarrierMachineSetting, ExcavatorMachineSetting, JointCmd
 
@@ -92,6 +99,9 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
             self.pub_imu = self.create_publisher(Imu, "imu", depth)
             self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostic", depth)
             self.create_subscription(Bool, "emg_stop", self._on_emg, reliable)
+            self.cutoff = CutoffSender()
+            self._cutoff_lock = threading.Lock()
+            self.create_subscription(Bool, "lock", self._on_lock, reliable)
             self.create_subscription(JointCmd, "tracks_cmd", self._on_tracks, depth)
             self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, depth)
             if machine == "zx200":
@@ -121,7 +131,12 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
 
         def _send_loop(self) -> None:
             while not self._stop.is_set():
-                self._send(self.core.tick(time.monotonic()))
+                now = time.monotonic()
+                self._send(self.core.tick(now))
+                with self._cutoff_lock:
+                    frame = self.cutoff.due(now)
+                if frame is not None:
+                    self._send([Tx(CUTOFF_FRAME, self.cutoff.frame_id, frame)])
                 wait = self.core.next_wake() - time.monotonic()
                 if wait > 0:
                     self._stop.wait(min(wait, 0.01))
@@ -232,9 +247,23 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
                 "speed_mode": float(msg.speed_mode),
             })
 
+        def _set_cutoff(self, source: str, on: bool) -> None:
+            with self._cutoff_lock:
+                before = self.cutoff.engaged
+                frame = self.cutoff.set(source, on, time.monotonic())
+                after = self.cutoff.engaged
+            if frame is not None:
+                self._send([Tx(CUTOFF_FRAME, self.cutoff.frame_id, frame)])
+            if before != after:
+                self._log.warning(f"pilot cut-off {'ENGAGED' if after else 'released'} ({source})")
+
+        def _on_lock(self, msg: Any) -> None:
+            self._set_cutoff("lock", bool(msg.data))
+
         def _on_emg(self, msg: Any) -> None:
             was = self.core.emg_latched
             self._send(self.core.emg_stop(bool(msg.data), time.monotonic()))
+            self._set_cutoff("emg_stop", self.core.emg_latched)
             if was != self.core.emg_latched:
                 self._log.warning("emg_stop latched: neutral frames" if msg.data else "emg_stop cleared")
             self._diag_timer(force=True)

@@ -132,12 +132,16 @@ class TreeContext:
     sync_loop_budget: int = 1000
     accept_timeout_s: float = 1.0
     halt_timeout_s: float = 5.0
+    #: an accepted goal whose subtask server stays unavailable this long ends FAILURE (server lost)
+    server_lost_s: float = 3.0
     #: every LeafNode of the tree (filled by the loader; the manager checks their servers at start)
     leaves: list[Any] = field(default_factory=list)
     #: halted subtask goals still waiting for CANCELED/ABORTED (see tms_ts.leaf.PendingStop)
     stops: list[Any] = field(default_factory=list)
     #: failure reasons reported by leaves, newest last (the task's FAILURE message uses them)
     failures: list[str] = field(default_factory=list)
+    #: actions whose server was lost while serving a goal of this task (the manager's stop policy)
+    lost_servers: list[str] = field(default_factory=list)
 
     def child(self, blackboard: Blackboard) -> TreeContext:
         """Same context with another blackboard (non-shared SubTree)."""
@@ -150,9 +154,11 @@ class TreeContext:
             sync_loop_budget=self.sync_loop_budget,
             accept_timeout_s=self.accept_timeout_s,
             halt_timeout_s=self.halt_timeout_s,
+            server_lost_s=self.server_lost_s,
             leaves=self.leaves,
             stops=self.stops,
             failures=self.failures,
+            lost_servers=self.lost_servers,
         )
 
 

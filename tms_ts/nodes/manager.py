@@ -14,8 +14,14 @@ topic                      type                   meaning
 =========================  =====================  =================================================
 
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
-``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``db_uri`` (""), ``db_path`` ("" = tms_db default).
+``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
+``db_path`` ("" = tms_db default).
 A task is ticked at the fixed rate; a tick that starts more than half a period late counts as missed.
+
+Lost-server policy: when a task ends FAILURE because a subtask server was lost mid-goal (its machine's
+``emg_stop`` is then latched, see :mod:`tms_ts.leaf`), every other running task is cancelled
+("stopped by policy"): the tasks cooperate through the global blackboard and the partner would wait
+for flags that never come, or act on a machine state nobody supervises.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ class TaskManager(Node):
         self.server_wait_s = float(p("server_wait_s", 5.0).value)
         self.accept_timeout_s = float(p("accept_timeout_s", 1.0).value)
         self.halt_timeout_s = float(p("halt_timeout_s", 5.0).value)
+        self.server_lost_s = float(p("server_lost_s", 3.0).value)
         db_uri = str(p("db_uri", "").value)
         db_path = str(p("db_path", "").value)
         for name, value in (("tick_rate_hz", self.tick_rate), ("status_rate_hz", status_rate)):
@@ -91,7 +98,8 @@ class TaskManager(Node):
             doc = self.store.get_task(task_id)
             xml = doc.get("task_sequence", "")
             ctx = TreeContext(store=self.store, ros=self.ros, task_id=task_id,
-                              accept_timeout_s=self.accept_timeout_s, halt_timeout_s=self.halt_timeout_s)
+                              accept_timeout_s=self.accept_timeout_s, halt_timeout_s=self.halt_timeout_s,
+                              server_lost_s=self.server_lost_s)
             tree = load_tree(xml, ctx, source=f"task {task_id}")
         except (TsError, KeyError, ValueError) as exc:
             message = f"cannot start task {task_id}: {exc}"
@@ -137,12 +145,22 @@ class TaskManager(Node):
             before = run.state
             run.step()
             changed |= run.state != before
+            if run.state == FAILED and before != FAILED and run.ctx.lost_servers:
+                self._stop_others(run)
         took = (time.monotonic() - start) * 1000.0
         self._stats["ticks"] += 1
         self._stats["sum_tick_ms"] += took
         self._stats["max_tick_ms"] = max(self._stats["max_tick_ms"], took)
         if changed:
             self._publish_status()
+
+    def _stop_others(self, failed: TaskRun) -> None:
+        """Lost-server policy (module docstring): cancel every other running task."""
+        reason = f"stopped by policy: task {failed.task_id} lost {', '.join(failed.ctx.lost_servers)}"
+        for other in self.runs.values():
+            if other is not failed and not other.done:
+                self.get_logger().error(f"task {other.task_id}: {reason}")
+                other.cancel(reason)
 
     def _publish_stats(self) -> None:
         s = dict(self._stats)

@@ -74,6 +74,8 @@ class ManagerRosPort:
         self.node = node
         self._clients: dict[str, ActionClient] = {}
         self._emg: dict[str, object] = {}
+        self._lock_pubs: dict[str, object] = {}
+        self.locked: dict[str, bool] = {}
         self._confirm: list[tuple[int, str]] = []
         self._seq = 0
         self._rejections: dict[tuple[str, str], str] = {}
@@ -97,12 +99,31 @@ class ManagerRosPort:
         goal = Subtask.Goal(model_name=model_name, record_name=record_name)
         return RosGoal(self._client(model_name, subtask_name), goal)
 
+    def _machine_pubs(self, model_name: str) -> tuple:
+        """``/<model>/lock`` and ``/<model>/emg_stop`` publishers, created at the first goal to that machine
+        so discovery has matched the converter long before a stop must get through (a publisher created
+        at the moment of the stop would drop its first message)."""
+        if model_name not in self._emg:
+            reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+            self._lock_pubs[model_name] = self.node.create_publisher(Bool, f"/{model_name}/lock", reliable)
+            self._emg[model_name] = self.node.create_publisher(Bool, f"/{model_name}/emg_stop", reliable)
+        return self._lock_pubs[model_name], self._emg[model_name]
+
     def emergency_stop(self, model_name: str, reason: str) -> None:
-        pub = self._emg.get(model_name)
-        if pub is None:
-            pub = self._emg[model_name] = self.node.create_publisher(Bool, f"/{model_name}/emg_stop", 10)
+        _, pub = self._machine_pubs(model_name)
         pub.publish(Bool(data=True))
         self.node.get_logger().error(f"emergency stop /{model_name}/emg_stop: {reason}")
+
+    def lock(self, model_name: str, engaged: bool, reason: str) -> None:
+        """Engage / release ``/<model_name>/lock`` (the converter's pilot cut-off); a release is sent only
+        when this manager engaged the lock."""
+        pub, _ = self._machine_pubs(model_name)
+        if not engaged and not self.locked.get(model_name):
+            return
+        pub.publish(Bool(data=engaged))
+        self.locked[model_name] = engaged
+        log = self.node.get_logger()
+        (log.warning if engaged else log.info)(f"/{model_name}/lock {'engaged' if engaged else 'released'}: {reason}")
 
     def rejection_reason(self, action: str, record_name: str) -> str | None:
         with self._lock:

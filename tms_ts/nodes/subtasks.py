@@ -8,11 +8,14 @@ sent to the planning action ``/<model_name>/<planning>`` (contract D), its feedb
 ``state``, its result mirrored as success/message. A cancel is forwarded to planning, which brings
 the machine to rest; the subtask reports CANCELED only after planning confirmed. If planning does not
 confirm within ``stop_timeout_s`` the node latches ``/<model_name>/emg_stop`` and aborts the goal.
+If the planning server disappears while a goal runs (its process died) for ``server_lost_s``, the
+node latches ``/<model_name>/emg_stop`` (nothing may keep driving the machine blind) and aborts the
+goal naming the lost server.
 ZX200 change_pose / excavate_simple set the record's ``LOCK_FLG`` false when a result arrives (so
 sensing may update the excavation target again), as the original subtasks did.
 
 Parameters: ``machine`` (required), ``model_name`` (default = machine), ``planning_wait_s`` (5.0),
-``stop_timeout_s`` (5.0), ``db_uri``, ``db_path``.
+``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri``, ``db_path``.
 """
 
 from __future__ import annotations
@@ -117,6 +120,7 @@ class SubtaskServers(Node):
         self.model_name = str(self.declare_parameter("model_name", machine).value) or machine
         self.planning_wait_s = float(self.declare_parameter("planning_wait_s", 5.0).value)
         self.stop_timeout_s = float(self.declare_parameter("stop_timeout_s", 5.0).value)
+        self.server_lost_s = float(self.declare_parameter("server_lost_s", 3.0).value)
         db_uri = str(self.declare_parameter("db_uri", "").value)
         db_path = str(self.declare_parameter("db_path", "").value)
         specs = subtasks_for(machine)  # ValueError naming the valid machines
@@ -213,7 +217,21 @@ class SubtaskServers(Node):
         result_future = handle.get_result_async()
         result_future.add_done_callback(lambda _f: done.set())
         cancel_deadline = None
+        lost_since = None
+        next_check = time.monotonic() + 0.2
         while not done.wait(0.02):
+            now = time.monotonic()
+            if now >= next_check:  # the planning process may have died: its goal would never end
+                next_check = now + 0.2
+                if client.server_is_ready():
+                    lost_since = None
+                elif lost_since is None:
+                    lost_since = now
+                elif now - lost_since >= self.server_lost_s:
+                    self.emg.publish(Bool(data=True))
+                    return self._finish(gh, spec, "abort", f"planning server {planning} lost while running "
+                                        f"record '{record}' (unavailable for {now - lost_since:.1f} s): "
+                                        f"/{self.model_name}/emg_stop latched")
             if gh.is_cancel_requested and cancel_deadline is None:
                 handle.cancel_goal_async()
                 cancel_deadline = time.monotonic() + self.stop_timeout_s
