@@ -275,3 +275,19 @@ def test_nav_config_errors_name_file_and_key(tmp_path):
     bad.write_text(text.replace("rotate_speed: 0.3", "rotate_speeed: 0.3"))
     with pytest.raises(ConfigError, match=r"nav.yaml:\d+: controller: unknown key 'rotate_speeed'"):
         load_nav_config(bad, map_yaml=CFG.map_yaml)
+
+
+def test_brake_decelerates_within_limits_to_rest():
+    """What the navigator node commands while the pose is stale: a ramp to rest, not a step."""
+    from tms_rp.ic120.config import load_nav_config
+    from tms_rp.ic120.controller import TrackedPurePursuit
+
+    cfg = load_nav_config()
+    ctl = TrackedPurePursuit(cfg.controller, cfg.limits)
+    ctl._v, ctl._w = cfg.limits.max_speed, cfg.limits.max_yaw_rate
+    dt = 0.05
+    speeds = [ctl.brake(dt) for _ in range(400)]
+    assert speeds[-1].v == 0.0 and speeds[-1].w == 0.0
+    v = [cfg.limits.max_speed] + [c.v for c in speeds]
+    assert max(abs(b - a) for a, b in zip(v, v[1:], strict=False)) <= cfg.limits.max_accel * dt + 1e-9
+    assert speeds[0].v > 0.0, "braking must ramp, not stop in one step"

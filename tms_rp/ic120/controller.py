@@ -197,6 +197,10 @@ class TrackedPurePursuit:
             w = 0.0
         return self._limited(0.0, w, dt, "final_rotate", goal_dist, debug={"yaw_error": err})
 
+    def brake(self, dt: float) -> Command:
+        """Decelerate towards rest within the acceleration limits (used while the pose is stale)."""
+        return self._limited(0.0, 0.0, dt, "hold", 0.0)
+
     def _limited(self, v: float, w: float, dt: float, state: str, remaining: float, *, done: bool = False,
                  debug: dict | None = None) -> Command:
         """Apply speed and acceleration limits relative to the last command (a velocity smoother)."""

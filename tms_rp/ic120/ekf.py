@@ -16,13 +16,21 @@ fix is also checked for *continuity*: the step from the previous fix must match 
 accepted fix means the estimate drifted: the position covariance is inflated by the innovation and the
 fix is used. A discontinuous step (a jump) keeps the stream rejected until it agrees with the estimate again.
 
+Latency: a GNSS fix or azimuth stamped at ``t`` may arrive after odometry stamped later than ``t`` (DDS
+delivery order, a relay, a loaded CPU). Applied as is, it would pull the estimate back along the track by
+speed x delay. So the filter keeps the last ``latency_window_s`` of odometry poses and moves such a
+measurement forward to the latest odometry time with the odometry motion since ``t`` (scaled by ``1 + k``,
+rotated into map): a delayed measurement then corrects the current state, not a past one.
+
 The map->odom transform (what a TF broadcaster would publish) is ``map_T_base * inv(odom_T_base)``.
 """
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,13 +62,15 @@ class EkfParams:
     reinit_after_s: float = 10.0
     jump_threshold: float = 0.5
     initial_yaw_sigma: float = 0.5
+    latency_window_s: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ("gnss_sigma", "azimuth_sigma", "gate_chi2", "gate_chi2_yaw", "initial_yaw_sigma", "jump_threshold"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"localization.{name} must be > 0, got {value!r}")
-        for name in ("odom_slip", "odom_yaw_slip", "odom_drift_xy", "reinit_after_s", "scale_sigma", "scale_walk"):
+        for name in ("odom_slip", "odom_yaw_slip", "odom_drift_xy", "reinit_after_s", "scale_sigma", "scale_walk",
+                     "latency_window_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"localization.{name} must be >= 0, got {value!r}")
@@ -112,6 +122,7 @@ class Ic120Ekf:
         self._pending_yaw: tuple[float, float] | None = None
         self._last_fix: tuple[float, float, tuple[float, float, float] | None] | None = None
         self._chain_ok = True
+        self._odom_hist: deque[tuple[float, float, float, float]] = deque()  # (t, x, y, yaw) in odom
         self.stats = _Stats()
 
     # --- state ---------------------------------------------------------------------------------
@@ -147,6 +158,7 @@ class Ic120Ekf:
         for name, v in (("t", t), ("x", x), ("y", y), ("yaw", yaw)):
             if not math.isfinite(v):
                 raise ValueError(f"odometry {name} is not finite: {v!r}")
+        self._remember_odom(t, x, y, yaw)
         if self._last_odom is None or not self.initialised:
             self._last_odom, self._last_odom_t = (x, y, yaw), t
             return
@@ -158,6 +170,34 @@ class Ic120Ekf:
         dt = max(0.0, t - (self._last_odom_t if self._last_odom_t is not None else t))
         self._last_odom, self._last_odom_t = (x, y, yaw), t
         self._predict(dx, dy, dyaw, dt)
+
+    def _remember_odom(self, t: float, x: float, y: float, yaw: float) -> None:
+        hist = self._odom_hist
+        if hist and t < hist[-1][0]:  # clock went back (restart, sim reset): the old history is meaningless
+            hist.clear()
+        hist.append((t, x, y, yaw))
+        while len(hist) > 2 and hist[0][0] < t - self.params.latency_window_s:
+            hist.popleft()
+
+    def _odom_since(self, t: float) -> tuple[float, float, float] | None:
+        """Odometry motion (dx, dy in odom axes, dyaw) from time ``t`` to the latest odometry, or None.
+
+        None when ``t`` is not older than the latest odometry (nothing to compensate) or there is no history;
+        a ``t`` older than the window uses the oldest pose kept (partial compensation).
+        """
+        hist = self._odom_hist
+        if len(hist) < 2 or self._last_odom is None or t >= hist[-1][0]:
+            return None
+        ts = [h[0] for h in hist]
+        i = bisect.bisect_left(ts, t)
+        if i == 0:
+            _, x0, y0, a0 = hist[0]
+        else:
+            (t0, xa, ya, aa), (t1, xb, yb, ab) = hist[i - 1], hist[i]
+            f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+            x0, y0, a0 = xa + f * (xb - xa), ya + f * (yb - ya), aa + f * wrap_angle(ab - aa)
+        _, x1, y1, a1 = hist[-1]
+        return x1 - x0, y1 - y0, wrap_angle(a1 - a0)
 
     def _predict(self, dx: float, dy: float, dyaw: float, dt: float) -> None:
         p = self.params
@@ -189,6 +229,12 @@ class Ic120Ekf:
         if not self.initialised:
             self._initialise(x, y, r)
             return UpdateResult(True, 0.0, reinitialised=False)
+        moved = self._odom_since(t)
+        if moved is not None:  # a delayed fix: carry it forward with the odometry motion since its stamp
+            _, _, rot = self.map_to_odom()
+            c, s = math.cos(rot), math.sin(rot)
+            k = 1.0 + float(self._kf.x[3])
+            x, y = x + k * (c * moved[0] - s * moved[1]), y + k * (s * moved[0] + c * moved[1])
         z = np.array([x, y])
         h = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
         innov = z - self._kf.x[:2]
@@ -250,6 +296,9 @@ class Ic120Ekf:
             self._kf.P[2, 2] = sig**2
             self._yaw_known = True
             return UpdateResult(True, 0.0)
+        moved = self._odom_since(t)
+        if moved is not None:  # a delayed azimuth: add the turn since its stamp
+            yaw = wrap_angle(yaw + moved[2])
         h = np.array([[0.0, 0.0, 1.0, 0.0]])
         r = np.array([[sig**2]])
         innov = wrap_angle(yaw - float(self._kf.x[2]))

@@ -5,7 +5,10 @@ Run in the machine namespace: ``ic120_navigator --ros-args -r __ns:=/ic120``. Ac
 ``odometry/global`` (from ic120_localization) and ``map`` (nav_msgs/OccupancyGrid, transient local: replaces
 the static map, e.g. when an obstacle appears; the running path is checked and replanned); output
 ``cmd_vel`` (geometry_msgs/Twist) to com3_bridge. Parameters: ``nav_config`` (default
-config/nav/ic120_nav.yaml), ``map_yaml`` (default: the config's ``costmap.map``), ``pose_timeout_s`` (1.0).
+config/nav/ic120_nav.yaml), ``map_yaml`` (default: the config's ``costmap.map``), ``pose_timeout_s`` (1.0),
+``pose_lost_timeout_s`` (10.0). A pose older than ``pose_timeout_s`` makes the machine brake and hold (a
+CPU-starved localisation or a DDS hiccup); it resumes when poses return, and the goal aborts with
+"localisation lost" only when no pose came for ``pose_lost_timeout_s``.
 
 One goal at a time; a new goal preempts the running one (as Nav2). Execution is an async execute
 callback awaiting a future that the control timer completes, so everything runs on one thread. Cancel:
@@ -66,6 +69,8 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             nav_config = str(self.declare_parameter("nav_config", "").value)
             map_yaml = str(self.declare_parameter("map_yaml", "").value)
             self.pose_timeout = float(self.declare_parameter("pose_timeout_s", 1.0).value)
+            self.pose_lost_timeout = max(self.pose_timeout,
+                                         float(self.declare_parameter("pose_lost_timeout_s", 10.0).value))
             self.cfg = load_nav_config(nav_config or None, map_yaml=map_yaml or None)
             self.core = self.cfg.build_navigator()
             self.dt = 1.0 / self.cfg.controller.frequency
@@ -207,11 +212,21 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
                 self.core.cancel()
                 act.stopping_since = now
                 act.final, act.result_code, act.result_msg = "cancel", errors.CANCELED, "canceled: machine at rest"
-            if act.stopping_since is None and (self._pose is None or now - self._pose_t > self.pose_timeout):
+            stale = self._pose is None or now - self._pose_t > self.pose_timeout
+            if act.stopping_since is None and stale and (self._pose is None or now - self._pose_t > self.pose_lost_timeout):
                 self.core.cancel()
                 act.stopping_since = now
                 act.final, act.result_code = "abort", errors.UNKNOWN
-                act.result_msg = f"localisation lost: no odometry/global for more than {self.pose_timeout:g} s"
+                act.result_msg = f"localisation lost: no odometry/global for more than {self.pose_lost_timeout:g} s"
+            elif act.stopping_since is None and stale:
+                if not act.extra.get("holding"):
+                    self._log.warning(f"no odometry/global for more than {self.pose_timeout:g} s: braking and holding")
+                act.extra["holding"] = True
+                cmd = self.core.controller.brake(self.dt)
+                self._publish_cmd(cmd.v, cmd.w)
+                return
+            elif act.extra.pop("holding", False):
+                self._log.info("odometry/global back: resuming")
             pose = self._pose or (0.0, 0.0, 0.0)
             step = self.core.step(pose, now, self.dt)
             self._publish_cmd(step.v, step.w)
