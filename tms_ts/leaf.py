@@ -21,8 +21,9 @@ is still stopping waits for that stop before sending the new goal.
 Hydraulic lock: a task cancel engages ``/<model_name>/lock`` of every machine with a goal in flight
 (:meth:`tms_ts.task.TaskRun.cancel`); the next goal a leaf sends to that machine releases it first.
 
-Lost server: while a goal is accepted the leaf checks that its subtask server is still available; if
-it stays unavailable for ``ctx.server_lost_s`` (the process died, e.g. SIGKILL) the leaf latches
+Lost server: while a goal is accepted the leaf checks that its subtask server is still available (on
+the ROS graph and, when the port offers ``subtask_server_alive``, by its heartbeat); if it stays
+unavailable for ``ctx.server_lost_s`` (the process died, e.g. SIGKILL) the leaf latches
 ``/<model_name>/emg_stop`` (the machine's state is unknown: nothing may keep driving it; an operator
 clears the latch), records the action in ``ctx.lost_servers`` and ends FAILURE naming the server.
 
@@ -178,7 +179,10 @@ class LeafNode(StatefulNode):
                                   f"within {self.ctx.accept_timeout_s:g} s")
             return RUNNING
         if state == ACCEPTED:
-            if not self._ros().subtask_server_ready(self.model_name, self.subtask_name):
+            ros = self._ros()
+            alive = getattr(ros, "subtask_server_alive", None)
+            beating = alive(self.model_name) if alive is not None else None
+            if beating is False or not ros.subtask_server_ready(self.model_name, self.subtask_name):
                 now = self.ctx.clock()
                 if self.lost_since is None:
                     self.lost_since = now

@@ -207,6 +207,17 @@ def test_lost_server_fails_the_task_naming_it_and_latches_emg_stop() -> None:
     assert "subtask server /zx200/subtask_zx200_excavate_simple lost" in run.message, run.message
     assert run.ctx.lost_servers == ["/zx200/subtask_zx200_excavate_simple"]
     assert [c[:2] for c in port.calls if c[0] == "emg"] == [("emg", "zx200")]
+    # a silent heartbeat (the process died, the graph still lists it) counts as lost as well
+    port3, clock3 = _Port(), [0.0]
+    port3.subtask_server_alive = lambda model: False  # type: ignore[attr-defined]
+    run3 = _run_task(port3, clock3)
+    run3.step()
+    run3.step()
+    port3.goals[-1].state = "accepted"
+    for _ in range(10):
+        clock3[0] += 0.5
+        run3.step()
+    assert run3.state == "failure" and "lost" in run3.message, run3.message
     # a short graph hiccup (< server_lost_s) does not fail a task
     port2, clock2 = _Port(), [0.0]
     run2 = _run_task(port2, clock2)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 
 from action_msgs.msg import GoalStatus
 from rclpy.action import ActionClient
@@ -23,10 +24,15 @@ from std_msgs.msg import Bool, String
 from tms_msg.action import Subtask
 from tms_ts.leaf import ABORTED, ACCEPTED, CANCELED, PENDING, REJECTED, SUCCEEDED
 
-__all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "REJECTIONS_TOPIC"]
+__all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "REJECTIONS_TOPIC", "HEARTBEAT_TOPIC"]
 
 CONFIRM_TOPIC = "/tms_ts/confirm"
 REJECTIONS_TOPIC = "/tms_ts/subtask_rejections"
+#: std_msgs/String(model_name) from every tms_ts_subtasks process every HEARTBEAT_PERIOD_S (wall time)
+HEARTBEAT_TOPIC = "/tms_ts/subtask_heartbeat"
+HEARTBEAT_PERIOD_S = 0.2
+#: a heartbeat older than this [s wall] counts as silent (the leaf then waits server_lost_s more)
+HEARTBEAT_STALE_S = 0.6
 _STATUS = {GoalStatus.STATUS_SUCCEEDED: SUCCEEDED, GoalStatus.STATUS_CANCELED: CANCELED, GoalStatus.STATUS_ABORTED: ABORTED}
 
 
@@ -83,6 +89,8 @@ class ManagerRosPort:
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(String, CONFIRM_TOPIC, self._on_confirm, reliable)
         node.create_subscription(String, REJECTIONS_TOPIC, self._on_rejection, reliable)
+        self._beats: dict[str, float] = {}
+        node.create_subscription(String, HEARTBEAT_TOPIC, self._on_beat, 50)
 
     def _client(self, model_name: str, subtask_name: str) -> ActionClient:
         name = f"/{model_name}/{subtask_name}"
@@ -94,6 +102,19 @@ class ManagerRosPort:
     # RosPort -----------------------------------------------------------------------------------
     def subtask_server_ready(self, model_name: str, subtask_name: str) -> bool:
         return self._client(model_name, subtask_name).server_is_ready()
+
+    def subtask_server_alive(self, model_name: str) -> bool | None:
+        """Heartbeat of ``model_name``'s tms_ts_subtasks: True fresh, False silent, None never heard
+        (servers without a heartbeat are judged by the ROS graph alone)."""
+        with self._lock:
+            last = self._beats.get(model_name)
+        if last is None:
+            return None
+        return time.monotonic() - last < HEARTBEAT_STALE_S
+
+    def _on_beat(self, msg: String) -> None:
+        with self._lock:
+            self._beats[msg.data] = time.monotonic()
 
     def send_subtask_goal(self, model_name: str, subtask_name: str, record_name: str) -> RosGoal:
         goal = Subtask.Goal(model_name=model_name, record_name=record_name)

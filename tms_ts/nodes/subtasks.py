@@ -8,6 +8,9 @@ sent to the planning action ``/<model_name>/<planning>`` (contract D), its feedb
 ``state``, its result mirrored as success/message. A cancel is forwarded to planning, which brings
 the machine to rest; the subtask reports CANCELED only after planning confirmed. If planning does not
 confirm within ``stop_timeout_s`` the node latches ``/<model_name>/emg_stop`` and aborts the goal.
+Heartbeat: a thread publishes the model name on ``/tms_ts/subtask_heartbeat`` (std_msgs/String) every
+0.2 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
+waiting for DDS discovery to drop it (~20 s with the default lease).
 If the planning server disappears while a goal runs (its process died) for ``server_lost_s``, the
 node latches ``/<model_name>/emg_stop`` (nothing may keep driving the machine blind) and aborts the
 goal naming the lost server.
@@ -45,7 +48,7 @@ from tms_msg.action import (
 )
 from tms_msg.msg import ErrorCodes, Zx200PositionWithAngle
 from tms_ts.errors import SubtaskRecordError
-from tms_ts.nodes.ros_port import REJECTIONS_TOPIC
+from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC, REJECTIONS_TOPIC
 from tms_ts.subtask_specs import SubtaskSpec, subtasks_for
 
 __all__ = ["SubtaskServers", "main", "planning_goal", "planning_ok"]
@@ -146,7 +149,18 @@ class SubtaskServers(Node):
                 cancel_callback=lambda _gh: CancelResponse.ACCEPT,
                 callback_group=group,
             ))
+        self.heartbeat = self.create_publisher(String, HEARTBEAT_TOPIC, 10)
+        self._beat_stop = threading.Event()
+        threading.Thread(target=self._beat, name="subtask_heartbeat", daemon=True).start()
         self.get_logger().info(f"subtask servers for /{self.model_name}: {', '.join(s.name for s in specs)}")
+
+    def _beat(self) -> None:
+        msg = String(data=self.model_name)
+        while not self._beat_stop.wait(HEARTBEAT_PERIOD_S):
+            try:
+                self.heartbeat.publish(msg)
+            except Exception:  # noqa: BLE001 - context shut down at exit
+                return
 
     @staticmethod
     def _kind_type(spec: SubtaskSpec):  # noqa: ANN205
@@ -250,6 +264,7 @@ class SubtaskServers(Node):
         return self._finish(gh, spec, "abort", f"planning {planning} failed for record '{record}': {detail}")
 
     def destroy_node(self) -> None:
+        self._beat_stop.set()
         self.store.close()
         super().destroy_node()
 
