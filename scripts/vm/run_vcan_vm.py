@@ -339,6 +339,8 @@ def run_vm(cfg: VmConfig, pre: Prereqs, outdir: Path, extra_pytest_args: list[st
     result.boot_failures = boot_failures
     if timed_out:
         result.reason = f"{timed_out}; console tail:\n{_tail(console)}"
+        if "tests-started" in phases:  # what the tests had got to (and why any failed) before the kill
+            result.reason += f"\npytest.log tail:\n{_tail(outdir / 'pytest.log', 60)}"
     elif proc.returncode in GUEST_FAILURES and fails:
         result.guest_failure = fails[-1]
         result.reason = f"VM {GUEST_FAILURES[proc.returncode]} failed: {fails[-1]}"

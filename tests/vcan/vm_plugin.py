@@ -3,7 +3,12 @@
 Under qemu software emulation a Python process that imports rclpy takes tens of seconds to start (measured:
 50-90 s on the shared 2-core machine), so the host-tuned waits of tests.rosproc.Proc (e.g. "node ready within
 30 s") would fail for slowness, not for a fault. This stretches exactly those waits by TMS_TEST_TIME_SCALE
-(set by scripts/vm/guest.sh from config/vm/vcan.yaml ``time_scale``); assertions are unchanged.
+(set by scripts/vm/guest.sh from config/vm/vcan.yaml ``time_scale``); assertions are unchanged (the com3_can
+tests widen their own timing tolerances by the same variable).
+
+It also prints each failure's traceback the moment the test fails, not only in pytest's end-of-session
+summary: when the VM is killed at ``timeout_s`` the summary never comes, and the runner's reason quotes the
+tail of pytest.log, so the log still says why an earlier test failed.
 """
 
 from __future__ import annotations
@@ -33,3 +38,21 @@ def pytest_configure(config: pytest.Config) -> None:
     rosproc.Proc.wait = scaled_wait  # type: ignore[method-assign]
     config.issue_config_time_warning(
         pytest.PytestConfigWarning(f"process waits scaled x{scale:g} for the VM (TMS_TEST_TIME_SCALE)"), stacklevel=2)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Write a failed test's traceback to the log at once (see the module docstring)."""
+    if report.failed and _terminal:
+        _terminal[0].write_line(f"\n[vm-plugin] FAILED {report.nodeid} ({report.when}, {report.duration:.1f} s):\n"
+                                f"{report.longreprtext[-4000:]}\n[vm-plugin] end of failure report", flush=True)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        _terminal.append(reporter)
+
+
+_terminal: list = []
