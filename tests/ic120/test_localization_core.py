@@ -183,3 +183,28 @@ def test_delayed_gnss_and_azimuth_are_carried_forward(window):
         assert rms < 0.05, f"RMS {rms:.4f} m with 0.4 s delayed measurements"
     else:
         assert rms > 0.1, f"RMS {rms:.4f} m: the uncompensated case should show the delay"
+
+
+def test_delayed_gnss_with_jump_recovers_after_the_jump():
+    """GNSS delivered 0-0.4 s late (a starved relay) with a 5 m jump for 3 s: the jump is rejected and the
+    good fixes after it are used again at once (no 10 s of dead reckoning until a re-initialisation)."""
+    rng = np.random.default_rng(3)
+    samples = simulate(60.0, dt=0.02, gnss_sigma=0.02, slip=0.05)
+    ekf = Ic120Ekf(EkfParams())
+    pending, after = [], []
+    for i, s in enumerate(samples):
+        ekf.odometry(s.t, *s.odom)
+        if i % 5 == 0:
+            pending.append((s.t + rng.uniform(0.0, 0.4), s))
+        for item in [p for p in pending if p[0] <= s.t]:
+            pending.remove(item)
+            old = item[1]
+            gx, gy = old.gnss
+            ekf.gnss(old.t, gx, gy + (5.0 if 36.0 <= old.t < 39.0 else 0.0))
+        ekf.azimuth(s.t, s.azimuth)
+        if 39.5 <= s.t < 45.0:
+            x, y, _ = ekf.pose
+            after.append(math.hypot(x - s.truth[0], y - s.truth[1]))
+    assert max(after) < 0.1, f"after the jump: max error {max(after):.3f} m"
+    assert ekf.stats.reinits == 0
+    assert ekf.stats.gnss_rejected >= 25  # the 30 jumped fixes (10 Hz for 3 s), give or take the delay

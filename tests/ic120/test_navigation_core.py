@@ -126,9 +126,10 @@ def test_plan_200m_map_under_a_second():
     g[1000:1010, 100:1900] = 100
     cm = Costmap(OccupancyMap(g, 0.1, (0, 0)), Footprint(6.05, 3.37))
     assert cm.labels.max() >= 1
-    t = time.perf_counter()
+    # CPU time of this process, not wall time: other jobs on a shared machine must not fail this test
+    t = time.process_time()
     path = GridPlanner().plan(cm, (5, 5), (195, 195))
-    assert time.perf_counter() - t < 1.0
+    assert time.process_time() - t < 1.0
     assert math.hypot(*(path[-1] - path[0])) > 250
 
 

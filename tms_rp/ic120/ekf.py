@@ -14,7 +14,9 @@ model): both give a large innovation, and rejecting a correct GNSS stream lets t
 fix is also checked for *continuity*: the step from the previous fix must match the odometry step within
 ``jump_threshold`` + 50 % of the step. A gated-out fix whose stream has been continuous since the last
 accepted fix means the estimate drifted: the position covariance is inflated by the innovation and the
-fix is used. A discontinuous step (a jump) keeps the stream rejected until it agrees with the estimate again.
+fix is used. A discontinuous step (a jump) keeps the stream rejected until it agrees with the estimate again,
+or until it is continuous again and within ``jump_threshold`` of the estimate (after a jump ends, the estimate
+may have drifted a few centimetres beyond the gate while dead-reckoning; a 5 m offset never qualifies).
 
 Latency: a GNSS fix or azimuth stamped at ``t`` may arrive after odometry stamped later than ``t`` (DDS
 delivery order, a relay, a loaded CPU). Applied as is, it would pull the estimate back along the track by
@@ -242,7 +244,8 @@ class Ic120Ekf:
         d2 = float(innov @ np.linalg.solve(s_mat, innov))
         continuous = self._fix_continuous(x, y)
         self._last_fix = (x, y, self._last_odom)
-        if d2 > self.params.gate_chi2 and continuous and self._chain_ok:
+        if d2 > self.params.gate_chi2 and continuous and (
+                self._chain_ok or math.hypot(*innov) < self.params.jump_threshold):
             # The fixes move as the odometry says (no jump since the last accepted fix), yet disagree with
             # the estimate: the estimate drifted (slip beyond the model, a stalled plant). Inflate P along
             # the innovation so the update is consistent instead of rejecting GNSS for good.
