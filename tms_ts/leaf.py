@@ -26,6 +26,8 @@ the ROS graph and, when the port offers ``subtask_server_alive``, by its heartbe
 unavailable for ``ctx.server_lost_s`` (the process died, e.g. SIGKILL) the leaf latches
 ``/<model_name>/emg_stop`` (the machine's state is unknown: nothing may keep driving it; an operator
 clears the latch), records the action in ``ctx.lost_servers`` and ends FAILURE naming the server.
+A goal ABORTED by its subtask server because the *planning* server was lost ("planning server X lost
+while running ...", emg_stop latched there) is recorded in ``ctx.lost_servers`` the same way.
 
 The ROS side is the :class:`RosPort` protocol, implemented by the manager node with rclpy; this
 module imports no rclpy.
@@ -204,6 +206,9 @@ class LeafNode(StatefulNode):
             reason = self._ros().rejection_reason(self.action, self.record) or goal.message
             detail = f": {reason}" if reason else ""
             return self._fail(f"{self.action} rejected the goal for record '{self.record}'{detail}")
+        if state == ABORTED and "lost while running" in goal.message:
+            # the subtask server lost its planning server and latched emg_stop (tms_ts.nodes.subtasks)
+            self.ctx.lost_servers.append(goal.message.split(" lost while running")[0].removeprefix("planning server "))
         return self._fail(f"{self.action} {state} record '{self.record}': {goal.message}")
 
     def on_halted(self) -> None:

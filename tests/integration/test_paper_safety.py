@@ -356,3 +356,61 @@ def test_subtask_server_killed_mid_task_fails_it_stops_both_machines(procs, doma
         assert stack["zx200/com3_bridge"].wait_for("emg_stop latched", 10.0), _tail(stack)
     finally:
         probe.close()
+
+
+@pytest.mark.integration
+@pytest.mark.timeout(360)
+def test_planning_server_killed_mid_task_fails_it_stops_both_machines(procs, domain, ros_node, tmp_path):
+    """SIGKILL of the ZX200 planner: the subtask server notices (ROS graph, no heartbeat: ~20 s of DDS
+    lease), latches emg_stop and aborts naming it; the task fails and the other task is stopped."""
+    stack, probe = _bring_up(procs, domain, ros_node, tmp_path)
+    try:
+        probe.start(ZX200_TASK, IC120_TASK)
+        _wait_digging_while_ic120_drives(probe, stack, 180.0)
+        t_kill, wall_kill = probe.clock, time.monotonic()
+        stack["zx200/zx200_planner"].signal(signal.SIGKILL)
+
+        failed = lambda: _state_name(probe.task(ZX200_TASK)) == "FAILURE"  # noqa: E731
+        assert probe.wait(failed, 120.0), f"ZX200 task did not fail: {probe.task(ZX200_TASK)}\n{_tail(stack)}"
+        wall_failed = time.monotonic() - wall_kill
+        message = probe.task(ZX200_TASK)[1]
+        assert "planning server /zx200/tms_rp_zx200_excavate_simple lost" in message, message
+        other = lambda: _state_name(probe.task(IC120_TASK)) == "CANCELED"  # noqa: E731
+        assert probe.wait(other, 60.0), f"IC120 task not stopped: {probe.task(IC120_TASK)}\n{_tail(stack)}"
+        assert "stopped by policy: task 91 lost /zx200/tms_rp_zx200_excavate_simple" in probe.task(IC120_TASK)[1]
+
+        t_end = _wait_quiet(probe, QUIET_S + 1.0, 60.0)
+        series = probe.series()
+        rest = rest_time(series, t_kill)
+        after = max_speed(series, t_kill + (rest or 0.0), t_end)
+        print(f"\nplanner SIGKILL: ZX200 task FAILURE {wall_failed:.2f} s wall after the kill: {message!r}; "
+              f"IC120 task {probe.task(IC120_TASK)[1]!r}; both at rest {rest} s simulated after the kill; "
+              f"max speeds over the last {t_end - t_kill - (rest or 0):.1f} s "
+              f"{({k: round(v, 4) for k, v in after.items()})}")
+        assert rest is not None and t_kill + rest <= t_end - QUIET_S, "not at rest for the checked span"
+        assert max(after["zx_joint"], after["ic_joint"], after["zx_yaw"], after["ic_yaw"]) < REST_JOINT, after
+        assert max(after["zx_base"], after["ic_base"]) < REST_BASE, after
+        assert stack["zx200/com3_bridge"].wait_for("emg_stop latched", 10.0), _tail(stack)
+    finally:
+        probe.close()
+
+
+def test_planning_server_loss_reported_by_the_subtask_server_counts_as_lost() -> None:
+    port, clock = _Port(), [0.0]
+    run = _run_task(port, clock)
+    run.step()
+    run.step()
+    port.goals[-1].state = "aborted"
+    port.goals[-1].message = ("planning server /zx200/tms_rp_zx200_excavate_simple lost while running record 'dig' "
+                              "(unavailable for 3.0 s): /zx200/emg_stop latched")
+    run.step()
+    assert run.state == "failure" and "planning server /zx200/tms_rp_zx200_excavate_simple lost" in run.message
+    assert run.ctx.lost_servers == ["/zx200/tms_rp_zx200_excavate_simple"]
+    # an ordinary abort is not a lost server (no stop policy for the other tasks)
+    port2, clock2 = _Port(), [0.0]
+    run2 = _run_task(port2, clock2)
+    run2.step()
+    run2.step()
+    port2.goals[-1].state, port2.goals[-1].message = "aborted", "error_code 99999: out of reach"
+    run2.step()
+    assert run2.state == "failure" and run2.ctx.lost_servers == []

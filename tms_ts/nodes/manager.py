@@ -18,8 +18,8 @@ Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s``
 ``db_path`` ("" = tms_db default).
 A task is ticked at the fixed rate; a tick that starts more than half a period late counts as missed.
 
-Lost-server policy: when a task ends FAILURE because a subtask server was lost mid-goal (its machine's
-``emg_stop`` is then latched, see :mod:`tms_ts.leaf`), every other running task is cancelled
+Lost-server policy: when a task ends FAILURE because a subtask or planning server was lost mid-goal (its
+machine's ``emg_stop`` is then latched, see :mod:`tms_ts.leaf`), every other running task is cancelled
 ("stopped by policy"): the tasks cooperate through the global blackboard and the partner would wait
 for flags that never come, or act on a machine state nobody supervises.
 """
