@@ -114,19 +114,23 @@ class ArmStack:
 def arm_stack(procs, domain: int, ros_node, tmp_path: Path) -> Iterator[Callable[..., ArmStack]]:
     """``arm_stack(ic120_pose="ic120_start")`` -> :class:`ArmStack` once every node is ready."""
 
-    def start(*, ic120_pose: str = "ic120_start", speed: float = SIM_SPEED) -> ArmStack:
+    def start(*, ic120_pose: str = "ic120_start", speed: float = SIM_SPEED, plant: str = "plant.yaml",
+              clock_period_s: float = 0.0, rate_hz: float = 0.0, joint_states_period_s: float = 0.0) -> ArmStack:
+        """Start the stack; the keyword arguments after ``speed`` reproduce the paper launch's choices
+        (config/launch/paper_experiment.yaml: paper_plant.yaml, /clock every 20 ms, 50 Hz controller)."""
         from tms_common.config import config_path
 
-        text = config_path("sim", "plant.yaml").read_text().replace("ic120: ic120_start", f"ic120: {ic120_pose}")
+        text = config_path("sim", plant).read_text().replace("ic120: ic120_start", f"ic120: {ic120_pose}")
         cfg_file = tmp_path / "plant.yaml"
         cfg_file.write_text(text)
         bus = _zx_bus(domain)
         sim_args = [str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", f"speed:={speed}",
                     "-p", f"config:={cfg_file}", "-p", f"zx200_can_interface:={bus['interface']}",
-                    "-p", f"zx200_can_channel:={bus['channel']}"]
+                    "-p", f"zx200_can_channel:={bus['channel']}", "-p", f"clock_period_s:={clock_period_s}"]
         bridge_args = [str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200",
                        "-p", "machine:=zx200", "-p", f"can_interface:={bus['interface']}",
-                       "-p", f"can_channel:={bus['channel']}", "-p", "use_sim_time:=true"]
+                       "-p", f"can_channel:={bus['channel']}", "-p", "use_sim_time:=true",
+                       "-p", f"joint_states_period_s:={joint_states_period_s}"]
         if "port" in bus:
             sim_args += ["-p", f"zx200_can_port:={bus['port']}"]
             bridge_args += ["-p", f"can_port:={bus['port']}"]
@@ -135,7 +139,7 @@ def arm_stack(procs, domain: int, ros_node, tmp_path: Path) -> Iterator[Callable
         bridge = procs(bridge_args, name="com3_bridge")
         assert bridge.wait_for("com3_bridge ready", 60), bridge.output
         ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200",
-                     "-p", "use_sim_time:=true"], name="zx200_arm_controller")
+                     "-p", "use_sim_time:=true", "-p", f"rate_hz:={rate_hz}"], name="zx200_arm_controller")
         planner = procs([str(executable("tms_if_opera", "zx200_planner")), "--ros-args", "-r", "__ns:=/zx200",
                          "-p", "use_sim_time:=true"], name="zx200_planner")
         assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output

@@ -175,3 +175,18 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     stack.spin(3.0)
     vessel2 = stack.soil[2]
     assert vessel2 > vessel1 + 0.5 * bucket1, stack.soil
+
+
+def test_paper_launch_poses_and_big_swings_always_end(arm_stack) -> None:
+    """Regression (paper stack hang): the seed's poses and +-1.2 rad swings under the paper launch's
+    choices (paper_plant.yaml, sim speed 3, /clock every 20 ms, 50 Hz controller, 20 ms joint_states).
+    Every goal must END (within its bound), SUCCEEDED, with the truth tip within 3 cm of the goal."""
+    stack = arm_stack(speed=3.0, plant="paper_plant.yaml", clock_period_s=0.02, rate_hz=50.0,
+                      joint_states_period_s=0.02)
+    release = [1.597394, -0.75, 1.6, 1.9]  # seed release_angle with the carry pose of the paper tree
+    pending = [0.0, -0.8, 1.3, 1.2]
+    for q in (release, pending, [-1.2, -0.8, 1.3, 1.2], [1.2, -0.8, 1.3, 1.2]):
+        status, res = stack.run("change_pose", joint_goal(q), timeout=150)
+        assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, (q, status, res.message)
+        tip = settled_tip(stack)
+        assert np.linalg.norm(tip - KIN.tip_position(np.array(q))) < TOL_M, (q, tip, KIN.tip_position(np.array(q)))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import threading
 import time
+import uuid
 
 import numpy as np
 
@@ -23,13 +24,21 @@ from tms_common.node import run_node
 
 __all__ = ["main"]
 
+GOAL_RESPONSE_TIMEOUT_S = 20.0  # [s wall] the controller answers at once (or after its <= 15 s joint_states wait)
+RESULT_GRACE_S = 3.0            # [s wall] after the goal status says it ended, wait this long for the result
+SERVER_GONE_S = 5.0             # [s wall] the controller's action server absent this long: the segment fails
+
 
 def _make_node():  # noqa: ANN202
-    from rclpy.action import ActionClient, ActionServer, CancelResponse
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.action.client import ClientGoalHandle
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
+    from unique_identifier_msgs.msg import UUID
 
+    from tms_if_opera.zx200.action_client import RaceFreeActionClient
     from tms_msg.action import Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
     from tms_msg.msg import Zx200PositionWithAngle
     from tms_rc.zx200.controller import JointTarget, load_controller_config
@@ -51,7 +60,7 @@ def _make_node():  # noqa: ANN202
             self._lock = threading.Lock()
             group = ReentrantCallbackGroup()
             self.create_subscription(JointState, "joint_states", self._on_state, 20, callback_group=group)
-            self._ctl = ActionClient(self, Zx200ChangePose, "arm_controller/move", callback_group=group)
+            self._ctl = RaceFreeActionClient(self, Zx200ChangePose, "arm_controller/move", callback_group=group)
             accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
             ActionServer(self, Zx200ChangePose, "tms_rp_zx200_change_pose", execute_callback=self._change_pose,
                          cancel_callback=accept, callback_group=group)
@@ -117,18 +126,51 @@ def _make_node():  # noqa: ANN202
             fb = action_type.Feedback()
             fb.state = target.label
             handle.publish_feedback(fb)
-            send = self._ctl.send_goal_async(goal)
+            # Every wait below is bounded: a segment always ends, and never leaves the arm driving blind.
+            goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+            send = self._ctl.send_goal_async(goal, goal_uuid=goal_id)
+            deadline = time.monotonic() + GOAL_RESPONSE_TIMEOUT_S
             while not send.done():
+                if time.monotonic() > deadline:
+                    # The goal may run on the controller without us knowing: cancel it by its id.
+                    response = Zx200ChangePose.Impl.SendGoalService.Response(accepted=True)
+                    ClientGoalHandle(self._ctl, goal_id, response).cancel_goal_async()
+                    return codes.NO_VALID_CONTROL, (
+                        f"arm controller did not answer the goal within {GOAL_RESPONSE_TIMEOUT_S:g} s (cancel sent)")
                 time.sleep(0.01)
             gh = send.result()
             if not gh.accepted:
                 return codes.NO_VALID_CONTROL, "arm controller rejected the segment"
+            return self._await_result(handle, gh)
+
+        def _await_result(self, handle, gh) -> tuple[int, str]:  # noqa: ANN001
+            """Wait for the controller's result; recover a lost result from the goal status topic."""
             res_future = gh.get_result_async()
             cancel_sent = False
+            ended_at: float | None = None
+            asked_again = False
+            server_seen = time.monotonic()
+            terminal = {GoalStatus.STATUS_SUCCEEDED: codes.SUCCESS, GoalStatus.STATUS_CANCELED: codes.CANCELED,
+                        GoalStatus.STATUS_ABORTED: codes.FAILURE}
             while not res_future.done():
+                now = time.monotonic()
                 if handle.is_cancel_requested and not cancel_sent:
                     gh.cancel_goal_async()
                     cancel_sent = True
+                if gh.status in terminal:
+                    ended_at = ended_at or now
+                    if now - ended_at > RESULT_GRACE_S:
+                        if not asked_again:  # the result server keeps results (result_timeout): ask again
+                            self.get_logger().warning("controller goal ended but its result did not arrive: asking again")
+                            res_future = gh.get_result_async()
+                            asked_again, ended_at = True, now
+                            continue
+                        code = terminal[gh.status]
+                        return code, f"controller goal ended with status {gh.status} (result message lost)"
+                if self._ctl.server_is_ready():
+                    server_seen = now
+                elif now - server_seen > SERVER_GONE_S:
+                    return codes.NO_VALID_CONTROL, f"arm controller action server gone for {SERVER_GONE_S:g} s"
                 time.sleep(0.02)
             res = res_future.result().result
             if cancel_sent:

@@ -88,6 +88,7 @@ class ControllerConfig:
     rest_speed: float = 0.01
     settle_s: float = 0.3
     segment_timeout_margin_s: float = 20.0
+    stop_timeout_s: float = 15.0
     osqp: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -124,6 +125,7 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             rest_speed=float(data["rest_speed"]),
             settle_s=float(data["settle_s"]),
             segment_timeout_margin_s=float(data["segment_timeout_margin_s"]),
+            stop_timeout_s=float(data.get("stop_timeout_s", 15.0)),
             osqp=dict(data.get("osqp", {})),
         )
     except KeyError as exc:
@@ -135,6 +137,8 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             raise where.error(("pid",), f"pid: missing gains for {key!r}")
     if cfg.rate_hz <= 0 or cfg.pump_flow_lpm <= 0 or cfg.max_tip_speed <= 0:
         raise ConfigError(f"{src}: rate_hz, pump_flow_lpm and max_tip_speed must be > 0")
+    if cfg.segment_timeout_margin_s <= 0 or cfg.stop_timeout_s <= 0:
+        raise ConfigError(f"{src}: segment_timeout_margin_s and stop_timeout_s must be > 0")
     return cfg
 
 
@@ -269,6 +273,7 @@ class ArmController:
         self._extra_steps = [int(round((float(np.max(delays)) - d) / self.dt)) for d in delays]
         self.preview_s = self._horizon_steps * self.dt
         self._in_flight: deque[np.ndarray] = deque(maxlen=max(self._horizon_steps, 1))
+        self._in_flight_sum = np.zeros(N)  # running sum of _in_flight (summing 100+ arrays per step cost ~0.1 ms)
         self._out_hist: deque[np.ndarray] = deque(maxlen=max(self._extra_steps) + 1)
         self.u_prev = np.zeros(N)
         self.status = ControllerStatus()
@@ -283,6 +288,8 @@ class ArmController:
         self._pid_q = _Pid(cfg.pid["joint"], N, self.dt)
         self.last_result = None
         self._stop_code = codes.CANCELED
+        self._stop_time = 0.0
+        self._remaining = ""
         self.reference_tip: np.ndarray | None = None
 
     # -------------------------------------------------------------------------- commands
@@ -300,6 +307,7 @@ class ArmController:
         self._stop_code = codes.CANCELED
         if self.status.mode == "moving" or (self.status.mode == "idle" and np.any(self.u_prev)):
             self.status = ControllerStatus(mode="stopping", message=message)
+            self._stop_time = 0.0
         elif self.status.mode != "stopping":
             self.status = ControllerStatus(mode="idle", result=codes.CANCELED, message=message)
 
@@ -308,7 +316,7 @@ class ArmController:
         """State expected when the next command takes effect: measured + commands still in flight."""
         if not self._in_flight:
             return np.asarray(q, dtype=float).copy()
-        return np.asarray(q, dtype=float) + self.dt * np.sum(self._in_flight, axis=0)
+        return np.asarray(q, dtype=float) + self.dt * self._in_flight_sum
 
     def _segment_duration(self, q0: np.ndarray, target: Target) -> float:
         cfg, lim = self.cfg, self.kin.limits
@@ -414,17 +422,30 @@ class ArmController:
             u = res.x
             self.last_result = res
             if st.mode == "stopping":
+                self._stop_time += self.dt
                 in_flight = max((float(np.max(np.abs(c))) for c in self._out_hist), default=0.0)
                 if self._horizon_steps:
                     in_flight = max(in_flight, float(np.max(np.abs(np.asarray(self._in_flight)))))
                 if np.max(np.abs(u)) < 1e-4 and np.max(np.abs(dq)) < self.cfg.rest_speed and in_flight < 1e-4:
                     self.status = ControllerStatus(mode="idle", result=self._stop_code, message=st.message or "canceled")
+                elif self._stop_time >= self.cfg.stop_timeout_s:
+                    # Never hang in "stopping": the command is zero (or holding a limit) but the measured
+                    # joints still move (plant not following, noisy joint_states). End with what we know.
+                    code = codes.FAILURE if self._stop_code == codes.CANCELED else self._stop_code
+                    self.status = ControllerStatus(
+                        mode="idle", result=code,
+                        message=f"{st.message or 'canceled'}; not at rest {self.cfg.stop_timeout_s:g} s after stopping "
+                        f"(joint speeds {np.round(dq, 3).tolist()} rad/s, command {np.round(u, 4).tolist()} rad/s)",
+                    )
             else:
                 u = np.zeros(N) if np.max(np.abs(u)) < 1e-9 else u
         u = self._enforce_hard_limits(u)
         self.u_prev = u
         if self._horizon_steps:
+            if len(self._in_flight) == self._in_flight.maxlen:
+                self._in_flight_sum -= self._in_flight[0]
             self._in_flight.append(u)
+            self._in_flight_sum += u
         self._out_hist.append(u)
         out = np.array([self._out_hist[-1 - min(e, len(self._out_hist) - 1)][i] for i, e in enumerate(self._extra_steps)])
         return out
@@ -442,12 +463,19 @@ class ArmController:
             err[0] = _wrap(err[0])
             b = v_ref + self._pid_q(err)
             res = self.hqp_joint.solve([*tasks, (np.eye(N), b), (np.eye(N), np.zeros(N))])
-            goal_err = self._joint_delta(q, spline.p1)
-            dist = float(np.max(np.abs(goal_err)))
             self.reference_tip = None
-            self.status.distance_remaining = float(np.linalg.norm(self.kin.tip_position(spline.p1) - self.kin.tip_position(q)))
-            # joints within tolerance AND the tip (a small swing error is centimetres at full reach)
-            reached = dist < cfg.goal_tolerance_rad and self.status.distance_remaining < cfg.goal_tolerance_m
+            tip_goal = self.kin.tip_position(spline.p1)
+            self.status.distance_remaining = float(np.linalg.norm(tip_goal - self.kin.tip_position(q)))
+            # Joints within tolerance AND the tip (a small swing error is centimetres at full reach), both
+            # as measured and as predicted once the commands still in flight (swing: ~1.3 s of dead time
+            # and lag) have acted: declaring success on the measurement alone let the arm drift off after.
+            joint_err = [self._joint_delta(x, spline.p1) for x in (q, qp)]
+            tip_err = [self.status.distance_remaining, float(np.linalg.norm(tip_goal - self.kin.tip_position(qp)))]
+            reached = max(float(np.max(np.abs(e))) for e in joint_err) < cfg.goal_tolerance_rad and max(tip_err) < cfg.goal_tolerance_m
+            self._remaining = (
+                f"tip {self.status.distance_remaining:.3f} m off, joints off by "
+                + ", ".join(f"{n} {e:+.4f} rad" for n, e in zip(JOINTS, joint_err[0], strict=True))
+            )
         else:
             assert self._theta_spline is not None
             p_ref, v_ref = spline.sample(t_ref)
@@ -459,11 +487,13 @@ class ArmController:
                 [*tasks, (self.kin.theta_w_jacobian()[None, :], b_th), (jt, b_p), (np.eye(N), np.zeros(N))]
             )
             self.reference_tip = spline.sample(self._seg_time)[0]
-            tip_now = self.kin.tip_position(q)
-            dist = float(np.linalg.norm(spline.p1 - tip_now))
-            th_err = abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(q))
-            reached = dist < cfg.goal_tolerance_m and th_err < cfg.goal_tolerance_rad
+            dists = [float(np.linalg.norm(spline.p1 - self.kin.tip_position(x))) for x in (q, qp)]
+            th_errs = [abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(x)) for x in (q, qp)]
+            # measured and predicted (commands in flight) both within tolerance, as for joint targets
+            reached = max(dists) < cfg.goal_tolerance_m and max(th_errs) < cfg.goal_tolerance_rad
+            dist = dists[0]
             self.status.distance_remaining = dist
+            self._remaining = f"tip {dist:.3f} m off, theta_w {th_errs[0]:.4f} rad off"
         self.last_result = res
         u = res.x
         last = self._seg == len(self._targets) - 1
@@ -485,8 +515,10 @@ class ArmController:
             elif self._seg_time > spline.duration + cfg.segment_timeout_margin_s:
                 self.status = ControllerStatus(
                     mode="stopping", result=None,
-                    message=f"segment {self._seg + 1} ({target.label or 'move'}) not reached in time: "
-                    f"{self.status.distance_remaining:.3f} remaining",
+                    message=f"segment {self._seg + 1} ({target.label or 'move'}) not reached within "
+                    f"{spline.duration + cfg.segment_timeout_margin_s:.1f} s: {self._remaining} "
+                    f"(tolerance {cfg.goal_tolerance_m:g} m / {cfg.goal_tolerance_rad:g} rad)",
                 )
                 self._stop_code = codes.TIMEOUT
+                self._stop_time = 0.0
         return u

@@ -121,13 +121,20 @@ class HierarchicalQP:
     @staticmethod
     def _shrink(proj: np.ndarray, a_eff: np.ndarray) -> np.ndarray:
         """Remove from the projector ``proj`` the directions the rows ``a_eff`` (= A @ proj) constrain."""
+        if a_eff.shape[0] == 1:  # one row (theta_w): its direction, without an SVD (~20 us of numpy overhead)
+            norm = float(np.sqrt(a_eff[0] @ a_eff[0]))
+            if norm <= 1e-9:
+                return proj
+            v1 = a_eff[0] / norm
+            out = proj - np.outer(v1, v1)
+            return out if np.abs(out).max() > 1e-9 else np.zeros_like(proj)
         _, sv, vt = np.linalg.svd(a_eff, full_matrices=False)
         rank = int(np.sum(sv > 1e-9 * max(1.0, float(sv[0]) if sv.size else 1.0)))
         if rank == 0:
             return proj
         v = vt[:rank].T
         out = proj - v @ v.T
-        return out if np.max(np.abs(out)) > 1e-9 else np.zeros_like(proj)
+        return out if np.abs(out).max() > 1e-9 else np.zeros_like(proj)
 
     def solve(self, tasks: list[tuple[np.ndarray, np.ndarray]]) -> HqpResult:
         """Solve the hierarchy for this step's ``(A, b)`` per level (same order and shapes as ``levels``)."""
@@ -151,13 +158,13 @@ class HierarchicalQP:
             b = np.asarray(b, dtype=float).reshape(lv.rows)
             s0, s1 = int(self._offsets[k]), int(self._offsets[k + 1])
             a = a_all[s0:s1]
-            if not np.all(np.isfinite(a)) or np.any(np.isnan(b)):
+            if not np.isfinite(a).all() or np.isnan(b).any():
                 result.failed.append(lv.name)
                 result.solved[lv.name] = False
                 continue  # a broken level is dropped; the levels above stay imposed
             b_eff = b - a @ x_star
             a_eff = a @ proj
-            if (np.all(b_eff >= 0.0) if lv.kind == INEQ else np.all(np.abs(b_eff) < 1e-12)):
+            if ((b_eff >= 0.0).all() if lv.kind == INEQ else (np.abs(b_eff) < 1e-12).all()):
                 # z = 0 (keep x_star) meets this level exactly and every level above: slack 0.
                 result.slack[lv.name] = 0.0
                 result.solved[lv.name] = False
@@ -166,7 +173,7 @@ class HierarchicalQP:
                 else:
                     proj = self._shrink(proj, a_eff)
                 continue
-            if not np.any(proj):
+            if not proj.any():
                 # no freedom left: this level is met as well as the higher ones allow
                 result.slack[lv.name] = float(np.linalg.norm(b_eff if lv.kind == EQ else np.maximum(-b_eff, 0.0)))
                 result.solved[lv.name] = False
@@ -191,7 +198,7 @@ class HierarchicalQP:
             solver.solve()
             status = solver.info.status_val
             z = np.array(solver.solution.x[:n], dtype=float)
-            if status not in _OK or not np.all(np.isfinite(z)):
+            if status not in _OK or not np.isfinite(z).all():
                 result.failed.append(f"{lv.name} ({solver.info.status})")
                 result.solved[lv.name] = False
                 continue  # drop this level: x and the constraints of the higher levels are kept

@@ -1,0 +1,125 @@
+"""Regression: the planner's action client never loses the controller's goal response (ros2/rclpy#1123).
+
+The paper stack sometimes hung in a ZX200 ``change_pose``: zx200_planner sends the segment to
+``arm_controller/move`` from an execute thread while MultiThreadedExecutor threads spin the client. In
+rclpy 7.1.6 the request is sent before it is recorded, so a response handled in between is dropped and
+the goal future never completes (the controller ran the goal and went idle; the leaf stayed RUNNING).
+Here the window is forced deterministically: the client handle's send blocks until an executor thread
+has *taken* the goal response. The stock ActionClient then loses the response (what the paper runs hit,
+shown so this test fails if the mechanism is ever misdiagnosed); RaceFreeActionClient must not.
+The server is the real ``zx200_arm_controller`` process, fed joint_states by this test.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from tests.rosproc import executable
+from tms_rp.zx200.kinematics import JOINTS
+
+pytestmark = pytest.mark.integration
+
+Q = [0.0, -0.8, 1.3, 1.2]
+
+
+class _SlowSendHandle:
+    """Wraps an rclpy action-client handle: ``send_goal_request`` returns only after the response was taken."""
+
+    def __init__(self, inner) -> None:  # noqa: ANN001
+        self._inner = inner
+        self.taken = threading.Event()
+
+    def __getattr__(self, name: str):  # noqa: ANN204
+        return getattr(self._inner, name)
+
+    def __enter__(self):  # noqa: ANN204
+        return self._inner.__enter__()
+
+    def __exit__(self, *exc) -> None:  # noqa: ANN002
+        return self._inner.__exit__(*exc)
+
+    def send_goal_request(self, request):  # noqa: ANN001, ANN201
+        seq = self._inner.send_goal_request(request)
+        self.taken.wait(30.0)  # the sending thread "preempted" until the response has been taken
+        return seq
+
+    def take_goal_response(self, response_type):  # noqa: ANN001, ANN201
+        data = self._inner.take_goal_response(response_type)
+        if all(data):
+            self.taken.set()
+        return data
+
+
+def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, object]:  # noqa: ANN001
+    from rclpy.executors import MultiThreadedExecutor
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    from tms_msg.action import Zx200ChangePose
+
+    client = client_cls(node, Zx200ChangePose, "/zx200/arm_controller/move")
+    executor = MultiThreadedExecutor(num_threads=2, context=node.context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        assert client.wait_for_server(timeout_sec=60.0), "arm_controller/move not available"
+        client._client_handle = _SlowSendHandle(client._client_handle)  # noqa: SLF001 - the forced window
+        goal = Zx200ChangePose.Goal()
+        goal.trajectory.joint_names = list(JOINTS)
+        goal.trajectory.points = [JointTrajectoryPoint(positions=Q)]
+        future = client.send_goal_async(goal)
+        end = time.monotonic() + wait_s
+        while not future.done() and time.monotonic() < end:
+            time.sleep(0.05)
+        handle = future.result() if future.done() else None
+        if handle is not None and handle.accepted:
+            result = handle.get_result_async()
+            end = time.monotonic() + 60.0
+            while not result.done() and time.monotonic() < end:
+                time.sleep(0.05)
+            return True, result.result() if result.done() else None
+        return future.done(), None
+    finally:
+        executor.shutdown(timeout_sec=5.0)
+        client.destroy()
+
+
+def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node) -> None:
+    import rclpy
+    from rclpy.action import ActionClient
+    from sensor_msgs.msg import JointState
+
+    from tms_if_opera.zx200.action_client import RaceFreeActionClient
+
+    ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
+                name="zx200_arm_controller")
+    assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+    # joint_states at the goal pose (the controller holds it: the goal ends SUCCESS after settling)
+    js_node = rclpy.create_node("js_feed", context=ros_node.context)
+    pub = js_node.create_publisher(JointState, "/zx200/joint_states", 10)
+    stop = threading.Event()
+
+    def feed() -> None:
+        msg = JointState(name=list(JOINTS), position=list(Q), velocity=[0.0] * 4)
+        while not stop.is_set():
+            pub.publish(msg)
+            time.sleep(0.01)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    try:
+        # the response is taken before send returns: it is handled at once or never (10 s is plenty)
+        stock_done, _ = _send_with_forced_race(rclpy.create_node("stock_client", context=ros_node.context),
+                                               ActionClient, 10.0)
+        assert not stock_done, "the stock ActionClient kept the response: rclpy#1123 fixed? re-check the workaround"
+        done, result = _send_with_forced_race(rclpy.create_node("racefree_client", context=ros_node.context),
+                                              RaceFreeActionClient, 60.0)
+        assert done, "RaceFreeActionClient lost the goal response"
+        assert result is not None, "RaceFreeActionClient: goal accepted but no result within 60 s"
+        assert result.status == 4 and result.result.error_code.val == 1, (result.status, result.result.message)
+    finally:
+        stop.set()
+        feeder.join(2.0)
