@@ -89,7 +89,7 @@ def test_localization_over_can_rms_outage_and_jump(procs, domain, ros_node, tmp_
     cmd.publish(Twist())
     errors: dict[str, list[float]] = {}
     covs: dict[str, list[float]] = {}
-    series = truth.wall_series()
+    series = truth.wall_series(window=0.5)  # short: a loaded plant runs below real time, the offset drifts
     for t, name, x, y, _yaw, cov in est:
         tr = truth.at(t, series=series)
         if tr is not None:
