@@ -249,17 +249,32 @@ def junit_cases(path: Path) -> dict[str, str]:
 
 
 def _kill_group(proc: subprocess.Popen[bytes]) -> None:
-    """SIGTERM then SIGKILL the VM's whole process group (vng, virtme-run, qemu)."""
+    """SIGTERM then SIGKILL the VM's whole process group (vng, virtme-run, qemu) until none of it is left.
+
+    Waiting for the group leader (vng) alone is not enough: virtme-run outlived it by seconds when measured.
+    """
     for sig, grace in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
         try:
             os.killpg(proc.pid, sig)
         except ProcessLookupError:
-            return
-        try:
-            proc.wait(grace)
-            return
-        except subprocess.TimeoutExpired:
-            continue
+            break
+        end = time.monotonic() + grace
+        while time.monotonic() < end:
+            proc.poll()  # reap the leader, else its zombie keeps the group "alive"
+            if not _group_alive(proc.pid):
+                return
+            time.sleep(0.05)
+    proc.poll()
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _tail(path: Path, lines: int = 15) -> str:
@@ -378,6 +393,10 @@ def _skip_reasons(outdir: Path) -> str:
     return "; ".join(line for line in lines if line.startswith("SKIPPED"))[:2000] or "(see pytest.log)"
 
 
+def _exit_on_signal(signum: int, _frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="VM settings (YAML)")
@@ -417,6 +436,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         print(f"{TAG} VM available: kernel {pre.kernel}, {pre.qemu}, {pre.vng}")
         return 0
+    # SIGTERM/SIGHUP (CI cancelling the job, a timeout killing this process) exit through run_vm's `finally`,
+    # which kills the VM's process group: qemu runs in its own session and would otherwise outlive us.
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _exit_on_signal)
     outdir = args.outdir or Path(tempfile.mkdtemp(prefix="tms-vcan-vm-"))
     print(f"{TAG} booting {pre.kernel} (kvm={'on' if cfg.kvm else 'off'}, timeout {cfg.timeout_s:.0f} s); "
           f"logs in {outdir}", flush=True)

@@ -85,7 +85,8 @@ def _no_vm_left(outdir: Path) -> list[str]:
             cmdline = (proc_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
         except OSError:
             continue
-        if str(outdir) in cmdline and "pytest" not in cmdline:
+        # (outdir lies under pytest's tmp_path, so "pytest" in a command line says nothing; skip only ourselves)
+        if str(outdir) in cmdline and proc_dir.name != str(os.getpid()):
             left.append(cmdline[:200])
     return left
 
@@ -128,6 +129,27 @@ def test_vm_boot_timeout_fails_with_that_reason_and_kills_the_vm(tmp_path):
     assert "VM boot timed out: the guest script had not started after 4 s" in proc.stderr
     assert took < 60, f"the runner took {took:.0f} s to give up on a 4 s bound"
     assert _no_vm_left(outdir) == []
+
+
+@pytest.mark.timeout(120)
+def test_vm_runner_terminated_mid_boot_takes_the_vm_with_it(tmp_path):
+    """CI cancelling the job (SIGTERM to the runner) ends the runner at once and leaves no qemu behind."""
+    _runner("--check", timeout=60)  # skips (naming what is missing) where there is no VM
+    outdir = tmp_path / "vm"
+    proc = subprocess.Popen([sys.executable, str(RUNNER), "--outdir", str(outdir), "--quiet"], cwd=ROOT,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not any("qemu-system" in c for c in _no_vm_left(outdir)) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert any("qemu-system" in c for c in _no_vm_left(outdir)), "qemu never started"
+        proc.terminate()
+        assert proc.wait(30) == 128 + 15
+        assert _no_vm_left(outdir) == []
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
 
 
 @pytest.mark.timeout(PYTEST_TIMEOUT_S)
