@@ -326,11 +326,11 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
                     if fault:
                         t_leg = time.monotonic()
                         rej0 = rejected_so_far(loc)
-                        for until, ph in ((20.0, "normal"), (30.0, "outage"), (32.0, "settle"), (45.0, "normal"),
-                                          (48.0, "jump"), (50.0, "after")):
-                            spin_until(node, call._result.done, t_leg + until - time.monotonic())
+                        # (start [s into the leg], phase): outage 20-30 s, settle 30-32 s, jump 45-48 s, after 48-53 s
+                        for start, ph in ((20.0, "outage"), (30.0, "settle"), (32.0, "normal"), (45.0, "jump"),
+                                          (48.0, "after"), (53.0, "normal")):
+                            spin_until(node, call._result.done, t_leg + start - time.monotonic())
                             phase["name"] = ph
-                        phase["name"] = "normal"
                         rej1 = rejected_so_far(loc)
                     if not spin_until(node, call._result.done, 900.0):  # generous: the plant slows under load
                         call.cancel()
