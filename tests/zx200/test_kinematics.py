@@ -77,3 +77,20 @@ def test_rejections_name_distance_joint_and_nan(kin):
         kin.ik_position_with_angle(np.array([7.0, 0.0, -3.5]), 1.0)  # needs the boom below its -0.1 limit
     with pytest.raises(InvalidGoalError, match="finite"):
         kin.ik_position_with_angle(np.array([float("nan"), 0.0, 1.0]), 0.5)
+
+
+def test_pose_to_theta_w_is_not_wrapped_to_pi() -> None:
+    # Regression (bench: a pose goal ended TIMEOUT 7-9 m away): theta_w = boom + arm + bucket reaches
+    # past pi (curled bucket); the pose's pitch must map back to the angle the joints can hold.
+    import pinocchio as pin
+
+    from tms_rp.zx200.kinematics import load_kinematics
+
+    kin = load_kinematics()
+    rng = np.random.default_rng(1)
+    lo, hi = kin.limits.lower.copy(), kin.limits.upper.copy()
+    lo[0], hi[0] = -3.0, 3.0
+    for q in [np.array([0.165, -0.348, 1.929, 1.628]), *rng.uniform(lo, hi, size=(300, 4))]:
+        m = kin.tip_pose(q)
+        _, th = kin.pose_to_position_with_angle(m.translation, pin.Quaternion(m.rotation).coeffs())
+        assert abs(th - kin.theta_w(q)) < 1e-9, (q, th, kin.theta_w(q))

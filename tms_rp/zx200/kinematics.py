@@ -268,7 +268,11 @@ class Zx200Kinematics:
                 f"(4-DOF front; tolerance {tolerance})"
             )
         theta_w = float(pitch - self.bucket_pitch0 + self.c_bucket)
-        theta_w = math.atan2(math.sin(theta_w), math.cos(theta_w))
+        # theta_w = boom + arm + bucket spans more than pi (about -1.2 .. 5.0 rad with the limits): a pitch
+        # is only defined mod 2 pi, so pick the representative in the window the joints can reach
+        # (wrapping to (-pi, pi] turned a 3.2 rad pose into -3.07 rad: the arm chased it and timed out).
+        lo = float(np.sum(self.limits.lower[1:])) - 0.1
+        theta_w = lo + math.fmod(theta_w - lo, 2.0 * math.pi) % (2.0 * math.pi)
         return pos, theta_w
 
 
