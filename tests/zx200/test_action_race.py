@@ -92,7 +92,7 @@ def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node)
     from rclpy.action import ActionClient
     from sensor_msgs.msg import JointState
 
-    from tms_if_opera.zx200.action_client import RaceFreeActionClient
+    from tms_common.action_client import RaceFreeActionClient
 
     ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
                 name="zx200_arm_controller")

@@ -38,7 +38,7 @@ def _make_node():  # noqa: ANN202
     from sensor_msgs.msg import JointState
     from unique_identifier_msgs.msg import UUID
 
-    from tms_if_opera.zx200.action_client import RaceFreeActionClient
+    from tms_common.action_client import RaceFreeActionClient
     from tms_msg.action import Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
     from tms_msg.msg import Zx200PositionWithAngle
     from tms_rc.zx200.controller import JointTarget, load_controller_config

@@ -16,11 +16,11 @@ import threading
 import time
 
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, String
 
+from tms_common.action_client import RaceFreeActionClient
 from tms_msg.action import Subtask
 from tms_ts.leaf import ABORTED, ACCEPTED, CANCELED, PENDING, REJECTED, SUCCEEDED
 
@@ -39,7 +39,7 @@ _STATUS = {GoalStatus.STATUS_SUCCEEDED: SUCCEEDED, GoalStatus.STATUS_CANCELED: C
 class RosGoal:
     """One Subtask goal: ``state`` follows the action protocol through future callbacks."""
 
-    def __init__(self, client: ActionClient, goal: Subtask.Goal) -> None:
+    def __init__(self, client: RaceFreeActionClient, goal: Subtask.Goal) -> None:
         self.state = PENDING
         self.message = ""
         self.feedback = ""
@@ -78,7 +78,7 @@ class ManagerRosPort:
 
     def __init__(self, node: Node) -> None:
         self.node = node
-        self._clients: dict[str, ActionClient] = {}
+        self._clients: dict[str, RaceFreeActionClient] = {}
         self._emg: dict[str, object] = {}
         self._lock_pubs: dict[str, object] = {}
         self.locked: dict[str, bool] = {}
@@ -92,11 +92,11 @@ class ManagerRosPort:
         self._beats: dict[str, float] = {}
         node.create_subscription(String, HEARTBEAT_TOPIC, self._on_beat, 50)
 
-    def _client(self, model_name: str, subtask_name: str) -> ActionClient:
+    def _client(self, model_name: str, subtask_name: str) -> RaceFreeActionClient:
         name = f"/{model_name}/{subtask_name}"
         client = self._clients.get(name)
         if client is None:
-            client = self._clients[name] = ActionClient(self.node, Subtask, name)
+            client = self._clients[name] = RaceFreeActionClient(self.node, Subtask, name)
         return client
 
     # RosPort -----------------------------------------------------------------------------------

@@ -29,13 +29,14 @@ import time
 
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import Point, Pose, PoseStamped
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from tms_common.action_client import RaceFreeActionClient
 from tms_msg.action import (
     FollowWaypoints,
     NavigateThroughPoses,
@@ -135,13 +136,13 @@ class SubtaskServers(Node):
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self.rejections = self.create_publisher(String, REJECTIONS_TOPIC, reliable)
         self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
-        self.planners: dict[str, ActionClient] = {}
+        self.planners: dict[str, RaceFreeActionClient] = {}
         self.action_servers = []
         for spec in specs:
             action_type = self._kind_type(spec)
             planning = f"/{self.model_name}/{spec.planning_action}"
             if planning not in self.planners:
-                self.planners[planning] = ActionClient(self, action_type, planning, callback_group=group)
+                self.planners[planning] = RaceFreeActionClient(self, action_type, planning, callback_group=group)
             self.action_servers.append(ActionServer(
                 self, Subtask, f"/{self.model_name}/{spec.name}",
                 execute_callback=lambda gh, s=spec: self._execute(gh, s),

@@ -11,7 +11,7 @@ executed - the ``pending_pose`` leaf stayed RUNNING with the controller idle. Up
 rclpy #1308 (backports #1517/#1519, newer than these wheels) with a lock; this subclass does the same:
 a request is sent and recorded under one lock, and a response is looked up only after taking that lock.
 
-Use it exactly like ``rclpy.action.ActionClient``. Node-side helper (imports rclpy).
+Use it exactly like ``rclpy.action.ActionClient`` (every action client of the platform does). Imports rclpy.
 """
 
 from __future__ import annotations
