@@ -85,6 +85,8 @@ class ControllerConfig:
     lag_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.15))
     goal_tolerance_m: float = 0.02
     goal_tolerance_rad: float = 0.02
+    via_tolerance_m: float = 0.05
+    via_tolerance_rad: float = 0.05
     rest_speed: float = 0.01
     settle_s: float = 0.3
     segment_timeout_margin_s: float = 20.0
@@ -122,6 +124,8 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             lag_s=_per_joint(data["plant_model"]["lag_s"], "plant_model.lag_s", src),
             goal_tolerance_m=float(data["goal_tolerance_m"]),
             goal_tolerance_rad=float(data["goal_tolerance_rad"]),
+            via_tolerance_m=float(data.get("via_tolerance_m", data["goal_tolerance_m"])),
+            via_tolerance_rad=float(data.get("via_tolerance_rad", data["goal_tolerance_rad"])),
             rest_speed=float(data["rest_speed"]),
             settle_s=float(data["settle_s"]),
             segment_timeout_margin_s=float(data["segment_timeout_margin_s"]),
@@ -137,6 +141,9 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             raise where.error(("pid",), f"pid: missing gains for {key!r}")
     if cfg.rate_hz <= 0 or cfg.pump_flow_lpm <= 0 or cfg.max_tip_speed <= 0:
         raise ConfigError(f"{src}: rate_hz, pump_flow_lpm and max_tip_speed must be > 0")
+    for key in ("goal_tolerance_m", "goal_tolerance_rad", "via_tolerance_m", "via_tolerance_rad"):
+        if not getattr(cfg, key) > 0:
+            raise where.error((key,), f"{key} must be > 0, got {getattr(cfg, key)}")
     if cfg.segment_timeout_margin_s <= 0 or cfg.stop_timeout_s <= 0:
         raise ConfigError(f"{src}: segment_timeout_margin_s and stop_timeout_s must be > 0")
     return cfg
@@ -207,6 +214,7 @@ class _Pid:
     def __init__(self, gains: dict[str, float], dim: int, dt: float) -> None:
         self.kp, self.ki, self.kd = gains.get("kp", 0.0), gains.get("ki", 0.0), gains.get("kd", 0.0)
         self.limit = gains.get("i_limit", math.inf)
+        self.zone = gains.get("i_zone", math.inf)  # integrate only components with |error| <= i_zone
         self.dt = dt
         self.integral = np.zeros(dim)
         self.prev: np.ndarray | None = None
@@ -215,9 +223,13 @@ class _Pid:
         self.integral[:] = 0.0
         self.prev = None
 
-    def __call__(self, error: np.ndarray) -> np.ndarray:
-        self.integral = np.clip(self.integral + error * self.dt, -self.limit, self.limit)
-        deriv = np.zeros_like(error) if self.prev is None else (error - self.prev) / self.dt
+    def __call__(self, error: np.ndarray, dt: float | None = None, integrate: bool = True) -> np.ndarray:
+        """PID output; ``integrate`` False holds the integral (conditional integration, anti-windup)."""
+        dt = self.dt if dt is None else dt
+        if integrate:
+            inside = np.abs(error) <= self.zone
+            self.integral = np.where(inside, np.clip(self.integral + error * dt, -self.limit, self.limit), self.integral)
+        deriv = np.zeros_like(error) if self.prev is None or dt <= 0 else (error - self.prev) / dt
         self.prev = error.copy()
         return self.kp * error + self.ki * self.integral + self.kd * deriv
 
@@ -272,8 +284,16 @@ class ArmController:
         self._horizon_steps = int(round(float(np.max(delays)) / self.dt))
         self._extra_steps = [int(round((float(np.max(delays)) - d) / self.dt)) for d in delays]
         self.preview_s = self._horizon_steps * self.dt
-        self._in_flight: deque[np.ndarray] = deque(maxlen=max(self._horizon_steps, 1))
-        self._in_flight_sum = np.zeros(N)  # running sum of _in_flight (summing 100+ arrays per step cost ~0.1 ms)
+        # Commands in flight as (command, how long it was applied [s]); the newest one's duration is only
+        # known at the next step (time-stamped steps) and counts as one period until then. The predictor
+        # sums command x duration over the last preview_s seconds, so a controller whose ticks are late
+        # or skipped (sim-time timer under CPU load) still predicts what the plant really received.
+        self._in_flight: deque[np.ndarray] = deque()
+        self._in_flight_dur: deque[float] = deque()
+        self._in_flight_sum = np.zeros(N)  # running sum of command x duration (rad) over the deque
+        self._in_flight_time = 0.0  # running sum of the durations [s]
+        self._last_now: float | None = None
+        self.elapsed = self.dt  # duration of the current step [s] (cfg.dt without time stamps)
         self._out_hist: deque[np.ndarray] = deque(maxlen=max(self._extra_steps) + 1)
         self.u_prev = np.zeros(N)
         self.status = ControllerStatus()
@@ -316,7 +336,44 @@ class ArmController:
         """State expected when the next command takes effect: measured + commands still in flight."""
         if not self._in_flight:
             return np.asarray(q, dtype=float).copy()
-        return np.asarray(q, dtype=float) + self.dt * self._in_flight_sum
+        return np.asarray(q, dtype=float) + self._in_flight_sum
+
+    def _advance_time(self, now: float | None) -> None:
+        """Set :attr:`elapsed` from the time stamp and give the previous command its real duration."""
+        if now is None:
+            self.elapsed = self.dt
+        else:
+            now = float(now)
+            if self._last_now is None or not math.isfinite(now):
+                self.elapsed = self.dt
+            else:
+                # Late ticks are real (the plant kept applying the last command); a clock jumping back or
+                # a pause of seconds (sim restarted) is not: bound it to [0, preview] so one bad stamp
+                # cannot wipe or inflate the prediction.
+                self.elapsed = min(max(now - self._last_now, 0.0), max(self.preview_s, self.dt))
+            self._last_now = now if math.isfinite(now) else self._last_now
+        if self._in_flight and self.elapsed != self._in_flight_dur[-1]:
+            # the newest command was provisionally counted as one period: correct to its real duration
+            self._in_flight_sum += self._in_flight[-1] * (self.elapsed - self._in_flight_dur[-1])
+            self._in_flight_time += self.elapsed - self._in_flight_dur[-1]
+            self._in_flight_dur[-1] = self.elapsed
+        self._trim_in_flight()
+
+    def _trim_in_flight(self) -> None:
+        """Keep only the last ``preview_s`` seconds of commands (the oldest one partly)."""
+        horizon = self.preview_s
+        while self._in_flight and self._in_flight_time - self._in_flight_dur[0] >= horizon - 1e-9:
+            u0, d0 = self._in_flight.popleft(), self._in_flight_dur.popleft()
+            self._in_flight_sum -= u0 * d0
+            self._in_flight_time -= d0
+        excess = self._in_flight_time - horizon
+        if self._in_flight and excess > 1e-9:
+            self._in_flight_sum -= self._in_flight[0] * excess
+            self._in_flight_time -= excess
+            self._in_flight_dur[0] -= excess
+        if not self._in_flight:
+            self._in_flight_sum[:] = 0.0
+            self._in_flight_time = 0.0
 
     def _segment_duration(self, q0: np.ndarray, target: Target) -> float:
         cfg, lim = self.cfg, self.kin.limits
@@ -398,12 +455,17 @@ class ArmController:
         return u
 
     # -------------------------------------------------------------------------- the step
-    def step(self, q: np.ndarray, dq: np.ndarray | None = None) -> np.ndarray:
+    def step(self, q: np.ndarray, dq: np.ndarray | None = None, now: float | None = None) -> np.ndarray:
         """One control period: measured joints ``q`` (and velocities ``dq``) -> joint-velocity command.
 
+        ``now`` [s] is the time of this step on the plant's clock (the node passes its ROS clock,
+        simulated time in the launches): with it, the Smith predictor, the PID integrators and the
+        reference advance by the time that really passed, so late or skipped ticks do not make the
+        prediction wrong (without it every step counts as one period ``1 / rate_hz``).
         The returned command is what to send now (delays equalised per joint). :attr:`status`
         reports the phase and, when a run ends, ``result`` (an ErrorCodes value) and ``message``.
         """
+        self._advance_time(now)
         q = np.asarray(q, dtype=float)
         dq = np.zeros(N) if dq is None else np.asarray(dq, dtype=float)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
@@ -422,9 +484,9 @@ class ArmController:
             u = res.x
             self.last_result = res
             if st.mode == "stopping":
-                self._stop_time += self.dt
+                self._stop_time += self.elapsed
                 in_flight = max((float(np.max(np.abs(c))) for c in self._out_hist), default=0.0)
-                if self._horizon_steps:
+                if self._in_flight:
                     in_flight = max(in_flight, float(np.max(np.abs(np.asarray(self._in_flight)))))
                 if np.max(np.abs(u)) < 1e-4 and np.max(np.abs(dq)) < self.cfg.rest_speed and in_flight < 1e-4:
                     self.status = ControllerStatus(mode="idle", result=self._stop_code, message=st.message or "canceled")
@@ -442,10 +504,11 @@ class ArmController:
         u = self._enforce_hard_limits(u)
         self.u_prev = u
         if self._horizon_steps:
-            if len(self._in_flight) == self._in_flight.maxlen:
-                self._in_flight_sum -= self._in_flight[0]
             self._in_flight.append(u)
-            self._in_flight_sum += u
+            self._in_flight_dur.append(self.dt)  # corrected to the real duration at the next step
+            self._in_flight_sum += u * self.dt
+            self._in_flight_time += self.dt
+            self._trim_in_flight()
         self._out_hist.append(u)
         out = np.array([self._out_hist[-1 - min(e, len(self._out_hist) - 1)][i] for i, e in enumerate(self._extra_steps)])
         return out
@@ -453,15 +516,28 @@ class ArmController:
     def _track(self, q, qp, dq, tip, jt, tasks) -> np.ndarray:  # noqa: ANN001 - internal
         cfg = self.cfg
         target = self._targets[self._seg]
-        self._seg_time += self.dt
+        self._seg_time += self.elapsed
         t_ref = self._seg_time + self.preview_s
         spline = self._spline
         assert spline is not None
+        # Integrate only once the (previewed) reference holds its end point and the error is inside the
+        # PID's i_zone: while the arm moves, the error is mostly the tracking lag of the dead time
+        # (1.3 s on the swing), and integrating it wound the integrator up to its clamp in every move; at the goal that wound-up term (ki x i_limit) then balanced
+        # kp x error, so the arm sat millimetres to centimetres off and only crept in as the integral
+        # bled off at the rate of that small error (tens of seconds: the paper demo's swing stuck at
+        # 0.008 rad for 26 s). The plant integrates velocity, so P alone has no steady-state error;
+        # the integral is only there for a constant velocity bias (leaking valves) at the goal.
+        hold = t_ref >= spline.duration
+        last = self._seg == len(self._targets) - 1
+        # Via segments (every one but the last: approach, carry) only need to pass near their target,
+        # like Nav2's waypoint vs goal tolerance; the last one gets the goal precision.
+        tol_m = cfg.goal_tolerance_m if last else cfg.via_tolerance_m
+        tol_rad = cfg.goal_tolerance_rad if last else cfg.via_tolerance_rad
         if isinstance(target, JointTarget):
             q_ref, v_ref = spline.sample(t_ref)
             err = q_ref - qp
             err[0] = _wrap(err[0])
-            b = v_ref + self._pid_q(err)
+            b = v_ref + self._pid_q(err, self.elapsed, hold)
             res = self.hqp_joint.solve([*tasks, (np.eye(N), b), (np.eye(N), np.zeros(N))])
             self.reference_tip = None
             tip_goal = self.kin.tip_position(spline.p1)
@@ -471,7 +547,7 @@ class ArmController:
             # and lag) have acted: declaring success on the measurement alone let the arm drift off after.
             joint_err = [self._joint_delta(x, spline.p1) for x in (q, qp)]
             tip_err = [self.status.distance_remaining, float(np.linalg.norm(tip_goal - self.kin.tip_position(qp)))]
-            reached = max(float(np.max(np.abs(e))) for e in joint_err) < cfg.goal_tolerance_rad and max(tip_err) < cfg.goal_tolerance_m
+            reached = max(float(np.max(np.abs(e))) for e in joint_err) < tol_rad and max(tip_err) < tol_m
             self._remaining = (
                 f"tip {self.status.distance_remaining:.3f} m off, joints off by "
                 + ", ".join(f"{n} {e:+.4f} rad" for n, e in zip(JOINTS, joint_err[0], strict=True))
@@ -481,8 +557,8 @@ class ArmController:
             p_ref, v_ref = spline.sample(t_ref)
             th_ref, w_ref = self._theta_spline.sample(t_ref)
             th = self.kin.theta_w(qp)
-            b_th = w_ref + self._pid_th(th_ref - th)
-            b_p = v_ref + self._pid_pos(p_ref - tip)
+            b_th = w_ref + self._pid_th(th_ref - th, self.elapsed, hold)
+            b_p = v_ref + self._pid_pos(p_ref - tip, self.elapsed, hold)
             res = self.hqp_cartesian.solve(
                 [*tasks, (self.kin.theta_w_jacobian()[None, :], b_th), (jt, b_p), (np.eye(N), np.zeros(N))]
             )
@@ -490,16 +566,15 @@ class ArmController:
             dists = [float(np.linalg.norm(spline.p1 - self.kin.tip_position(x))) for x in (q, qp)]
             th_errs = [abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(x)) for x in (q, qp)]
             # measured and predicted (commands in flight) both within tolerance, as for joint targets
-            reached = max(dists) < cfg.goal_tolerance_m and max(th_errs) < cfg.goal_tolerance_rad
+            reached = max(dists) < tol_m and max(th_errs) < tol_rad
             dist = dists[0]
             self.status.distance_remaining = dist
             self._remaining = f"tip {dist:.3f} m off, theta_w {th_errs[0]:.4f} rad off"
         self.last_result = res
         u = res.x
-        last = self._seg == len(self._targets) - 1
         if self._seg_time >= spline.duration:
             if reached and (not last or np.max(np.abs(dq)) < cfg.rest_speed):
-                self._settled += self.dt
+                self._settled += self.elapsed
             else:
                 self._settled = 0.0
             if reached and (not last or self._settled >= cfg.settle_s):
@@ -517,7 +592,7 @@ class ArmController:
                     mode="stopping", result=None,
                     message=f"segment {self._seg + 1} ({target.label or 'move'}) not reached within "
                     f"{spline.duration + cfg.segment_timeout_margin_s:.1f} s: {self._remaining} "
-                    f"(tolerance {cfg.goal_tolerance_m:g} m / {cfg.goal_tolerance_rad:g} rad)",
+                    f"(tolerance {tol_m:g} m / {tol_rad:g} rad)",
                 )
                 self._stop_code = codes.TIMEOUT
                 self._stop_time = 0.0

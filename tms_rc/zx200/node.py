@@ -84,7 +84,10 @@ def _make_node():  # noqa: ANN202
                 q, dq = self._q, self._dq
                 if q is None:
                     return
-                u = self.ctl.step(q, dq)
+                # The ROS clock (simulated time in the launches): the controller advances its Smith
+                # predictor, integrators and reference by the time that really passed, so late or
+                # skipped ticks under CPU load do not corrupt the prediction (issue 9: swing stuck off).
+                u = self.ctl.step(q, dq, now=self.get_clock().now().nanoseconds * 1e-9)
             msg = JointCmd()
             msg.joint_name = list(JOINTS)
             msg.control_type = JointCmd.VELOCITY
