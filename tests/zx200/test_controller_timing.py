@@ -160,3 +160,16 @@ def test_via_tolerance_must_be_positive(tmp_path):
     bad.write_text(text.replace("via_tolerance_m: 0.05", "via_tolerance_m: -0.05"))
     with pytest.raises(ConfigError, match="via_tolerance_m"):
         load_controller_config(bad)
+
+
+def test_a_target_marked_via_uses_the_via_tolerance_alone(kin):
+    # The planner sends each segment as its own controller goal and marks all but the plan's last "via"
+    # (internal action frame_id "<label>|via"): such a one-segment run is held to via_tolerance_*.
+    cfg = dataclasses.replace(load_controller_config(), segment_timeout_margin_s=3.0, stop_timeout_s=3.0)
+    q0 = np.array(kin.home, dtype=float)
+    reach = float(np.linalg.norm(kin.tip_position(q0)[:2] - kin.swing_origin[:2]))
+    via = q0.copy()
+    via[0] += 0.03 / reach
+    ctl, _ = _stuck_swing_run(kin, cfg, [JointTarget(via, "approach", via=True)], q0)
+    assert ctl.status.result == codes.SUCCESS, ctl.status
+    assert 0.02 < ctl.status.distance_remaining < 0.05, ctl.status

@@ -94,8 +94,9 @@ def _make_node():  # noqa: ANN202
                 result.message = "arm controller action arm_controller/move is not available"
                 handle.abort()
                 return result
-            for target in targets:
-                code, message = self._segment(handle, action_type, target)
+            for k, target in enumerate(targets):
+                # every segment but the last is a via point (approach, carry, ...): via_tolerance_*
+                code, message = self._segment(handle, action_type, target, via=k < len(targets) - 1)
                 if code != codes.SUCCESS:
                     result.error_code.val = code
                     result.message = f"{target.label}: {message}"
@@ -109,13 +110,14 @@ def _make_node():  # noqa: ANN202
             handle.succeed()
             return result
 
-        def _segment(self, handle, action_type, target) -> tuple[int, str]:  # noqa: ANN001
+        def _segment(self, handle, action_type, target, via: bool = False) -> tuple[int, str]:  # noqa: ANN001
             goal = Zx200ChangePose.Goal()
+            # internal action: frame_id = segment label, "|via" marks a via segment (controller README)
+            goal.trajectory.header.frame_id = target.label + ("|via" if via else "")
             if isinstance(target, JointTarget):
                 from trajectory_msgs.msg import JointTrajectoryPoint
 
                 goal.trajectory.joint_names = list(JOINTS)
-                goal.trajectory.header.frame_id = target.label
                 goal.trajectory.points = [JointTrajectoryPoint(positions=[float(v) for v in target.q])]
             else:
                 pwa = Zx200PositionWithAngle()

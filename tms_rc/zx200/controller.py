@@ -182,6 +182,7 @@ class JointTarget:
     q: np.ndarray
     label: str = ""
     speed_scale: float = 1.0
+    via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
 
 
 @dataclass(frozen=True)
@@ -192,6 +193,7 @@ class CartesianTarget:
     theta_w: float
     label: str = ""
     speed_scale: float = 1.0
+    via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
 
 
 Target = JointTarget | CartesianTarget
@@ -529,10 +531,12 @@ class ArmController:
         # the integral is only there for a constant velocity bias (leaking valves) at the goal.
         hold = t_ref >= spline.duration
         last = self._seg == len(self._targets) - 1
-        # Via segments (every one but the last: approach, carry) only need to pass near their target,
-        # like Nav2's waypoint vs goal tolerance; the last one gets the goal precision.
-        tol_m = cfg.goal_tolerance_m if last else cfg.via_tolerance_m
-        tol_rad = cfg.goal_tolerance_rad if last else cfg.via_tolerance_rad
+        # Via segments (every one but the last, and targets marked ``via``: the planner sends approach,
+        # carry, ... one goal each) only need to pass near their target, like Nav2's waypoint vs goal
+        # tolerance, and do not wait for rest; the final one gets the goal precision.
+        via = target.via or not last
+        tol_m = cfg.via_tolerance_m if via else cfg.goal_tolerance_m
+        tol_rad = cfg.via_tolerance_rad if via else cfg.goal_tolerance_rad
         if isinstance(target, JointTarget):
             q_ref, v_ref = spline.sample(t_ref)
             err = q_ref - qp
@@ -573,11 +577,11 @@ class ArmController:
         self.last_result = res
         u = res.x
         if self._seg_time >= spline.duration:
-            if reached and (not last or np.max(np.abs(dq)) < cfg.rest_speed):
+            if reached and (via or np.max(np.abs(dq)) < cfg.rest_speed):
                 self._settled += self.elapsed
             else:
                 self._settled = 0.0
-            if reached and (not last or self._settled >= cfg.settle_s):
+            if reached and (via or self._settled >= cfg.settle_s):
                 if last:
                     self.status = ControllerStatus(
                         mode="idle", segment=self._seg + 1, segments=len(self._targets), label=target.label,

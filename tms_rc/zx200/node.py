@@ -107,17 +107,22 @@ def _make_node():  # noqa: ANN202
 
         def _targets(self, goal) -> list:  # noqa: ANN001
             names = list(goal.trajectory.joint_names)
+            # trajectory.header.frame_id = "<label>" or "<label>|via" (internal action): a via segment
+            # (the planner's approach, carry, ...: every segment of a plan but the last, sent one goal
+            # each) is reached within via_tolerance_* without waiting for rest.
+            label, _, flags = goal.trajectory.header.frame_id.partition("|")
+            via = "via" in flags.split(",")
             out = []
             for k, pt in enumerate(goal.trajectory.points):
                 q = self._q.copy()
                 for n, v in zip(names, pt.positions, strict=False):
                     if n in JOINTS:
                         q[JOINTS.index(n)] = v
-                out.append(JointTarget(q, goal.trajectory.header.frame_id or f"joint {k + 1}"))
+                out.append(JointTarget(q, label or f"joint {k + 1}", via=via))
             for k, pwa in enumerate(goal.position_with_angle_sequence):
                 p = np.array([pwa.position.x, pwa.position.y, pwa.position.z])
                 scale = pwa.offset if 0.0 < pwa.offset <= 1.0 else 1.0
-                out.append(CartesianTarget(p, pwa.theta_w, f"position {k + 1}", speed_scale=scale))
+                out.append(CartesianTarget(p, pwa.theta_w, label or f"position {k + 1}", speed_scale=scale, via=via))
             return out
 
         def _execute(self, handle):  # noqa: ANN001, ANN202
