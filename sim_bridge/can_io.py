@@ -168,7 +168,16 @@ class PlantCanIO:
         now = self.plant.time
         for side in self.sides.values():
             while True:
-                msg = side.bus.recv(timeout=0.0)
+                try:
+                    msg = side.bus.recv(timeout=0.0)
+                except can.CanOperationError as exc:
+                    # A datagram that is not a CAN frame (udp_multicast: anything sent to the port, e.g. a
+                    # stray DDS packet) is dropped and counted; it must not stop the plant.
+                    side.counters["ignored_undecodable"] += 1
+                    if side.counters["ignored_undecodable"] in (1, 10, 100, 1000):
+                        log.warning("%s: undecodable bus message ignored (%d so far): %s", side.machine,
+                                    side.counters["ignored_undecodable"], exc)
+                    continue
                 if msg is None:
                     break
                 n += 1

@@ -47,6 +47,23 @@ def isolated_domain() -> Iterator[int]:
     raise RuntimeError("no free ROS_DOMAIN_ID in 1..200")
 
 
+#: udp_multicast CAN test ports live below DDS's port space: Fast DDS uses 7400 + 250 * domain + offsets
+#: (domains 1..200 here -> 7650..57700), and a socket bound to a port hears every datagram sent to it, so a
+#: CAN bus on, say, port 47196 received the SPDP announcements a left-over participant of domain 159 kept
+#: sending to its dead peers (and the plant crashed on them).
+CAN_PORT_BASE = 3000
+CAN_PORTS_PER_DOMAIN = 20
+
+
+def can_port(domain: int, k: int = 0) -> int:
+    """The ``k``-th (0..19) udp_multicast CAN port of a test holding ``domain``: unique per domain, never a DDS port."""
+    if not 0 <= k < CAN_PORTS_PER_DOMAIN:
+        raise ValueError(f"can_port: k={k} outside 0..{CAN_PORTS_PER_DOMAIN - 1}")
+    port = CAN_PORT_BASE + CAN_PORTS_PER_DOMAIN * domain + k
+    assert port < 7400, f"can_port({domain}, {k}) = {port} would be inside DDS's port range"
+    return port
+
+
 def ros_env(domain: int, **extra: str) -> dict[str, str]:
     """Environment for a node process on ``domain``, discovery limited to this host."""
     env = dict(os.environ)

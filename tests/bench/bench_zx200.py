@@ -143,7 +143,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
-    from tests.rosproc import Proc, executable, isolated_domain, ros_env
+    from tests.rosproc import Proc, can_port, executable, isolated_domain, ros_env
     from tests.zx200.conftest import ArmStack
     from tests.zx200.test_plant_integration import joint_goal, pose_goal, pwa_goal
     from tms_msg.msg import JointCmd
@@ -155,7 +155,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     lo = np.array([-1.5, -1.0, 0.8, -0.3])
     hi = np.array([1.5, -0.2, 2.4, 2.1])
     with isolated_domain() as domain:
-        port = 48000 + domain * 7 % 1000
+        port = can_port(domain, 0)
         bus = ["-p", "zx200_can_interface:=udp_multicast", "-p", f"zx200_can_channel:=239.77.{domain}.9",
                "-p", f"zx200_can_port:={port}"]
         env = ros_env(domain)

@@ -19,6 +19,8 @@ from typing import Any
 
 import pytest
 
+from tests.rosproc import can_port
+
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
@@ -45,7 +47,7 @@ def can_cfg(domain: int) -> dict[str, Any]:
     return {
         "interface": "udp_multicast",
         "channel": f"239.74.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-        "port": 44000 + domain * 20 + rng.randrange(20),
+        "port": can_port(domain, rng.randrange(20)),
     }
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.rosproc import VENV
+from tests.rosproc import VENV, can_port
 
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "config" / "launch" / "paper_experiment.yaml"
@@ -50,7 +50,7 @@ def _write_configs(tmp: Path, domain: int, supervisor: bool = True) -> Path:
     launch = yaml.safe_load(LAUNCH.read_text())
     rnd = random.Random(domain)
     groups = {m: f"239.74.{rnd.randrange(1, 250)}.{rnd.randrange(1, 250)}" for m in ("zx200", "ic120")}
-    ports = {"zx200": 45000 + 2 * domain, "ic120": 45001 + 2 * domain}
+    ports = {"zx200": can_port(domain, 0), "ic120": can_port(domain, 1)}
     for node in launch["nodes"]:
         params = node.setdefault("parameters", {})
         exe = node["executable"]

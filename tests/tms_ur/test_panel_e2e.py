@@ -8,13 +8,12 @@ map, save a screenshot, press the emergency stop, see both tasks CANCELED.
 from __future__ import annotations
 
 import os
-import random
 import time
 from pathlib import Path
 
 import pytest
 
-from tests.rosproc import ROOT, VENV
+from tests.rosproc import ROOT, VENV, can_port
 from tests.tms_ur.conftest import free_port
 
 pytestmark = pytest.mark.integration
@@ -40,8 +39,8 @@ def _seed(db_path: Path) -> None:
         store.close()
 
 
-def _launch_yaml(tmp_path: Path, port: int, db: Path) -> Path:
-    zx_port, ic_port = random.randint(20000, 29999), random.randint(30000, 39999)
+def _launch_yaml(tmp_path: Path, port: int, db: Path, domain: int) -> Path:
+    zx_port, ic_port = can_port(domain, 0), can_port(domain, 1)
     text = f"""
 name: panel_e2e
 parameters: {{use_sim_time: true, db_path: "{db}"}}
@@ -84,11 +83,11 @@ def _wait(predicate, timeout: float, what: str, launcher) -> None:  # noqa: ANN0
     pytest.fail(f"timed out waiting for {what}:\n" + "\n".join(launcher.lines[-80:]))
 
 
-def test_start_see_running_and_moving_then_emergency_stop_cancels_both(procs, browser_page, tmp_path):
+def test_start_see_running_and_moving_then_emergency_stop_cancels_both(procs, domain, browser_page, tmp_path):
     db = tmp_path / "db"
     _seed(db)
     port = free_port()
-    launcher = procs([VENV / "bin" / "tms-launch", str(_launch_yaml(tmp_path, port, db))], name="tms-launch")
+    launcher = procs([VENV / "bin" / "tms-launch", str(_launch_yaml(tmp_path, port, db, domain))], name="tms-launch")
     assert launcher.wait_for("are up; Ctrl-C stops them", timeout=240), "\n".join(launcher.lines[-60:])
     page = browser_page
     page.goto(f"http://127.0.0.1:{port}/")

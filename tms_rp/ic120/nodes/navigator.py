@@ -27,7 +27,7 @@ from tms_common.node import run_node
 __all__ = ["main", "make_node"]
 
 REST_V, REST_W, REST_TIMEOUT = 0.02, 0.02, 5.0
-POSE_WAIT = 5.0  # [s] a goal arriving before the first pose waits this long for one
+POSE_WAIT = 10.0  # [s, wall clock] a goal arriving before the first pose waits this long for one
 
 
 @dataclass
@@ -163,10 +163,17 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             return await fut
 
         async def _wait_pose(self, seconds: float) -> bool:
-            """Wait (without blocking the executor) for a fresh pose, e.g. just after start-up."""
+            """Wait (without blocking the executor) for a fresh pose, e.g. just after start-up.
+
+            The wait runs on the steady (wall) clock: it covers other processes starting up, and a sim-time
+            timer created before the first /clock fired at once when /clock jumped ahead.
+            """
+            from rclpy.clock import Clock, ClockType
+
             waiter = Future()
             self._pose_waiters.append(waiter)
-            timer = self.create_timer(seconds, lambda: waiter.done() or waiter.set_result(False))
+            timer = self.create_timer(seconds, lambda: waiter.done() or waiter.set_result(False),
+                                      clock=Clock(clock_type=ClockType.STEADY_TIME))
             ok = await waiter
             timer.cancel()
             self.destroy_timer(timer)
