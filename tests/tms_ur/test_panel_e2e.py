@@ -89,6 +89,8 @@ def test_start_see_running_and_moving_then_emergency_stop_cancels_both(procs, do
     port = free_port()
     launcher = procs([VENV / "bin" / "tms-launch", str(_launch_yaml(tmp_path, port, db, domain))], name="tms-launch")
     assert launcher.wait_for("are up; Ctrl-C stops them", timeout=240), "\n".join(launcher.lines[-60:])
+    # "are up" means on the ROS graph; the panel starts its HTTP server just after: wait for it.
+    assert launcher.wait_for(f"serving http://127.0.0.1:{port}/", timeout=60), "\n".join(launcher.lines[-40:])
     page = browser_page
     page.goto(f"http://127.0.0.1:{port}/")
     page.wait_for_selector("#conn.ok", timeout=30000)
@@ -133,6 +135,8 @@ nodes:
     (tmp_path / "l.yaml").write_text(text)
     launcher = procs([VENV / "bin" / "tms-launch", str(tmp_path / "l.yaml")], name="tms-launch")
     assert launcher.wait_for("are up; Ctrl-C stops them", timeout=120), launcher.output
+    # "are up" means on the ROS graph; the panel starts its HTTP server just after: wait for it.
+    assert launcher.wait_for(f"serving http://127.0.0.1:{port}/", timeout=60), "\n".join(launcher.lines[-40:])
     page = browser_page
     page.goto(f"http://127.0.0.1:{port}/")
     page.wait_for_selector("#conn.ok", timeout=30000)
