@@ -3,16 +3,18 @@
 Target choice (one call per sensing update):
 
 1. ``height above ground`` h = max(z - ground_z, 0) on the grid; cells thinner than ``min_height``
-   count as empty.
-2. Score of each cell = soil volume within ``bucket_radius`` of it (a disk convolution of h) minus
-   ``distance_penalty`` x its distance from the ZX200 swing axis, so the bucket goes where one pass
-   fills it best and, at equal fill, to the nearer soil. Only cells in the reach annulus
-   ``[reach_min, reach_max]`` are candidates.
-3. The target is the bucket-tip point the excavation penetrates to: the best cell's (x, y) and
-   ``z = surface - penetration_depth`` (not below ground). ``offset`` is the drag length towards the
-   machine (shortened so the drag ends outside ``reach_min``). ``theta_w`` (bucket-edge angle to the
-   x-y plane, positive = tip down) = local surface slope rising away from the machine + the attack
-   angle, clipped to ``[theta_w_min, theta_w_max]``.
+   count as empty. Candidates are the cells with soil in the reach annulus ``[reach_min, reach_max]``.
+2. For each candidate, the cut the excavation would make there is simulated on the grid: the bucket
+   (``2 bucket_radius`` wide) penetrates to ``surface - depth`` and is dragged level towards the machine
+   by ``offset`` = ``drag_length`` (shortened so the drag ends outside ``reach_min``); the cut volume is
+   the soil above that level in the swept strip. ``depth`` is the shallowest of
+   ``penetration_depth .. max_penetration_depth`` whose cut fills ``bucket_volume`` (else the deepest):
+   on a slope a level drag leaves the soil after a short way, so it must start deeper than on the top.
+3. Score = min(cut, bucket_volume) - ``distance_penalty`` x distance from the swing axis: the bucket goes
+   where one pass fills it, and at equal fill to the nearer soil. The target is the best cell's (x, y)
+   at ``z = surface - depth`` (not below ground); ``expected_volume`` is its cut. ``theta_w``
+   (bucket-edge angle to the x-y plane, positive = tip down) = local surface slope rising away from the
+   machine + the attack angle, clipped to ``[theta_w_min, theta_w_max]``.
 
 The mound is "present" (SENSING_CHECK_MOUND_FLG true) while the diggable volume in reach is at least
 ``min_volume`` and some cell stands ``min_height`` above ground.
@@ -40,6 +42,9 @@ class ExcavationParams:
     reach_max: float = 8.8
     bucket_radius: float = 0.5
     penetration_depth: float = 0.35
+    max_penetration_depth: float = 0.35
+    bucket_volume: float = 0.8
+    depth_steps: int = 5
     drag_length: float = 1.5
     attack_angle: float = math.radians(45.0)
     theta_w_min: float = math.radians(20.0)
@@ -56,6 +61,10 @@ class ExcavationParams:
         for name in ("bucket_radius", "drag_length"):
             if not getattr(self, name) > 0:
                 problems.append(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.max_penetration_depth < self.penetration_depth:
+            problems.append(f"max_penetration_depth {self.max_penetration_depth} < penetration_depth {self.penetration_depth}")
+        if not self.bucket_volume > 0 or self.depth_steps < 1:
+            problems.append(f"bucket_volume must be > 0 and depth_steps >= 1, got {self.bucket_volume}, {self.depth_steps}")
         for name in ("penetration_depth", "min_height", "min_volume", "distance_penalty"):
             if getattr(self, name) < 0:
                 problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
@@ -99,10 +108,39 @@ class MoundAssessment:
     has_soil: bool           # SENSING_CHECK_MOUND_FLG
 
 
-def _disk(radius_cells: int) -> np.ndarray:
-    r = max(1, radius_cells)
-    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
-    return (xx * xx + yy * yy <= r * r).astype(float)
+
+def _level_cuts(
+    z: np.ndarray, spec, rows: np.ndarray, cols: np.ndarray, dist: np.ndarray,  # noqa: ANN001 - GridSpec
+    swing_axis_xy: tuple[float, float], params: ExcavationParams,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(depth, cut volume) per candidate cell: a level drag towards the machine at ``surface - depth``.
+
+    The swept strip is sampled at the grid resolution (``bucket`` wide, ``offset`` long, starting at the
+    cell); each sample stands for one cell area. Depth is the shallowest step that fills the bucket.
+    """
+    res = spec.resolution
+    xg0, yg0 = spec.x_min + (cols + 0.5) * res, spec.y_min + (rows + 0.5) * res
+    ux, uy = (xg0 - swing_axis_xy[0]) / np.maximum(dist, 1e-6), (yg0 - swing_axis_xy[1]) / np.maximum(dist, 1e-6)
+    length = np.clip(np.minimum(params.drag_length, dist - params.reach_min), 0.0, None)
+    along = np.arange(0.0, params.drag_length + 1e-9, res)
+    half = params.bucket_radius
+    across = np.arange(-half + res / 2, half, res)
+    px = xg0[:, None, None] - ux[:, None, None] * along[None, :, None] - uy[:, None, None] * across[None, None, :]
+    py = yg0[:, None, None] - uy[:, None, None] * along[None, :, None] + ux[:, None, None] * across[None, None, :]
+    ci = np.clip(((px - spec.x_min) / res).astype(int), 0, spec.nx - 1)
+    ri = np.clip(((py - spec.y_min) / res).astype(int), 0, spec.ny - 1)
+    swept = z[ri, ci] * 1.0
+    inside = along[None, :, None] <= length[:, None, None]
+    surface = z[rows, cols]
+    depths = np.linspace(params.penetration_depth, params.max_penetration_depth, params.depth_steps)
+    cuts = np.empty((len(depths), len(rows)))
+    for k, d in enumerate(depths):
+        level = np.maximum(surface - d, params.ground_z)
+        cuts[k] = (np.clip(swept - level[:, None, None], 0.0, None) * inside).sum(axis=(1, 2)) * res * res
+    enough = cuts >= params.bucket_volume
+    pick = np.where(enough.any(axis=0), np.argmax(enough, axis=0), len(depths) - 1)
+    idx = np.arange(len(rows))
+    return depths[pick], cuts[pick, idx]
 
 
 def assess_mound(grid: HeightGrid, swing_axis_xy: tuple[float, float], params: ExcavationParams) -> MoundAssessment:
@@ -123,10 +161,12 @@ def assess_mound(grid: HeightGrid, swing_axis_xy: tuple[float, float], params: E
     target = None
     candidates = in_reach & (h_dig > 0)
     if has_soil and candidates.any():
-        footprint = _disk(int(round(params.bucket_radius / spec.resolution)))
-        fill = ndimage.convolve(h_dig, footprint, mode="constant") * spec.cell_area
-        score = np.where(candidates, fill - params.distance_penalty * r, -np.inf)
-        row, col = np.unravel_index(int(np.argmax(score)), score.shape)
+        rows, cols = np.nonzero(candidates)
+        depth, cut = _level_cuts(grid.z, spec, rows, cols, r[rows, cols], swing_axis_xy, params)
+        score = np.minimum(cut, params.bucket_volume) - params.distance_penalty * r[rows, cols]
+        best = int(np.argmax(score))
+        row, col = int(rows[best]), int(cols[best])
+        chosen_depth, fill = float(depth[best]), float(cut[best])
         tx, ty = float(xg[row, col]), float(yg[row, col])
         surface = float(grid.z[row, col])
         # Surface slope along "away from the machine" from the smoothed grid.
@@ -137,9 +177,9 @@ def assess_mound(grid: HeightGrid, swing_axis_xy: tuple[float, float], params: E
         rise = float(gx[row, col] * ux + gy[row, col] * uy)
         theta_w = min(max(math.atan(rise) + params.attack_angle, params.theta_w_min), params.theta_w_max)
         offset = max(0.0, min(params.drag_length, dist - params.reach_min))
-        z = max(surface - params.penetration_depth, params.ground_z)
+        z = max(surface - chosen_depth, params.ground_z)
         target = ExcavationTarget(
-            x=tx, y=ty, z=z, theta_w=theta_w, offset=offset, surface_z=surface, expected_volume=float(fill[row, col])
+            x=tx, y=ty, z=z, theta_w=theta_w, offset=offset, surface_z=surface, expected_volume=fill
         )
     return MoundAssessment(
         volume_total=volume_total,

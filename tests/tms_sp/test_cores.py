@@ -61,13 +61,20 @@ def test_excavation_target_is_on_the_mound_in_reach_below_the_surface(seed):
     assert p.reach_min <= r <= p.reach_max
     true_surface = float(surface(np.array(t.x), np.array(t.y)))
     assert t.surface_z == pytest.approx(true_surface, abs=0.06)
-    assert t.z == pytest.approx(max(true_surface - p.penetration_depth, 0.0), abs=0.06)
+    depth = true_surface - t.z
+    assert t.z == pytest.approx(0.0, abs=0.06) or p.penetration_depth - 0.06 <= depth <= p.max_penetration_depth + 0.06
     assert p.theta_w_min <= t.theta_w <= p.theta_w_max
     assert 0 < t.offset <= p.drag_length
-    # On the machine-facing half of the mound, near its top: where one pass fills the bucket.
+    # On the machine-facing half of the mound, where one level drag fills the bucket.
     assert t.x < CFG.mound.cx + 0.2
-    assert true_surface > 0.8 * CFG.mound.height
-    assert t.expected_volume > 0.5
+    assert t.expected_volume >= 0.9 * p.bucket_volume
+    # The expected cut, integrated independently on the true surface (5 cm samples): the soil above the
+    # drag level in the bucket-wide strip from the target towards the machine.
+    ux, uy = (t.x - ax) / r, (t.y - ay) / r
+    s_along, s_across = np.meshgrid(np.arange(0.025, t.offset, 0.05), np.arange(-p.bucket_radius + 0.025, p.bucket_radius, 0.05))
+    xs, ys = t.x - ux * s_along - uy * s_across, t.y - uy * s_along + ux * s_across
+    true_cut = float(np.clip(surface(xs, ys) - t.z, 0.0, None).sum() * 0.05 * 0.05)
+    assert t.expected_volume == pytest.approx(true_cut, rel=0.2)
 
 
 def test_excavation_target_moves_away_from_a_dug_pit():

@@ -379,7 +379,7 @@ class ArmController:
 
     def _segment_duration(self, q0: np.ndarray, target: Target) -> float:
         cfg, lim = self.cfg, self.kin.limits
-        scale = cfg.joint_speed_scale * target.speed_scale
+        scale = min(1.0, cfg.joint_speed_scale * target.speed_scale)  # never beyond the joint limits
         if isinstance(target, JointTarget):
             dq = np.abs(self._joint_delta(q0, target.q))
             t_cart = 0.0
@@ -551,7 +551,10 @@ class ArmController:
             # and lag) have acted: declaring success on the measurement alone let the arm drift off after.
             joint_err = [self._joint_delta(x, spline.p1) for x in (q, qp)]
             tip_err = [self.status.distance_remaining, float(np.linalg.norm(tip_goal - self.kin.tip_position(qp)))]
-            reached = max(float(np.max(np.abs(e))) for e in joint_err) < tol_rad and max(tip_err) < tol_m
+            # A via point is passed on the prediction alone: the next segment's spline starts from it.
+            checked = slice(1, 2) if via else slice(0, 2)
+            reached = (max(float(np.max(np.abs(e))) for e in joint_err[checked]) < tol_rad
+                       and max(tip_err[checked]) < tol_m)
             self._remaining = (
                 f"tip {self.status.distance_remaining:.3f} m off, joints off by "
                 + ", ".join(f"{n} {e:+.4f} rad" for n, e in zip(JOINTS, joint_err[0], strict=True))
@@ -570,7 +573,8 @@ class ArmController:
             dists = [float(np.linalg.norm(spline.p1 - self.kin.tip_position(x))) for x in (q, qp)]
             th_errs = [abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(x)) for x in (q, qp)]
             # measured and predicted (commands in flight) both within tolerance, as for joint targets
-            reached = max(dists) < tol_m and max(th_errs) < tol_rad
+            checked = slice(1, 2) if via else slice(0, 2)
+            reached = max(dists[checked]) < tol_m and max(th_errs[checked]) < tol_rad
             dist = dists[0]
             self.status.distance_remaining = dist
             self._remaining = f"tip {dist:.3f} m off, theta_w {th_errs[0]:.4f} rad off"

@@ -39,6 +39,8 @@ class PlannerConfig:
     curl_theta_w: float = 2.6
     lift_height: float = 1.5
     release_open_bucket: float = -0.5
+    release_theta_w: float = 0.3
+    joint_space_swing: float = 0.35
     dig_speed_scale: float = 0.5
     limit_margin: float = 0.005
     dig_joint_margin: float = 0.06
@@ -134,13 +136,27 @@ class Zx200Planner:
                         q[JOINTS.index(name)] = v
                 targets.append(JointTarget(self._check_joints(q, f"trajectory point {k + 1}"), f"joint pose {k + 1}"))
                 base = q
-        elif poses:
-            for k, (pos, quat) in enumerate(poses):
-                p, th = self.kin.pose_to_position_with_angle(_finite(pos, f"pose {k + 1} position"), _finite(quat, f"pose {k + 1} orientation"))
-                targets.append(self._cartesian(p, th, f"pose {k + 1}", label=f"pose {k + 1}"))
         else:
-            for k, (pos, th) in enumerate(positions_with_angle or []):
-                targets.append(self._cartesian(pos, th, f"position_with_angle {k + 1}", label=f"position {k + 1}"))
+            if poses:
+                tips = [self.kin.pose_to_position_with_angle(_finite(pos, f"pose {k + 1} position"),
+                                                             _finite(quat, f"pose {k + 1} orientation"))
+                        for k, (pos, quat) in enumerate(poses)]
+                what = "pose"
+            else:
+                tips = list(positions_with_angle or [])
+                what = "position_with_angle"
+            q_prev = None if current_q is None else _finite(current_q, "current joint state")
+            for k, (pos, th) in enumerate(tips):
+                final = self._cartesian(pos, th, f"{what} {k + 1}", label=f"{what.split('_')[0]} {k + 1}")
+                q_goal = self.kin.ik_position_with_angle(final.position, final.theta_w)
+                if q_prev is not None and abs(math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)) > self.cfg.joint_space_swing:
+                    # A big swing: joint-space motion to the IK solution (as MoveIt plans a pose goal), the
+                    # straight tip line only for the final approach. A straight line across a swing is
+                    # slow (the tip speed limit over the whole chord) and cuts past the cab.
+                    q_goal[0] = q_prev[0] + math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)
+                    targets.append(JointTarget(self._check_joints(q_goal, f"{what} {k + 1}"), final.label, via=True))
+                targets.append(final)
+                q_prev = q_goal
         return self._label(targets, "moving")
 
     @staticmethod
@@ -208,24 +224,43 @@ class Zx200Planner:
         th_drag = self.feasible_theta_w(dragged, max(th_in, cfg.drag_end_theta_w))
         th_curl = self.feasible_theta_w(dragged, cfg.curl_theta_w)
         th_lift = self.feasible_theta_w(lifted, th_curl)
-        slow = cfg.dig_speed_scale
+        dig = cfg.dig_speed_scale
         q_above = self.kin.ik_position_with_angle(above, th_above)  # reason names joint/distance
         return [
             JointTarget(q_above, "approach"),
-            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=slow),
-            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=slow),
-            self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=slow),
-            self._cartesian(lifted, th_lift, "lift", label="lift"),
+            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig),
+            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=dig),
+            self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=dig),
+            # lift clear is a pass-through point: the carry (next goal) goes on from where the arm will be
+            self._cartesian(lifted, th_lift, "lift", label="lift", speed_scale=dig, via=True),
         ]
 
-    def release(self, target_angle: float, current_q: np.ndarray) -> list[JointTarget]:
-        """swing to ``target_angle`` with the front as it is, then open the bucket (dump)."""
+    def release(self, target_angle: float, current_q: np.ndarray) -> list[JointTarget | CartesianTarget]:
+        """swing to ``target_angle`` with the front as it is, then open the bucket (dump).
+
+        The bucket opens with its tip held where the swing left it (edge angle down to ``release_theta_w``,
+        the rest of the front compensating), as an operator pulls the arm in while dumping: a bucket opened
+        on its own joint sweeps its tip about a metre outwards and drops much of the load beyond a
+        1.75 m wide vessel. Where the tip cannot be held, the bucket opens on its joint to
+        ``release_open_bucket``.
+        """
         ang = float(_finite([target_angle], "release target_angle")[0])
         q = _finite(current_q, "current joint state").copy()
         q[0] = math.atan2(math.sin(ang), math.cos(ang))
         lim = self.kin.limits
         m = self.cfg.limit_margin
         q[1:] = np.clip(q[1:], lim.lower[1:] + m, lim.upper[1:] - m)
+        tip = self.kin.tip_position(q)
+        try:
+            th_open = self.feasible_theta_w(tip, self.cfg.release_theta_w)
+        except PlanningError:
+            th_open = None
+        if th_open is not None and th_open < self.kin.theta_w(q):
+            # Joint-space (all joints on one spline, so the boom's low acceleration paces the bucket) to
+            # the IK pose that has the tip where it was; pass-through precision: the soil only has to
+            # land in the vessel, and it goes on falling while the next goal's swing is in its dead time.
+            q_open = self.kin.ik_position_with_angle(tip, th_open)
+            return [JointTarget(q, "swing", via=True), JointTarget(q_open, "open", via=True)]
         opened = q.copy()
         opened[3] = max(self.cfg.release_open_bucket, lim.lower[3] + m)
         return [JointTarget(q, "swing"), JointTarget(self._check_joints(opened, "open"), "open")]

@@ -1,0 +1,160 @@
+"""ZX200 load passes in-process: tms_sp targets -> planner -> arm controller -> MuJoCo plant, no ROS/CAN.
+
+What one load pass of the paper experiment (trees/paper_zx200_load.xml: excavate, carry_over_vessel,
+release) yields when only the cores are in the loop: the excavation target from tms_sp's mound
+processor on the plant's height field, the release target from its vessel processor (IC120 standing at
+P1), the planner's segments, the HQP controller at the paper launch's 50 Hz on the plant's clock, and
+the plant's hydraulics (dead times, lags, pump) and soil model. It isolates geometry and motion from the
+transport and CPU of the full launch, so it shows what digging and release settings are worth:
+
+    python -m tests.bench load_pass            # LOAD_PASS_N passes (default 6)
+
+Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
+soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+from sim_bridge.config import load_plant
+from sim_bridge.plant import Plant
+from tms_common.config import config_path
+from tms_rc.zx200.controller import ArmController, load_controller_config
+from tms_rp.zx200.kinematics import load_kinematics
+from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_sp.config import load_sensing_config
+from tms_sp.frames import Pose2D
+from tms_sp.heightgrid import HeightGrid
+from tms_sp.mound import assess_mound
+from tms_sp.vessel import assess_vessel, release_in_zx200
+
+#: The paper launch's choices (config/launch/paper_experiment.yaml): 50 Hz controller.
+RATE_HZ = 50.0
+
+
+class PassRig:
+    """The plant of the paper experiment with the ZX200 cores driving it in simulated time."""
+
+    def __init__(self) -> None:
+        self.plant = Plant(load_plant(config_path("sim", "paper_plant.yaml")))
+        self.kin = load_kinematics()
+        cfg = load_controller_config()
+        cfg.rate_hz = RATE_HZ
+        self.ctl_cfg = cfg
+        self.planner = Zx200Planner(self.kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
+        self.sensing = load_sensing_config()
+        self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
+        pts = self.sensing.points
+        self.base = pts["zx200_base"]
+        self.plant.set_truth("ic120", pts["P1"].x, pts["P1"].y, pts["P1"].yaw, {})
+
+    @property
+    def q(self) -> np.ndarray:
+        return np.array(self.plant.zx200.front.q, dtype=float)
+
+    def run(self, targets: list, limit_s: float = 300.0) -> tuple[int, str, float]:
+        """Run one action's targets to the end; returns (result code, message, simulated seconds).
+
+        :attr:`segment_s` gets the simulated time spent in each segment (by label).
+        """
+        ctl = ArmController(self.kin, self.ctl_cfg)
+        self.segment_s: dict[str, float] = {}
+        ctl.start(targets)
+        names = self.plant.zx200.front.names
+        t0 = self.plant.time
+        while self.plant.time - t0 < limit_s:
+            front = self.plant.zx200.front
+            u = ctl.step(np.array(front.q, dtype=float), np.array(front.v, dtype=float), now=self.plant.time)
+            self.plant.zx200.set_front_velocity(dict(zip(names, u.tolist(), strict=True)))
+            for _ in range(self.sub_steps):
+                self.plant.step()
+            label = ctl.status.label or ctl.status.mode
+            self.segment_s[label] = self.segment_s.get(label, 0.0) + self.sub_steps * self.plant.dt
+            if ctl.status.result is not None:
+                return ctl.status.result, ctl.status.message, self.plant.time - t0
+        return -1, f"no result within {limit_s} s", self.plant.time - t0
+
+    def mound_target(self) -> tuple[list[float], float, float]:
+        spec = self.sensing.mound_grid
+        xg, yg = spec.centres()
+        g = self.plant.ground
+        rows = np.clip(((yg - g.y0) / g.res).astype(int), 0, g.ny - 1)
+        cols = np.clip(((xg - g.x0) / g.res).astype(int), 0, g.nx - 1)
+        grid = HeightGrid(spec, g.h[rows, cols], 1.0)
+        axis = self.base.to_map(np.array([*self.sensing.swing_axis_in_base, 0.0]))
+        a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.sensing.excavation)
+        if a.target is None:
+            raise RuntimeError(f"no excavation target: {a}")
+        f = a.target.record_fields(self.base)
+        return [f["x"], f["y"], f["z"]], f["theta_w"], f["offset"]
+
+    def release_target(self) -> tuple[list[float], float, float]:
+        geom = self.sensing.vessel_geom
+        spec = geom.grid_spec(self.sensing.resolution)
+        # Load shape: the plant keeps a volume only; spread it evenly (the scanner's heap is similar).
+        h = self.plant.soil.vessel / (geom.inner_length * geom.inner_width)
+        grid = HeightGrid(spec, np.full((spec.ny, spec.nx), h), 1.0)
+        v = assess_vessel(grid, geom, self.sensing.vessel)
+        ic = self.plant.truth("ic120")
+        pose, angle = release_in_zx200(v.release_xyz, Pose2D(ic.x, ic.y, ic.yaw), self.base, geom,
+                                       self.sensing.swing_axis_in_base, self.sensing.vessel.carry_theta_w)
+        return [pose["x"], pose["y"], pose["z"]], pose["theta_w"], angle["target_angle"]
+
+
+def main() -> None:
+    n = int(os.environ.get("LOAD_PASS_N", "6"))
+    rig = PassRig()
+    soil = rig.plant.soil
+    ground = rig.plant.ground
+    print(f"load passes in-process (MuJoCo plant, controller {RATE_HZ:.0f} Hz, no transport delay): {n} passes")
+    wall0 = time.monotonic()
+    sim0 = rig.plant.time
+    totals = {"cut": 0.0, "vessel": 0.0, "pass_s": []}
+    for k in range(n):
+        mound0, vessel0, dug0 = ground.mound_volume(), soil.vessel, soil.dug
+        ground_out0 = ground.ground_soil_volume() - ground.mound_volume()
+        times = {}
+        pos, th, off = rig.mound_target()
+        code, msg, times["excavate"] = rig.run(rig.planner.excavate(pos, th, off))
+        dig_segments = dict(rig.segment_s)
+        cut = soil.dug - dug0
+        in_bucket = soil.bucket
+        if code != 0:
+            print(f"  pass {k + 1}: excavate ended {code}: {msg}")
+        rpos, rth, angle = rig.release_target()
+        code2, msg2, times["carry"] = rig.run(rig.planner.change_pose(positions_with_angle=[(rpos, rth)], current_q=rig.q))
+        carried = soil.bucket
+        carry_segments = dict(rig.segment_s)
+        code3, msg3, times["release"] = rig.run(rig.planner.release(angle, rig.q))
+        release_segments = dict(rig.segment_s)
+        for c, m, what in ((code2, msg2, "carry"), (code3, msg3, "release")):
+            if c != 0:
+                print(f"  pass {k + 1}: {what} ended {c}: {m}")
+        t_settle = rig.plant.time
+        while rig.plant.time - t_settle < 1.0:  # let the last soil fall
+            rig.plant.step()
+        into = soil.vessel - vessel0
+        spilled_out = ground.ground_soil_volume() - ground.mound_volume() - ground_out0
+        pass_s = sum(times.values())
+        totals["cut"] += cut
+        totals["vessel"] += into
+        totals["pass_s"].append(pass_s)
+        print(f"  pass {k + 1}: target r {math.hypot(pos[0], pos[1]):.2f} m z {pos[2]:.2f} theta_w {th:.2f} drag {off:.2f}; "
+              f"cut {cut:.3f} m3 (bucket after dig {in_bucket:.3f}, after carry {carried:.3f}), into vessel {into:.3f} m3, "
+              f"spilled off the mound {spilled_out:.3f} m3, mound {mound0:.2f} -> {ground.mound_volume():.2f} m3; "
+              + ", ".join(f"{a} {s:.1f} s" for a, s in times.items()) + f", pass {pass_s:.1f} s", flush=True)
+        for what, segs in (("excavate", dig_segments), ("carry", carry_segments), ("release", release_segments)):
+            print(f"    {what} segments [s]: " + ", ".join(f"{a} {s:.1f}" for a, s in segs.items()))
+    sim = rig.plant.time - sim0
+    print(f"  total: cut {totals['cut']:.2f} m3, into the vessel {totals['vessel']:.2f} m3 "
+          f"({totals['vessel'] / max(n, 1):.3f} m3 per pass); pass time median {np.median(totals['pass_s']):.1f} s "
+          f"simulated (goal <= 20 s); {sim:.0f} s simulated in {time.monotonic() - wall0:.0f} s wall")
+
+
+if __name__ == "__main__":
+    main()
