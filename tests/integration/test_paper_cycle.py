@@ -28,7 +28,7 @@ from tests.rosproc import VENV, can_port
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "config" / "launch" / "paper_experiment.yaml"
 SENSING = ROOT / "config" / "tms_sp" / "sensing.yaml"
-TARGET_FILL = 0.01  # x 4.5 m^3 heaped capacity = 0.045 m^3: one pass (a pass moves 0.06-0.2 m^3 here)
+TARGET_FILL = 0.1  # x 4.5 m^3 heaped capacity = 0.45 m^3: one pass (a pass moves about a bucketful, 0.8 m^3)
 SPEED = float(os.environ.get("TMS_PAPER_TEST_SPEED", "3.0"))
 WALL_LIMIT_S = float(os.environ.get("TMS_PAPER_TEST_WALL_S", "600"))
 
@@ -39,7 +39,27 @@ def _first(timeline: list, value: object) -> float | None:
     return next((t for t, v in timeline if v == value), None)
 
 
-def _write_configs(tmp: Path, domain: int, supervisor: bool = True) -> Path:
+#: The two machines' buses over SocketCAN (``backend="socketcan"``): one vcan interface per machine, as on
+#: the real machines (each has its own CAN bus). Create them with ``ip link add dev vcanN type vcan``.
+VCAN = {"zx200": os.environ.get("TMS_PAPER_VCAN_ZX200", "vcan0"), "ic120": os.environ.get("TMS_PAPER_VCAN_IC120", "vcan1")}
+
+
+def _can_buses(domain: int, backend: str) -> dict[str, dict[str, object]]:
+    """Per machine: the bus parameters of sim_plant (``<m>_can_*``) and com3_bridge (``can_*``)."""
+    if backend == "socketcan":
+        from com3_can.bus import socketcan_available
+
+        missing = [ch for ch in VCAN.values() if not Path("/sys/class/net", ch).exists()]
+        if not socketcan_available() or missing:
+            pytest.skip(f"SocketCAN interfaces {sorted(VCAN.values())} are not available in this kernel"
+                        + (f" (missing: {missing})" if missing else " (no AF_CAN)"))
+        return {m: {"interface": "socketcan", "channel": ch, "port": 0} for m, ch in VCAN.items()}
+    rnd = random.Random(domain)
+    return {m: {"interface": "udp_multicast", "channel": f"239.74.{rnd.randrange(1, 250)}.{rnd.randrange(1, 250)}",
+                "port": can_port(domain, k)} for k, m in enumerate(("zx200", "ic120"))}
+
+
+def _write_configs(tmp: Path, domain: int, supervisor: bool = True, backend: str = "udp_multicast") -> Path:
     """Launch file of the paper experiment with this test's CAN buses, sensing config, one cycle."""
     text = SENSING.read_text()
     text, n = re.subn(r"(?m)^(\s*target_fill:\s*)[0-9.]+", rf"\g<1>{TARGET_FILL}", text)
@@ -48,20 +68,17 @@ def _write_configs(tmp: Path, domain: int, supervisor: bool = True) -> Path:
     sensing.write_text(text)
 
     launch = yaml.safe_load(LAUNCH.read_text())
-    rnd = random.Random(domain)
-    groups = {m: f"239.74.{rnd.randrange(1, 250)}.{rnd.randrange(1, 250)}" for m in ("zx200", "ic120")}
-    ports = {"zx200": can_port(domain, 0), "ic120": can_port(domain, 1)}
+    buses = _can_buses(domain, backend)
     for node in launch["nodes"]:
         params = node.setdefault("parameters", {})
         exe = node["executable"]
         if exe == "sim_plant":
             params["speed"] = SPEED
             params["config"] = str(ROOT / params["config"])
-            for m in ("zx200", "ic120"):
-                params[f"{m}_can_channel"], params[f"{m}_can_port"] = groups[m], ports[m]
+            for m, bus in buses.items():
+                params.update({f"{m}_can_{k}": v for k, v in bus.items()})
         elif exe == "com3_bridge":
-            m = params["machine"]
-            params["can_channel"], params["can_port"] = groups[m], ports[m]
+            params.update({f"can_{k}": v for k, v in buses[params["machine"]].items()})
         elif exe == "tms_sp_sensing":
             params["config"] = str(sensing)
         elif exe == "tms_ur_experiment":
@@ -73,7 +90,7 @@ def _write_configs(tmp: Path, domain: int, supervisor: bool = True) -> Path:
     return path
 
 
-def _start(procs, domain, tmp_path, supervisor: bool = True):  # noqa: ANN001, ANN202
+def _start(procs, domain, tmp_path, supervisor: bool = True, backend: str = "udp_multicast"):  # noqa: ANN001, ANN202
     """Seed a fresh embedded DB and start the whole stack; returns the tms-launch process."""
     db = tmp_path / "db"
     db.mkdir()
@@ -81,17 +98,14 @@ def _start(procs, domain, tmp_path, supervisor: bool = True):  # noqa: ANN001, A
     seeded = subprocess.run([str(VENV / "bin" / "tms-db"), "seed", "paper"], env={**os.environ, **env},
                             capture_output=True, text=True, timeout=120)
     assert seeded.returncode == 0, seeded.stdout + seeded.stderr
-    launch = _write_configs(tmp_path, domain, supervisor)
+    launch = _write_configs(tmp_path, domain, supervisor, backend)
     return procs([VENV / "bin" / "tms-launch", launch], name="paper", **env)
 
 
-# Passed 1 of 2 runs after the last fixes; the failing run hung in the ZX200 pending_pose leaf with the
-# arm controller idle (trees/README.md "Known problems"). Remove the mark once that is fixed.
-@pytest.mark.xfail(strict=False, reason="one full cycle is not yet reliable in the 13-process stack: it completed "
-                   "in an earlier session's run but not in the last clean-clone CI runs (load passes move ~0.16 m3 "
-                   "each; see trees/README.md). The change_pose hang it used to hit is fixed.")
-def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path):
-    proc = _start(procs, domain, tmp_path)
+@pytest.mark.parametrize("backend", ["udp_multicast", "socketcan"])
+def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path, backend):
+    """One load-haul-dump cycle over each CAN backend (SocketCAN only where the kernel has vcan0/vcan1)."""
+    proc = _start(procs, domain, tmp_path, backend=backend)
     code = proc.wait(WALL_LIMIT_S)
     out = proc.output
     tail = "\n".join(out.splitlines()[-60:])

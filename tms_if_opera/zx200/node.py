@@ -95,8 +95,9 @@ def _make_node():  # noqa: ANN202
                 handle.abort()
                 return result
             for k, target in enumerate(targets):
-                # every segment but the last is a via point (approach, carry, ...): via_tolerance_*
-                code, message = self._segment(handle, action_type, target, via=k < len(targets) - 1)
+                # every segment but the last is a via point (approach, carry, ...): via_tolerance_*; so is a
+                # last one the planner marks (excavate's lift, release's open: the next goal goes on from it)
+                code, message = self._segment(handle, action_type, target, via=target.via or k < len(targets) - 1)
                 if code != codes.SUCCESS:
                     result.error_code.val = code
                     result.message = f"{target.label}: {message}"

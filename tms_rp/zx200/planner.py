@@ -1,9 +1,11 @@
 """ZX200 motion planning: planning goals -> validated controller targets, rejected before any motion.
 
-* :meth:`Zx200Planner.change_pose` — joint angles, bucket-tip poses or position + theta_w targets;
+* :meth:`Zx200Planner.change_pose` — joint angles, bucket-tip poses or position + theta_w targets (a big
+  swing goes joint-space to the IK solution first, then a straight tip line to the goal);
 * :meth:`Zx200Planner.excavate` — approach above the target, penetrate, drag towards the machine by
   ``offset``, curl, lift clear;
-* :meth:`Zx200Planner.release` — swing to the target angle (front held), open (dump) the bucket.
+* :meth:`Zx200Planner.release` — swing to the target angle (front held), open (dump) the bucket with its
+  tip held over the release point.
 
 Every target is checked here (finite, non-empty, reachable, inside the joint limits, above the
 ground limit); failures raise :class:`~tms_rp.zx200.errors.PlanningError` subclasses whose message
