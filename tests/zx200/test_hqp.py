@@ -65,3 +65,82 @@ def test_infeasible_inequality_level_keeps_higher_equality():
 def test_bad_construction_is_refused():
     with pytest.raises(ValueError, match="kind"):
         HierarchicalQP(2, [LevelSpec("x", "soft", 1)])  # type: ignore[arg-type]
+
+
+def _random_hierarchy(rng, closed_form):
+    """The controller's shape on 4 joints: a coupling (pump-like) inequality, two boxes, equality tasks."""
+    n = 4
+    levels = [LevelSpec("pump", "ineq", 2**n), LevelSpec("velocity", "ineq", 2 * n), LevelSpec("position", "ineq", 2 * n),
+              LevelSpec("task_1", "eq", 1), LevelSpec("task_3", "eq", 3), LevelSpec("least", "eq", n)]
+    return HierarchicalQP(n, levels, closed_form=closed_form)
+
+
+def _random_tasks(rng, u_prev):
+    n = 4
+    signs = np.array([[1.0 if (i >> j) & 1 else -1.0 for j in range(n)] for i in range(2**n)])
+    flow = np.array([2.0, 6.6, 2.7, 1.7])
+    a_step = 0.08
+    hi = np.minimum(1.0, u_prev + a_step)
+    lo = np.maximum(-1.0, u_prev - a_step)
+    box = np.vstack([np.eye(n), -np.eye(n)])
+    return [(signs * flow, np.full(2**n, 4.0)), (box, np.concatenate([hi, -lo])), (box, rng.uniform(0.05, 2.0, 2 * n)),
+            (rng.normal(size=(1, n)), rng.normal(scale=0.1, size=1)), (rng.normal(size=(3, n)), rng.normal(scale=0.1, size=3)),
+            (np.eye(n), np.zeros(n))]
+
+
+def test_closed_form_gives_the_osqp_optimum_and_osqp_still_solves_active_levels():
+    # Two hierarchies over the same sequence of problems (a closed loop: u_prev = last solution, so the
+    # acceleration box often excludes 0): one takes the closed form where it is provably the optimum,
+    # the other solves every level with OSQP. Same solution within OSQP's tolerance, same slacks.
+    rng = np.random.default_rng(5)
+    fast, ref = _random_hierarchy(rng, True), _random_hierarchy(rng, False)
+    u_ref = np.zeros(4)  # both see the reference's last solution as u_prev
+    used: set[str] = set()
+    osqp_solved: set[str] = set()
+    compared = 0
+    for _ in range(300):
+        tasks = _random_tasks(rng, u_ref)
+        r, r0 = fast.solve(tasks), ref.solve(tasks)
+        assert not r0.closed_form
+        u_ref = r0.x
+        if r.failed or r0.failed:  # OSQP hit max_iter on a random level (either variant): nothing to compare
+            continue
+        compared += 1
+        used.update(r.closed_form)
+        osqp_solved.update(k for k, v in r.solved.items() if v and k not in r.closed_form)
+        assert np.allclose(r.x, r0.x, atol=5e-3), (r.x, r0.x)
+        for name, s in r.slack.items():
+            assert s <= r0.slack.get(name, np.inf) + 5e-3, (name, s, r0.slack)
+        # the limits hold (pump within its fix tolerance, box exactly up to the regularisation pull)
+        flow = np.array([2.0, 6.6, 2.7, 1.7]) @ np.abs(r.x)
+        assert flow <= 4.0 + 1e-3
+    assert compared >= 240
+    # both paths are exercised: closed form for boxes and equality tasks, OSQP when limits are active
+    assert {"velocity", "task_1", "task_3"} <= used
+    assert {"task_3"} <= osqp_solved
+
+
+def test_closed_form_not_taken_when_a_higher_limit_is_active():
+    # high box |x_i| <= 1; the task wants x0 = 3: its unconstrained optimum breaks the box -> OSQP, x0 = 1
+    h = HierarchicalQP(2, [LevelSpec("box", "ineq", 4), LevelSpec("task", "eq", 1)])
+    r = h.solve([BOX, (np.array([[1.0, 0.0]]), [3.0])])
+    assert "task" not in r.closed_form and r.solved["task"]
+    assert r.x[0] == pytest.approx(1.0, abs=2e-4)
+    # inside the box the closed form is the optimum: x0 = 0.5 / (1 + reg)
+    r = h.solve([BOX, (np.array([[1.0, 0.0]]), [0.5])])
+    assert r.closed_form == ["task"]
+    assert r.x[0] == pytest.approx(0.5 / (1 + 1e-4), abs=1e-9) and r.x[1] == 0.0
+
+
+def test_box_level_closed_form_is_the_nearest_point_and_inverted_box_goes_to_osqp():
+    h = HierarchicalQP(2, [LevelSpec("box", "ineq", 4)])
+    # box 0.2 <= x0 <= 0.5, -0.3 <= x1 <= 0.4: nearest point to 0 is (0.2, 0), pulled in by the regularisation
+    r = h.solve([(BOX[0], np.array([0.5, 0.4, -0.2, 0.3]))])
+    assert r.closed_form == ["box"]
+    assert r.x == pytest.approx([0.2 / (1 + 1e-4), 0.0], abs=1e-12)
+    ref = HierarchicalQP(2, [LevelSpec("box", "ineq", 4)], closed_form=False).solve([(BOX[0], np.array([0.5, 0.4, -0.2, 0.3]))])
+    assert r.x == pytest.approx(ref.x, abs=2e-4)
+    # inverted box (0.5 <= x0 <= 0.2): no closed form, OSQP balances the two slacks at the middle
+    r = h.solve([(BOX[0], np.array([0.2, 1.0, -0.5, 1.0]))])
+    assert "box" not in r.closed_form and r.solved["box"]
+    assert r.x[0] == pytest.approx(0.35, abs=2e-3)
