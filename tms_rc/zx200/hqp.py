@@ -7,7 +7,9 @@ Each level is a set of linear rows on the decision vector ``x`` (joint velocitie
     subject to  A_k x - w  (= b_k | <= b_k, w >= 0)
                 A_j x  within what level j < k achieved   (equal to A_j x*_j, or <= max(b_j, A_j x*_j))
 
-so a lower level can only use the freedom the higher ones leave: it never disturbs them, and when it
+(an equality level's slack is eliminated before OSQP sees it: ``P = A^T A + reg I``, ``q = -A^T b``,
+the same optimum with a better-conditioned problem), so a lower level can only use the freedom the
+higher ones leave: it never disturbs them, and when it
 is infeasible its slack ``w`` absorbs the conflict instead of bending a higher level (the HEAP
 formulation: Jelavic et al., "Whole-body motion planning for walking excavators", and the
 hierarchical optimisation it builds on). One OSQP instance per level is created once with a fixed
@@ -135,38 +137,56 @@ class HierarchicalQP:
             eps_abs=eps, eps_rel=eps, max_iter=max_iter, polishing=polish, verbose=False, warm_starting=True,
             adaptive_rho=True, check_termination=10,
         )
+        # upper triangle of a dense n x n matrix in CSC order (column by column): the P of equality levels
+        self._triu = tuple(np.array(ix) for ix in zip(*[(i, j) for j in range(n) for i in range(j + 1)], strict=True))
+        self._px_sent: list[bytes | None] = [None] * len(levels)
         for k, lv in enumerate(levels):
-            task_rows = int(self._offsets[k + 1])
+            s0, task_rows = self._offsets_py[k], self._offsets_py[k + 1]
             m = lv.rows
-            # Columns 0..n-1: dense over the task rows; slack column i: -1 at its task row, +1 at its sign row.
-            indptr = [0]
-            indices: list[int] = []
-            for _ in range(n):
-                indices.extend(range(task_rows))
-                indptr.append(len(indices))
-            for i in range(m):
-                indices.extend([int(self._offsets[k]) + i, task_rows + i])
-                indptr.append(len(indices))
-            slack_ax = np.tile([-1.0, 1.0], m)
-            data = np.concatenate([np.ones(n * task_rows), slack_ax])
-            a = sparse.csc_matrix((data, np.array(indices), np.array(indptr)), shape=(task_rows + m, n + m))
-            p = sparse.diags(np.concatenate([np.full(n, regularisation), np.ones(m)])).tocsc()
-            p = sparse.triu(p, format="csc")
-            big = np.full(task_rows + m, np.inf)
+            if lv.kind == EQ:
+                # Slack eliminated: ||A_eff z - b_eff||^2 + reg ||z||^2 = z^T (A_eff^T A_eff + reg I) z
+                # - 2 b_eff^T A_eff z + const, so P = A_eff^T A_eff + reg I (dense upper triangle),
+                # q = -A_eff^T b_eff, and the constraints are only the rows of the levels above (one
+                # unbounded zero row for a first level). Same optimum as with the slack, better
+                # conditioned for ADMM (4x fewer iterations on the position level while a limit binds).
+                rows = max(s0, 1)
+                indptr = np.arange(n + 1) * rows
+                indices = np.tile(np.arange(rows), n)
+                data = np.zeros(n * rows) if s0 == 0 else np.ones(n * rows)
+                a = sparse.csc_matrix((np.ones(n * rows), indices, indptr), shape=(rows, n))
+                p = sparse.triu(sparse.csc_matrix(np.ones((n, n))), format="csc")
+                lo, hi = np.full(rows, -_INF), np.full(rows, _INF)
+                q0 = np.zeros(n)
+                slack_ax = np.zeros(0)
+            else:
+                # Columns 0..n-1: dense over the task rows; slack column i: -1 at its task row, +1 at its sign row.
+                indptr_l = [0]
+                indices_l: list[int] = []
+                for _ in range(n):
+                    indices_l.extend(range(task_rows))
+                    indptr_l.append(len(indices_l))
+                for i in range(m):
+                    indices_l.extend([s0 + i, task_rows + i])
+                    indptr_l.append(len(indices_l))
+                slack_ax = np.tile([-1.0, 1.0], m)
+                data = np.concatenate([np.ones(n * task_rows), slack_ax])
+                a = sparse.csc_matrix((data, np.array(indices_l), np.array(indptr_l)), shape=(task_rows + m, n + m))
+                p = sparse.diags(np.concatenate([np.full(n, regularisation), np.ones(m)])).tocsc()
+                p = sparse.triu(p, format="csc")
+                # lower bounds are constant (rows -inf, slack >= 0); upper ones are filled every step
+                lo = np.full(task_rows + m, -_INF)
+                lo[task_rows:] = 0.0
+                hi = np.full(task_rows + m, _INF)
+                q0 = np.zeros(n + m)
             solver = osqp.OSQP()
-            solver.setup(p, np.zeros(n + m), a, -big, big, **settings)
+            solver.setup(p, q0, a, lo, hi, **settings)  # lo never changes: sent once, here
             self._solvers.append(solver)
             self._slack_ax.append(slack_ax)
-            # Per-level buffers, filled in place every step: bounds (the constant parts set once here)
-            # and the constraint values in CSC order (dense block column-major, then the slack columns).
-            lo = np.full(task_rows + m, -_INF)
-            lo[task_rows:] = 0.0 if lv.kind == INEQ else -_INF
-            hi = np.full(task_rows + m, _INF)
-            ax = data.copy()
+            ax = data.copy()  # constraint values in CSC order: dense block column-major, then slack columns
             self._lo.append(lo)
             self._hi.append(hi)
             self._ax.append(ax)
-            self._ax_block.append(ax[: n * task_rows].reshape(n, task_rows))
+            self._ax_block.append(ax[: n * max(s0 if lv.kind == EQ else task_rows, 1)].reshape(n, -1))
             self._ax_sent.append(None)
 
     @staticmethod
@@ -263,7 +283,7 @@ class HierarchicalQP:
             if x_new is not None:
                 result.closed_form.append(lv.name)
             else:
-                z = self._osqp_solve(k, lv, b_eff, proj, proj_eye, x_zero, x_star, result)
+                z = self._osqp_solve(k, lv, a_eff, b_eff, proj, proj_eye, x_zero, x_star, result)
                 if z is None:
                     solved[lv.name] = False
                     continue  # drop this level: x and the constraints of the higher levels are kept
@@ -319,40 +339,51 @@ class HierarchicalQP:
         return np.where(upper < 0.0, upper, np.where(lower > 0.0, lower, 0.0)) * (1.0 / (1.0 + self._reg))
 
     def _osqp_solve(
-        self, k: int, lv: LevelSpec, b_eff: np.ndarray, proj: np.ndarray, proj_eye: bool, x_zero: bool,
-        x_star: np.ndarray, result: HqpResult,
+        self, k: int, lv: LevelSpec, a_eff: np.ndarray, b_eff: np.ndarray, proj: np.ndarray, proj_eye: bool,
+        x_zero: bool, x_star: np.ndarray, result: HqpResult,
     ) -> np.ndarray | None:
         """Solve level ``k``'s QP with its kept, warm-started OSQP instance; ``z`` or None if it failed."""
         n = self.n
         s0, s1 = self._offsets_py[k], self._offsets_py[k + 1]
         a_all, hi_fixed = self._a_all, self._hi_fixed
-        lo, hi, ax = self._lo[k], self._hi[k], self._ax[k]
+        hi, ax = self._hi[k], self._ax[k]
         # Rows of the levels above: z = 0 stays feasible for them (x_star is their accepted solution).
         if x_zero:
             np.minimum(hi_fixed[:s0], _INF, out=hi[:s0])
         else:
             np.minimum(hi_fixed[:s0] - a_all[:s0] @ x_star, _INF, out=hi[:s0])
-        np.minimum(b_eff, _INF, out=hi[s0:s1])
-        if lv.kind == EQ:
-            np.maximum(b_eff, -_INF, out=lo[s0:s1])
         solver = self._solvers[k]._solver  # the low-level object: osqp.OSQP.update/solve add ~50 us per call
-        solver.update_data_vec(q=None, l=lo, u=hi)
-        # Constraint values, column-major (CSC of the dense block): (A[:s1] @ proj) in Fortran order.
-        if proj_eye:
-            ax[: n * s1] = a_all[:s1].ravel(order="F")
+        if lv.kind == EQ:
+            gram = a_eff.T @ a_eff
+            gram.flat[:: n + 1] += self._reg
+            solver.update_data_vec(q=-(a_eff.T @ b_eff), l=None, u=hi)
+            px = gram[self._triu]
+            rows = s0
         else:
-            np.dot(proj.T, a_all[:s1].T, out=self._ax_block[k])
-        key = ax.tobytes()
-        if key != self._ax_sent[k]:
-            solver.update_data_mat(P_x=None, P_i=None, A_x=ax, A_i=None)
-            self._ax_sent[k] = key
+            np.minimum(b_eff, _INF, out=hi[s0:s1])
+            solver.update_data_vec(q=None, l=None, u=hi)
+            px = None
+            rows = s1
+        # Constraint values, column-major (CSC of the dense block): (A[:rows] @ proj) in Fortran order.
+        if rows:
+            if proj_eye:
+                ax[: n * rows] = a_all[:rows].ravel(order="F")
+            else:
+                np.dot(proj.T, a_all[:rows].T, out=self._ax_block[k])
+        # re-send (and refactorise) only what changed: the safety rows above the first equality level never do
+        a_key = ax.tobytes()
+        a_new = a_key != self._ax_sent[k]
+        p_key = None if px is None else px.tobytes()
+        p_new = p_key != self._px_sent[k]
+        if a_new or p_new:
+            solver.update_data_mat(P_x=px if p_new else None, P_i=None, A_x=ax if a_new else None, A_i=None)
+            self._ax_sent[k], self._px_sent[k] = a_key, p_key
         solver.solve()
         z = solver.solution.x[:n]
         if solver.info.status_val not in _OK or not math.isfinite(z.sum()):
             result.failed.append(f"{lv.name} ({solver.info.status})")
             return None
         return z
-
 
 def _norm(v: np.ndarray) -> float:
     """Euclidean norm of a vector (what np.linalg.norm computes, without its ~2 us of dispatch)."""
