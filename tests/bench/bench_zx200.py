@@ -4,7 +4,9 @@ CAN over udp_multicast) with goals sent over ROS and accuracy from the plant's t
 
 Prints for each: success rate of 100 random reachable targets of each kind (joint / pose / position+theta_w)
 within 3 cm and 2 deg with zero limit violations, QP solve time per control step (median, p99), the RMS
-tip tracking error of a 2 m Cartesian move, and the period jitter of a 100 Hz control loop.
+tip tracking error of a 2 m Cartesian move, and the period jitter of a 100 Hz control loop. The core also
+replays the QP problems of its first 12,000 control steps 5 times and reports the per-step minimum thread CPU
+time: the solve's own cost, which a machine loaded by other jobs cannot inflate (the live figures can).
 Run: ``.venv/bin/python -m tests.bench zx200`` (``ZX200_BENCH_N`` = targets per kind, default 100, for the
 core; ``ZX200_BENCH_PLANT_N`` for the plant, default = ZX200_BENCH_N; ``ZX200_BENCH_PLANT=0`` skips the plant,
 ``ZX200_BENCH_CORE=0`` the core). A target that fails (rejected, timed out, no result) is counted and reported;
@@ -31,9 +33,69 @@ from tms_rp.zx200.errors import PlanningError
 from tms_rp.zx200.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
+#: at most this many control steps of QP problems are recorded for the solve-alone replay
+_RECORD_STEPS = 12000
+_HQPS = ("hqp_cartesian", "hqp_joint")
 
-def _run(kin, cfg, q0, targets, solve_times, max_steps=8000, cpu_times=None):
+
+class _Recording:
+    """The (A, b) of every level the controllers' hierarchies got, flat in one preallocated array.
+
+    One array, not a list of arrays per step: ~10^5 small Python containers held for the whole campaign
+    made the cyclic garbage collector's full passes (milliseconds) land inside the timed solves.
+    """
+
+    def __init__(self, width: int = 256) -> None:
+        self.data = np.zeros((_RECORD_STEPS, width))
+        self.which = np.zeros(_RECORD_STEPS, dtype=np.int8)  # index into _HQPS
+        self.run = np.zeros(_RECORD_STEPS, dtype=np.int32)  # controller (fresh solvers) the step belongs to
+        self.steps = 0
+        self.runs = 0
+
+    def attach(self, ctl: ArmController) -> None:
+        """Record what ``ctl`` solves from now on, as a new run."""
+        run = self.runs
+        self.runs += 1
+        for i, name in enumerate(_HQPS):
+            hqp = getattr(ctl, name)
+
+            def recording(tasks, _solve=hqp.solve, _i=i, _run=run):
+                if self.steps < _RECORD_STEPS:
+                    flat = np.concatenate([np.ravel(np.asarray(x, dtype=float)) for task in tasks for x in task])
+                    self.data[self.steps, : flat.size] = flat
+                    self.which[self.steps], self.run[self.steps] = _i, _run
+                    self.steps += 1
+                return _solve(tasks)
+
+            hqp.solve = recording
+
+    def replay(self, kin, cfg, repeats: int = 5) -> list[float]:
+        """Solve the recorded steps again ``repeats`` times (fresh, warm-started solvers per run, as in the
+        campaign) and return, per step, the smallest thread CPU time: the cost of the solve itself, without
+        what a loaded machine adds (preemption, another process on the sibling hyperthread, cache misses)."""
+        best = np.full(self.steps, np.inf)
+        for _ in range(repeats):
+            run, hqps = -1, []
+            for k in range(self.steps):
+                if self.run[k] != run:
+                    run = self.run[k]
+                    ctl = ArmController(kin, cfg)
+                    hqps = [getattr(ctl, name) for name in _HQPS]
+                hqp = hqps[self.which[k]]
+                tasks, pos = [], 0
+                for lv in hqp.levels:
+                    a = self.data[k, pos : pos + lv.rows * hqp.n].reshape(lv.rows, hqp.n)
+                    pos += lv.rows * hqp.n
+                    tasks.append((a, self.data[k, pos : pos + lv.rows]))
+                    pos += lv.rows
+                best[k] = min(best[k], hqp.solve(tasks).solve_cpu_s)
+        return best.tolist()
+
+
+def _run(kin, cfg, q0, targets, solve_times, max_steps=8000, cpu_times=None, record=None):
     ctl = ArmController(kin, cfg)
+    if record is not None:
+        record.attach(ctl)
     plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q0)
     q, v = q0.copy(), np.zeros(4)
     ctl.start(targets)
@@ -64,6 +126,7 @@ def core() -> None:
     rng = np.random.default_rng(7)
     solve_times: list[float] = []
     cpu_times: list[float] = []
+    recorded = _Recording()
     lo = np.array([-math.pi, -1.1, 0.65, -0.55])
     hi = np.array([math.pi, -0.15, 2.6, 2.3])
 
@@ -97,7 +160,7 @@ def core() -> None:
             except PlanningError as exc:
                 print(f"  planner refused a reachable target: {exc}")
                 continue
-            status, q_end, viol, _ = _run(kin, cfg, q_start, targets, solve_times, cpu_times=cpu_times)
+            status, q_end, viol, _ = _run(kin, cfg, q_start, targets, solve_times, cpu_times=cpu_times, record=recorded)
             pos_err = float(np.linalg.norm(kin.tip_position(q_end) - p_goal))
             ang_err = abs(kin.theta_w(q_end) - kin.theta_w(q_goal))
             if kind == "joint":
@@ -113,6 +176,9 @@ def core() -> None:
               flush=True)
     print("  QP solve time per control step (wall): " + summary_ms(solve_times))
     print("  QP solve time per control step (thread CPU time, without preemption): " + summary_ms(cpu_times))
+    replayed = recorded.replay(kin, cfg)
+    print("  QP solve alone, the campaign's first recorded steps solved again 5 times (per-step minimum of the thread "
+          "CPU time, the load-independent cost): " + summary_ms(replayed))
 
     q0 = kin.home.copy()
     p0 = kin.tip_position(q0)
