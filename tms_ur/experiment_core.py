@@ -4,8 +4,13 @@ The recorder is fed time-stamped samples (simulated time ``t`` [s]) by ``tms_ur.
 soil volumes, truth and estimated poses, bucket-tip truth and estimate, global-blackboard flags and
 task states. From them it derives the events of the earthwork cycle:
 
-* a **load pass** is an increase of the vessel load by more than ``pass_threshold`` m^3;
-* a **haul cycle** ends when soil reaches the dump site (``dumped`` grows by more than ``pass_threshold``).
+* a **load pass** is one episode of vessel-load increase totalling more than ``pass_threshold`` m^3;
+* a **haul cycle** ends with one episode of soil reaching the dump site (``dumped`` grows by more than
+  ``pass_threshold``).
+
+An episode is a run of increases with no gap longer than ``episode_gap_s``: a bucketful falls into the
+vessel over a second or two and a vessel empties over several, sampled many times on the way; each
+counts once, at the sample where its total first passes the threshold.
 
 ``report(directory)`` writes ``metrics.json``, ``site_map.png``, ``soil.png``, ``flags.png`` and
 ``index.html`` (one page linking them).
@@ -47,10 +52,41 @@ def _rms(values: list[float]) -> float | None:
 
 
 @dataclass
+class _Episodes:
+    """Counts episodes of increase of one volume (see the module docstring)."""
+
+    threshold: float
+    gap_s: float
+    _last: float | None = None
+    _start_value: float = 0.0
+    _last_rise: float | None = None
+    _counted: bool = False
+
+    def update(self, t: float, value: float) -> bool:
+        """Feed a sample; True when it completes a new episode (total rise > threshold)."""
+        if self._last is None:
+            self._last = value
+            return False
+        rising = value > self._last + 1e-9
+        if self._last_rise is not None and t - self._last_rise > self.gap_s:
+            self._last_rise = None  # episode over
+        if rising and self._last_rise is None:
+            self._start_value, self._counted = self._last, False
+        if rising:
+            self._last_rise = t
+        self._last = value
+        if self._last_rise is not None and not self._counted and value - self._start_value > self.threshold:
+            self._counted = True
+            return True
+        return False
+
+
+@dataclass
 class ExperimentRecorder:
     """Accumulates one run. All times are simulated seconds; volumes m^3; distances m."""
 
     pass_threshold: float = 0.05
+    episode_gap_s: float = 3.0
     soil: list[Sample] = field(default_factory=list)
     paths: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
     loc_errors: list[float] = field(default_factory=list)
@@ -66,8 +102,8 @@ class ExperimentRecorder:
     sim_start: float | None = None
     sim_end: float | None = None
     initial_mound: float | None = None
-    _vessel_ref: float = 0.0
-    _dumped_ref: float = 0.0
+    _passes: _Episodes | None = None
+    _dumps: _Episodes | None = None
     _last_truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
     # -- inputs -------------------------------------------------------------------------------
@@ -75,20 +111,17 @@ class ExperimentRecorder:
         self._clock(t)
         if self.initial_mound is None:
             self.initial_mound = mound
-            self._vessel_ref, self._dumped_ref = vessel, dumped
+            self._passes = _Episodes(self.pass_threshold, self.episode_gap_s)
+            self._dumps = _Episodes(self.pass_threshold, self.episode_gap_s)
         self.soil.append(Sample(t, {"mound": mound, "bucket": bucket, "vessel": vessel, "dumped": dumped}))
-        if vessel - self._vessel_ref > self.pass_threshold:
+        if self._passes.update(t, vessel):
             if self.pass_events and (not self.dump_events or self.pass_events[-1] > self.dump_events[-1]):
                 self.pass_times.append(t - self.pass_events[-1])
             self.pass_events.append(t)
-            self._vessel_ref = vessel
-        elif vessel < self._vessel_ref:
-            self._vessel_ref = vessel
-        if dumped - self._dumped_ref > self.pass_threshold:
+        if self._dumps.update(t, dumped):
             if self.dump_events:
                 self.cycle_times.append(t - self.dump_events[-1])
             self.dump_events.append(t)
-            self._dumped_ref = dumped
 
     def on_truth_pose(self, t: float, machine: str, x: float, y: float, yaw: float) -> None:
         self._clock(t)

@@ -124,7 +124,8 @@ def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path, backend):
         assert m["task_states"][tid][-1][1] == "SUCCESS", m["task_states"]
 
     # Soil: loaded into the vessel (a pass), then dumped at the dump site (soil_moved = dumped volume).
-    assert m["cycles"] >= 1 and m["load_passes"] >= 1, summary
+    # One cycle asked and run (a bucketful falls into the vessel over many soil samples: still one pass).
+    assert m["cycles"] == 1 and 1 <= m["load_passes"] <= 3, summary
     assert m["soil_moved_m3"] > 0.04, summary
     # What was dumped left the mound (its volume counts only the mound's area, not the dump pile).
     assert m["mound_initial_m3"] - m["mound_final_m3"] >= 0.9 * m["soil_moved_m3"], summary

@@ -42,6 +42,28 @@ def test_cycles_passes_and_times():
     assert m["flags_timeline"]["SENSING_LOADED_FLG"][1][1] is True
 
 
+def test_a_bucketful_falling_over_many_samples_is_one_pass_and_a_dump_one_cycle():
+    """At 20 Hz a 0.8 m^3 bucketful lands in ~30 samples and a vessel empties over ~100: one event each."""
+    rec = ExperimentRecorder()
+    t, vessel, dumped = 0.0, 0.0, 0.0
+    rec.on_soil(t, 20.0, 0.0, vessel, dumped)
+    for _ in range(3):  # three passes 25 s apart, each falling over 1.5 s
+        t += 25.0
+        for _ in range(30):
+            t += 0.05
+            vessel += 0.8 / 30
+            rec.on_soil(t, 20.0, 0.0, vessel, dumped)
+    t += 100.0
+    for _ in range(100):  # the dump: 5 s
+        t += 0.05
+        vessel -= 2.4 / 100
+        dumped += 2.4 / 100
+        rec.on_soil(t, 20.0, 0.0, vessel, dumped)
+    m = rec.metrics()
+    assert m["load_passes"] == 3 and m["cycles"] == 1, (m["pass_events_s"], m["dump_events_s"])
+    assert m["load_pass_time_s"]["median"] == pytest.approx(26.5, abs=0.1)
+
+
 def test_report_writes_every_file(tmp_path):
     rec = _scripted_run()
     index = rec.report(tmp_path, site={"points": {"P1": {"x": 1.0, "y": 6.5}}, "mound": {"center": {}}})
