@@ -70,12 +70,12 @@ class HqpResult:
     slack: dict[str, float] = field(default_factory=dict)
     solved: dict[str, bool] = field(default_factory=dict)
     failed: list[str] = field(default_factory=list)
-    #: levels whose QP optimum was found in closed form (unconstrained optimum inside every constraint)
-    closed_form: list[str] = field(default_factory=list)
     solve_time_s: float = 0.0
     #: CPU time of this thread in the solve (excludes time the OS gave other processes: on a loaded
     #: machine the wall time's tail is preemption, not work)
     solve_cpu_s: float = 0.0
+    #: levels whose QP optimum was found in closed form (unconstrained optimum inside every constraint)
+    closed_form: list[str] = field(default_factory=list)
 
 
 class HierarchicalQP:
