@@ -1,0 +1,59 @@
+"""Planner paths of the load pass: joint-space carry for big swings, release with the tip held, via marks."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tms_rc.zx200.controller import CartesianTarget, JointTarget
+from tms_rp.zx200.kinematics import load_kinematics
+from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+
+KIN = load_kinematics()
+PLAN = Zx200Planner(KIN, load_planner_config())
+#: The seed's release pose over the IC120 at P1 (config/seeds/paper.yaml target_release_pose, 85 deg carry).
+RELEASE_TIP = np.array([-0.065, 6.475, 2.726])
+CARRY_THETA_W = math.radians(85.0)
+#: Bucket tip lifted out of the mound (swing 0).
+LIFTED = np.array([4.2, 0.0, 1.6])
+
+
+def test_big_swing_goes_joint_space_to_the_ik_pose_then_straight_to_the_goal() -> None:
+    q_lifted = KIN.ik_position_with_angle(LIFTED, 2.6)
+    targets = PLAN.change_pose(positions_with_angle=[(RELEASE_TIP.tolist(), CARRY_THETA_W)], current_q=q_lifted)
+    assert [type(t) for t in targets] == [JointTarget, CartesianTarget]
+    joint, final = targets
+    assert joint.via and not final.via
+    np.testing.assert_allclose(KIN.tip_position(joint.q), RELEASE_TIP, atol=1e-6)
+    assert KIN.theta_w(joint.q) == pytest.approx(CARRY_THETA_W, abs=1e-6)
+    np.testing.assert_allclose(final.position, RELEASE_TIP)
+    assert final.theta_w == pytest.approx(CARRY_THETA_W)
+
+
+def test_small_moves_and_unknown_start_stay_a_straight_tip_line() -> None:
+    q0 = KIN.ik_position_with_angle(LIFTED, 1.6)
+    near = LIFTED + np.array([-0.5, 0.3, 0.2])  # swing change ~0.07 rad < joint_space_swing
+    assert [type(t) for t in PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q0)] == [CartesianTarget]
+    assert [type(t) for t in PLAN.change_pose(positions_with_angle=[(RELEASE_TIP.tolist(), CARRY_THETA_W)])] == [CartesianTarget]
+
+
+def test_release_opens_the_bucket_with_the_tip_held_over_the_release_point() -> None:
+    q_carry = KIN.ik_position_with_angle(RELEASE_TIP, CARRY_THETA_W)
+    swing = math.atan2(RELEASE_TIP[1] - KIN.swing_origin[1], RELEASE_TIP[0] - KIN.swing_origin[0])
+    targets = PLAN.release(swing, q_carry)
+    assert [t.label for t in targets] == ["swing", "open"]
+    assert all(isinstance(t, JointTarget) and t.via for t in targets)
+    swung, opened = targets
+    # the tip stays where the swing left it; the edge angle drops below the plant's 1.2 rad spill angle
+    np.testing.assert_allclose(KIN.tip_position(opened.q), KIN.tip_position(swung.q), atol=1e-6)
+    assert KIN.theta_w(opened.q) < 0.7 < 1.2 < KIN.theta_w(swung.q)
+    assert KIN.limits.violation(opened.q) is None
+
+
+def test_excavate_lift_is_a_via_point_and_digging_runs_faster() -> None:
+    targets = PLAN.excavate([5.05, 1.25, 0.05], 1.11, 1.1)
+    assert [t.label for t in targets] == ["approach", "penetrate", "drag", "curl", "lift"]
+    assert targets[-1].via
+    assert all(t.speed_scale == PLAN.cfg.dig_speed_scale for t in targets[1:])
