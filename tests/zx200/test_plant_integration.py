@@ -161,12 +161,12 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     assert bucket1 > 0.2, stack.soil
     assert mound1 < mound0 - 0.2, (mound0, mound1)
 
-    # Over the vessel (IC120 at P1, left of the ZX200), then open the bucket.
-    p1 = site["points"]["P1"]
-    swing = math.atan2(p1["y"] - KIN.swing_origin[1], p1["x"] - KIN.swing_origin[0])
-    q_carry = np.array(stack.q)
-    q_carry[0] = swing
-    status, res = stack.run("change_pose", joint_goal([swing, -0.75, 1.6, 1.9]), timeout=120)
+    # Over the vessel (IC120 at P1, left of the ZX200) as the paper tree carries it (the seed's
+    # target_release_pose: tip over the vessel centre, bucket closed at 85 deg), then open the bucket.
+    seed, _ = load_yaml(config_path("seeds", "paper.yaml"))
+    rel = next(r for r in seed["parameters"] if r.get("record_name") == "target_release_pose")
+    swing = math.atan2(rel["y"] - KIN.swing_origin[1], rel["x"] - KIN.swing_origin[0])
+    status, res = stack.run("change_pose", pwa_goal([rel["x"], rel["y"], rel["z"]], rel["theta_w"]), timeout=120)
     assert status == SUCCEEDED, res.message
     stack.feedback.clear()
     status, res = stack.run("release", Zx200ReleaseSimple.Goal(target_angle=swing), timeout=120)
