@@ -129,7 +129,7 @@ def _level_cuts(
     py = yg0[:, None, None] - uy[:, None, None] * along[None, :, None] + ux[:, None, None] * across[None, None, :]
     ci = np.clip(((px - spec.x_min) / res).astype(int), 0, spec.nx - 1)
     ri = np.clip(((py - spec.y_min) / res).astype(int), 0, spec.ny - 1)
-    swept = z[ri, ci] * 1.0
+    swept = z[ri, ci]  # fancy indexing: a copy
     inside = along[None, :, None] <= length[:, None, None]
     surface = z[rows, cols]
     depths = np.linspace(params.penetration_depth, params.max_penetration_depth, params.depth_steps)
