@@ -9,7 +9,7 @@ replays the QP problems of its first 12,000 control steps 5 times and reports th
 time: the solve's own cost, which a machine loaded by other jobs cannot inflate (the live figures can).
 Run: ``.venv/bin/python -m tests.bench zx200`` (``ZX200_BENCH_N`` = targets per kind, default 100, for the
 core; ``ZX200_BENCH_PLANT_N`` for the plant, default = ZX200_BENCH_N; ``ZX200_BENCH_PLANT=0`` skips the plant,
-``ZX200_BENCH_CORE=0`` the core). A target that fails (rejected, timed out, no result) is counted and reported;
+``ZX200_BENCH_CORE=0`` the core; ``ZX200_BENCH_SPEED`` = the plant's real-time factor, default 1.0). A target that fails (rejected, timed out, no result) is counted and reported;
 it never aborts the campaign.
 In the plant: limit violations = joint_states samples outside the position limits (> 1 mrad) or above the
 velocity limits (> 2 %); the 2 m move reports the truth tip's RMS distance from the straight reference line;
@@ -217,6 +217,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     kin = load_kinematics()
     cfg = load_controller_config()
     n = int(os.environ.get("ZX200_BENCH_PLANT_N", os.environ.get("ZX200_BENCH_N", "100")))
+    speed = float(os.environ.get("ZX200_BENCH_SPEED", "1.0"))
     rng = np.random.default_rng(11)
     lo = np.array([-1.5, -1.0, 0.8, -0.3])
     hi = np.array([1.5, -0.2, 2.4, 2.1])
@@ -225,15 +226,17 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
         bus = ["-p", "zx200_can_interface:=udp_multicast", "-p", f"zx200_can_channel:=239.77.{domain}.9",
                "-p", f"zx200_can_port:={port}"]
         env = ros_env(domain)
-        procs = [Proc([str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", "speed:=1.0", *bus], env, name="sim")]
+        procs = [Proc([str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", f"speed:={speed}", *bus], env, name="sim")]
         try:
             assert procs[0].wait_for("sim_plant: running", 90), procs[0].output
             procs.append(Proc([str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200",
                                "-p", "machine:=zx200", "-p", "can_interface:=udp_multicast",
                                "-p", f"can_channel:=239.77.{domain}.9", "-p", f"can_port:={port}",
                                "-p", "use_sim_time:=true"], env, name="bridge"))
-            for pkg, exe in (("tms_rc", "zx200_arm_controller"), ("tms_if_opera", "zx200_planner")):
-                procs.append(Proc([str(executable(pkg, exe)), "--ros-args", "-r", "__ns:=/zx200", "-p", "use_sim_time:=true"],
+            # the planner's waits are wall time; on /clock it would wake every plant step for nothing (as in
+            # config/launch/paper_experiment.yaml)
+            for pkg, exe, sim_time in (("tms_rc", "zx200_arm_controller", "true"), ("tms_if_opera", "zx200_planner", "false")):
+                procs.append(Proc([str(executable(pkg, exe)), "--ros-args", "-r", "__ns:=/zx200", "-p", f"use_sim_time:={sim_time}"],
                                   env, name=exe))
             for p, text in zip(procs[1:], ("com3_bridge ready", "zx200_arm_controller ready", "zx200_planner ready"), strict=True):
                 assert p.wait_for(text, 60), p.output
@@ -247,7 +250,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
             node.create_subscription(JointCmd, "/zx200/front_cmd", lambda _m: cmd_t.append(time.monotonic()), 100)
             st = ArmStack(node)
             assert st.spin_until(lambda: st.q is not None and st.tip is not None, 30), "no state from the plant"
-            print(f"zx200 bench in the MuJoCo plant over CAN: {n} random reachable targets per kind (speed 1.0)")
+            print(f"zx200 bench in the MuJoCo plant over CAN: {n} random reachable targets per kind (speed {speed})")
             violations = 0
 
             def count_violations(since: float) -> int:
@@ -320,7 +323,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
                   f"({len(dev)} truth samples), end error {1000 * float(np.linalg.norm(np.array(st.tip) - p1)):.1f} mm")
             periods = np.diff(np.array(cmd_t))
             jit = np.abs(periods - cfg.dt)
-            print(f"  front_cmd period at the probe (100 Hz, sim time at speed 1.0): {summary_ms(list(periods))}; "
+            print(f"  front_cmd period at the probe (100 Hz, sim time at speed {speed}): {summary_ms(list(periods))}; "
                   f"|period - 10 ms| median {1000 * np.median(jit):.3f} ms, p99 {1000 * np.percentile(jit, 99):.3f} ms")
             node.executor_for_test.shutdown()
             node.destroy_node()
