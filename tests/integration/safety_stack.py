@@ -54,7 +54,7 @@ SERVERS = {
     "/zx200/subtask_zx200_excavate_simple": "Subtask",
     "/ic120/st_ic120_follow_waypoints": "Subtask",
     "/zx200/tms_rp_zx200_excavate_simple": "Zx200ExcavateSimple",
-    "/zx200/arm_controller/move": "Zx200ChangePose",
+    "/zx200/arm_controller/move": "Zx200ArmMove",
     "/ic120/follow_waypoints": "FollowWaypoints",
 }
 

@@ -13,6 +13,7 @@ import random
 import threading
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,32 @@ from tests.rosproc import can_port, executable
 #: Real-time factor of the plant in the integration tests (1.0: the nodes are timed against wall-clock
 #: CAN/DDS transport; the controller's dead-time model assumes real-time transport delays).
 SIM_SPEED = float(os.environ.get("ZX200_TEST_SIM_SPEED", "1.0"))
+
+
+@contextmanager
+def joint_states_held_at(node: Any, q: list[float], period_s: float = 0.01) -> Iterator[None]:
+    """Publish ``/zx200/joint_states`` at pose ``q`` (at rest) every ``period_s`` from a thread: a controller
+    process under test sees an arm that holds still wherever it is commanded."""
+    from sensor_msgs.msg import JointState
+
+    from tms_rp.zx200.kinematics import JOINTS
+
+    pub = node.create_publisher(JointState, "/zx200/joint_states", 10)
+    stop = threading.Event()
+
+    def feed() -> None:
+        msg = JointState(name=list(JOINTS), position=[float(v) for v in q], velocity=[0.0] * len(JOINTS))
+        while not stop.is_set():
+            pub.publish(msg)
+            time.sleep(period_s)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        feeder.join(2.0)
 
 
 def _zx_bus(domain: int) -> dict[str, Any]:

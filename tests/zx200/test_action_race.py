@@ -18,7 +18,7 @@ import time
 import pytest
 
 from tests.rosproc import executable
-from tms_rp.zx200.kinematics import JOINTS
+from tests.zx200.conftest import joint_states_held_at
 
 pytestmark = pytest.mark.integration
 
@@ -55,11 +55,11 @@ class _SlowSendHandle:
 
 def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, object]:  # noqa: ANN001
     from rclpy.executors import MultiThreadedExecutor
-    from trajectory_msgs.msg import JointTrajectoryPoint
 
-    from tms_msg.action import Zx200ChangePose
+    from tms_msg.action import Zx200ArmMove
+    from tms_msg.msg import Zx200ArmSegment
 
-    client = client_cls(node, Zx200ChangePose, "/zx200/arm_controller/move")
+    client = client_cls(node, Zx200ArmMove, "/zx200/arm_controller/move")
     executor = MultiThreadedExecutor(num_threads=2, context=node.context)
     executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)
@@ -67,9 +67,8 @@ def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, objec
     try:
         assert client.wait_for_server(timeout_sec=60.0), "arm_controller/move not available"
         client._client_handle = _SlowSendHandle(client._client_handle)  # noqa: SLF001 - the forced window
-        goal = Zx200ChangePose.Goal()
-        goal.trajectory.joint_names = list(JOINTS)
-        goal.trajectory.points = [JointTrajectoryPoint(positions=Q)]
+        goal = Zx200ArmMove.Goal(segments=[Zx200ArmSegment(kind=Zx200ArmSegment.JOINT, label="race",
+                                                           joint_positions=[float(v) for v in Q])])
         future = client.send_goal_async(goal)
         end = time.monotonic() + wait_s
         while not future.done() and time.monotonic() < end:
@@ -90,7 +89,6 @@ def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, objec
 def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node) -> None:
     import rclpy
     from rclpy.action import ActionClient
-    from sensor_msgs.msg import JointState
 
     from tms_common.action_client import RaceFreeActionClient
 
@@ -98,19 +96,7 @@ def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node)
                 name="zx200_arm_controller")
     assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
     # joint_states at the goal pose (the controller holds it: the goal ends SUCCESS after settling)
-    js_node = rclpy.create_node("js_feed", context=ros_node.context)
-    pub = js_node.create_publisher(JointState, "/zx200/joint_states", 10)
-    stop = threading.Event()
-
-    def feed() -> None:
-        msg = JointState(name=list(JOINTS), position=list(Q), velocity=[0.0] * 4)
-        while not stop.is_set():
-            pub.publish(msg)
-            time.sleep(0.01)
-
-    feeder = threading.Thread(target=feed, daemon=True)
-    feeder.start()
-    try:
+    with joint_states_held_at(rclpy.create_node("js_feed", context=ros_node.context), Q):
         # the response is taken before send returns: it is handled at once or never (10 s is plenty)
         stock_done, _ = _send_with_forced_race(rclpy.create_node("stock_client", context=ros_node.context),
                                                ActionClient, 10.0)
@@ -120,6 +106,3 @@ def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node)
         assert done, "RaceFreeActionClient lost the goal response"
         assert result is not None, "RaceFreeActionClient: goal accepted but no result within 60 s"
         assert result.status == 4 and result.result.error_code.val == 1, (result.status, result.result.message)
-    finally:
-        stop.set()
-        feeder.join(2.0)

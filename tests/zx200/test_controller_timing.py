@@ -163,8 +163,8 @@ def test_via_tolerance_must_be_positive(tmp_path):
 
 
 def test_a_target_marked_via_uses_the_via_tolerance_alone(kin):
-    # The planner sends each segment as its own controller goal and marks all but the plan's last "via"
-    # (internal action frame_id "<label>|via"): such a one-segment run is held to via_tolerance_*.
+    # The planner marks excavate's lift and release's open "via" (Zx200ArmSegment.via on the internal
+    # action): the next goal goes on from them, so even as a run's last segment it is held to via_tolerance_*.
     cfg = dataclasses.replace(load_controller_config(), segment_timeout_margin_s=3.0, stop_timeout_s=3.0)
     q0 = np.array(kin.home, dtype=float)
     reach = float(np.linalg.norm(kin.tip_position(q0)[:2] - kin.swing_origin[:2]))

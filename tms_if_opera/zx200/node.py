@@ -4,10 +4,11 @@ Serves ``tms_rp_zx200_change_pose`` (Zx200ChangePose), ``tms_rp_zx200_excavate_s
 (Zx200ExcavateSimple) and ``tms_rp_zx200_release_simple`` (Zx200ReleaseSimple). Each goal is planned
 and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
 goal ends at once (no motion) with ``error_code`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT and a
-``message`` naming the joint or distance. Valid goals run phase by phase through the arm controller's
-action ``arm_controller/move`` (node ``zx200_arm_controller``); feedback ``state`` is the phase
-(approach, penetrate, drag, curl, lift / swing, open / moving i/n). Cancel is forwarded; the goal
-ends CANCELED once the controller reports the arm at rest.
+``message`` naming the joint or distance. A valid goal's phases go to the arm controller's action
+``arm_controller/move`` (node ``zx200_arm_controller``, tms_msg/action/Zx200ArmMove) as one goal of
+segments, so the arm passes the via phases without stopping; feedback ``state`` is the running phase
+(approach, penetrate, drag, curl, lift / swing, open / ...), forwarded from the controller. Cancel is
+forwarded; the goal ends CANCELED once the controller reports the arm at rest.
 
 Parameters: ``machine_config``, ``planner_config``, ``controller_config`` (YAML paths; defaults in config/).
 """
@@ -39,8 +40,8 @@ def _make_node():  # noqa: ANN202
     from unique_identifier_msgs.msg import UUID
 
     from tms_common.action_client import RaceFreeActionClient
-    from tms_msg.action import Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
-    from tms_msg.msg import Zx200PositionWithAngle
+    from tms_msg.action import Zx200ArmMove, Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
+    from tms_msg.msg import Zx200ArmSegment
     from tms_rc.zx200.controller import JointTarget, load_controller_config
     from tms_rp.zx200 import errors as codes
     from tms_rp.zx200.errors import PlanningError
@@ -60,7 +61,7 @@ def _make_node():  # noqa: ANN202
             self._lock = threading.Lock()
             group = ReentrantCallbackGroup()
             self.create_subscription(JointState, "joint_states", self._on_state, 20, callback_group=group)
-            self._ctl = RaceFreeActionClient(self, Zx200ChangePose, "arm_controller/move", callback_group=group)
+            self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=group)
             accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
             ActionServer(self, Zx200ChangePose, "tms_rp_zx200_change_pose", execute_callback=self._change_pose,
                          cancel_callback=accept, callback_group=group)
@@ -94,57 +95,74 @@ def _make_node():  # noqa: ANN202
                 result.message = "arm controller action arm_controller/move is not available"
                 handle.abort()
                 return result
-            for k, target in enumerate(targets):
-                # every segment but the last is a via point (approach, carry, ...): via_tolerance_*; so is a
-                # last one the planner marks (excavate's lift, release's open: the next goal goes on from it)
-                code, message = self._segment(handle, action_type, target, via=target.via or k < len(targets) - 1)
-                if code != codes.SUCCESS:
-                    result.error_code.val = code
-                    result.message = f"{target.label}: {message}"
-                    if code == codes.CANCELED:
-                        handle.canceled()
-                    else:
-                        handle.abort()
-                    return result
+            code, message = self._move(handle, action_type, targets)
+            if code != codes.SUCCESS:
+                result.error_code.val = code
+                result.message = message
+                if code == codes.CANCELED:
+                    handle.canceled()
+                else:
+                    handle.abort()
+                return result
             result.error_code.val = codes.SUCCESS
             result.message = "done"
             handle.succeed()
             return result
 
-        def _segment(self, handle, action_type, target, via: bool = False) -> tuple[int, str]:  # noqa: ANN001
-            goal = Zx200ChangePose.Goal()
-            # internal action: frame_id = segment label, "|via" marks a via segment (controller README)
-            goal.trajectory.header.frame_id = target.label + ("|via" if via else "")
-            if isinstance(target, JointTarget):
-                from trajectory_msgs.msg import JointTrajectoryPoint
+        @staticmethod
+        def _segments(targets) -> list:  # noqa: ANN001
+            """The plan as controller segments. Every segment but the last is a via point (approach,
+            carry, ...: via_tolerance_*); so is a last one the planner marks (excavate's lift, release's
+            open: the next goal goes on from it)."""
+            out = []
+            for k, target in enumerate(targets):
+                seg = Zx200ArmSegment(label=target.label, speed_scale=float(target.speed_scale),
+                                      via=bool(target.via or k < len(targets) - 1))
+                if isinstance(target, JointTarget):
+                    seg.kind = Zx200ArmSegment.JOINT
+                    seg.joint_positions = [float(v) for v in target.q]
+                else:
+                    seg.kind = Zx200ArmSegment.CARTESIAN
+                    seg.position.x, seg.position.y, seg.position.z = (float(v) for v in target.position)
+                    seg.theta_w = float(target.theta_w)
+                out.append(seg)
+            return out
 
-                goal.trajectory.joint_names = list(JOINTS)
-                goal.trajectory.points = [JointTrajectoryPoint(positions=[float(v) for v in target.q])]
-            else:
-                pwa = Zx200PositionWithAngle()
-                pwa.position.x, pwa.position.y, pwa.position.z = (float(v) for v in target.position)
-                pwa.theta_w = float(target.theta_w)
-                pwa.offset = float(target.speed_scale)  # internal action: offset carries the speed scale
-                goal.position_with_angle_sequence = [pwa]
+        def _move(self, handle, action_type, targets) -> tuple[int, str]:  # noqa: ANN001
+            """Run the plan as one controller goal; the controller's phase feedback is forwarded."""
+            goal = Zx200ArmMove.Goal(segments=self._segments(targets))
             fb = action_type.Feedback()
-            fb.state = target.label
+            fb.state = targets[0].label
             handle.publish_feedback(fb)
-            # Every wait below is bounded: a segment always ends, and never leaves the arm driving blind.
+            last_label = [fb.state]
+
+            def forward(msg) -> None:  # noqa: ANN001
+                label = msg.feedback.label
+                if label and label != last_label[0]:
+                    last_label[0] = label
+                    out = action_type.Feedback()
+                    out.state = label
+                    handle.publish_feedback(out)
+
+            # Every wait below is bounded: a goal always ends, and never leaves the arm driving blind.
             goal_id = UUID(uuid=list(uuid.uuid4().bytes))
-            send = self._ctl.send_goal_async(goal, goal_uuid=goal_id)
+            send = self._ctl.send_goal_async(goal, feedback_callback=forward, goal_uuid=goal_id)
             deadline = time.monotonic() + GOAL_RESPONSE_TIMEOUT_S
             while not send.done():
                 if time.monotonic() > deadline:
                     # The goal may run on the controller without us knowing: cancel it by its id.
-                    response = Zx200ChangePose.Impl.SendGoalService.Response(accepted=True)
+                    response = Zx200ArmMove.Impl.SendGoalService.Response(accepted=True)
                     ClientGoalHandle(self._ctl, goal_id, response).cancel_goal_async()
                     return codes.NO_VALID_CONTROL, (
                         f"arm controller did not answer the goal within {GOAL_RESPONSE_TIMEOUT_S:g} s (cancel sent)")
                 time.sleep(0.01)
             gh = send.result()
             if not gh.accepted:
-                return codes.NO_VALID_CONTROL, "arm controller rejected the segment"
-            return self._await_result(handle, gh)
+                return codes.NO_VALID_CONTROL, "arm controller rejected the goal"
+            code, message = self._await_result(handle, gh)
+            if code not in (codes.SUCCESS, codes.CANCELED) and last_label[0] not in message:
+                message = f"{last_label[0]}: {message}"
+            return code, message
 
         def _await_result(self, handle, gh) -> tuple[int, str]:  # noqa: ANN001
             """Wait for the controller's result; recover a lost result from the goal status topic."""

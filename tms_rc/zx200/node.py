@@ -2,11 +2,11 @@
 
 In the machine namespace (``/zx200``): subscribes ``joint_states`` (sensor_msgs/JointState, the four
 front joints), publishes ``front_cmd`` (tms_msg/JointCmd, VELOCITY) every period (contract [A] of the
-COM3 converter), and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ChangePose)
-that the planner (``zx200_planner``) uses: joint targets in ``trajectory`` (one point per target),
-Cartesian targets in ``position_with_angle_sequence`` (on this internal action ``offset`` in (0, 1] is the
-segment's speed scale, e.g. the planner's slow dig phases; 0 = full speed); feedback ``state`` names the segment. Cancel
-decelerates within the limits and the goal ends CANCELED only when the arm is at rest.
+COM3 converter), and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
+that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
+joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
+malformed segment rejects the whole goal before motion, naming the segment. Cancel decelerates within the
+limits and the goal ends CANCELED only when the arm is at rest.
 
 Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
 ``machine_config`` (default config/machines/zx200.yaml).
@@ -14,6 +14,7 @@ Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_control
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -24,6 +25,9 @@ from tms_common.node import run_node
 __all__ = ["main"]
 
 
+#: a segment's speed_scale multiplies the configured tip / joint speeds (joint speeds stay capped at their
+#: limits); anything above this is a garbled goal, not a plan
+MAX_SPEED_SCALE = 10.0
 JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states
 
 
@@ -33,8 +37,8 @@ def _make_node():  # noqa: ANN202
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
 
-    from tms_msg.action import Zx200ChangePose
-    from tms_msg.msg import JointCmd
+    from tms_msg.action import Zx200ArmMove
+    from tms_msg.msg import JointCmd, Zx200ArmSegment
     from tms_rc.zx200.controller import ArmController, CartesianTarget, JointTarget, load_controller_config
     from tms_rp.zx200 import errors as codes
     from tms_rp.zx200.kinematics import JOINTS, load_kinematics
@@ -64,7 +68,7 @@ def _make_node():  # noqa: ANN202
             self.create_subscription(JointState, "joint_states", self._on_state, 20)
             self.create_timer(self.cfg.dt, self._tick, callback_group=MutuallyExclusiveCallbackGroup())
             self._server = ActionServer(
-                self, Zx200ChangePose, "arm_controller/move", execute_callback=self._execute,
+                self, Zx200ArmMove, "arm_controller/move", execute_callback=self._execute,
                 goal_callback=self._on_goal, cancel_callback=lambda _h: CancelResponse.ACCEPT,
                 callback_group=ReentrantCallbackGroup(),
             )
@@ -106,34 +110,41 @@ def _make_node():  # noqa: ANN202
             return GoalResponse.ACCEPT
 
         def _targets(self, goal) -> list:  # noqa: ANN001
-            names = list(goal.trajectory.joint_names)
-            # trajectory.header.frame_id = "<label>" or "<label>|via" (internal action): a via segment
-            # (the planner's approach, carry, ...: every segment of a plan but the last, sent one goal
-            # each) is reached within via_tolerance_* without waiting for rest.
-            label, _, flags = goal.trajectory.header.frame_id.partition("|")
-            via = "via" in flags.split(",")
+            """The goal's segments as controller targets; ValueError names the first malformed one."""
             out = []
-            for k, pt in enumerate(goal.trajectory.points):
-                q = self._q.copy()
-                for n, v in zip(names, pt.positions, strict=False):
-                    if n in JOINTS:
-                        q[JOINTS.index(n)] = v
-                out.append(JointTarget(q, label or f"joint {k + 1}", via=via))
-            for k, pwa in enumerate(goal.position_with_angle_sequence):
-                p = np.array([pwa.position.x, pwa.position.y, pwa.position.z])
-                scale = pwa.offset if 0.0 < pwa.offset <= 1.0 else 1.0
-                out.append(CartesianTarget(p, pwa.theta_w, label or f"position {k + 1}", speed_scale=scale, via=via))
+            for k, seg in enumerate(goal.segments):
+                name = f"segment {k + 1} ({seg.label or 'unlabelled'})"
+                if not (0.0 <= seg.speed_scale <= MAX_SPEED_SCALE):  # also NaN
+                    raise ValueError(f"{name}: speed_scale {seg.speed_scale} is outside [0, {MAX_SPEED_SCALE:g}]")
+                scale = seg.speed_scale or 1.0
+                if seg.kind == Zx200ArmSegment.JOINT:
+                    q = np.array(seg.joint_positions, dtype=float)
+                    if q.shape != (len(JOINTS),) or not np.all(np.isfinite(q)):
+                        raise ValueError(f"{name}: joint_positions must be {len(JOINTS)} finite angles "
+                                         f"({', '.join(JOINTS)}), got {list(seg.joint_positions)}")
+                    out.append(JointTarget(q, seg.label, speed_scale=scale, via=seg.via))
+                elif seg.kind == Zx200ArmSegment.CARTESIAN:
+                    p = np.array([seg.position.x, seg.position.y, seg.position.z])
+                    if not (np.all(np.isfinite(p)) and math.isfinite(seg.theta_w)):
+                        raise ValueError(f"{name}: position / theta_w must be finite")
+                    out.append(CartesianTarget(p, seg.theta_w, seg.label, speed_scale=scale, via=seg.via))
+                else:
+                    raise ValueError(f"{name}: unknown kind {seg.kind} (JOINT=0, CARTESIAN=1)")
             return out
 
         def _execute(self, handle):  # noqa: ANN001, ANN202
-            result = Zx200ChangePose.Result()
-            with self._lock:
+            result = Zx200ArmMove.Result()
+            try:
                 targets = self._targets(handle.request)
                 if not targets:
-                    handle.abort()
-                    result.error_code.val = codes.INVALID_GOAL
-                    result.message = "empty goal"
-                    return result
+                    raise ValueError("empty goal: no segments")
+            except ValueError as exc:
+                self.get_logger().warning(f"goal rejected before motion: {exc}")
+                handle.abort()
+                result.error_code.val = codes.INVALID_GOAL
+                result.message = str(exc)
+                return result
+            with self._lock:
                 self.ctl.start(targets)
             canceling = False
             while True:
@@ -146,8 +157,11 @@ def _make_node():  # noqa: ANN202
                         st = self.ctl.status
                     if st.result is not None:
                         break
-                fb = Zx200ChangePose.Feedback()
-                fb.state = "stopping" if st.mode == "stopping" else f"{st.label or 'moving'} ({st.segment}/{st.segments})"
+                fb = Zx200ArmMove.Feedback()
+                stopping = st.mode == "stopping"
+                fb.segment = 0 if stopping else int(st.segment)
+                fb.label = "" if stopping else st.label
+                fb.state = "stopping" if stopping else f"{st.label or 'moving'} ({st.segment}/{st.segments})"
                 fb.distance_remaining = float(st.distance_remaining)
                 handle.publish_feedback(fb)
             result.error_code.val = int(st.result)
