@@ -1,8 +1,8 @@
 """Pure core of the experiment supervisor: records a run and writes its report.
 
 The recorder is fed time-stamped samples (simulated time ``t`` [s]) by ``tms_ur.experiment_node``:
-soil volumes, truth and estimated poses, bucket-tip truth and estimate, global-blackboard flags and
-task states. From them it derives the events of the earthwork cycle:
+soil volumes, truth and estimated poses, bucket-tip truth and estimate, global-blackboard flags,
+task states and the leaves each task is running. From them it derives the events of the earthwork cycle:
 
 * a **load pass** is one episode of vessel-load increase totalling more than ``pass_threshold`` m^3;
 * a **haul cycle** ends with one episode of soil reaching the dump site (``dumped`` grows by more than
@@ -11,6 +11,9 @@ task states. From them it derives the events of the earthwork cycle:
 An episode is a run of increases with no gap longer than ``episode_gap_s``: a bucketful falls into the
 vessel over a second or two and a vessel empties over several, sampled many times on the way; each
 counts once, at the sample where its total first passes the threshold.
+
+The **leaf times** are how long each task's leaves (its subtask calls, waits and flag reads, named as in
+the tree) ran, from the ``running_leaves`` of ``/tms_ts/status``: where a load pass's time goes.
 
 ``report(directory)`` writes ``metrics.json``, ``site_map.png``, ``soil.png``, ``flags.png`` and
 ``index.html`` (one page linking them).
@@ -93,6 +96,7 @@ class ExperimentRecorder:
     tip_errors: list[float] = field(default_factory=list)
     flags: dict[str, list[tuple[float, Any]]] = field(default_factory=dict)
     task_states: dict[int, list[tuple[float, str]]] = field(default_factory=dict)
+    leaf_times: dict[int, dict[str, list[float]]] = field(default_factory=dict)
     pass_times: list[float] = field(default_factory=list)
     cycle_times: list[float] = field(default_factory=list)
     pass_events: list[float] = field(default_factory=list)
@@ -105,6 +109,7 @@ class ExperimentRecorder:
     _passes: _Episodes | None = None
     _dumps: _Episodes | None = None
     _last_truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    _leaf_starts: dict[int, dict[str, float]] = field(default_factory=dict)
 
     # -- inputs -------------------------------------------------------------------------------
     def on_soil(self, t: float, mound: float, bucket: float, vessel: float, dumped: float) -> None:
@@ -149,6 +154,14 @@ class ExperimentRecorder:
         if not series or series[-1][1] != state:
             series.append((t, state))
 
+    def on_running_leaves(self, t: float, task_id: int, leaves: list[str]) -> None:
+        """The leaves task ``task_id`` is running at ``t``; a leaf's time runs from its first to its last report."""
+        starts = self._leaf_starts.setdefault(task_id, {})
+        for name in [n for n in starts if n not in leaves]:
+            self.leaf_times.setdefault(task_id, {}).setdefault(name, []).append(t - starts.pop(name))
+        for name in leaves:
+            starts.setdefault(name, t)
+
     def _clock(self, t: float) -> None:
         if self.sim_start is None:
             self.sim_start = t
@@ -183,6 +196,9 @@ class ExperimentRecorder:
             "end_effector_error_m": {"rms": _rms(self.tip_errors), **(_stats(self.tip_errors) or {})},
             "flags_timeline": {k: [[round(t, 2), v] for t, v in series] for k, series in self.flags.items()},
             "task_states": {str(k): [[round(t, 2), s] for t, s in v] for k, v in self.task_states.items()},
+            "leaf_time_s": {
+                str(k): {name: _stats(times) for name, times in sorted(v.items())} for k, v in self.leaf_times.items()
+            },
             "pass_events_s": [round(t, 2) for t in self.pass_events],
             "dump_events_s": [round(t, 2) for t in self.dump_events],
         }

@@ -112,6 +112,7 @@ def _make_node():  # noqa: ANN202
                     state = STATE_NAMES.get(t.state, str(t.state))
                     self.tasks[t.task_id] = {"state": state, "running": list(t.running_leaves), "message": t.message}
                     self.rec.on_task_state(self.sim_t, t.task_id, state)
+                    self.rec.on_running_leaves(self.sim_t, t.task_id, list(t.running_leaves))
 
         def _on_soil(self, msg: Float64MultiArray) -> None:
             labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []

@@ -71,3 +71,18 @@ def test_report_writes_every_file(tmp_path):
         assert (tmp_path / name).stat().st_size > 100, name
     assert json.loads((tmp_path / "metrics.json").read_text())["cycles"] == 3
     assert 'src="site_map.png"' in index.read_text()
+
+
+def test_leaf_times_come_from_the_running_leaves_of_each_task():
+    rec = ExperimentRecorder()
+    # task 2 runs excavate 10-25 s, carry 25-31 s, then excavate again 31-40 s; task 1 drives 0-40 s
+    for t, leaves in [(10.0, ["excavate"]), (20.0, ["excavate"]), (25.0, ["carry_over_vessel"]),
+                      (31.0, ["excavate"]), (40.0, [])]:
+        rec.on_running_leaves(t, 2, leaves)
+        rec.on_running_leaves(t, 1, ["drive_to_p5"] if t < 40.0 else [])
+    times = rec.metrics()["leaf_time_s"]
+    assert times["2"]["excavate"]["n"] == 2 and times["2"]["excavate"]["max"] == pytest.approx(15.0)
+    assert times["2"]["excavate"]["median"] == pytest.approx(12.0)
+    assert times["2"]["carry_over_vessel"]["mean"] == pytest.approx(6.0)
+    assert times["1"] == {"drive_to_p5": rec.metrics()["leaf_time_s"]["1"]["drive_to_p5"]}
+    assert times["1"]["drive_to_p5"]["max"] == pytest.approx(30.0)
