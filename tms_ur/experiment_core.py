@@ -156,6 +156,7 @@ class ExperimentRecorder:
 
     def on_running_leaves(self, t: float, task_id: int, leaves: list[str]) -> None:
         """The leaves task ``task_id`` is running at ``t``; a leaf's time runs from its first to its last report."""
+        leaves = [leaf.split(" (task ")[0] for leaf in leaves]  # drop the XML position tms_ts appends
         starts = self._leaf_starts.setdefault(task_id, {})
         for name in [n for n in starts if n not in leaves]:
             self.leaf_times.setdefault(task_id, {}).setdefault(name, []).append(t - starts.pop(name))

@@ -76,7 +76,7 @@ def test_report_writes_every_file(tmp_path):
 def test_leaf_times_come_from_the_running_leaves_of_each_task():
     rec = ExperimentRecorder()
     # task 2 runs excavate 10-25 s, carry 25-31 s, then excavate again 31-40 s; task 1 drives 0-40 s
-    for t, leaves in [(10.0, ["excavate"]), (20.0, ["excavate"]), (25.0, ["carry_over_vessel"]),
+    for t, leaves in [(10.0, ["excavate"]), (20.0, ["excavate"]), (25.0, ["carry_over_vessel (task 2 line 1, column 3404)"]),
                       (31.0, ["excavate"]), (40.0, [])]:
         rec.on_running_leaves(t, 2, leaves)
         rec.on_running_leaves(t, 1, ["drive_to_p5"] if t < 40.0 else [])

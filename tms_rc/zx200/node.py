@@ -147,10 +147,16 @@ def _make_node():  # noqa: ANN202
             with self._lock:
                 self.ctl.start(targets)
             canceling = False
+            # (label, start) of each segment in ROS-clock seconds: logged at the end, where a motion's time went
+            spans: list[list] = []
             while True:
                 time.sleep(0.05)
                 with self._lock:
                     st = self.ctl.status
+                    now = self.get_clock().now().nanoseconds * 1e-9
+                    label = "stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}")
+                    if not spans or spans[-1][0] != label:
+                        spans.append([label, now])
                     if handle.is_cancel_requested and not canceling:
                         self.ctl.stop("canceled")
                         canceling = True
@@ -166,6 +172,11 @@ def _make_node():  # noqa: ANN202
                 handle.publish_feedback(fb)
             result.error_code.val = int(st.result)
             result.message = st.message
+            ends = [start for _, start in spans[1:]] + [self.get_clock().now().nanoseconds * 1e-9]
+            self.get_logger().info(
+                f"goal ended {st.result} ({st.message}) after {ends[-1] - spans[0][1]:.1f} s; segments [s]: "
+                + ", ".join(f"{label} {end - start:.1f}" for (label, start), end in zip(spans, ends, strict=True))
+            )
             if st.result == codes.SUCCESS:
                 handle.succeed()
             elif st.result == codes.CANCELED and handle.is_cancel_requested:
