@@ -18,9 +18,22 @@ from sim_bridge.model import SiteModel
 from sim_bridge.soil import HeightField, SoilState
 from sim_bridge.tracks import SkidSteer, centre_to_tracks
 
-__all__ = ["Plant", "MachineTruth"]
+__all__ = ["Plant", "MachineTruth", "stamp_parts"]
 
 log = logging.getLogger(__name__)
+
+
+def stamp_parts(t: float) -> tuple[int, int]:
+    """Simulated time [s] -> ``(sec, nanosec)`` of a ROS stamp, carrying a rounded-up second.
+
+    A time a hair below a whole second (3.0 read as 2.9999999999999996) rounds to 1e9 ns; that carry
+    must go into ``sec``. Splitting off ``int(t)`` first and wrapping the nanoseconds stamped it
+    ``2.000`` instead, one second back: every truth pose, /clock and scan at such a second jumped
+    back 0.95 s, and tms_sp's arrival detector took that as a sim reset (SENSING_ARRIVAL_FLG fell
+    once per simulated second).
+    """
+    sec, nanosec = divmod(round(t * 1e9), 1_000_000_000)
+    return int(sec), int(nanosec)
 
 
 @dataclass(frozen=True)
@@ -147,7 +160,7 @@ class Plant:
     def __init__(self, spec: PlantSpec | None = None) -> None:
         self.spec = spec or load_plant()
         self.dt = self.spec.dt
-        self.time = 0.0
+        self.time = 0.0  # = steps * dt (not accumulated: summing 0.01 drifts off the step grid)
         self.steps = 0
         self.zx200 = Zx200(self.spec)
         self.ic120 = Ic120(self.spec)
@@ -207,8 +220,12 @@ class Plant:
         self.tip_speed = math.dist(tip, prev) / self.dt
         self._soil(prev, tip)
         self._tip = tip
-        self.time += self.dt
+        self.advance_clock()
+
+    def advance_clock(self) -> None:
+        """Count one step: ``time = steps * dt`` (no accumulated rounding; replay uses it too)."""
         self.steps += 1
+        self.time = self.steps * self.dt
 
     def _soil(self, prev, tip) -> None:  # noqa: ANN001 - numpy vectors
         zx = self.zx200.spec

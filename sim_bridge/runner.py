@@ -154,8 +154,7 @@ class PlantRunner:
                 io.poll()
                 io.watchdog()
             if self.replay is not None:
-                plant.time += dt
-                plant.steps += 1
+                plant.advance_clock()
                 self.replay.apply(plant)
             else:
                 plant.step()

@@ -30,7 +30,7 @@ from pathlib import Path  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
 from sim_bridge.config import load_plant  # noqa: E402
-from sim_bridge.plant import Plant  # noqa: E402
+from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
 from tms_common.node import run_node  # noqa: E402
 
@@ -131,8 +131,8 @@ class SimPlantNode(Node):
             os._exit(1)
 
     def _stamp(self, t: float):  # noqa: ANN202
-        sec = int(t)
-        return self._Time(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+        sec, nanosec = stamp_parts(t)
+        return self._Time(sec=sec, nanosec=nanosec)
 
     def _on_step(self, plant: Plant) -> None:
         stamp = self._stamp(plant.time)

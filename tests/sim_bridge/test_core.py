@@ -11,7 +11,7 @@ from sim_bridge.config import load_plant, load_zx200
 from sim_bridge.errors import SimConfigError
 from sim_bridge.hydraulics import DeadTimeLag, JointBank
 from sim_bridge.model import SiteModel
-from sim_bridge.plant import Plant
+from sim_bridge.plant import Plant, stamp_parts
 from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
 from sim_bridge.sensors import Gnss, Noise
 from tms_common.config import config_path
@@ -183,3 +183,20 @@ def test_truth_record_and_replay(spec, tmp_path):
     (tmp_path / "bad.jsonl").write_text('{"t": 0}\n')
     with pytest.raises(ReplayError, match=r"bad\.jsonl:1: not a truth record"):
         TruthLog(tmp_path / "bad.jsonl")
+
+
+def test_plant_time_on_the_step_grid_and_stamps_carry_the_second(spec):
+    """time = steps * dt (no drift), and a time a hair below a whole second is stamped as that second."""
+    assert stamp_parts(2.99999999999998) == (3, 0)  # what 300 summed 0.01 steps gave: was stamped (2, 0)
+    assert stamp_parts(2.9999999999999996) == (3, 0)
+    assert stamp_parts(160.02) == (160, 20_000_000)
+    assert stamp_parts(0.0) == (0, 0)
+    last = (-1, 0)
+    for n in range(1, 40_000):  # the 0.01 s step grid over 400 s: strictly increasing, exact
+        st = stamp_parts(n * 0.01)
+        assert st > last and st == (n // 100, (n % 100) * 10_000_000), (n, st)
+        last = st
+    plant = Plant(spec)
+    for _ in range(300):
+        plant.step()
+    assert plant.steps == 300 and plant.time == 300 * plant.dt and stamp_parts(plant.time) == (3, 0)

@@ -232,3 +232,58 @@ def test_soil_conserved_over_scripted_dig_load_dump_over_can(start_plant, ros_no
     assert ground + bucket + vessel == pytest.approx(total0, rel=0.01)
     assert mound <= initial[0] - dumped + 0.05, (mound, initial[0], dumped)  # (spills at P1 are not mound either)
     assert ground > mound + 0.9 * dumped, (ground, mound, dumped)  # the dump pile lies outside the mound
+
+
+def test_truth_stamps_and_clock_never_go_back_so_arrival_holds_at_p1(start_plant, ros_node):
+    """IC120 parked at P1: /sim/truth/ic120/pose and /clock stamps rise by one period across whole seconds.
+
+    The node once split ``int(t)`` off the accumulated plant time and wrapped the rounded nanoseconds:
+    3.0 s (summed as 2.99999999999998) was stamped 2.000, 0.95 s back, at every whole second of
+    3-17 s, 44-72 s and from 160 s on. tms_sp's arrival detector takes a stamp going back as a sim
+    reset, so SENSING_ARRIVAL_FLG fell at every such second while the IC120 stood at P1 (demo of
+    08:20, 160-357 s).
+    """
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    from tms_sp.arrival import ArrivalDetector
+    from tms_sp.config import load_sensing_config
+    from tms_sp.frames import Pose2D, yaw_from_quaternion
+
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    poses: list[tuple[int, int, float, float, float]] = []
+    clock: list[tuple[int, int]] = []
+
+    def on_pose(m: PoseStamped) -> None:
+        q = m.pose.orientation
+        poses.append((m.header.stamp.sec, m.header.stamp.nanosec, m.pose.position.x, m.pose.position.y,
+                       yaw_from_quaternion(q.x, q.y, q.z, q.w)))
+
+    ros_node.create_subscription(PoseStamped, "/sim/truth/ic120/pose", on_pose, qos)
+    ros_node.create_subscription(Clock, "/clock", lambda m: clock.append((m.clock.sec, m.clock.nanosec)), qos)
+    start_plant(speed=2.0, ic120_pose="P1", clock_period_s=0.02)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (poses and poses[-1][0] >= 9):
+        ros_node.executor_for_test.spin_once(timeout_sec=0.05)
+    assert poses and poses[-1][0] >= 9, f"truth poses up to {poses[-1][:2] if poses else None}"
+    stamps = [s + ns * 1e-9 for s, ns, *_ in poses]
+    whole = [t for t in stamps if 3.0 <= t and abs(t - round(t)) < 1e-6]
+    assert len(whole) >= 3, f"too few whole-second samples from 3 s on: {stamps[:3]} .. {stamps[-3:]}"
+    steps = [(b - a, a, b) for a, b in zip(stamps, stamps[1:], strict=False)]
+    back = [(a, b) for d, a, b in steps if d <= 0.0]
+    assert not back, f"truth pose stamp went back: {back[:5]}"
+    # one truth period apart (a multiple where DDS dropped a sample under load: keep-last 10 publisher);
+    # the first pose goes out after the first step (0.01 s), the next on the 0.05 s grid
+    grid = [d for d, a, _ in steps if a >= 0.05 - 1e-9]
+    assert all(abs(d / 0.05 - round(d / 0.05)) < 1e-4 for d in grid), sorted({round(d, 9) for d in grid})
+    clock_t = [s + ns * 1e-9 for s, ns in clock]
+    clock_back = [(a, b) for a, b in zip(clock_t, clock_t[1:], strict=False) if b <= a]
+    assert len(clock_t) > 100 and not clock_back, f"/clock went back: {clock_back[:5]}"
+    # The symptom: the arrival flag on these poses (config/tms_sp/sensing.yaml) rises once and stays up.
+    cfg = load_sensing_config()
+    det = ArrivalDetector(cfg.points[cfg.arrival_point], cfg.arrival)
+    flags = [(t, det.update(t, Pose2D(x, y, yaw))) for t, (_s, _ns, x, y, yaw) in zip(stamps, poses, strict=True)]
+    rises = [t for (_, a), (t, b) in zip(flags, flags[1:], strict=False) if b and not a]
+    falls = [t for (_, a), (t, b) in zip(flags, flags[1:], strict=False) if a and not b]
+    assert len(rises) == 1 and not falls, f"SENSING_ARRIVAL_FLG rose at {rises}, fell at {falls}"
