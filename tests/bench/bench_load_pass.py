@@ -8,6 +8,7 @@ the plant's hydraulics (dead times, lags, pump) and soil model. It isolates geom
 transport and CPU of the full launch, so it shows what digging and release settings are worth:
 
     python -m tests.bench load_pass            # LOAD_PASS_N passes (default 6)
+    LOAD_PASS_LATE=0.4 python -m tests.bench load_pass   # 40 % of the control ticks a period late
 
 Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
 soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
@@ -67,9 +68,15 @@ class PassRig:
         ctl.start(targets)
         names = self.plant.zx200.front.names
         t0 = self.plant.time
+        # LOAD_PASS_LATE: the fraction of control ticks that come a period late (the previous command acts
+        # for two periods), as a sim-time timer does on a loaded machine: the stack's conditions.
+        late = float(os.environ.get("LOAD_PASS_LATE", "0"))
+        rng = np.random.default_rng(1)
+        u = np.zeros(len(names))
         while self.plant.time - t0 < limit_s:
             front = self.plant.zx200.front
-            u = ctl.step(np.array(front.q, dtype=float), np.array(front.v, dtype=float), now=self.plant.time)
+            if not (late and rng.random() < late):
+                u = ctl.step(np.array(front.q, dtype=float), np.array(front.v, dtype=float), now=self.plant.time)
             self.plant.zx200.set_front_velocity(dict(zip(names, u.tolist(), strict=True)))
             for _ in range(self.sub_steps):
                 self.plant.step()
@@ -111,7 +118,8 @@ def main() -> None:
     rig = PassRig()
     soil = rig.plant.soil
     ground = rig.plant.ground
-    print(f"load passes in-process (MuJoCo plant, controller {RATE_HZ:.0f} Hz, no transport delay): {n} passes")
+    print(f"load passes in-process (MuJoCo plant, controller {RATE_HZ:.0f} Hz, no transport delay): {n} passes, "
+          f"{float(os.environ.get('LOAD_PASS_LATE', '0')):.0%} of the ticks a period late (LOAD_PASS_LATE)")
     wall0 = time.monotonic()
     sim0 = rig.plant.time
     totals = {"cut": 0.0, "vessel": 0.0, "pass_s": []}

@@ -284,7 +284,9 @@ class ArmController:
         # Smith predictor with equalised delays (dead time + lag, as steps).
         delays = cfg.dead_time_s + cfg.lag_s
         self._horizon_steps = int(round(float(np.max(delays)) / self.dt))
-        self._extra_steps = [int(round((float(np.max(delays)) - d) / self.dt)) for d in delays]
+        # Each joint's extra command delay [s] equalising it to the slowest joint; applied on time stamps
+        # (not step counts), so late ticks do not stretch a joint's delay beyond what the predictor assumes.
+        self._extra_s = np.round((float(np.max(delays)) - np.asarray(delays, dtype=float)) / self.dt) * self.dt
         self.preview_s = self._horizon_steps * self.dt
         # Commands in flight as (command, how long it was applied [s]); the newest one's duration is only
         # known at the next step (time-stamped steps) and counts as one period until then. The predictor
@@ -296,7 +298,8 @@ class ArmController:
         self._in_flight_time = 0.0  # running sum of the durations [s]
         self._last_now: float | None = None
         self.elapsed = self.dt  # duration of the current step [s] (cfg.dt without time stamps)
-        self._out_hist: deque[np.ndarray] = deque(maxlen=max(self._extra_steps) + 1)
+        self._clock = 0.0  # sum of the steps' durations [s]: the time axis of _out_hist
+        self._out_hist: deque[tuple[float, np.ndarray]] = deque()  # (clock, command), oldest first
         self.u_prev = np.zeros(N)
         self.status = ControllerStatus()
         self._targets: list[Target] = []
@@ -416,12 +419,22 @@ class ArmController:
         self.status.segment = self._seg + 1
         self.status.label = target.label
 
+    def _accel_dt(self) -> float:
+        """Time over which the command may change by acceleration x dt: the real duration of this step.
+
+        A late tick (sim-time timer under CPU load) has let the previous command act for longer; with the
+        nominal period the arm would accelerate at a fraction of its limit whenever ticks are late
+        (the paper launch's swings took 9-13 s instead of 6 s). Capped at 3 periods so a long pause
+        does not allow a jump.
+        """
+        return min(max(self.elapsed, self.dt), 3.0 * self.dt)
+
     # -------------------------------------------------------------------------- safety rows
     def _safety_tasks(self, qp: np.ndarray, tip: np.ndarray, jt: np.ndarray, pin_p: np.ndarray, jp: np.ndarray):
         cfg, lim = self.cfg, self.kin.limits
         vmax = lim.velocity
         if cfg.use_acceleration_limits:
-            a = lim.acceleration * self.dt
+            a = lim.acceleration * self._accel_dt()
             hi = np.minimum(vmax, self.u_prev + a)
             lo = np.maximum(-vmax, self.u_prev - a)
         else:
@@ -447,7 +460,7 @@ class ArmController:
         """Final guard against solver tolerance: clip to the velocity/acceleration box, scale to the pump."""
         vmax = self.kin.limits.velocity
         if self.cfg.use_acceleration_limits:
-            a = self.kin.limits.acceleration * self.dt
+            a = self.kin.limits.acceleration * self._accel_dt()
             u = np.clip(u, np.maximum(-vmax, self.u_prev - a), np.minimum(vmax, self.u_prev + a))
         else:
             u = np.clip(u, -vmax, vmax)
@@ -487,7 +500,7 @@ class ArmController:
             self.last_result = res
             if st.mode == "stopping":
                 self._stop_time += self.elapsed
-                in_flight = max((float(np.max(np.abs(c))) for c in self._out_hist), default=0.0)
+                in_flight = max((float(np.max(np.abs(c))) for _, c in self._out_hist), default=0.0)
                 if self._in_flight:
                     in_flight = max(in_flight, float(np.max(np.abs(np.asarray(self._in_flight)))))
                 if np.max(np.abs(u)) < 1e-4 and np.max(np.abs(dq)) < self.cfg.rest_speed and in_flight < 1e-4:
@@ -511,8 +524,20 @@ class ArmController:
             self._in_flight_sum += u * self.dt
             self._in_flight_time += self.dt
             self._trim_in_flight()
-        self._out_hist.append(u)
-        out = np.array([self._out_hist[-1 - min(e, len(self._out_hist) - 1)][i] for i, e in enumerate(self._extra_steps)])
+        return self._delayed(u)
+
+    def _delayed(self, u: np.ndarray) -> np.ndarray:
+        """Per joint, the command of ``_extra_s`` ago (the oldest kept until then): delays equalised."""
+        self._clock += self.elapsed
+        hist = self._out_hist
+        hist.append((self._clock, u))
+        oldest_needed = self._clock - float(np.max(self._extra_s)) + 0.5 * self.dt
+        while len(hist) > 1 and hist[1][0] <= oldest_needed:
+            hist.popleft()
+        out = np.empty(N)
+        for i, extra in enumerate(self._extra_s):
+            cutoff = self._clock - extra + 0.5 * self.dt
+            out[i] = next((c[i] for t, c in reversed(hist) if t <= cutoff), hist[0][1][i])
         return out
 
     def _track(self, q, qp, dq, tip, jt, tasks) -> np.ndarray:  # noqa: ANN001 - internal
