@@ -191,3 +191,34 @@ def test_a_target_marked_via_uses_the_via_tolerance_alone(kin):
     ctl, _ = _stuck_swing_run(kin, cfg, [JointTarget(via, "approach", via=True)], q0)
     assert ctl.status.result == codes.SUCCESS, ctl.status
     assert 0.02 < ctl.status.distance_remaining < 0.05, ctl.status
+
+
+def test_a_clock_that_jumps_back_does_not_end_a_goal_early(kin, cfg50):
+    # sim_plant used to stamp some whole seconds 0.95 s early (N.0 s read N-1 + 0.0). The controller took
+    # the next good stamp as a 1 s late tick: the settle timer jumped past settle_s and the predictor
+    # credited the last command with a second of motion.
+    q0 = np.array(kin.home, dtype=float)
+    q1 = q0.copy()
+    q1[:3] += [0.3, 0.1, -0.15]
+
+    def glitched(t):
+        whole = round(t)
+        return whole - 1.0 if abs(t - whole) < 1e-6 and whole > 0 else t  # every whole second 1 s early
+
+    for stamp in (lambda t: t, glitched):
+        ctl = ArmController(kin, cfg50)
+        plant = LagDeadTimePlant(PLANT_DT, PLANT_DEAD_TIME, PLANT_LAG, q0)
+        q, v, t, errors = q0.copy(), np.zeros(4), 0.0, []
+        ctl.start([JointTarget(q1, "move")])
+        while ctl.status.result is None and t < 30.0:
+            u = ctl.step(q, v, now=stamp(t))
+            for _ in range(2):
+                q, v = plant.step(u)
+                t = round(t + PLANT_DT, 9)
+            assert ctl.elapsed <= 2 * cfg50.dt + 1e-9, f"t={t:.2f}: a step counted {ctl.elapsed:.2f} s"
+        assert ctl.status.result == codes.SUCCESS, ctl.status
+        for _ in range(200):  # 2 s more with the commands still in flight: where the arm comes to rest
+            q, v = plant.step(ctl.step(q, v, now=stamp(t)))
+            t = round(t + PLANT_DT, 9)
+            errors.append(float(np.linalg.norm(kin.tip_position(q) - kin.tip_position(q1))))
+        assert max(errors[-50:]) < cfg50.goal_tolerance_m, f"rest error {max(errors[-50:]) * 100:.1f} cm"

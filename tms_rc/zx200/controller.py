@@ -351,11 +351,18 @@ class ArmController:
             now = float(now)
             if self._last_now is None or not math.isfinite(now):
                 self.elapsed = self.dt
+            elif now < self._last_now:
+                # A clock that jumps back (a bad stamp, a restarted simulation) says nothing about the time
+                # that passed: count one period and keep our own time running, so the next good stamp is
+                # not read as a second-long late tick. (sim_plant once stamped whole seconds 0.95 s early:
+                # the next step then counted 1 s, which inflated the settle time and corrupted the
+                # predictor, and a goal could end "reached" with its tip still 2 cm from the target.)
+                self.elapsed = self.dt
+                now = self._last_now + self.dt
             else:
-                # Late ticks are real (the plant kept applying the last command); a clock jumping back or
-                # a pause of seconds (sim restarted) is not: bound it to [0, preview] so one bad stamp
-                # cannot wipe or inflate the prediction.
-                self.elapsed = min(max(now - self._last_now, 0.0), max(self.preview_s, self.dt))
+                # Late ticks are real (the plant kept applying the last command); a pause of seconds is
+                # not: bound it to the preview so one bad stamp cannot wipe or inflate the prediction.
+                self.elapsed = min(now - self._last_now, max(self.preview_s, self.dt))
             self._last_now = now if math.isfinite(now) else self._last_now
         if self._in_flight and self.elapsed != self._in_flight_dur[-1]:
             # the newest command was provisionally counted as one period: correct to its real duration
