@@ -42,7 +42,9 @@ def test_small_moves_and_unknown_start_stay_a_straight_tip_line() -> None:
 def test_release_opens_the_bucket_with_the_tip_held_over_the_release_point() -> None:
     q_carry = KIN.ik_position_with_angle(RELEASE_TIP, CARRY_THETA_W)
     swing = math.atan2(RELEASE_TIP[1] - KIN.swing_origin[1], RELEASE_TIP[0] - KIN.swing_origin[0])
-    targets = PLAN.release(swing, q_carry)
+    away = q_carry.copy()
+    away[0] -= 0.3  # the arm is not yet over the vessel: swing first, then open
+    targets = PLAN.release(swing, away)
     assert [t.label for t in targets] == ["swing", "open"]
     assert all(isinstance(t, JointTarget) and t.via for t in targets)
     swung, opened = targets
@@ -50,6 +52,17 @@ def test_release_opens_the_bucket_with_the_tip_held_over_the_release_point() -> 
     np.testing.assert_allclose(KIN.tip_position(opened.q), KIN.tip_position(swung.q), atol=1e-6)
     assert KIN.theta_w(opened.q) < 0.7 < 1.2 < KIN.theta_w(swung.q)
     assert KIN.limits.violation(opened.q) is None
+
+
+def test_release_from_over_the_vessel_opens_at_once_and_the_open_does_the_small_swing() -> None:
+    q_carry = KIN.ik_position_with_angle(RELEASE_TIP, CARRY_THETA_W)
+    swing = math.atan2(RELEASE_TIP[1] - KIN.swing_origin[1], RELEASE_TIP[0] - KIN.swing_origin[0])
+    nudge = PLAN.cfg.release_swing_in_open / 2
+    (opened,) = PLAN.release(swing + nudge, q_carry)
+    assert opened.label == "open" and opened.via
+    assert opened.q[0] == pytest.approx(math.remainder(swing + nudge, 2 * math.pi))
+    assert KIN.theta_w(opened.q) < 0.7
+    assert [t.label for t in PLAN.release(swing + 2 * PLAN.cfg.release_swing_in_open, q_carry)] == ["swing", "open"]
 
 
 def test_excavate_lift_is_a_via_point_and_digging_runs_faster() -> None:

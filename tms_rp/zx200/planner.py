@@ -42,6 +42,7 @@ class PlannerConfig:
     lift_height: float = 1.5
     release_open_bucket: float = -0.5
     release_theta_w: float = 0.3
+    release_swing_in_open: float = 0.05
     joint_space_swing: float = 0.35
     dig_speed_scale: float = 0.5
     limit_margin: float = 0.005
@@ -244,7 +245,8 @@ class Zx200Planner:
         the rest of the front compensating), as an operator pulls the arm in while dumping: a bucket opened
         on its own joint sweeps its tip about a metre outwards and drops much of the load beyond a
         1.75 m wide vessel. Where the tip cannot be held, the bucket opens on its joint to
-        ``release_open_bucket``.
+        ``release_open_bucket``. When the arm is already within ``release_swing_in_open`` of the angle
+        (the carry left it over the vessel), there is no separate swing: the open segment swings the rest.
         """
         ang = float(_finite([target_angle], "release target_angle")[0])
         q = _finite(current_q, "current joint state").copy()
@@ -262,7 +264,19 @@ class Zx200Planner:
             # the IK pose that has the tip where it was; pass-through precision: the soil only has to
             # land in the vessel, and it goes on falling while the next goal's swing is in its dead time.
             q_open = self.kin.ik_position_with_angle(tip, th_open)
-            return [JointTarget(q, "swing", via=True), JointTarget(q_open, "open", via=True)]
+            open_ = JointTarget(q_open, "open", via=True)
+            if self._swing_only_nudges(current_q, q):
+                return [open_]  # already over the vessel (the carry put it there): the open does the rest
+            return [JointTarget(q, "swing", via=True), open_]
         opened = q.copy()
         opened[3] = max(self.cfg.release_open_bucket, lim.lower[3] + m)
-        return [JointTarget(q, "swing"), JointTarget(self._check_joints(opened, "open"), "open")]
+        open_ = JointTarget(self._check_joints(opened, "open"), "open")
+        return [open_] if self._swing_only_nudges(current_q, q) else [JointTarget(q, "swing"), open_]
+
+    def _swing_only_nudges(self, current_q: Any, swung: np.ndarray) -> bool:
+        """The release's swing moves the swing less than ``release_swing_in_open`` and nothing else: the
+        open segment can carry it (a separate swing segment costs its minimum duration and, in the stack, the
+        swing's dead time; a bigger swing must end before the bucket opens, or soil falls on the way)."""
+        cur = np.asarray(current_q, dtype=float)
+        return (abs(math.remainder(swung[0] - cur[0], 2 * math.pi)) <= self.cfg.release_swing_in_open
+                and bool(np.allclose(swung[1:], cur[1:], atol=1e-9)))
