@@ -5,7 +5,7 @@ front joints), publishes ``front_cmd`` (tms_msg/JointCmd, VELOCITY) every period
 COM3 converter), and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
 that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
 joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
-malformed segment rejects the whole goal before motion, naming the segment. Cancel decelerates within the
+malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.zx200.segments`). Cancel decelerates within the
 limits and the goal ends CANCELED only when the arm is at rest.
 
 Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
@@ -14,7 +14,6 @@ Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_control
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 
@@ -25,9 +24,6 @@ from tms_common.node import run_node
 __all__ = ["main"]
 
 
-#: a segment's speed_scale multiplies the configured tip / joint speeds (joint speeds stay capped at their
-#: limits); anything above this is a garbled goal, not a plan
-MAX_SPEED_SCALE = 10.0
 JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states
 
 
@@ -38,8 +34,9 @@ def _make_node():  # noqa: ANN202
     from sensor_msgs.msg import JointState
 
     from tms_msg.action import Zx200ArmMove
-    from tms_msg.msg import JointCmd, Zx200ArmSegment
-    from tms_rc.zx200.controller import ArmController, CartesianTarget, JointTarget, load_controller_config
+    from tms_msg.msg import JointCmd
+    from tms_rc.zx200.controller import ArmController, load_controller_config
+    from tms_rc.zx200.segments import targets_from_segments
     from tms_rp.zx200 import errors as codes
     from tms_rp.zx200.kinematics import JOINTS, load_kinematics
 
@@ -109,35 +106,10 @@ def _make_node():  # noqa: ANN202
                 return GoalResponse.REJECT
             return GoalResponse.ACCEPT
 
-        def _targets(self, goal) -> list:  # noqa: ANN001
-            """The goal's segments as controller targets; ValueError names the first malformed one."""
-            out = []
-            for k, seg in enumerate(goal.segments):
-                name = f"segment {k + 1} ({seg.label or 'unlabelled'})"
-                if not (0.0 <= seg.speed_scale <= MAX_SPEED_SCALE):  # also NaN
-                    raise ValueError(f"{name}: speed_scale {seg.speed_scale} is outside [0, {MAX_SPEED_SCALE:g}]")
-                scale = seg.speed_scale or 1.0
-                if seg.kind == Zx200ArmSegment.JOINT:
-                    q = np.array(seg.joint_positions, dtype=float)
-                    if q.shape != (len(JOINTS),) or not np.all(np.isfinite(q)):
-                        raise ValueError(f"{name}: joint_positions must be {len(JOINTS)} finite angles "
-                                         f"({', '.join(JOINTS)}), got {list(seg.joint_positions)}")
-                    out.append(JointTarget(q, seg.label, speed_scale=scale, via=seg.via))
-                elif seg.kind == Zx200ArmSegment.CARTESIAN:
-                    p = np.array([seg.position.x, seg.position.y, seg.position.z])
-                    if not (np.all(np.isfinite(p)) and math.isfinite(seg.theta_w)):
-                        raise ValueError(f"{name}: position / theta_w must be finite")
-                    out.append(CartesianTarget(p, seg.theta_w, seg.label, speed_scale=scale, via=seg.via))
-                else:
-                    raise ValueError(f"{name}: unknown kind {seg.kind} (JOINT=0, CARTESIAN=1)")
-            return out
-
         def _execute(self, handle):  # noqa: ANN001, ANN202
             result = Zx200ArmMove.Result()
             try:
-                targets = self._targets(handle.request)
-                if not targets:
-                    raise ValueError("empty goal: no segments")
+                targets = targets_from_segments(handle.request.segments)
             except ValueError as exc:
                 self.get_logger().warning(f"goal rejected before motion: {exc}")
                 handle.abort()
