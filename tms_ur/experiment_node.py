@@ -8,6 +8,8 @@ It is the job node of ``config/launch/paper_experiment.yaml`` (``on_exit: shutdo
 3. after ``cycles`` haul cycles (soil reached the dump site that many times) it clears
    ``CONTINUE_FLG`` in the global-blackboard record ``blackboard_record`` so both tasks finish their
    current cycle and end; it also ends when every task has ended on its own (mound depleted);
+   when a task FAILS it cancels the others on ``/tms_ts/cancel`` (the partner would wait for a flag
+   that never comes) and ends with the failure's message;
 4. writes ``runs/<timestamp>/`` (metrics.json, PNG plots, index.html) and exits 0 when every task
    ended SUCCESS, 1 otherwise (or on ``timeout_s`` of simulated time).
 
@@ -49,9 +51,10 @@ def _make_node():  # noqa: ANN202
     from geometry_msgs.msg import PointStamped, PoseStamped
     from nav_msgs.msg import Odometry
     from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64MultiArray
+    from std_msgs.msg import Float64MultiArray, Int32
 
     from tms_msg.msg import TaskIds, TaskStatus
 
@@ -91,6 +94,8 @@ def _make_node():  # noqa: ANN202
             self.site, _ = load_yaml(config_path("site.yaml"))
             self._store = None
             self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
+            reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+            self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", reliable)
             self.create_subscription(Clock, "/clock", self._on_clock, 10)
             self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
             self.create_subscription(Float64MultiArray, "/sim/truth/soil", self._on_soil, 10)
@@ -181,6 +186,14 @@ def _make_node():  # noqa: ANN202
             if not self.stopping and (self.rec.cycles >= self.cycles_target or self._failed()):
                 self.stopping = True
                 reason = "a task failed" if self._failed() else f"{self.rec.cycles} cycle(s) done"
+                if self._failed():
+                    for tid, info in sorted(self.tasks.items()):
+                        if info.get("state") == "FAILURE":
+                            print(f"[experiment] task {tid} FAILED: {info.get('message', '')}", flush=True)
+                    for tid in self.task_ids:
+                        if tid not in ended:
+                            print(f"[experiment] canceling task {tid}: its partner failed", flush=True)
+                            self.pub_cancel.publish(Int32(data=tid))
                 print(f"[experiment] {reason}: clearing CONTINUE_FLG", flush=True)
                 self._db().set_fields(self.record, {"CONTINUE_FLG": False})
             if len(ended) == len(self.task_ids):

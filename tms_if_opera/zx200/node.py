@@ -65,8 +65,11 @@ def _make_node():  # noqa: ANN202
             # q is needed only when a goal arrives (a few times per load pass): a subscription of its own
             # node (never spun by the executor) takes one joint_states then. Subscribed all the time, the
             # 50 Hz stream cost ~16 % of a core in executor overhead alone.
+            # use_global_arguments=False: the launch's "-r __node:=zx200_planner" would rename it too (two
+            # nodes of one name); the topic is resolved (remaps included) by this node instead.
             self._state_probe = rclpy.create_node("zx200_planner_state", namespace=self.get_namespace(),
-                                                  context=self.context)
+                                                  context=self.context, use_global_arguments=False)
+            self._state_topic = self.resolve_topic_name("joint_states")
             self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=group)
             accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
             ActionServer(self, Zx200ChangePose, "tms_rp_zx200_change_pose", execute_callback=self._change_pose,
@@ -80,7 +83,7 @@ def _make_node():  # noqa: ANN202
         def _current_q(self) -> np.ndarray | None:
             """The four front joints of the next joint_states (None when none naming them all comes in time)."""
             with self._lock:  # one probe subscription at a time
-                ok, msg = wait_for_message(JointState, self._state_probe, "joint_states", time_to_wait=JOINT_STATES_WAIT_S)
+                ok, msg = wait_for_message(JointState, self._state_probe, self._state_topic, time_to_wait=JOINT_STATES_WAIT_S)
             if not ok:
                 return None
             idx = {n: i for i, n in enumerate(msg.name)}
