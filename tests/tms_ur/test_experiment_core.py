@@ -84,5 +84,5 @@ def test_leaf_times_come_from_the_running_leaves_of_each_task():
     assert times["2"]["excavate"]["n"] == 2 and times["2"]["excavate"]["max"] == pytest.approx(15.0)
     assert times["2"]["excavate"]["median"] == pytest.approx(12.0)
     assert times["2"]["carry_over_vessel"]["mean"] == pytest.approx(6.0)
-    assert times["1"] == {"drive_to_p5": rec.metrics()["leaf_time_s"]["1"]["drive_to_p5"]}
+    assert set(times) == {"1", "2"} and set(times["1"]) == {"drive_to_p5"}
     assert times["1"]["drive_to_p5"]["max"] == pytest.approx(30.0)

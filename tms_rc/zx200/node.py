@@ -125,10 +125,9 @@ def _make_node():  # noqa: ANN202
                 time.sleep(0.05)
                 with self._lock:
                     st = self.ctl.status
-                    now = self.get_clock().now().nanoseconds * 1e-9
                     label = "stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}")
-                    if not spans or spans[-1][0] != label:
-                        spans.append([label, now])
+                    if st.result is None and (not spans or spans[-1][0] != label):  # ended: idle, no segment
+                        spans.append([label, self.get_clock().now().nanoseconds * 1e-9])
                     if handle.is_cancel_requested and not canceling:
                         self.ctl.stop("canceled")
                         canceling = True
@@ -145,8 +144,9 @@ def _make_node():  # noqa: ANN202
             result.error_code.val = int(st.result)
             result.message = st.message
             ends = [start for _, start in spans[1:]] + [self.get_clock().now().nanoseconds * 1e-9]
+            took = f"after {ends[-1] - spans[0][1]:.1f} s; segments [s]: " if spans else "at once"
             self.get_logger().info(
-                f"goal ended {st.result} ({st.message}) after {ends[-1] - spans[0][1]:.1f} s; segments [s]: "
+                f"goal ended {st.result} ({st.message}) {took}"
                 + ", ".join(f"{label} {end - start:.1f}" for (label, start), end in zip(spans, ends, strict=True))
             )
             if st.result == codes.SUCCESS:
