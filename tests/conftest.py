@@ -8,6 +8,10 @@ from collections.abc import Iterator
 import pytest
 
 from tests.rosproc import VENV, Proc, isolated_domain, ros_env
+from tms_common.dds import use_platform_profiles
+
+# every rclpy context of the test process, and every process a test starts, use the platform's DDS profiles
+use_platform_profiles()
 
 
 @pytest.fixture

@@ -11,6 +11,8 @@ executed - the ``pending_pose`` leaf stayed RUNNING with the controller idle. Up
 rclpy #1308 (backports #1517/#1519, newer than these wheels) with a lock; this subclass does the same:
 a request is sent and recorded under one lock, and a response is looked up only after taking that lock.
 
+``cancel_goal_by_id`` cancels a goal whose goal response was lost (the server may be running it).
+
 Use it exactly like ``rclpy.action.ActionClient`` (every action client of the platform does). Imports rclpy.
 """
 
@@ -42,6 +44,15 @@ class RaceFreeActionClient(ActionClient):
     def _get_result_async(self, goal_handle: Any) -> Any:
         with self._request_lock:
             return super()._get_result_async(goal_handle)
+
+    def cancel_goal_by_id(self, goal_id: Any) -> Any:
+        """Request the cancel of goal ``goal_id`` (a ``unique_identifier_msgs/UUID``) whose goal response never
+        arrived: the server may have accepted it and be running it (a dropped reply, see
+        config/dds/fastdds_profiles.xml). Returns the cancel future; a server that never got the goal answers
+        ERROR_UNKNOWN_GOAL_ID."""
+        from rclpy.action.client import ClientGoalHandle
+
+        return self._cancel_goal_async(ClientGoalHandle(self, goal_id, None))
 
     async def execute(self, taken_data: Any) -> None:
         # A response can only exist once its request was sent; the sender records it before releasing

@@ -58,6 +58,9 @@ def run_node(
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
+    from tms_common.dds import use_platform_profiles
+
+    use_platform_profiles()
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
     try:

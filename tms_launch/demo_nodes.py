@@ -148,6 +148,9 @@ def subtask_client_main() -> int:
     parser.add_argument("--cancel-after", type=float, default=None)
     parser.add_argument("--timeout", type=float, default=20.0)
     opts, ros_args = parser.parse_known_args()
+    from tms_common.dds import use_platform_profiles
+
+    use_platform_profiles()
     rclpy.init(args=[sys.argv[0], *ros_args])
     node = rclpy.create_node("demo_subtask_client")
     try:

@@ -84,6 +84,9 @@ class Launcher:
             import rclpy
             from rclpy.signals import SignalHandlerOptions
 
+            from tms_common.dds import use_platform_profiles
+
+            use_platform_profiles()
             # The launcher owns SIGINT/SIGTERM (to stop its children in order), not rclpy.
             rclpy.init(
                 args=["tms-launch", "--ros-args", "--disable-rosout-logs"],

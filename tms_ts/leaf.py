@@ -178,7 +178,7 @@ class LeafNode(StatefulNode):
             if self.ctx.clock() - self.sent_at > self.ctx.accept_timeout_s:
                 goal.cancel()
                 return self._fail(f"{self.action} did not accept the goal for record '{self.record}' "
-                                  f"within {self.ctx.accept_timeout_s:g} s")
+                                  f"within {self.ctx.accept_timeout_s:g} s (cancel sent by goal id, in case the server runs it)")
             return RUNNING
         if state == ACCEPTED:
             ros = self._ros()

@@ -232,6 +232,9 @@ def main() -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+    from tms_common.dds import use_platform_profiles
+
+    use_platform_profiles()
     rclpy.init(args=sys.argv)
     try:
         node = _make_node()

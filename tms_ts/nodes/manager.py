@@ -145,6 +145,9 @@ class TaskManager(Node):
             before = run.state
             run.step()
             changed |= run.state != before
+            if run.done:
+                log = self.get_logger().info if run.state == SUCCEEDED else self.get_logger().error
+                log(f"task {run.task_id} ended {run.state}" + (f": {run.message}" if run.message else ""))
             if run.state == FAILED and before != FAILED and run.ctx.lost_servers:
                 self._stop_others(run)
         took = (time.monotonic() - start) * 1000.0

@@ -14,11 +14,13 @@ from __future__ import annotations
 import json
 import threading
 import time
+import uuid
 
 from action_msgs.msg import GoalStatus
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, String
+from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
 from tms_msg.action import Subtask
@@ -45,7 +47,12 @@ class RosGoal:
         self.feedback = ""
         self._handle = None
         self._cancel_wanted = False
-        future = client.send_goal_async(goal, feedback_callback=self._on_feedback)
+        self._client = client
+        #: our own goal id, so a goal whose response never arrives can still be cancelled by id
+        self.goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        #: True once a cancel was sent by goal id while no goal response had arrived
+        self.cancelled_unanswered = False
+        future = client.send_goal_async(goal, feedback_callback=self._on_feedback, goal_uuid=self.goal_id)
         future.add_done_callback(self._on_response)
 
     def _on_feedback(self, msg) -> None:  # noqa: ANN001
@@ -71,6 +78,11 @@ class RosGoal:
         self._cancel_wanted = True
         if self._handle is not None and self.state == ACCEPTED:
             self._handle.cancel_goal_async()
+        elif self.state == PENDING and not self.cancelled_unanswered:
+            # No response yet (e.g. the accept timeout): the server may have accepted the goal and its reply
+            # been dropped (config/dds/fastdds_profiles.xml) - cancel by id so it cannot run on unseen.
+            self.cancelled_unanswered = True
+            self._client.cancel_goal_by_id(self.goal_id)
 
 
 class ManagerRosPort:
