@@ -28,7 +28,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ExperimentRecorder", "Sample"]
+__all__ = ["ExperimentRecorder", "Sample", "tasks_to_cancel_after_failure", "TASK_DONE"]
+
+#: task states (tms_msg/TaskState names) after which a task runs no more
+TASK_DONE = frozenset({"SUCCESS", "FAILURE", "CANCELED"})
+
+
+def tasks_to_cancel_after_failure(task_ids: list[int], states: dict[int, str]) -> list[int]:
+    """The supervisor's policy when a task FAILED: every started task that has not ended yet, in order.
+
+    Its partner would otherwise wait for a flag that never comes (the IC120 task waits for LOADED_FLG from
+    a ZX200 task that failed). ``states`` maps task id -> state name; returns [] when no task FAILED.
+    """
+    if not any(state == "FAILURE" for state in states.values()):
+        return []
+    return [tid for tid in task_ids if states.get(tid) not in TASK_DONE]
 
 
 @dataclass

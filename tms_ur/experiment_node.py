@@ -29,10 +29,10 @@ from pathlib import Path
 
 from tms_common.config import config_path, load_yaml, repo_root
 from tms_common.node import run_node
-from tms_ur.experiment_core import ExperimentRecorder
+from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
 
 STATE_NAMES = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
-DONE = {"SUCCESS", "FAILURE", "CANCELED"}
+DONE = TASK_DONE
 # Action servers the paper trees need (contracts D and E): planning and subtask servers of both machines.
 DEFAULT_ACTIONS = (
     "/zx200/tms_rp_zx200_change_pose", "/zx200/tms_rp_zx200_excavate_simple", "/zx200/tms_rp_zx200_release_simple",
@@ -190,10 +190,10 @@ def _make_node():  # noqa: ANN202
                     for tid, info in sorted(self.tasks.items()):
                         if info.get("state") == "FAILURE":
                             print(f"[experiment] task {tid} FAILED: {info.get('message', '')}", flush=True)
-                    for tid in self.task_ids:
-                        if tid not in ended:
-                            print(f"[experiment] canceling task {tid}: its partner failed", flush=True)
-                            self.pub_cancel.publish(Int32(data=tid))
+                    states = {tid: info.get("state", "") for tid, info in self.tasks.items()}
+                    for tid in tasks_to_cancel_after_failure(self.task_ids, states):
+                        print(f"[experiment] canceling task {tid}: its partner failed", flush=True)
+                        self.pub_cancel.publish(Int32(data=tid))
                 print(f"[experiment] {reason}: clearing CONTINUE_FLG", flush=True)
                 self._db().set_fields(self.record, {"CONTINUE_FLG": False})
             if len(ended) == len(self.task_ids):

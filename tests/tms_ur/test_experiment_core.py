@@ -86,3 +86,13 @@ def test_leaf_times_come_from_the_running_leaves_of_each_task():
     assert times["2"]["carry_over_vessel"]["mean"] == pytest.approx(6.0)
     assert set(times) == {"1", "2"} and set(times["1"]) == {"drive_to_p5"}
     assert times["1"]["drive_to_p5"]["max"] == pytest.approx(30.0)
+
+
+def test_a_failed_task_cancels_every_partner_that_still_runs():
+    from tms_ur.experiment_core import tasks_to_cancel_after_failure
+
+    assert tasks_to_cancel_after_failure([1, 2], {1: "RUNNING", 2: "RUNNING"}) == []
+    assert tasks_to_cancel_after_failure([1, 2], {1: "RUNNING", 2: "FAILURE"}) == [1]
+    # a partner not heard from yet is cancelled too; one that already ended is not
+    assert tasks_to_cancel_after_failure([1, 2, 3], {2: "FAILURE", 3: "SUCCESS"}) == [1]
+    assert tasks_to_cancel_after_failure([1, 2], {1: "CANCELED", 2: "FAILURE"}) == []
