@@ -63,6 +63,7 @@ def run_node(
     use_platform_profiles()
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
+    spinner = None
     try:
         node = factory()
         spinner = make_executor(executor, threads=threads)
@@ -81,7 +82,28 @@ def run_node(
         traceback.print_exc()
         return 1
     finally:
+        if spinner is not None:
+            spinner.shutdown(timeout_sec=0)
+            _wait_for_callback_threads(spinner, timeout_s=2.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _wait_for_callback_threads(spinner, timeout_s: float) -> None:  # noqa: ANN001
+    """Let callbacks still running in a MultiThreadedExecutor's threads end before the node is destroyed.
+
+    Without this, a callback in flight at SIGINT touched handles that ``destroy_node`` had just destroyed and
+    a multi-threaded node printed "exception was never retrieved: cannot use Destroyable because destruction
+    was requested" at shutdown. rclpy 7.1.6's ``Executor.shutdown`` does not wait for them (its wait is
+    skipped once ``_is_shutdown`` is set), so the thread pool is joined here, for at most ``timeout_s``.
+    """
+    import threading
+
+    pool = getattr(spinner, "_executor", None)  # rclpy.executors.MultiThreadedExecutor's ThreadPoolExecutor
+    if pool is None:
+        return
+    joiner = threading.Thread(target=pool.shutdown, kwargs={"wait": True, "cancel_futures": True}, daemon=True)
+    joiner.start()
+    joiner.join(timeout_s)
