@@ -146,7 +146,8 @@ class TaskManager(Node):
             run.step()
             changed |= run.state != before
             if run.done:
-                log = self.get_logger().info if run.state == SUCCEEDED else self.get_logger().error
+                logger = self.get_logger()
+                log = {SUCCEEDED: logger.info, CANCELED: logger.warning}.get(run.state, logger.error)
                 log(f"task {run.task_id} ended {run.state}" + (f": {run.message}" if run.message else ""))
             if run.state == FAILED and before != FAILED and run.ctx.lost_servers:
                 self._stop_others(run)
