@@ -2,7 +2,10 @@
 
 Run in the machine namespace, e.g. ``com3_bridge --ros-args -r __ns:=/zx200 -p machine:=zx200``.
 Parameters: ``machine`` (zx200|ic120), ``can_config`` (YAML, default config/can/<machine>.yaml),
-``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep), ``watchdog_s``.
+``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep), ``watchdog_s``,
+``joint_states_period_s`` and ``odom_period_s`` (publish ``joint_states`` / ``odom_pose`` at most once per
+this period of the node clock; 0 = on every state frame, 100 Hz; the odometry is integrated on every frame
+either way, so a longer period drops samples, not accuracy).
 
 Three threads touch the core (it locks): the executor (command callbacks send their frame at once),
 a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thread (state frames ->
@@ -68,7 +71,10 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
             self._js_period = float(self.declare_parameter("joint_states_period_s", 0.0).value)
             if self._js_period < 0:
                 raise ConfigError(f"com3_bridge: joint_states_period_s must be >= 0, got {self._js_period}")
-            self._js_last: dict[tuple[str, ...], float] = {}
+            self._odom_period = float(self.declare_parameter("odom_period_s", 0.0).value)
+            if self._odom_period < 0:
+                raise ConfigError(f"com3_bridge: odom_period_s must be >= 0, got {self._odom_period}")
+            self._last_published: dict[Any, float] = {}
             if machine not in ("zx200", "ic120"):
                 raise ConfigError(f"com3_bridge: parameter machine must be zx200 or ic120, got {machine!r}")
             cfg = load_bus_config(machine, can_config or None)
@@ -162,16 +168,15 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
 
         def _publish(self, out: Any, stamp: Any) -> None:
             if isinstance(out, JointStateOut):
-                if self._js_period > 0:
-                    key, t = tuple(out.name), stamp.sec + stamp.nanosec * 1e-9
-                    if t - self._js_last.get(key, -1e18) < self._js_period - 1e-6:
-                        return
-                    self._js_last[key] = t
+                if self._too_soon(tuple(out.name), self._js_period, stamp):
+                    return
                 js = JointState()
                 js.header.stamp = stamp
                 js.name, js.position, js.velocity = list(out.name), list(out.position), list(out.velocity)
                 self.pub_joints.publish(js)
             elif isinstance(out, OdomOut):
+                if self._too_soon(("odom", out.frame_id), self._odom_period, stamp):
+                    return
                 od = Odometry()
                 od.header.stamp = stamp
                 od.header.frame_id = out.frame_id
@@ -207,6 +212,16 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
                     fix.position_covariance[8] = 4 * var
                     fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_APPROXIMATED
                 self.pub_fix.publish(fix)
+
+        def _too_soon(self, key: Any, period: float, stamp: Any) -> bool:
+            """True when ``key`` was published less than ``period`` ago (then skip it); else record ``stamp``."""
+            if period <= 0:
+                return False
+            t = stamp.sec + stamp.nanosec * 1e-9
+            if t - self._last_published.get(key, -1e18) < period - 1e-6:
+                return True
+            self._last_published[key] = t
+            return False
 
         # -------------------------------------------------------------- ROS commands
         def _command(self, fn: Any, *args: Any) -> None:

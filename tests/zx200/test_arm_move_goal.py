@@ -108,3 +108,41 @@ def test_segments_run_in_order_as_one_goal(controller) -> None:
     assert named, "no feedback named a segment"
     assert all({1: "pass", 2: "hold"}.get(seg) == label for seg, label in named), named
     assert [seg for seg, _ in named] == sorted(seg for seg, _ in named), f"segments out of order: {named}"
+
+
+def test_a_goal_sent_before_the_first_joint_states_waits_for_them(procs, ros_node) -> None:  # noqa: ANN001
+    """Start-up: the goal callback waits (without blocking the single-threaded node) for the first joint_states,
+    then accepts; the goal runs and succeeds at the held pose."""
+    import rclpy
+    from rclpy.action import ActionClient
+    from rclpy.executors import SingleThreadedExecutor
+
+    from tms_msg.action import Zx200ArmMove
+
+    ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
+                name="zx200_arm_controller")
+    assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+    node = rclpy.create_node("arm_move_early_probe", context=ros_node.context)
+    executor = SingleThreadedExecutor(context=ros_node.context)
+    executor.add_node(node)
+    try:
+        client = ActionClient(node, Zx200ArmMove, "/zx200/arm_controller/move")
+        assert client.wait_for_server(timeout_sec=30.0), "arm_controller/move not available"
+        send = client.send_goal_async(Zx200ArmMove.Goal(segments=[_joint("hold", Q)]))
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        assert not send.done(), "answered before any joint_states (it must wait for them)"
+        with joint_states_held_at(node, Q):
+            end = time.monotonic() + 20.0
+            while not send.done() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+            assert send.done() and send.result().accepted, f"goal not accepted once joint_states came\n{ctl.output}"
+            result = send.result().get_result_async()
+            end = time.monotonic() + 30.0
+            while not result.done() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+            assert result.done() and result.result().status == 4, ctl.output  # SUCCEEDED
+    finally:
+        executor.shutdown(timeout_sec=5.0)
+        node.destroy_node()

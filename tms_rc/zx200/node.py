@@ -8,13 +8,17 @@ joint or Cartesian, label, speed scale, via), run as one motion; feedback names 
 malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.zx200.segments`). Cancel decelerates within the
 limits and the goal ends CANCELED only when the arm is at rest.
 
+One thread: the goal's execute callback is a coroutine that the control tick wakes (feedback at most
+every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On the MultiThreadedExecutor
+it had, rclpy's dispatch loop took about 85 % of the node's CPU and the control step under 4 %
+(py-spy, paper launch, 22 Nov).
+
 Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
 ``machine_config`` (default config/machines/zx200.yaml).
 """
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -24,13 +28,16 @@ from tms_common.node import run_node
 __all__ = ["main"]
 
 
-JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states
+JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states (wall clock)
+FEEDBACK_PERIOD_S = 0.05  # [s wall] feedback at most this often (the result is checked on every tick)
 
 
 def _make_node():  # noqa: ANN202
     from rclpy.action import ActionServer, CancelResponse, GoalResponse
     from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+    from rclpy.clock import Clock, ClockType
     from rclpy.node import Node
+    from rclpy.task import Future
     from sensor_msgs.msg import JointState
 
     from tms_msg.action import Zx200ArmMove
@@ -57,13 +64,17 @@ def _make_node():  # noqa: ANN202
 
                 self.cfg = dataclasses.replace(self.cfg, rate_hz=rate)
             self.ctl = ArmController(self.kin, self.cfg)
-            self._lock = threading.Lock()
             self._q: np.ndarray | None = None
             self._dq = np.zeros(len(JOINTS))
             self._goal_active = False
             self._pub = self.create_publisher(JointCmd, "front_cmd", 10)
             self.create_subscription(JointState, "joint_states", self._on_state, 20)
+            # futures completed by the next control tick / the first joint_states (coroutines await them)
+            self._tick_waiters: list[Future] = []
+            self._state_waiters: list[Future] = []
             self.create_timer(self.cfg.dt, self._tick, callback_group=MutuallyExclusiveCallbackGroup())
+            # Reentrant: a goal callback awaiting the first joint_states holds the server's group, and in the
+            # node's default group it would block the joint_states subscription it waits for.
             self._server = ActionServer(
                 self, Zx200ArmMove, "arm_controller/move", execute_callback=self._execute,
                 goal_callback=self._on_goal, cancel_callback=lambda _h: CancelResponse.ACCEPT,
@@ -77,36 +88,54 @@ def _make_node():  # noqa: ANN202
                 return
             q = np.array([msg.position[idx[n]] for n in JOINTS])
             dq = np.array([msg.velocity[idx[n]] if len(msg.velocity) > idx[n] else 0.0 for n in JOINTS])
-            with self._lock:
-                self._q, self._dq = q, dq
+            self._q, self._dq = q, dq
+            self._wake(self._state_waiters)
+
+        @staticmethod
+        def _wake(waiters: list) -> None:
+            pending = list(waiters)
+            waiters.clear()
+            for future in pending:
+                if not future.done():
+                    future.set_result(True)
+
+        def _next_tick(self) -> Future:
+            future = Future()
+            self._tick_waiters.append(future)
+            return future
 
         def _tick(self) -> None:
-            with self._lock:
-                q, dq = self._q, self._dq
-                if q is None:
-                    return
-                # The ROS clock (simulated time in the launches): the controller advances its Smith
-                # predictor, integrators and reference by the time that really passed, so late or
-                # skipped ticks under CPU load do not corrupt the prediction (issue 9: swing stuck off).
-                u = self.ctl.step(q, dq, now=self.get_clock().now().nanoseconds * 1e-9)
+            q, dq = self._q, self._dq
+            if q is None:
+                return
+            # The ROS clock (simulated time in the launches): the controller advances its Smith
+            # predictor, integrators and reference by the time that really passed, so late or
+            # skipped ticks under CPU load do not corrupt the prediction (issue 9: swing stuck off).
+            u = self.ctl.step(q, dq, now=self.get_clock().now().nanoseconds * 1e-9)
             msg = JointCmd()
             msg.joint_name = list(JOINTS)
             msg.control_type = JointCmd.VELOCITY
             msg.velocity = [float(v) for v in u]
             self._pub.publish(msg)
+            self._wake(self._tick_waiters)
 
-        def _on_goal(self, goal) -> GoalResponse:  # noqa: ANN001
+        async def _on_goal(self, goal) -> GoalResponse:  # noqa: ANN001
             # Right after start-up the first joint_states may still be on its way (the plant, the CAN
-            # converter and this node start together): wait a bounded time before refusing.
-            deadline = time.monotonic() + JOINT_STATES_WAIT_S
-            while self._q is None and time.monotonic() < deadline:
-                time.sleep(0.05)
+            # converter and this node start together): wait a bounded time (wall clock) before refusing.
+            if self._q is None:
+                waiter = Future()
+                self._state_waiters.append(waiter)
+                timer = self.create_timer(JOINT_STATES_WAIT_S, lambda: waiter.done() or waiter.set_result(False),
+                                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+                await waiter
+                timer.cancel()
+                self.destroy_timer(timer)
             if self._q is None:
                 self.get_logger().warning(f"goal rejected: no joint_states received within {JOINT_STATES_WAIT_S:g} s")
                 return GoalResponse.REJECT
             return GoalResponse.ACCEPT
 
-        def _execute(self, handle):  # noqa: ANN001, ANN202
+        async def _execute(self, handle):  # noqa: ANN001, ANN202
             result = Zx200ArmMove.Result()
             try:
                 targets = targets_from_segments(handle.request.segments)
@@ -116,24 +145,26 @@ def _make_node():  # noqa: ANN202
                 result.error_code.val = codes.INVALID_GOAL
                 result.message = str(exc)
                 return result
-            with self._lock:
-                self.ctl.start(targets)
+            self.ctl.start(targets)
             canceling = False
+            last_feedback = -1e9
             # (label, start) of each segment in ROS-clock seconds: logged at the end, where a motion's time went
             spans: list[list] = []
             while True:
-                time.sleep(0.05)
-                with self._lock:
+                await self._next_tick()
+                st = self.ctl.status
+                label = "stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}")
+                if st.result is None and (not spans or spans[-1][0] != label):  # ended: idle, no segment
+                    spans.append([label, self.get_clock().now().nanoseconds * 1e-9])
+                if handle.is_cancel_requested and not canceling:
+                    self.ctl.stop("canceled")
+                    canceling = True
                     st = self.ctl.status
-                    label = "stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}")
-                    if st.result is None and (not spans or spans[-1][0] != label):  # ended: idle, no segment
-                        spans.append([label, self.get_clock().now().nanoseconds * 1e-9])
-                    if handle.is_cancel_requested and not canceling:
-                        self.ctl.stop("canceled")
-                        canceling = True
-                        st = self.ctl.status
-                    if st.result is not None:
-                        break
+                if st.result is not None:
+                    break
+                if time.monotonic() - last_feedback < FEEDBACK_PERIOD_S:
+                    continue
+                last_feedback = time.monotonic()
                 fb = Zx200ArmMove.Feedback()
                 stopping = st.mode == "stopping"
                 fb.segment = 0 if stopping else int(st.segment)
@@ -162,4 +193,4 @@ def _make_node():  # noqa: ANN202
 
 def main() -> int:
     """Console script ``zx200_arm_controller``."""
-    return run_node(_make_node, executor="multi")
+    return run_node(_make_node, executor="single")
