@@ -15,24 +15,17 @@ import time
 
 import pytest
 
+from tests.action_handle import ClientHandleProxy
+
 pytestmark = pytest.mark.integration
 
 
-class _DropGoalResponses:
+class _DropGoalResponses(ClientHandleProxy):
     """Wraps an rclpy action-client handle: every goal response is taken and discarded (a dropped reply)."""
 
     def __init__(self, inner) -> None:  # noqa: ANN001
-        self._inner = inner
+        super().__init__(inner)
         self.dropped = 0
-
-    def __getattr__(self, name: str):  # noqa: ANN204
-        return getattr(self._inner, name)
-
-    def __enter__(self):  # noqa: ANN204
-        return self._inner.__enter__()
-
-    def __exit__(self, *exc) -> None:  # noqa: ANN002
-        return self._inner.__exit__(*exc)
 
     def take_goal_response(self, response_type):  # noqa: ANN001, ANN201
         data = self._inner.take_goal_response(response_type)

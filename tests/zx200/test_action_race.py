@@ -17,6 +17,7 @@ import time
 
 import pytest
 
+from tests.action_handle import ClientHandleProxy
 from tests.rosproc import executable
 from tests.zx200.conftest import joint_states_held_at
 
@@ -25,21 +26,12 @@ pytestmark = pytest.mark.integration
 Q = [0.0, -0.8, 1.3, 1.2]
 
 
-class _SlowSendHandle:
+class _SlowSendHandle(ClientHandleProxy):
     """Wraps an rclpy action-client handle: ``send_goal_request`` returns only after the response was taken."""
 
     def __init__(self, inner) -> None:  # noqa: ANN001
-        self._inner = inner
+        super().__init__(inner)
         self.taken = threading.Event()
-
-    def __getattr__(self, name: str):  # noqa: ANN204
-        return getattr(self._inner, name)
-
-    def __enter__(self):  # noqa: ANN204
-        return self._inner.__enter__()
-
-    def __exit__(self, *exc) -> None:  # noqa: ANN002
-        return self._inner.__exit__(*exc)
 
     def send_goal_request(self, request):  # noqa: ANN001, ANN201
         seq = self._inner.send_goal_request(request)
