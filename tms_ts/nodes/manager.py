@@ -146,9 +146,7 @@ class TaskManager(Node):
             run.step()
             changed |= run.state != before
             if run.done:
-                logger = self.get_logger()
-                log = {SUCCEEDED: logger.info, CANCELED: logger.warning}.get(run.state, logger.error)
-                log(f"task {run.task_id} ended {run.state}" + (f": {run.message}" if run.message else ""))
+                self._log_end(run)
             if run.state == FAILED and before != FAILED and run.ctx.lost_servers:
                 self._stop_others(run)
         took = (time.monotonic() - start) * 1000.0
@@ -157,6 +155,17 @@ class TaskManager(Node):
         self._stats["max_tick_ms"] = max(self._stats["max_tick_ms"], took)
         if changed:
             self._publish_status()
+
+    def _log_end(self, run: TaskRun) -> None:
+        # One call site per severity: rclpy refuses a log call whose severity differs from its last call
+        # at the same line ("Logger severity cannot be changed between calls"), which killed the tick.
+        text = f"task {run.task_id} ended {run.state}" + (f": {run.message}" if run.message else "")
+        if run.state == SUCCEEDED:
+            self.get_logger().info(text)
+        elif run.state == CANCELED:
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().error(text)
 
     def _stop_others(self, failed: TaskRun) -> None:
         """Lost-server policy (module docstring): cancel every other running task."""

@@ -156,7 +156,11 @@ class ManagerRosPort:
         pub.publish(Bool(data=engaged))
         self.locked[model_name] = engaged
         log = self.node.get_logger()
-        (log.warning if engaged else log.info)(f"/{model_name}/lock {'engaged' if engaged else 'released'}: {reason}")
+        # one call site per severity (rclpy refuses a severity change at the same line)
+        if engaged:
+            log.warning(f"/{model_name}/lock engaged: {reason}")
+        else:
+            log.info(f"/{model_name}/lock released: {reason}")
 
     def rejection_reason(self, action: str, record_name: str) -> str | None:
         with self._lock:
