@@ -10,8 +10,8 @@ limits and the goal ends CANCELED only when the arm is at rest.
 
 One thread: the goal's execute callback is a coroutine that the control tick wakes (feedback at most
 every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On the MultiThreadedExecutor
-it had, rclpy's dispatch loop took about 85 % of the node's CPU and the control step under 4 %
-(py-spy, paper launch, 22 Nov).
+it had, the control step was 3.7 % of the node's py-spy samples and rclpy's dispatch most of the rest; the
+node took 28-29 % of a core in the paper demo then, 18 % on one thread (22 Nov).
 
 Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
 ``machine_config`` (default config/machines/zx200.yaml).
