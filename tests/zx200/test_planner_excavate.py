@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -21,20 +22,33 @@ def test_seed_target_penetrates_at_the_point_drags_offset_and_keeps_soil() -> No
     # so the entry angle is the nearest holdable one; the tip still goes exactly to the point.
     targets = PLAN.excavate([5.85, -0.05, 1.15], math.radians(45.0), 1.5)
     labels = [t.label for t in targets]
-    assert labels == ["approach", "penetrate", "drag", "curl", "lift"]
-    pen, drag, curl, lift = targets[1:]
+    assert labels == ["approach", "penetrate", "drag", "curl and lift"]  # config: curl_during_lift
+    pen, drag, lift = targets[1:]
     assert np.allclose(pen.position, [5.85, -0.05, 1.15 - cfg.penetrate_depth])
     assert math.radians(45.0) < pen.theta_w < math.radians(45.0) + 0.3
     r0 = np.linalg.norm(pen.position[:2] - KIN.swing_origin[:2])
     r1 = np.linalg.norm(drag.position[:2] - KIN.swing_origin[:2])
     assert r0 - r1 == pytest.approx(1.5, abs=1e-6)  # offset = drag length towards the machine
-    assert drag.theta_w >= cfg.drag_end_theta_w - 1e-9 and curl.theta_w >= drag.theta_w
+    assert drag.theta_w >= cfg.drag_end_theta_w - 1e-9 and lift.theta_w >= drag.theta_w
     assert lift.position[2] == pytest.approx(drag.position[2] + cfg.lift_height)
-    for t in (pen, drag, curl, lift):  # every phase reachable with the joints inside their margins
+    for t in (pen, drag, lift):  # every phase reachable with the joints inside their margins
         q = KIN.ik_position_with_angle(t.position, t.theta_w)
         assert KIN.limits.violation(q, margin=-cfg.dig_joint_margin + 1e-6) is None
     # a holdable entry angle is kept as given
     assert PLAN.excavate([5.85, -0.05, 1.15], 1.2, 1.5)[1].theta_w == pytest.approx(1.2)
+
+
+def test_curl_in_place_then_lift_when_not_curling_during_the_lift() -> None:
+    plan = Zx200Planner(KIN, dataclasses.replace(PLAN.cfg, curl_during_lift=0.0))
+    targets = plan.excavate([5.85, -0.05, 1.15], math.radians(45.0), 1.5)
+    assert [t.label for t in targets] == ["approach", "penetrate", "drag", "curl", "lift"]
+    drag, curl, lift = targets[2:]
+    assert np.allclose(curl.position, drag.position) and curl.theta_w > drag.theta_w
+    assert lift.position[2] == pytest.approx(drag.position[2] + plan.cfg.lift_height)
+    assert lift.theta_w == pytest.approx(curl.theta_w) and lift.via and not curl.via
+    # curling during the lift ends at the same point and angle
+    merged = PLAN.excavate([5.85, -0.05, 1.15], math.radians(45.0), 1.5)[-1]
+    assert np.allclose(merged.position, lift.position) and merged.theta_w == pytest.approx(lift.theta_w)
 
 
 def test_bad_excavate_goals_are_rejected_with_the_reason() -> None:

@@ -67,6 +67,6 @@ def test_release_from_over_the_vessel_opens_at_once_and_the_open_does_the_small_
 
 def test_excavate_lift_is_a_via_point_and_digging_runs_faster() -> None:
     targets = PLAN.excavate([5.05, 1.25, 0.05], 1.11, 1.1)
-    assert [t.label for t in targets] == ["approach", "penetrate", "drag", "curl", "lift"]
+    assert [t.label for t in targets] == ["approach", "penetrate", "drag", "curl and lift"]
     assert targets[-1].via
     assert all(t.speed_scale == PLAN.cfg.dig_speed_scale for t in targets[1:])

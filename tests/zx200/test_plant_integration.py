@@ -155,7 +155,7 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     stack.feedback.clear()
     status, res = stack.run("excavate", g, timeout=180)
     assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
-    assert {"approach", "penetrate", "drag", "curl", "lift"} <= set(stack.feedback), stack.feedback
+    assert {"approach", "penetrate", "drag", "curl and lift"} <= set(stack.feedback), stack.feedback
     stack.spin(1.0)
     mound1, bucket1, vessel1 = stack.soil[:3]
     assert bucket1 > 0.2, stack.soil

@@ -12,11 +12,14 @@ Every control step turns the measured joint angles into joint-velocity commands 
 6. bucket-tip position;
 7. least joint motion.
 
-References are cubic Hermite splines from the state at segment start to the target; the task rows
-ask for the spline velocity plus PID feedback on the spline position. The plant's command dead time
+References run from the state at segment start to the target: joint-space segments on a synchronised
+trapezoidal velocity profile (every joint at the same fraction of its move, the most limited joint at
+its velocity, acceleration or pump-flow share), Cartesian segments (tip line and edge angle) on cubic
+Hermite splines; the task rows ask for the reference velocity plus PID feedback on its position. The plant's command dead time
 and lag are compensated with a Smith predictor: the controller acts on the state predicted for when
 its command takes effect (measured state + commands still in flight), joints' delays are equalised
-in the output, and references are read that far ahead, so the machine follows the spline in time.
+in the output, and each reference starts at the predicted state, so the machine follows it one
+predictor horizon (``preview_s``) later.
 
 Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.zx200.node`.
 """
@@ -42,6 +45,7 @@ __all__ = [
     "ControllerConfig",
     "load_controller_config",
     "HermiteSegment",
+    "TrapezoidSegment",
     "JointTarget",
     "CartesianTarget",
     "ControllerStatus",
@@ -49,6 +53,8 @@ __all__ = [
 ]
 
 N = len(JOINTS)
+#: [s] shortest segment: a near-zero move still gets a smooth reference the PID can follow
+MIN_SEGMENT_S = 0.5
 
 
 def _per_joint(data: Any, key: str, source: str) -> np.ndarray:
@@ -173,6 +179,58 @@ class HermiteSegment:
             return pos, np.zeros_like(self.p0)
         vel = (d00 * self.p0 + d10 * v0 + d01 * self.p1 + d11 * v1) / dur
         return pos, vel
+
+
+@dataclass(frozen=True)
+class TrapezoidSegment:
+    """Straight move from ``p0`` to ``p1`` over ``duration`` with a trapezoidal speed profile.
+
+    The path fraction accelerates uniformly for ``accel_time``, coasts, and decelerates for ``accel_time``
+    (``accel_time = duration / 2``: triangular). For a given peak acceleration and speed this is the
+    shortest rest-to-rest move: a cubic needs sqrt(6/4) = 1.22 times as long at the same peak acceleration
+    (the swings, acceleration-limited, are most of a load pass).
+    """
+
+    p0: np.ndarray
+    p1: np.ndarray
+    duration: float
+    accel_time: float
+
+    def __post_init__(self) -> None:
+        if not (self.duration > 0 and 0 < self.accel_time <= 0.5 * self.duration + 1e-12):
+            raise ValueError(f"TrapezoidSegment: need 0 < accel_time {self.accel_time} <= duration / 2 "
+                             f"(duration {self.duration})")
+
+    @staticmethod
+    def timing(speed: float, accel: float, min_duration: float = 0.0) -> tuple[float, float]:
+        """(duration, accel_time) of the fastest path-fraction profile with peak ``speed`` [1/s] and
+        ``accel`` [1/s^2]; a profile shorter than ``min_duration`` is slowed uniformly to it."""
+        if speed * speed >= accel:  # the top speed is never reached: triangular
+            t_a = 1.0 / math.sqrt(accel)
+            dur = 2.0 * t_a
+        else:
+            t_a = speed / accel
+            dur = 1.0 / speed + t_a
+        if dur < min_duration:
+            t_a *= min_duration / dur
+            dur = min_duration
+        return dur, t_a
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(position, velocity) at time ``t`` (clamped to [0, duration])."""
+        dur, t_a = self.duration, self.accel_time
+        speed = 1.0 / (dur - t_a)
+        accel = speed / t_a
+        t = min(max(t, 0.0), dur)
+        if t < t_a:
+            s, ds = 0.5 * accel * t * t, accel * t
+        elif t <= dur - t_a:
+            s, ds = 0.5 * speed * t_a + speed * (t - t_a), speed
+        else:
+            rest = dur - t
+            s, ds = 1.0 - 0.5 * accel * rest * rest, accel * rest
+        delta = self.p1 - self.p0
+        return self.p0 + s * delta, ds * delta
 
 
 @dataclass(frozen=True)
@@ -304,7 +362,7 @@ class ArmController:
         self.status = ControllerStatus()
         self._targets: list[Target] = []
         self._seg: int = 0
-        self._spline: HermiteSegment | None = None
+        self._spline: HermiteSegment | TrapezoidSegment | None = None
         self._theta_spline: HermiteSegment | None = None
         self._seg_time = 0.0
         self._settled = 0.0
@@ -337,11 +395,29 @@ class ArmController:
             self.status = ControllerStatus(mode="idle", result=codes.CANCELED, message=message)
 
     # -------------------------------------------------------------------------- helpers
-    def predicted(self, q: np.ndarray) -> np.ndarray:
-        """State expected when the next command takes effect: measured + commands still in flight."""
+    def predicted(self, q: np.ndarray, dq: np.ndarray | None = None) -> np.ndarray:
+        """Where the joints go with the commands already sent: measured + commands still in flight.
+
+        With measured velocities ``dq``, joint i's first-order lag is its own state: what it still moves is
+        ``lag_i * dq_i`` (exact for a first-order lag), and only the commands of the last
+        ``preview_s - lag_i`` seconds (not yet acting: equalising delay + dead time) are added. Without
+        velocities, the lag counts as more dead time (commands of the last ``preview_s``), which is wrong
+        while the joint accelerates or brakes: at the end of a fast swing the prediction said "there"
+        while the swing overshot by 5 cm, and the goal then crept in for 2 s (paper load pass, 22 Nov).
+        """
+        q = np.asarray(q, dtype=float)
+        if dq is None:
+            return q + self._in_flight_sum if self._in_flight else q.copy()
+        lagged = self.cfg.lag_s * np.asarray(dq, dtype=float)
         if not self._in_flight:
-            return np.asarray(q, dtype=float).copy()
-        return np.asarray(q, dtype=float) + self._in_flight_sum
+            return q + lagged
+        cmds = np.asarray(self._in_flight)
+        durs = np.asarray(self._in_flight_dur)
+        started_ago = np.cumsum(durs[::-1])[::-1]  # how long ago each command was first applied [s]
+        newer_start = started_ago - durs
+        acting_after = self.preview_s - self.cfg.lag_s  # per joint: a command acts this long after it is sent
+        weights = np.clip(acting_after[None, :] - newer_start[:, None], 0.0, durs[:, None])
+        return q + lagged + np.sum(cmds * weights, axis=0)
 
     def _advance_time(self, now: float | None) -> None:
         """Set :attr:`elapsed` from the time stamp and give the previous command its real duration."""
@@ -388,21 +464,30 @@ class ArmController:
             self._in_flight_time = 0.0
 
     def _segment_duration(self, q0: np.ndarray, target: Target) -> float:
+        """Duration of a Cartesian segment's cubic (peak speed 1.5 x mean, peak acceleration 6 x distance / T^2)."""
         cfg, lim = self.cfg, self.kin.limits
         scale = min(1.0, cfg.joint_speed_scale * target.speed_scale)  # never beyond the joint limits
-        if isinstance(target, JointTarget):
-            dq = np.abs(self._joint_delta(q0, target.q))
-            t_cart = 0.0
-        else:
-            q1 = self.kin.ik_position_with_angle(target.position, target.theta_w, check_limits=False)
-            dq = np.abs(self._joint_delta(q0, q1))
-            dist = float(np.linalg.norm(target.position - self.kin.tip_position(q0)))
-            dth = abs(target.theta_w - self.kin.theta_w(q0))
-            t_cart = max(1.5 * dist / (cfg.max_tip_speed * target.speed_scale), 1.5 * dth / (cfg.max_theta_w_rate * target.speed_scale))
+        q1 = self.kin.ik_position_with_angle(target.position, target.theta_w, check_limits=False)
+        dq = np.abs(self._joint_delta(q0, q1))
+        dist = float(np.linalg.norm(target.position - self.kin.tip_position(q0)))
+        dth = abs(target.theta_w - self.kin.theta_w(q0))
+        t_cart = max(1.5 * dist / (cfg.max_tip_speed * target.speed_scale), 1.5 * dth / (cfg.max_theta_w_rate * target.speed_scale))
         t_vel = float(np.max(1.5 * dq / (scale * lim.velocity)))
         t_acc = float(np.max(np.sqrt(6.0 * dq / (scale * lim.acceleration))))
         t_flow = 1.5 * float(np.sum(cfg.flow_per_rad_s * dq)) / (0.8 * cfg.pump_flow_lpm)
-        return max(t_cart, t_vel, t_acc, t_flow, 0.5)
+        return max(t_cart, t_vel, t_acc, t_flow, MIN_SEGMENT_S)
+
+    def _joint_profile(self, dq: np.ndarray, speed_scale: float) -> tuple[float, float]:
+        """(duration, accel_time) of a joint-space move by ``dq``: the path fraction's peak speed and
+        acceleration are the largest every joint allows at ``joint_speed_scale`` of its limits, with
+        the pump flow at 80 % of its limit (the rest is the PID's and the other joints' margin)."""
+        cfg, lim = self.cfg, self.kin.limits
+        scale = min(1.0, cfg.joint_speed_scale * speed_scale)  # never beyond the joint limits
+        dq = np.maximum(np.abs(dq), 1e-9)
+        speed = min(float(np.min(scale * lim.velocity / dq)),
+                    0.8 * cfg.pump_flow_lpm / float(np.sum(cfg.flow_per_rad_s * dq)))
+        accel = float(np.min(scale * lim.acceleration / dq))
+        return TrapezoidSegment.timing(speed, accel, MIN_SEGMENT_S)
 
     @staticmethod
     def _joint_delta(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
@@ -412,11 +497,13 @@ class ArmController:
 
     def _begin_segment(self, qp: np.ndarray) -> None:
         target = self._targets[self._seg]
-        dur = self._segment_duration(qp, target)
         if isinstance(target, JointTarget):
-            self._spline = HermiteSegment(qp.copy(), qp + self._joint_delta(qp, target.q), dur)
+            delta = self._joint_delta(qp, target.q)
+            dur, t_a = self._joint_profile(delta, target.speed_scale)
+            self._spline = TrapezoidSegment(qp.copy(), qp + delta, dur, t_a)
             self._theta_spline = None
         else:
+            dur = self._segment_duration(qp, target)
             self._spline = HermiteSegment(self.kin.tip_position(qp), np.asarray(target.position, dtype=float), dur)
             self._theta_spline = HermiteSegment(np.array([self.kin.theta_w(qp)]), np.array([target.theta_w]), dur)
         self._seg_time = 0.0
@@ -489,11 +576,12 @@ class ArmController:
         """
         self._advance_time(now)
         q = np.asarray(q, dtype=float)
+        dq_measured = dq
         dq = np.zeros(N) if dq is None else np.asarray(dq, dtype=float)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
             self.stop("non-finite joint state")
-            q = np.nan_to_num(q)
-        qp = self.predicted(q)
+            q, dq = np.nan_to_num(q), np.nan_to_num(dq)
+        qp = self.predicted(q, None if dq_measured is None else dq)
         tip, jt, pin_p, jp = self.kin.jacobians(qp)
         tasks = self._safety_tasks(qp, tip, jt, pin_p, jp)
         st = self.status
@@ -551,10 +639,15 @@ class ArmController:
         cfg = self.cfg
         target = self._targets[self._seg]
         self._seg_time += self.elapsed
-        t_ref = self._seg_time + self.preview_s
+        # The reference starts at the predicted state (p0 = qp at segment start), so it is a trajectory of
+        # the predicted state and is read at the segment's own time: the plant follows it preview_s later.
+        # (Reading it preview_s ahead, as before 22 Nov, skipped the first 1.3 s of every swing: the PID
+        # chased a reference that had left without it, a trapezoidal swing overshot by 0.5 rad, and a
+        # 1.1 s penetrate took 2.2 s to converge.)
+        t_ref = self._seg_time
         spline = self._spline
         assert spline is not None
-        # Integrate only once the (previewed) reference holds its end point and the error is inside the
+        # Integrate only once the reference holds its end point and the error is inside the
         # PID's i_zone: while the arm moves, the error is mostly the tracking lag of the dead time
         # (1.3 s on the swing), and integrating it wound the integrator up to its clamp in every move; at the goal that wound-up term (ki x i_limit) then balanced
         # kp x error, so the arm sat millimetres to centimetres off and only crept in as the integral
@@ -601,7 +694,7 @@ class ArmController:
             res = self.hqp_cartesian.solve(
                 [*tasks, (self.kin.theta_w_jacobian()[None, :], b_th), (jt, b_p), (np.eye(N), np.zeros(N))]
             )
-            self.reference_tip = spline.sample(self._seg_time)[0]
+            self.reference_tip = spline.sample(self._seg_time - self.preview_s)[0]  # where the plant should be now
             dists = [float(np.linalg.norm(spline.p1 - self.kin.tip_position(x))) for x in (q, qp)]
             th_errs = [abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(x)) for x in (q, qp)]
             # measured and predicted (commands in flight) both within tolerance, as for joint targets

@@ -65,7 +65,7 @@ def _make_node():  # noqa: ANN202
                 self.cfg = dataclasses.replace(self.cfg, rate_hz=rate)
             self.ctl = ArmController(self.kin, self.cfg)
             self._q: np.ndarray | None = None
-            self._dq = np.zeros(len(JOINTS))
+            self._dq: np.ndarray | None = None
             self._goal_active = False
             self._pub = self.create_publisher(JointCmd, "front_cmd", 10)
             self.create_subscription(JointState, "joint_states", self._on_state, 20)
@@ -87,7 +87,8 @@ def _make_node():  # noqa: ANN202
             if not all(n in idx for n in JOINTS):
                 return
             q = np.array([msg.position[idx[n]] for n in JOINTS])
-            dq = np.array([msg.velocity[idx[n]] if len(msg.velocity) > idx[n] else 0.0 for n in JOINTS])
+            # no velocities (a driver that reports positions only): the controller predicts without them
+            dq = np.array([msg.velocity[idx[n]] for n in JOINTS]) if len(msg.velocity) == len(msg.name) else None
             self._q, self._dq = q, dq
             self._wake(self._state_waiters)
 
