@@ -161,6 +161,28 @@ def test_delay_runs_child_only_after_the_timer():
     assert t.tick() is SUCCESS and log(t) == ["a"]
 
 
+def test_delay_timeout_and_sleep_run_on_the_task_clock_not_the_transport_clock():
+    # The manager passes its ROS clock as task_clock: simulated time under use_sim_time, which can run
+    # faster than the wall clock (``clock``) that times goal acceptance and halts.
+    wall, sim = FakeClock(), FakeClock()
+    for xml, first in (('<Delay delay_msec="1000"><Scripted id="a"/></Delay>', "S"),
+                       ('<Sleep msec="1000"/>', None)):
+        t = tree(xml, **({"a": first} if first else {}))
+        t.ctx.clock, t.ctx.task_clock = wall, sim
+        assert t.tick() is RUNNING
+        wall.t += 5.0  # wall time alone does not end it
+        assert t.tick() is RUNNING
+        sim.t += 1.001
+        assert t.tick() is SUCCESS
+    t = tree('<Timeout msec="500"><Scripted id="a"/></Timeout>', a="R")
+    t.ctx.clock, t.ctx.task_clock = wall, sim
+    assert t.tick() is RUNNING
+    wall.t += 5.0
+    assert t.tick() is RUNNING
+    sim.t += 0.6
+    assert t.tick() is FAILURE and log(t) == ["a", "a", "halt a"]
+
+
 def test_timeout_halts_child_and_fails():
     t = tree('<Timeout msec="500"><Scripted id="a"/></Timeout>', a="R")
     clock = FakeClock()

@@ -98,8 +98,11 @@ def _make_node():  # noqa: ANN202
         # -------------------------------------------------------------- common execution
         def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
             result = action_type.Result()
+            t0 = time.monotonic()
             try:
-                targets = plan(self._current_q() if needs_q else None)
+                q = self._current_q() if needs_q else None
+                t_state = time.monotonic()
+                targets = plan(q)
             except PlanningError as exc:
                 self.get_logger().warning(f"goal rejected before motion: {exc}")
                 result.error_code.val = exc.code
@@ -111,7 +114,11 @@ def _make_node():  # noqa: ANN202
                 result.message = "arm controller action arm_controller/move is not available"
                 handle.abort()
                 return result
-            code, message = self._move(handle, action_type, targets)
+            t_plan = time.monotonic()
+            code, message = self._move(handle, action_type, targets, lambda: self.get_logger().info(
+                f"{action_type.__name__}: {len(targets)} segment(s); joint_states {1e3 * (t_state - t0):.0f} ms, "
+                f"plan {1e3 * (t_plan - t_state):.0f} ms, controller accepted {1e3 * (time.monotonic() - t_plan):.0f} ms "
+                "later (wall)"))
             if code != codes.SUCCESS:
                 result.error_code.val = code
                 result.message = message
@@ -144,7 +151,7 @@ def _make_node():  # noqa: ANN202
                 out.append(seg)
             return out
 
-        def _move(self, handle, action_type, targets) -> tuple[int, str]:  # noqa: ANN001
+        def _move(self, handle, action_type, targets, on_accepted) -> tuple[int, str]:  # noqa: ANN001
             """Run the plan as one controller goal; the controller's phase feedback is forwarded."""
             goal = Zx200ArmMove.Goal(segments=self._segments(targets))
             fb = action_type.Feedback()
@@ -175,6 +182,7 @@ def _make_node():  # noqa: ANN202
             gh = send.result()
             if not gh.accepted:
                 return codes.NO_VALID_CONTROL, "arm controller rejected the goal"
+            on_accepted()
             code, message = self._await_result(handle, gh)
             if code not in (codes.SUCCESS, codes.CANCELED) and last_label[0] not in message:
                 message = f"{last_label[0]}: {message}"

@@ -362,9 +362,9 @@ class Delay(DecoratorNode):
             msec = self.get_input("delay_msec")
             if msec < 0:
                 raise TreeRuntimeError(f"{self.describe()}: delay_msec must be >= 0, got {msec}")
-            self.deadline = self.ctx.clock() + msec / 1000.0
-        if self.ctx.clock() < self.deadline:
-            self.feedback_message = f"waiting {self.deadline - self.ctx.clock():.2f} s"
+            self.deadline = self.ctx.task_time() + msec / 1000.0
+        if self.ctx.task_time() < self.deadline:
+            self.feedback_message = f"waiting {self.deadline - self.ctx.task_time():.2f} s"
             return RUNNING
         status = self.child.execute_tick()
         if status is not RUNNING:
@@ -387,7 +387,7 @@ class Timeout(DecoratorNode):
         self.deadline = None
 
     def _tick(self) -> Status:
-        now = self.ctx.clock()
+        now = self.ctx.task_time()
         if self.deadline is None:
             self.deadline = now + self.get_input("msec") / 1000.0
         elif now >= self.deadline:
@@ -431,11 +431,11 @@ class Sleep(StatefulNode):
     PORTS = {"msec": Port("int")}
 
     def on_start(self) -> Status:
-        self.deadline = self.ctx.clock() + self.get_input("msec") / 1000.0
+        self.deadline = self.ctx.task_time() + self.get_input("msec") / 1000.0
         return self.on_running()
 
     def on_running(self) -> Status:
-        return SUCCESS if self.ctx.clock() >= self.deadline else RUNNING
+        return SUCCESS if self.ctx.task_time() >= self.deadline else RUNNING
 
 
 #: BT.CPP id -> class (v3 and v4 spellings)

@@ -119,7 +119,11 @@ class TreeContext:
 
     ``store`` is a tms_db store (``open_store()``) or None for trees without DB nodes; ``ros`` is the
     ROS port of the manager (:class:`tms_ts.leaf.RosPort`) or None offline. ``clock`` returns
-    monotonic seconds (injectable for tests and simulated time). ``sync_loop_budget`` bounds how many
+    monotonic seconds (injectable for tests) and times the transport: goal acceptance, halts, lost
+    servers, DB retries. ``task_clock`` times the task itself (Delay, Timeout, Sleep; :meth:`task_time`):
+    the manager passes its ROS clock, so under ``use_sim_time`` a 1.5 s Delay is 1.5 s of the plant's
+    time, not of the wall (it was wall time: 3.75 s of simulation at 2.5x real time, 22 Nov);
+    None = ``clock``. ``sync_loop_budget`` bounds how many
     synchronous iterations a Repeat/RetryUntilSuccessful runs inside one tick before yielding RUNNING
     (BT.CPP loops forever there, which made the original manager deaf to the emergency stop).
     """
@@ -128,6 +132,7 @@ class TreeContext:
     store: Any = None
     ros: Any = None
     clock: Callable[[], float] = time.monotonic
+    task_clock: Callable[[], float] | None = None
     task_id: int = -1
     sync_loop_budget: int = 1000
     accept_timeout_s: float = 1.0
@@ -143,6 +148,10 @@ class TreeContext:
     #: actions whose server was lost while serving a goal of this task (the manager's stop policy)
     lost_servers: list[str] = field(default_factory=list)
 
+    def task_time(self) -> float:
+        """Seconds on the task's clock (``task_clock``, else ``clock``)."""
+        return (self.task_clock or self.clock)()
+
     def child(self, blackboard: Blackboard) -> TreeContext:
         """Same context with another blackboard (non-shared SubTree)."""
         return TreeContext(
@@ -150,6 +159,7 @@ class TreeContext:
             store=self.store,
             ros=self.ros,
             clock=self.clock,
+            task_clock=self.task_clock,
             task_id=self.task_id,
             sync_loop_budget=self.sync_loop_budget,
             accept_timeout_s=self.accept_timeout_s,

@@ -97,7 +97,9 @@ class TaskManager(Node):
         try:
             doc = self.store.get_task(task_id)
             xml = doc.get("task_sequence", "")
+            # Delay / Timeout / Sleep run on the node's clock (simulated time under use_sim_time)
             ctx = TreeContext(store=self.store, ros=self.ros, task_id=task_id,
+                              task_clock=lambda: self.get_clock().now().nanoseconds * 1e-9,
                               accept_timeout_s=self.accept_timeout_s, halt_timeout_s=self.halt_timeout_s,
                               server_lost_s=self.server_lost_s)
             tree = load_tree(xml, ctx, source=f"task {task_id}")
