@@ -163,8 +163,13 @@ def make_node():  # noqa: ANN201 - rclpy Node subclass defined lazily so the mod
                     is_error_frame=msg.is_error_frame, is_remote_frame=msg.is_remote_frame,
                     stamp=stamp.nanoseconds * 1e-9,
                 )
-                for out in outs:
-                    self._publish(out, stamp.to_msg())
+                try:
+                    for out in outs:
+                        self._publish(out, stamp.to_msg())
+                except Exception:
+                    if not self.context.ok():  # SIGINT shut the context down before destroy_node stopped us
+                        return
+                    raise
 
         def _publish(self, out: Any, stamp: Any) -> None:
             if isinstance(out, JointStateOut):
