@@ -12,11 +12,11 @@ Every control step turns the measured joint angles into joint-velocity commands 
 6. bucket-tip position;
 7. least joint motion.
 
-References run from the state at segment start to the target: joint-space segments on a synchronised
-trapezoidal velocity profile (every joint at the same fraction of its move, the most limited joint at
-its velocity, acceleration or pump-flow share), Cartesian segments (tip line and edge angle) on cubic
-Hermite splines; the task rows ask for the reference velocity plus PID feedback on its position. The plant's command dead time
-and lag are compensated with a Smith predictor: the controller acts on the state predicted for when
+References run from the state at segment start to the target on trapezoidal speed profiles: joint
+space with every joint at the same fraction of its move, Cartesian segments along the tip line and the
+edge angle; the most limited of the joints (velocity, acceleration, pump-flow share) and the tip / edge
+speed and acceleration limits set the timing. The task rows ask for the reference velocity plus PID
+feedback on its position. The plant's command dead time and lag are compensated with a Smith predictor: the controller acts on the state predicted for when
 its command takes effect (measured state + commands still in flight), joints' delays are equalised
 in the output, and each reference starts at the predicted state, so the machine follows it one
 predictor horizon (``preview_s``) later.
@@ -44,7 +44,6 @@ from tms_rp.zx200.kinematics import JOINTS, Zx200Kinematics
 __all__ = [
     "ControllerConfig",
     "load_controller_config",
-    "HermiteSegment",
     "TrapezoidSegment",
     "JointTarget",
     "CartesianTarget",
@@ -86,6 +85,8 @@ class ControllerConfig:
     )
     max_tip_speed: float = 0.35
     max_theta_w_rate: float = 0.35
+    max_tip_accel: float = 1.0
+    max_theta_w_accel: float = 1.0
     joint_speed_scale: float = 0.6
     dead_time_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.1))
     lag_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.15))
@@ -125,6 +126,8 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             pid={k: {kk: float(vv) for kk, vv in v.items()} for k, v in data["pid"].items()},
             max_tip_speed=float(data["max_tip_speed"]),
             max_theta_w_rate=float(data["max_theta_w_rate"]),
+            max_tip_accel=float(data["max_tip_accel"]),
+            max_theta_w_accel=float(data["max_theta_w_accel"]),
             joint_speed_scale=float(data["joint_speed_scale"]),
             dead_time_s=_per_joint(data["plant_model"]["dead_time_s"], "plant_model.dead_time_s", src),
             lag_s=_per_joint(data["plant_model"]["lag_s"], "plant_model.lag_s", src),
@@ -145,8 +148,10 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
     for key in ("position", "theta_w", "joint"):
         if key not in cfg.pid:
             raise where.error(("pid",), f"pid: missing gains for {key!r}")
-    if cfg.rate_hz <= 0 or cfg.pump_flow_lpm <= 0 or cfg.max_tip_speed <= 0:
-        raise ConfigError(f"{src}: rate_hz, pump_flow_lpm and max_tip_speed must be > 0")
+    limits = ("rate_hz", "pump_flow_lpm", "max_tip_speed", "max_theta_w_rate", "max_tip_accel", "max_theta_w_accel",
+              "joint_speed_scale")
+    if not all(getattr(cfg, key) > 0 for key in limits):
+        raise ConfigError(f"{src}: {', '.join(limits)} must be > 0")
     for key in ("goal_tolerance_m", "goal_tolerance_rad", "via_tolerance_m", "via_tolerance_rad"):
         if not getattr(cfg, key) > 0:
             raise where.error((key,), f"{key} must be > 0, got {getattr(cfg, key)}")
@@ -157,38 +162,15 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
 
 # ---------------------------------------------------------------------------------------------- references
 @dataclass(frozen=True)
-class HermiteSegment:
-    """Cubic Hermite curve from ``p0`` to ``p1`` over ``duration`` with end velocities ``v0``, ``v1``."""
-
-    p0: np.ndarray
-    p1: np.ndarray
-    duration: float
-    v0: np.ndarray | None = None
-    v1: np.ndarray | None = None
-
-    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(position, velocity) at time ``t`` (clamped to [0, duration])."""
-        dur = self.duration
-        u = min(max(t / dur, 0.0), 1.0) if dur > 0 else 1.0
-        v0 = np.zeros_like(self.p0) if self.v0 is None else self.v0 * dur
-        v1 = np.zeros_like(self.p0) if self.v1 is None else self.v1 * dur
-        h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
-        d00, d10, d01, d11 = 6 * u**2 - 6 * u, 3 * u**2 - 4 * u + 1, -6 * u**2 + 6 * u, 3 * u**2 - 2 * u
-        pos = h00 * self.p0 + h10 * v0 + h01 * self.p1 + h11 * v1
-        if dur <= 0 or t < 0 or t > dur:
-            return pos, np.zeros_like(self.p0)
-        vel = (d00 * self.p0 + d10 * v0 + d01 * self.p1 + d11 * v1) / dur
-        return pos, vel
-
-
-@dataclass(frozen=True)
 class TrapezoidSegment:
     """Straight move from ``p0`` to ``p1`` over ``duration`` with a trapezoidal speed profile.
 
     The path fraction accelerates uniformly for ``accel_time``, coasts, and decelerates for ``accel_time``
     (``accel_time = duration / 2``: triangular). For a given peak acceleration and speed this is the
     shortest rest-to-rest move: a cubic needs sqrt(6/4) = 1.22 times as long at the same peak acceleration
-    (the swings, acceleration-limited, are most of a load pass).
+    (the swings, acceleration-limited, are most of a load pass). Joint-space segments run on one (every
+    joint the same fraction of its move); a Cartesian segment's tip line and edge angle on two with the
+    same timing.
     """
 
     p0: np.ndarray
@@ -362,8 +344,8 @@ class ArmController:
         self.status = ControllerStatus()
         self._targets: list[Target] = []
         self._seg: int = 0
-        self._spline: HermiteSegment | TrapezoidSegment | None = None
-        self._theta_spline: HermiteSegment | None = None
+        self._spline: TrapezoidSegment | None = None
+        self._theta_spline: TrapezoidSegment | None = None
         self._seg_time = 0.0
         self._settled = 0.0
         self._pid_pos = _Pid(cfg.pid["position"], 3, self.dt)
@@ -463,30 +445,19 @@ class ArmController:
             self._in_flight_sum[:] = 0.0
             self._in_flight_time = 0.0
 
-    def _segment_duration(self, q0: np.ndarray, target: Target) -> float:
-        """Duration of a Cartesian segment's cubic (peak speed 1.5 x mean, peak acceleration 6 x distance / T^2)."""
-        cfg, lim = self.cfg, self.kin.limits
-        scale = min(1.0, cfg.joint_speed_scale * target.speed_scale)  # never beyond the joint limits
-        q1 = self.kin.ik_position_with_angle(target.position, target.theta_w, check_limits=False)
-        dq = np.abs(self._joint_delta(q0, q1))
-        dist = float(np.linalg.norm(target.position - self.kin.tip_position(q0)))
-        dth = abs(target.theta_w - self.kin.theta_w(q0))
-        t_cart = max(1.5 * dist / (cfg.max_tip_speed * target.speed_scale), 1.5 * dth / (cfg.max_theta_w_rate * target.speed_scale))
-        t_vel = float(np.max(1.5 * dq / (scale * lim.velocity)))
-        t_acc = float(np.max(np.sqrt(6.0 * dq / (scale * lim.acceleration))))
-        t_flow = 1.5 * float(np.sum(cfg.flow_per_rad_s * dq)) / (0.8 * cfg.pump_flow_lpm)
-        return max(t_cart, t_vel, t_acc, t_flow, MIN_SEGMENT_S)
-
-    def _joint_profile(self, dq: np.ndarray, speed_scale: float) -> tuple[float, float]:
-        """(duration, accel_time) of a joint-space move by ``dq``: the path fraction's peak speed and
-        acceleration are the largest every joint allows at ``joint_speed_scale`` of its limits, with
-        the pump flow at 80 % of its limit (the rest is the PID's and the other joints' margin)."""
+    def _profile(self, dq: np.ndarray, speed_scale: float, speed_caps: tuple[float, ...] = (),
+                 accel_caps: tuple[float, ...] = ()) -> tuple[float, float]:
+        """(duration, accel_time) of a segment moving the joints by ``dq`` (end to end): the path fraction's
+        peak speed and acceleration are the largest every joint allows at ``joint_speed_scale`` of its
+        limits, with the pump flow at 80 % of its limit (the rest is the PID's margin), and within
+        ``speed_caps`` / ``accel_caps`` (path fraction per s, per s^2: a Cartesian segment's tip and edge
+        angle limits). For a Cartesian segment ``dq`` is the IK difference of its ends, an estimate."""
         cfg, lim = self.cfg, self.kin.limits
         scale = min(1.0, cfg.joint_speed_scale * speed_scale)  # never beyond the joint limits
         dq = np.maximum(np.abs(dq), 1e-9)
-        speed = min(float(np.min(scale * lim.velocity / dq)),
-                    0.8 * cfg.pump_flow_lpm / float(np.sum(cfg.flow_per_rad_s * dq)))
-        accel = float(np.min(scale * lim.acceleration / dq))
+        speed = min((float(np.min(scale * lim.velocity / dq)),
+                     0.8 * cfg.pump_flow_lpm / float(np.sum(cfg.flow_per_rad_s * dq)), *speed_caps))
+        accel = min((float(np.min(scale * lim.acceleration / dq)), *accel_caps))
         return TrapezoidSegment.timing(speed, accel, MIN_SEGMENT_S)
 
     @staticmethod
@@ -499,13 +470,23 @@ class ArmController:
         target = self._targets[self._seg]
         if isinstance(target, JointTarget):
             delta = self._joint_delta(qp, target.q)
-            dur, t_a = self._joint_profile(delta, target.speed_scale)
+            dur, t_a = self._profile(delta, target.speed_scale)
             self._spline = TrapezoidSegment(qp.copy(), qp + delta, dur, t_a)
             self._theta_spline = None
         else:
-            dur = self._segment_duration(qp, target)
-            self._spline = HermiteSegment(self.kin.tip_position(qp), np.asarray(target.position, dtype=float), dur)
-            self._theta_spline = HermiteSegment(np.array([self.kin.theta_w(qp)]), np.array([target.theta_w]), dur)
+            cfg, k = self.cfg, target.speed_scale
+            q1 = self.kin.ik_position_with_angle(target.position, target.theta_w, check_limits=False)
+            p0, p1 = self.kin.tip_position(qp), np.asarray(target.position, dtype=float)
+            th0 = self.kin.theta_w(qp)
+            dist = max(float(np.linalg.norm(p1 - p0)), 1e-9)
+            dth = max(abs(target.theta_w - th0), 1e-9)
+            dur, t_a = self._profile(
+                self._joint_delta(qp, q1), k,
+                speed_caps=(cfg.max_tip_speed * k / dist, cfg.max_theta_w_rate * k / dth),
+                accel_caps=(cfg.max_tip_accel * k / dist, cfg.max_theta_w_accel * k / dth),
+            )
+            self._spline = TrapezoidSegment(p0, p1, dur, t_a)
+            self._theta_spline = TrapezoidSegment(np.array([th0]), np.array([target.theta_w]), dur, t_a)
         self._seg_time = 0.0
         self._settled = 0.0
         for pid in (self._pid_pos, self._pid_th, self._pid_q):
