@@ -143,8 +143,10 @@ def main() -> None:
         for c, m, what in ((code2, msg2, "carry"), (code3, msg3, "release")):
             if c != 0:
                 print(f"  pass {k + 1}: {what} ended {c}: {m}")
+        # let the last soil fall (not counted in the pass: the next dig's swing starts while it does): the
+        # release ends on the prediction, the open bucket reaches the plant ~1.3 s later and spills for 1.5 s
         t_settle = rig.plant.time
-        while rig.plant.time - t_settle < 1.0:  # let the last soil fall
+        while rig.plant.time - t_settle < 1.0 or (soil.bucket > 1e-3 and rig.plant.time - t_settle < 5.0):
             rig.plant.step()
         into = soil.vessel - vessel0
         spilled_out = ground.ground_soil_volume() - ground.mound_volume() - ground_out0
