@@ -16,10 +16,11 @@ References run from the state at segment start to the target on trapezoidal spee
 space with every joint at the same fraction of its move, Cartesian segments along the tip line and the
 edge angle; the most limited of the joints (velocity, acceleration, pump-flow share) and the tip / edge
 speed and acceleration limits set the timing. The task rows ask for the reference velocity plus PID
-feedback on its position. The plant's command dead time and lag are compensated with a Smith predictor: the controller acts on the state predicted for when
-its command takes effect (measured state + commands still in flight), joints' delays are equalised
-in the output, and each reference starts at the predicted state, so the machine follows it one
-predictor horizon (``preview_s``) later.
+feedback on its position. The plant's command dead time and lag are compensated with a Smith
+predictor: the controller acts on the state predicted for when its command takes effect (measured
+state + what the lag still moves + commands still in flight), joints' delays are equalised in the
+output, and each reference starts at the predicted state, so the machine follows it one predictor
+horizon (``preview_s``) later.
 
 Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.zx200.node`.
 """
