@@ -205,8 +205,14 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
     first_neutral = next((t for t, m in after if t > moving[0] and bytes(m.data) == NEUTRAL_V1), None)
     assert first_neutral is not None, f"no neutral Velocity_Cmd_1 after the command stopped\n{bridge.output}"
     # never before the configured 0.5 s (minus the probe's own timing error), whatever the clock speed
-    assert 0.45 <= first_neutral - t_cmd <= watchdog_bound, (
-        f"watchdog neutral after {first_neutral - t_cmd:.3f} s (time scale {SCALE:g})")
+    assert first_neutral - t_cmd >= 0.45, f"watchdog neutral after {first_neutral - t_cmd:.3f} s"
+    # The watchdog counts from the command's arrival, which the first moving frame on the bus marks (within
+    # one 10 ms cycle): timed from our publish, the bound also held our own DDS delivery (CI, 22 Nov: 0.572 s
+    # against 0.57 s on a loaded host).
+    held = first_neutral - moving[0]
+    assert 0.5 - 0.010 - 0.005 <= held <= watchdog_bound, (
+        f"neutral {held:.3f} s after the command's first frame, {first_neutral - t_cmd:.3f} s after our publish "
+        f"(time scale {SCALE:g})")
     assert all(bytes(m.data) == NEUTRAL_V1 for t, m in after if t >= first_neutral)
     assert any("watchdog: no front_cmd" in d.status[0].message for d in diags), [d.status[0].message for d in diags[-5:]]
 
