@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -59,8 +60,7 @@ def test_predictor_with_velocities_knows_where_a_braking_swing_stops() -> None:
         u = ctl.step(q, v)
         if k in (int(2.5 / cfg.dt), int(3.5 / cfg.dt), int(4.5 / cfg.dt)):  # accelerating, braking
             with_v, without_v = ctl.predicted(q, v)[0], ctl.predicted(q)[0]
-            coast = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q)
-            coast.v, coast._queues = plant.v.copy(), [type(d)(d, maxlen=d.maxlen) for d in plant._queues]
+            coast = copy.deepcopy(plant)  # its dead-time queues and lag state as they are now
             coast.step(u)  # this step's command is in flight too (the swing's output is not delayed further)
             for _ in range(int(5.0 / cfg.dt)):
                 rest_q, _ = coast.step(np.zeros(4))

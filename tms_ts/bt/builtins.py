@@ -358,13 +358,14 @@ class Delay(DecoratorNode):
         self.deadline = None
 
     def _tick(self) -> Status:
+        now = self.ctx.task_time()
         if self.deadline is None:
             msec = self.get_input("delay_msec")
             if msec < 0:
                 raise TreeRuntimeError(f"{self.describe()}: delay_msec must be >= 0, got {msec}")
-            self.deadline = self.ctx.task_time() + msec / 1000.0
-        if self.ctx.task_time() < self.deadline:
-            self.feedback_message = f"waiting {self.deadline - self.ctx.task_time():.2f} s"
+            self.deadline = now + msec / 1000.0
+        if now < self.deadline:
+            self.feedback_message = f"waiting {self.deadline - now:.2f} s"
             return RUNNING
         status = self.child.execute_tick()
         if status is not RUNNING:
