@@ -8,7 +8,8 @@ A missing or malformed field raises :class:`SubtaskRecordError` naming the recor
 Planning goal data (``kind`` -> keys):
 
 * ``change_pose``: ``mode`` joints|pose|position_with_angle and ``joints`` {name: rad} | ``pose``
-  {x..qw} | ``pwa`` {x, y, z, theta_w}
+  {x..qw} | ``pwa`` {x, y, z, theta_w}; ``pass_through`` (the record's optional 0/1 field: end at the
+  target without waiting for rest, the next goal continues the motion)
 * ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
 * ``navigate_to_pose``: ``pose`` {x, y, z, qx..qw}; ``follow_waypoints`` / ``navigate_through_poses``:
   ``poses`` [{x, y, z, qx..qw}, ...] in frame ``map``. ``_deg`` variants give yaw in degrees.
@@ -71,7 +72,23 @@ def _unit_quat(record: str, q: dict[str, float]) -> dict[str, float]:
     return {k: v / norm for k, v in q.items()}
 
 
+def _bool(doc: dict, record: str, field: str) -> bool:
+    """An optional 0/1 or true/false field (absent = false); anything else names the record and field."""
+    value = doc.get(field, False)
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, int | float) and value in (0, 1):
+        return bool(value)
+    raise SubtaskRecordError(record, field, f"must be 0/1 or true/false, got {value!r}")
+
+
 def build_change_pose(doc: dict, record: str) -> dict:
+    out = _change_pose_target(doc, record)
+    out["pass_through"] = _bool(doc, record, "pass_through")
+    return out
+
+
+def _change_pose_target(doc: dict, record: str) -> dict:
     if _flag(doc, "trajectory"):
         return {"kind": "change_pose", "mode": "joints", "joints": {j: _num(doc, record, j) for j in ZX200_JOINTS}}
     if _flag(doc, "pose"):

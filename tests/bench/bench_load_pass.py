@@ -9,6 +9,7 @@ transport and CPU of the full launch, so it shows what digging and release setti
 
     python -m tests.bench load_pass            # LOAD_PASS_N passes (default 6)
     LOAD_PASS_LATE=0.4 python -m tests.bench load_pass   # 40 % of the control ticks a period late
+    LOAD_PASS_PASS_THROUGH=0 python -m tests.bench load_pass   # the carry waits for rest at its goal
 
 Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
 soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
@@ -36,6 +37,8 @@ from tms_sp.vessel import assess_vessel, release_in_zx200
 
 #: The paper launch's choices (config/launch/paper_experiment.yaml): 50 Hz controller.
 RATE_HZ = 50.0
+#: The carry as the seed's target_release_pose asks (pass_through: 1); LOAD_PASS_PASS_THROUGH=0 waits for rest.
+PASS_THROUGH = os.environ.get("LOAD_PASS_PASS_THROUGH", "1") != "0"
 
 
 class PassRig:
@@ -47,6 +50,9 @@ class PassRig:
         cfg = load_controller_config()
         cfg.rate_hz = RATE_HZ
         self.ctl_cfg = cfg
+        # one controller for every action, as zx200_arm_controller keeps one: a goal that ends at a
+        # pass-through point leaves commands in flight, and the next goal starts from their prediction
+        self.ctl = ArmController(self.kin, cfg)
         self.planner = Zx200Planner(self.kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
         self.sensing = load_sensing_config()
         self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
@@ -63,28 +69,30 @@ class PassRig:
 
         :attr:`segment_s` gets the simulated time spent in each segment (by label).
         """
-        ctl = ArmController(self.kin, self.ctl_cfg)
+        ctl = self.ctl
         self.segment_s: dict[str, float] = {}
         ctl.start(targets)
-        names = self.plant.zx200.front.names
         t0 = self.plant.time
         # LOAD_PASS_LATE: the fraction of control ticks that come a period late (the previous command acts
         # for two periods), as a sim-time timer does on a loaded machine: the stack's conditions.
         late = float(os.environ.get("LOAD_PASS_LATE", "0"))
         rng = np.random.default_rng(1)
-        u = np.zeros(len(names))
         while self.plant.time - t0 < limit_s:
-            front = self.plant.zx200.front
-            if not (late and rng.random() < late):
-                u = ctl.step(np.array(front.q, dtype=float), np.array(front.v, dtype=float), now=self.plant.time)
-            self.plant.zx200.set_front_velocity(dict(zip(names, u.tolist(), strict=True)))
-            for _ in range(self.sub_steps):
-                self.plant.step()
+            self.step_controller(skip=bool(late and rng.random() < late))
             label = ctl.status.label or ctl.status.mode
             self.segment_s[label] = self.segment_s.get(label, 0.0) + self.sub_steps * self.plant.dt
             if ctl.status.result is not None:
                 return ctl.status.result, ctl.status.message, self.plant.time - t0
         return -1, f"no result within {limit_s} s", self.plant.time - t0
+
+    def step_controller(self, skip: bool = False) -> None:
+        """One control period: the controller's command (the previous one again when ``skip``: a late tick)."""
+        front = self.plant.zx200.front
+        if not skip:
+            u = self.ctl.step(np.array(front.q, dtype=float), np.array(front.v, dtype=float), now=self.plant.time)
+            self.plant.zx200.set_front_velocity(dict(zip(front.names, u.tolist(), strict=True)))
+        for _ in range(self.sub_steps):
+            self.plant.step()
 
     def mound_target(self) -> tuple[list[float], float, float]:
         spec = self.sensing.mound_grid
@@ -135,10 +143,14 @@ def main() -> None:
         if code != 0:
             print(f"  pass {k + 1}: excavate ended {code}: {msg}")
         rpos, rth, angle = rig.release_target()
-        code2, msg2, times["carry"] = rig.run(rig.planner.change_pose(positions_with_angle=[(rpos, rth)], current_q=rig.q))
+        # the seed's target_release_pose has pass_through: 1; the planner node plans the release from the
+        # carry's end while the arm is on its way there (Zx200Planner.start_state)
+        carry = rig.planner.change_pose(positions_with_angle=[(rpos, rth)], current_q=rig.q, pass_through=PASS_THROUGH)
+        code2, msg2, times["carry"] = rig.run(carry)
         carried = soil.bucket
         carry_segments = dict(rig.segment_s)
-        code3, msg3, times["release"] = rig.run(rig.planner.release(angle, rig.q))
+        q_release = rig.planner.start_state(rig.q, rig.planner.end_joints(carry) if carry[-1].via else None)
+        code3, msg3, times["release"] = rig.run(rig.planner.release(angle, q_release))
         release_segments = dict(rig.segment_s)
         for c, m, what in ((code2, msg2, "carry"), (code3, msg3, "release")):
             if c != 0:
@@ -147,7 +159,7 @@ def main() -> None:
         # release ends on the prediction, the open bucket reaches the plant ~1.3 s later and spills for 1.5 s
         t_settle = rig.plant.time
         while rig.plant.time - t_settle < 1.0 or (soil.bucket > 1e-3 and rig.plant.time - t_settle < 5.0):
-            rig.plant.step()
+            rig.step_controller()  # idle between goals, as the node's 50 Hz loop goes on
         into = soil.vessel - vessel0
         spilled_out = ground.ground_soil_volume() - ground.mound_volume() - ground_out0
         pass_s = sum(times.values())

@@ -70,3 +70,33 @@ def test_excavate_lift_is_a_via_point_and_digging_runs_faster() -> None:
     assert [t.label for t in targets] == ["approach", "penetrate", "drag", "curl and lift"]
     assert targets[-1].via
     assert all(t.speed_scale == PLAN.cfg.dig_speed_scale for t in targets[1:])
+
+
+def test_pass_through_carry_ends_at_a_via_point_and_the_release_plans_from_it() -> None:
+    q_lifted = KIN.ik_position_with_angle(LIFTED, 2.6)
+    carry = PLAN.change_pose(positions_with_angle=[(RELEASE_TIP.tolist(), CARRY_THETA_W)], current_q=q_lifted,
+                             pass_through=True)
+    assert [type(t) for t in carry] == [JointTarget], "the joint-space swing ends at the goal: no straight approach"
+    assert carry[-1].via, "a pass-through change_pose ends without waiting for rest"
+    near = LIFTED + np.array([-0.5, 0.3, 0.2])  # a small move stays one straight tip line, now a via point
+    small = PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q_lifted, pass_through=True)
+    assert [type(t) for t in small] == [CartesianTarget] and small[0].via
+    np.testing.assert_allclose(KIN.tip_position(PLAN.end_joints(small)), near, atol=1e-6)
+    end = PLAN.end_joints(carry)
+    np.testing.assert_allclose(KIN.tip_position(end), RELEASE_TIP, atol=1e-6)
+    # The carry's goal ended on the controller's prediction: the measured swing still lags ~0.25 rad.
+    lagging = end - np.array([0.25, 0.05, -0.05, 0.02])
+    assert np.array_equal(PLAN.start_state(lagging, end), end)
+    from_end = PLAN.release(float(end[0]), PLAN.start_state(lagging, end))
+    from_lagging = PLAN.release(float(end[0]), lagging)
+    assert [t.label for t in from_end] == ["open"], "over the vessel already: no extra swing"
+    assert [t.label for t in from_lagging] == ["swing", "open"]
+    np.testing.assert_allclose(KIN.tip_position(from_end[-1].q), RELEASE_TIP, atol=1e-3)
+    # Too far from the end point (the arm was moved elsewhere, or never got there): the measurement wins.
+    elsewhere = end + np.array([0.0, 0.0, PLAN.cfg.continue_window_rad + 0.01, 0.0])
+    assert PLAN.start_state(elsewhere, end) is elsewhere
+    # Swing angles compare the short way round (2 pi apart is the same pose).
+    wrapped = end + np.array([2 * math.pi - 0.1, 0.0, 0.0, 0.0])
+    assert np.array_equal(PLAN.start_state(wrapped, end), end)
+    assert PLAN.start_state(None, end) is None
+    assert PLAN.start_state(lagging, None) is lagging

@@ -166,12 +166,21 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     seed, _ = load_yaml(config_path("seeds", "paper.yaml"))
     rel = next(r for r in seed["parameters"] if r.get("record_name") == "target_release_pose")
     swing = math.atan2(rel["y"] - KIN.swing_origin[1], rel["x"] - KIN.swing_origin[0])
-    status, res = stack.run("change_pose", pwa_goal([rel["x"], rel["y"], rel["z"]], rel["theta_w"]), timeout=120)
+    # pass_through as the seed's record asks: the carry ends once the commands sent bring the arm there
+    assert rel.get("pass_through") == 1, rel
+    carry = pwa_goal([rel["x"], rel["y"], rel["z"]], rel["theta_w"])
+    carry.pass_through = True
+    status, res = stack.run("change_pose", carry, timeout=120)
     assert status == SUCCEEDED, res.message
+    carry_end_speed = max(abs(v) for v in stack.dq_log[-1][2])
     stack.feedback.clear()
     status, res = stack.run("release", Zx200ReleaseSimple.Goal(target_angle=swing), timeout=120)
     assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
-    # the carry left the arm over the vessel: the release opens at once (release_swing_in_open)
+    assert carry_end_speed > 0.02, f"the pass-through carry waited for rest (joint speed {carry_end_speed:.3f} rad/s)"
+    # planned from where the carry goes, not from the lagging joint_states: over the vessel already, so
+    # the release opens at once (release_swing_in_open), with no swing back
+    assert stack.procs["planner"].wait_for("Zx200ReleaseSimple: planned from the previous goal's pass-through end", 5), \
+        stack.procs["planner"].output[-2000:]
     assert "open" in set(stack.feedback) and "swing" not in set(stack.feedback), stack.feedback
     stack.spin(3.0)
     vessel2 = stack.soil[2]

@@ -70,6 +70,9 @@ def _make_node():  # noqa: ANN202
             self._state_probe = rclpy.create_node("zx200_planner_state", namespace=self.get_namespace(),
                                                   context=self.context, use_global_arguments=False)
             self._state_topic = self.resolve_topic_name("joint_states")
+            # where the last goal left the arm when it ended at a pass-through point (None otherwise): the
+            # next plan starts there while the arm is still on its way (Zx200Planner.start_state)
+            self._pass_through_end: np.ndarray | None = None
             self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=group)
             accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
             ActionServer(self, Zx200ChangePose, "tms_rp_zx200_change_pose", execute_callback=self._change_pose,
@@ -99,10 +102,16 @@ def _make_node():  # noqa: ANN202
         def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
             result = action_type.Result()
             t0 = time.monotonic()
+            pass_through_end, self._pass_through_end = self._pass_through_end, None
             try:
                 q = self._current_q() if needs_q else None
+                q_plan = self.planner.start_state(q, pass_through_end)
+                if q_plan is not q:
+                    self.get_logger().info(
+                        f"{action_type.__name__}: planned from the previous goal's pass-through end "
+                        f"{np.round(q_plan, 3).tolist()} (measured {np.round(q, 3).tolist()})")
                 t_state = time.monotonic()
-                targets = plan(q)
+                targets = plan(q_plan)
             except PlanningError as exc:
                 self.get_logger().warning(f"goal rejected before motion: {exc}")
                 result.error_code.val = exc.code
@@ -127,6 +136,8 @@ def _make_node():  # noqa: ANN202
                 else:
                     handle.abort()
                 return result
+            if targets[-1].via:
+                self._pass_through_end = self.planner.end_joints(targets)
             result.error_code.val = codes.SUCCESS
             result.message = "done"
             handle.succeed()
@@ -235,6 +246,7 @@ def _make_node():  # noqa: ANN202
                     positions_with_angle=[([p.position.x, p.position.y, p.position.z], p.theta_w)
                                           for p in g.position_with_angle_sequence],
                     current_q=q,
+                    pass_through=bool(g.pass_through),
                 )
 
             return self._run(handle, Zx200ChangePose, plan)

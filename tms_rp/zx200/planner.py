@@ -16,7 +16,7 @@ names the joint or the distance. The targets are consumed by :class:`tms_rc.zx20
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +49,7 @@ class PlannerConfig:
     dig_speed_scale: float = 0.5
     limit_margin: float = 0.005
     dig_joint_margin: float = 0.06
+    continue_window_rad: float = 0.5
 
 
 def load_planner_config(path: str | Path | None = None) -> PlannerConfig:
@@ -111,8 +112,13 @@ class Zx200Planner:
         poses: list[tuple[list[float], list[float]]] | None = None,
         positions_with_angle: list[tuple[list[float], float]] | None = None,
         current_q: np.ndarray | None = None,
+        pass_through: bool = False,
     ) -> list[JointTarget | CartesianTarget]:
         """Targets of one change_pose goal; exactly one of the three forms must be non-empty.
+
+        ``pass_through`` makes the last target a via point too: the goal ends once the commands already
+        sent bring the arm there (the controller's via tolerance, no wait for rest), for a goal the next
+        one continues from (the paper tree's carry over the vessel, followed by the release).
 
         Joint points may name a subset of the joints (others are held at ``current_q``); unknown names
         (other than the IK dummy ``bucket_end_joint``, which is ignored) are rejected.
@@ -151,10 +157,12 @@ class Zx200Planner:
                 tips = list(positions_with_angle or [])
                 what = "position_with_angle"
             q_prev = None if current_q is None else _finite(current_q, "current joint state")
+            swung = False
             for k, (pos, th) in enumerate(tips):
                 final = self._cartesian(pos, th, f"{what} {k + 1}", label=f"{what.split('_')[0]} {k + 1}")
                 q_goal = self.kin.ik_position_with_angle(final.position, final.theta_w)
-                if q_prev is not None and abs(math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)) > self.cfg.joint_space_swing:
+                swung = q_prev is not None and abs(math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)) > self.cfg.joint_space_swing
+                if swung:
                     # A big swing: joint-space motion to the IK solution (as MoveIt plans a pose goal), the
                     # straight tip line only for the final approach. A straight line across a swing is
                     # slow (the tip speed limit over the whole chord) and cuts past the cab.
@@ -162,7 +170,40 @@ class Zx200Planner:
                     targets.append(JointTarget(self._check_joints(q_goal, f"{what} {k + 1}"), final.label, via=True))
                 targets.append(final)
                 q_prev = q_goal
+            if pass_through and swung:
+                # the joint-space move already ends at the goal's IK pose; the straight final approach is
+                # there for the goal precision, which a pass-through goal does not wait for (it would
+                # only add its 0.5 s minimum duration)
+                targets.pop()
+        if pass_through:
+            targets[-1] = replace(targets[-1], via=True)
         return self._label(targets, "moving")
+
+    def end_joints(self, targets: list[JointTarget | CartesianTarget]) -> np.ndarray:
+        """The joint angles the last of ``targets`` puts the arm at (IK of a Cartesian one)."""
+        last = targets[-1]
+        if isinstance(last, JointTarget):
+            return np.asarray(last.q, dtype=float).copy()
+        return self.kin.ik_position_with_angle(last.position, last.theta_w, check_limits=False)
+
+    def start_state(self, measured_q: np.ndarray | None, pass_through_end: np.ndarray | None) -> np.ndarray | None:
+        """The joint state to plan the next goal from.
+
+        A goal that ended at a pass-through point (excavate's lift, release's open, a ``pass_through``
+        change_pose) ended before the arm got there: the measured joints still lag by the commands in
+        flight (on the swing ~1.3 s of dead time and lag, 0.2-0.3 rad at the end of a carry), while the
+        controller starts the next goal's first segment from where they will be. Planning from the lagging
+        measurement would aim the release's open from a front pose the arm is leaving and add a swing
+        back. So the next plan starts from that end point, as long as every measured joint is within
+        ``continue_window_rad`` of it (the arm is on its way there); otherwise from the measurement.
+        """
+        if pass_through_end is None or measured_q is None:
+            return measured_q
+        d = np.asarray(measured_q, dtype=float) - pass_through_end
+        d[0] = math.remainder(float(d[0]), 2 * math.pi)
+        if float(np.max(np.abs(d))) <= self.cfg.continue_window_rad:
+            return np.asarray(pass_through_end, dtype=float).copy()
+        return measured_q
 
     @staticmethod
     def _label(targets: list, prefix: str) -> list:

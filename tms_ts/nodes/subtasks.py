@@ -85,6 +85,7 @@ def planning_goal(plan: dict):  # noqa: ANN201 - one of the planning goal types
             goal.pose_sequence = [_pose(plan["pose"])]
         else:
             goal.position_with_angle_sequence = [_pwa(plan["pwa"])]
+        goal.pass_through = bool(plan.get("pass_through", False))
         return goal
     if kind == "excavate":
         return Zx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
