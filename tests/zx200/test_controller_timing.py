@@ -222,3 +222,29 @@ def test_a_clock_that_jumps_back_does_not_end_a_goal_early(kin, cfg50):
             t = round(t + PLANT_DT, 9)
             errors.append(float(np.linalg.norm(kin.tip_position(q) - kin.tip_position(q1))))
         assert max(errors[-50:]) < cfg50.goal_tolerance_m, f"rest error {max(errors[-50:]) * 100:.1f} cm"
+
+
+def test_joint_speed_scale_is_one_number_or_per_joint_and_paces_each_joint(tmp_path, kin):
+    import re
+
+    from tms_common.config import config_path
+
+    text = config_path("tms_rc", "zx200_arm_controller.yaml").read_text()
+    line = re.compile(r"^joint_speed_scale:.*$", re.M)
+    path = tmp_path / "ctl.yaml"
+    path.write_text(line.sub("joint_speed_scale: 0.5", text))
+    assert load_controller_config(path).joint_speed_scale.tolist() == [0.5] * 4
+    path.write_text(line.sub("joint_speed_scale: {swing_joint: 1.2, boom_joint: 0.8, arm_joint: 0.8, bucket_joint: 0.8}", text))
+    with pytest.raises(ConfigError, match="joint_speed_scale must be <= 1"):
+        load_controller_config(path)
+    path.write_text(line.sub("joint_speed_scale: {swing_joint: 0.9, boom_joint: 0.8}", text))
+    with pytest.raises(ConfigError, match="joint_speed_scale: missing joint 'arm_joint'"):
+        load_controller_config(path)
+    # A swing-only move is paced by the swing's own scale: its time goes as 1/sqrt(scale) (triangular profile).
+    cfg = load_controller_config()
+    times = []
+    for swing_scale in (0.8, 0.9):
+        cfg.joint_speed_scale = np.array([swing_scale, 0.8, 0.8, 0.8])
+        dur, _ = ArmController(kin, cfg)._profile(np.array([1.5, 0.0, 0.0, 0.0]), 1.0)
+        times.append(dur)
+    assert times[1] == pytest.approx(times[0] * (0.8 / 0.9) ** 0.5, rel=1e-6), times

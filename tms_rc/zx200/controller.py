@@ -68,6 +68,13 @@ def _per_joint(data: Any, key: str, source: str) -> np.ndarray:
         raise ConfigError(f"{source}: {key}: values must be numbers, got {data!r}") from None
 
 
+def _scalar_or_per_joint(data: Any, key: str, source: str) -> np.ndarray:
+    """One number for every joint, or a mapping joint -> number."""
+    if isinstance(data, int | float) and not isinstance(data, bool):
+        return np.full(N, float(data))
+    return _per_joint(data, key, source)
+
+
 @dataclass
 class ControllerConfig:
     """Parameters of :class:`ArmController` (see ``config/tms_rc/zx200_arm_controller.yaml``)."""
@@ -88,7 +95,7 @@ class ControllerConfig:
     max_theta_w_rate: float = 0.35
     max_tip_accel: float = 1.0
     max_theta_w_accel: float = 1.0
-    joint_speed_scale: float = 0.6
+    joint_speed_scale: np.ndarray = field(default_factory=lambda: np.full(N, 0.6))  # per joint
     dead_time_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.1))
     lag_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.15))
     goal_tolerance_m: float = 0.02
@@ -129,7 +136,7 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             max_theta_w_rate=float(data["max_theta_w_rate"]),
             max_tip_accel=float(data["max_tip_accel"]),
             max_theta_w_accel=float(data["max_theta_w_accel"]),
-            joint_speed_scale=float(data["joint_speed_scale"]),
+            joint_speed_scale=_scalar_or_per_joint(data["joint_speed_scale"], "joint_speed_scale", src),
             dead_time_s=_per_joint(data["plant_model"]["dead_time_s"], "plant_model.dead_time_s", src),
             lag_s=_per_joint(data["plant_model"]["lag_s"], "plant_model.lag_s", src),
             goal_tolerance_m=float(data["goal_tolerance_m"]),
@@ -151,8 +158,11 @@ def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
             raise where.error(("pid",), f"pid: missing gains for {key!r}")
     limits = ("rate_hz", "pump_flow_lpm", "max_tip_speed", "max_theta_w_rate", "max_tip_accel", "max_theta_w_accel",
               "joint_speed_scale")
-    if not all(getattr(cfg, key) > 0 for key in limits):
+    if not all(np.all(np.asarray(getattr(cfg, key)) > 0) for key in limits):
         raise ConfigError(f"{src}: {', '.join(limits)} must be > 0")
+    if np.any(cfg.joint_speed_scale > 1.0):
+        raise where.error(("joint_speed_scale",), f"joint_speed_scale must be <= 1 (a fraction of the joint limits), "
+                          f"got {cfg.joint_speed_scale.tolist()}")
     for key in ("goal_tolerance_m", "goal_tolerance_rad", "via_tolerance_m", "via_tolerance_rad"):
         if not getattr(cfg, key) > 0:
             raise where.error((key,), f"{key} must be > 0, got {getattr(cfg, key)}")
@@ -454,7 +464,7 @@ class ArmController:
         ``speed_caps`` / ``accel_caps`` (path fraction per s, per s^2: a Cartesian segment's tip and edge
         angle limits). For a Cartesian segment ``dq`` is the IK difference of its ends, an estimate."""
         cfg, lim = self.cfg, self.kin.limits
-        scale = min(1.0, cfg.joint_speed_scale * speed_scale)  # never beyond the joint limits
+        scale = np.minimum(1.0, cfg.joint_speed_scale * speed_scale)  # per joint; never beyond the joint limits
         dq = np.maximum(np.abs(dq), 1e-9)
         speed = min((float(np.min(scale * lim.velocity / dq)),
                      0.8 * cfg.pump_flow_lpm / float(np.sum(cfg.flow_per_rad_s * dq)), *speed_caps))
