@@ -53,6 +53,7 @@ class SiteSensing:
     _written_flags: dict[str, bool] = field(default_factory=dict)
     _last_target: tuple[float, float, float] | None = None
     _last_release: tuple[float, float, float] | None = None
+    _release_spot: tuple[float, float] | None = None  # vessel frame x, y of the written release target
     _arrival: ArrivalDetector | None = None
 
     def __post_init__(self) -> None:
@@ -117,7 +118,7 @@ class SiteSensing:
         """Vessel points (vessel frame, see :mod:`tms_sp.vessel`) -> release target + SENSING_LOADED_FLG."""
         spec = self.cfg.vessel_geom.grid_spec(self.cfg.resolution)
         grid = rasterize(points, spec, sensor="vessel points")
-        v = assess_vessel(grid, self.cfg.vessel_geom, self.cfg.vessel)
+        v = assess_vessel(grid, self.cfg.vessel_geom, self.cfg.vessel, previous_xy=self._release_spot)
         self.vessel = v
         if self.ic120_pose is not None and self._at_loading_point():
             pose, angle = release_in_zx200(
@@ -130,6 +131,7 @@ class SiteSensing:
                 self.store.set_fields(self.cfg.angle_record, angle, model_name=self.cfg.vessel_model)
                 self.writes += 2
                 self._last_release = xyz
+                self._release_spot = (v.release_xyz[0], v.release_xyz[1])
         self._set_flag("SENSING_LOADED_FLG", v.loaded)
         return v
 

@@ -63,12 +63,19 @@ class VesselParams:
     carry_theta_w: float = math.radians(85.0)
     target_fill: float = 0.8
     smooth_width: float = 0.5   # [m] box filter before picking the lowest spot
+    #: [m] the previous release spot is kept unless another is at least this much lower: with an even
+    #: load, 2 cm scan noise moved the lowest spot up to 1 m between scans, so the carry (reading
+    #: target_release_pose) and the release (reading release_angle ~5 s later) aimed 0.05-0.1 rad apart
+    #: and the release added a swing of its own (6 of 16 passes, 3-cycle demo of 22 Nov 18:51)
+    release_hysteresis: float = 0.03
 
     def __post_init__(self) -> None:
         if not 0 < self.target_fill <= 1.5:
             raise ValueError(f"VesselParams: target_fill must be in (0, 1.5], got {self.target_fill}")
         if self.wall_margin < 0 or self.clearance < 0:
             raise ValueError(f"VesselParams: wall_margin/clearance must be >= 0, got {self.wall_margin}/{self.clearance}")
+        if self.release_hysteresis < 0:
+            raise ValueError(f"VesselParams: release_hysteresis must be >= 0, got {self.release_hysteresis}")
 
 
 @dataclass(frozen=True)
@@ -82,8 +89,13 @@ class VesselAssessment:
     lowest_height: float     # smoothed load height at the release point [m above floor]
 
 
-def assess_vessel(grid: HeightGrid, geom: VesselGeometry, params: VesselParams) -> VesselAssessment:
-    """Load volume, loaded flag and release point from the vessel's height grid."""
+def assess_vessel(grid: HeightGrid, geom: VesselGeometry, params: VesselParams,
+                  previous_xy: tuple[float, float] | None = None) -> VesselAssessment:
+    """Load volume, loaded flag and release point from the vessel's height grid.
+
+    ``previous_xy`` (vessel frame) is the release spot chosen before: it stays the release point unless
+    another allowed spot scores at least ``params.release_hysteresis`` lower.
+    """
     spec = grid.spec
     h = np.clip(grid.z, 0.0, None)
     volume = float(h.sum() * spec.cell_area)
@@ -97,6 +109,10 @@ def assess_vessel(grid: HeightGrid, geom: VesselGeometry, params: VesselParams) 
     # Prefer the centre at (nearly) equal height: 1 cm per metre off-centre.
     score = np.where(allowed, smooth + 0.01 * np.hypot(xg, yg), np.inf)
     row, col = np.unravel_index(int(np.argmin(score)), score.shape)
+    if previous_xy is not None:
+        prev = np.unravel_index(int(np.argmin(np.hypot(xg - previous_xy[0], yg - previous_xy[1]))), score.shape)
+        if np.isfinite(score[prev]) and score[prev] - score[row, col] < params.release_hysteresis:
+            row, col = prev
     tip_z = max(geom.rim_above_floor, float(h.max())) + params.clearance
     return VesselAssessment(
         volume=volume,

@@ -222,3 +222,24 @@ def test_bad_parameters_name_the_key(tmp_path):
     bad.write_text(text)
     with pytest.raises(ConfigError, match=r"arrival.point: 'P9' is not a pose"):
         load_sensing_config(sensing=bad)
+
+
+def test_release_spot_holds_against_scan_noise_and_moves_for_a_real_heap():
+    g = CFG.vessel_geom
+    spec = g.grid_spec(CFG.resolution)
+    rng = np.random.default_rng(12)
+
+    def grid(surface):
+        pts = syn.scan(surface, (spec.x_min, spec.x_max), (spec.y_min, spec.y_max), 8000, rng, noise=0.02)
+        return rasterize(pts, spec, sensor="vessel")
+
+    even = lambda x, y: 0.2 + 0 * x  # noqa: E731 - the plant's even layer of load
+    free = [assess_vessel(grid(even), g, CFG.vessel).release_xyz[:2] for _ in range(12)]
+    assert max(np.hypot(x - free[0][0], y - free[0][1]) for x, y in free) > 0.2, "noise alone should move the argmin"
+    spot = free[0]
+    held = [assess_vessel(grid(even), g, CFG.vessel, previous_xy=spot).release_xyz[:2] for _ in range(12)]
+    assert all(np.hypot(x - spot[0], y - spot[1]) < 0.11 for x, y in held), held
+    # a heap where the spot was (soil landed there): the release moves away from it
+    heap = lambda x, y: 0.2 + 0.3 * np.exp(-((x - spot[0]) ** 2 + (y - spot[1]) ** 2) / 0.3)  # noqa: E731
+    moved = assess_vessel(grid(heap), g, CFG.vessel, previous_xy=spot).release_xyz[:2]
+    assert np.hypot(moved[0] - spot[0], moved[1] - spot[1]) > 0.5, (moved, spot)
