@@ -149,7 +149,7 @@ def main() -> None:
         code2, msg2, times["carry"] = rig.run(carry)
         carried = soil.bucket
         carry_segments = dict(rig.segment_s)
-        q_release = rig.planner.start_state(rig.q, rig.planner.end_joints(carry) if carry[-1].via else None)
+        q_release = rig.planner.start_state(rig.q, rig.planner.pass_through_end(carry))
         code3, msg3, times["release"] = rig.run(rig.planner.release(angle, q_release))
         release_segments = dict(rig.segment_s)
         for c, m, what in ((code2, msg2, "carry"), (code3, msg3, "release")):

@@ -82,7 +82,8 @@ def test_pass_through_carry_ends_at_a_via_point_and_the_release_plans_from_it() 
     small = PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q_lifted, pass_through=True)
     assert [type(t) for t in small] == [CartesianTarget] and small[0].via
     np.testing.assert_allclose(KIN.tip_position(PLAN.end_joints(small)), near, atol=1e-6)
-    end = PLAN.end_joints(carry)
+    end = PLAN.pass_through_end(carry)
+    assert PLAN.pass_through_end(PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q_lifted)) is None
     np.testing.assert_allclose(KIN.tip_position(end), RELEASE_TIP, atol=1e-6)
     # The carry's goal ended on the controller's prediction: the measured swing still lags ~0.25 rad.
     lagging = end - np.array([0.25, 0.05, -0.05, 0.02])

@@ -136,8 +136,7 @@ def _make_node():  # noqa: ANN202
                 else:
                     handle.abort()
                 return result
-            if targets[-1].via:
-                self._pass_through_end = self.planner.end_joints(targets)
+            self._pass_through_end = self.planner.pass_through_end(targets)
             result.error_code.val = codes.SUCCESS
             result.message = "done"
             handle.succeed()

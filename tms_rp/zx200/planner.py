@@ -186,6 +186,11 @@ class Zx200Planner:
             return np.asarray(last.q, dtype=float).copy()
         return self.kin.ik_position_with_angle(last.position, last.theta_w, check_limits=False)
 
+    def pass_through_end(self, targets: list[JointTarget | CartesianTarget]) -> np.ndarray | None:
+        """Where a goal of ``targets`` that succeeded leaves the arm going, if it ends at a pass-through
+        point (its last target is a via point), for :meth:`start_state`; None if it ends at rest."""
+        return self.end_joints(targets) if targets[-1].via else None
+
     def start_state(self, measured_q: np.ndarray | None, pass_through_end: np.ndarray | None) -> np.ndarray | None:
         """The joint state to plan the next goal from.
 
