@@ -49,6 +49,8 @@ class SensingConfig:
     excavation: ExcavationParams
     excavation_model: str
     excavation_record: str
+    approach_record: str
+    approach_height: float
     excavation_update_threshold: float
     vessel_geom: VesselGeometry
     vessel: VesselParams
@@ -156,6 +158,8 @@ def load_sensing_config(
     except ValueError as exc:
         raise sw.error(e, str(exc)) from None
 
+    if ex("approach_height") < 0:
+        raise sw.error(e + ("approach_height",), f"approach_height: must be >= 0, got {ex('approach_height')}")
     v = ("vessel",)
     vessel_cfg = _get(ic, iw, ("vessel",), dict)
     hinge = _get(ic, iw, ("vessel", "hinge_xyz"), list)
@@ -205,6 +209,8 @@ def load_sensing_config(
         excavation_model=_get(s, sw, e + ("model_name",), str),
         excavation_record=_get(s, sw, e + ("record",), str),
         excavation_update_threshold=ex("update_threshold"),
+        approach_record=_get(s, sw, e + ("approach_record",), str),
+        approach_height=ex("approach_height"),
         vessel_geom=geom,
         vessel=vparams,
         vessel_model=_get(s, sw, v + ("model_name",), str),

@@ -96,6 +96,12 @@ class ExcavationTarget:
         bx, by, bz = self.in_base(base)
         return {"position_with_angle": 1, "x": bx, "y": by, "z": bz, "theta_w": self.theta_w, "offset": self.offset}
 
+    def approach_record_fields(self, base: Pose2D, height: float) -> dict[str, float | int]:
+        """The ``position_with_angle`` payload of the approach record: the target ``height`` higher with the
+        same edge angle, where the excavate's approach segment begins (ZX200 base frame)."""
+        bx, by, bz = self.in_base(base)
+        return {"position_with_angle": 1, "x": bx, "y": by, "z": bz + height, "theta_w": self.theta_w}
+
 
 @dataclass(frozen=True)
 class MoundAssessment:

@@ -5,7 +5,8 @@ changed through a tms_db store (``open_store``), as the original tms_sp updaters
 
 * the excavation target -> ``(zx200, target_excavate_pose)`` (position_with_angle:1 + x,y,z,theta_w,offset,
   ZX200 base frame), skipped while the record's ``LOCK_FLG`` is true, rewritten only when it moved
-  more than ``update_threshold``;
+  more than ``update_threshold``; with it ``(zx200, target_excavate_approach_pose)``, the same point
+  ``approach_height`` higher (the paper tree returns the arm there after a release);
 * the release target -> ``(zx200, target_release_pose)`` and the swing angle -> ``(zx200, release_angle)``,
   only while the IC120 stands at the loading point (elsewhere the vessel is not where the ZX200 releases);
 * the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> the global-blackboard
@@ -65,6 +66,7 @@ class SiteSensing:
         wanted = [
             (None, self.cfg.blackboard_record),
             (self.cfg.excavation_model, self.cfg.excavation_record),
+            (self.cfg.excavation_model, self.cfg.approach_record),
             (self.cfg.vessel_model, self.cfg.release_record),
             (self.cfg.vessel_model, self.cfg.angle_record),
         ]
@@ -109,6 +111,8 @@ class SiteSensing:
                     log.debug("excavation target locked (LOCK_FLG): not updated")
                 else:
                     self.store.set_fields(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model)
+                    self.store.set_fields(self.cfg.approach_record, a.target.approach_record_fields(self.base, self.cfg.approach_height),
+                                          model_name=self.cfg.excavation_model)
                     self.writes += 1
                     self._last_target = xyz
         self._set_flag("SENSING_CHECK_MOUND_FLG", a.has_soil)

@@ -9,7 +9,8 @@ Planning goal data (``kind`` -> keys):
 
 * ``change_pose``: ``mode`` joints|pose|position_with_angle and ``joints`` {name: rad} | ``pose``
   {x..qw} | ``pwa`` {x, y, z, theta_w}; ``pass_through`` (the record's optional 0/1 field: end at the
-  target without waiting for rest, the next goal continues the motion)
+  target without waiting for rest, the next goal continues the motion); ``theta_w_tolerance`` (optional
+  [rad], default 0: the nearest holdable edge angle within it where theta_w cannot be held)
 * ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
 * ``navigate_to_pose``: ``pose`` {x, y, z, qx..qw}; ``follow_waypoints`` / ``navigate_through_poses``:
   ``poses`` [{x, y, z, qx..qw}, ...] in frame ``map``. ``_deg`` variants give yaw in degrees.
@@ -85,6 +86,12 @@ def _bool(doc: dict, record: str, field: str) -> bool:
 def build_change_pose(doc: dict, record: str) -> dict:
     out = _change_pose_target(doc, record)
     out["pass_through"] = _bool(doc, record, "pass_through")
+    tolerance = _num(doc, record, "theta_w_tolerance", 0.0)
+    if tolerance < 0:
+        raise SubtaskRecordError(record, "theta_w_tolerance", f"must be >= 0 rad, got {tolerance}")
+    if tolerance > 0 and out["mode"] == "joints":
+        raise SubtaskRecordError(record, "theta_w_tolerance", "applies to pose / position_with_angle targets, not joints")
+    out["theta_w_tolerance"] = tolerance
     return out
 
 

@@ -25,8 +25,10 @@ import numpy as np
 
 from sim_bridge.config import load_plant
 from sim_bridge.plant import Plant
+from tests.tms_sp.treeutil import load_seed
 from tms_common.config import config_path
 from tms_rc.zx200.controller import ArmController, load_controller_config
+from tms_rp.zx200 import errors as codes
 from tms_rp.zx200.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp.config import load_sensing_config
@@ -39,6 +41,14 @@ from tms_sp.vessel import assess_vessel, release_in_zx200
 RATE_HZ = 50.0
 #: The carry as the seed's target_release_pose asks (pass_through: 1); LOAD_PASS_PASS_THROUGH=0 waits for rest.
 PASS_THROUGH = os.environ.get("LOAD_PASS_PASS_THROUGH", "1") != "0"
+#: The tree's let_the_soil_fall delay after the release [s] (trees/paper_zx200_load.xml; LOAD_PASS_SOIL_FALL).
+SOIL_FALL_S = float(os.environ.get("LOAD_PASS_SOIL_FALL", "1.0"))
+#: The tree's return_over_mound after that delay (seed record target_excavate_approach_pose); LOAD_PASS_RETURN=0:
+#: none, the excavate's approach does the swing back (the tree before 23 Nov).
+RETURN = os.environ.get("LOAD_PASS_RETURN", "1") != "0"
+#: The seed's theta_w_tolerance of that record.
+APPROACH_TOLERANCE = next(d["theta_w_tolerance"] for d in load_seed()["parameters"]
+                          if d.get("record_name") == "target_excavate_approach_pose")
 
 
 class PassRig:
@@ -95,6 +105,10 @@ class PassRig:
             self.plant.step()
 
     def mound_target(self) -> tuple[list[float], float, float]:
+        return self.mound_targets()[0]
+
+    def mound_targets(self) -> tuple[tuple[list[float], float, float], dict]:
+        """(excavation position, theta_w, offset), and the approach record tms_sp writes with it."""
         spec = self.sensing.mound_grid
         xg, yg = spec.centres()
         g = self.plant.ground
@@ -106,7 +120,8 @@ class PassRig:
         if a.target is None:
             raise RuntimeError(f"no excavation target: {a}")
         f = a.target.record_fields(self.base)
-        return [f["x"], f["y"], f["z"]], f["theta_w"], f["offset"]
+        return ([f["x"], f["y"], f["z"]], f["theta_w"], f["offset"]), a.target.approach_record_fields(
+            self.base, self.sensing.approach_height)
 
     def release_target(self) -> tuple[list[float], float, float]:
         geom = self.sensing.vessel_geom
@@ -135,12 +150,12 @@ def main() -> None:
         mound0, vessel0, dug0 = ground.mound_volume(), soil.vessel, soil.dug
         ground_out0 = ground.ground_soil_volume() - ground.mound_volume()
         times = {}
-        pos, th, off = rig.mound_target()
+        (pos, th, off), _ = rig.mound_targets()
         code, msg, times["excavate"] = rig.run(rig.planner.excavate(pos, th, off))
         dig_segments = dict(rig.segment_s)
         cut = soil.dug - dug0
         in_bucket = soil.bucket
-        if code != 0:
+        if code != codes.SUCCESS:
             print(f"  pass {k + 1}: excavate ended {code}: {msg}")
         rpos, rth, angle = rig.release_target()
         # the seed's target_release_pose has pass_through: 1; the planner node plans the release from the
@@ -150,16 +165,31 @@ def main() -> None:
         carried = soil.bucket
         carry_segments = dict(rig.segment_s)
         q_release = rig.planner.start_state(rig.q, rig.planner.pass_through_end(carry))
-        code3, msg3, times["release"] = rig.run(rig.planner.release(angle, q_release))
+        release_targets = rig.planner.release(angle, q_release)
+        code3, msg3, times["release"] = rig.run(release_targets)
         release_segments = dict(rig.segment_s)
         for c, m, what in ((code2, msg2, "carry"), (code3, msg3, "release")):
-            if c != 0:
+            if c != codes.SUCCESS:
                 print(f"  pass {k + 1}: {what} ended {c}: {m}")
-        # let the last soil fall (not counted in the pass: the next dig's swing starts while it does): the
-        # release ends on the prediction, the open bucket reaches the plant ~1.3 s later and spills for 1.5 s
+        # the tree's let_the_soil_fall: the release ends on the prediction, the open bucket reaches the plant
+        # ~1.3 s later and spills for 1.5 s; the swing back starts after the delay (its dead time covers the rest)
         t_settle = rig.plant.time
-        while rig.plant.time - t_settle < 1.0 or (soil.bucket > 1e-3 and rig.plant.time - t_settle < 5.0):
+        while rig.plant.time - t_settle < SOIL_FALL_S:
             rig.step_controller()  # idle between goals, as the node's 50 Hz loop goes on
+        times["soil_fall"] = rig.plant.time - t_settle
+        if RETURN:
+            _, approach = rig.mound_targets()
+            back = rig.planner.change_pose(
+                positions_with_angle=[([approach["x"], approach["y"], approach["z"]], approach["theta_w"])],
+                current_q=rig.planner.start_state(rig.q, rig.planner.pass_through_end(release_targets)),
+                pass_through=True, theta_w_tolerance=APPROACH_TOLERANCE)
+            code4, msg4, times["return"] = rig.run(back)
+            if code4 != codes.SUCCESS:
+                print(f"  pass {k + 1}: return ended {code4}: {msg4}")
+        else:
+            t_rest = rig.plant.time  # no return leaf: the next excavate's approach swings back
+            while soil.bucket > 1e-3 and rig.plant.time - t_rest < 5.0:
+                rig.step_controller()
         into = soil.vessel - vessel0
         spilled_out = ground.ground_soil_volume() - ground.mound_volume() - ground_out0
         pass_s = sum(times.values())

@@ -42,7 +42,8 @@ def _validate(record: str, doc: dict) -> None:
     elif record == CFG.excavation_record:
         PLANNER.excavate([doc["x"], doc["y"], doc["z"]], doc["theta_w"], doc.get("offset", 0.0))
     elif "position_with_angle" in doc:
-        PLANNER.change_pose(positions_with_angle=[([doc["x"], doc["y"], doc["z"]], doc["theta_w"])])
+        PLANNER.change_pose(positions_with_angle=[([doc["x"], doc["y"], doc["z"]], doc["theta_w"])],
+                            theta_w_tolerance=doc.get("theta_w_tolerance", 0.0))
     elif "target_angle" in doc:
         PLANNER.release(doc["target_angle"], q_home)
     else:
@@ -101,6 +102,21 @@ def test_every_sensed_excavation_target_passes_planner_validation():
             break
         fields = a.target.record_fields(CFG.zx200_base)
         _validate(CFG.excavation_record, fields)
+        approach = {**a.target.approach_record_fields(CFG.zx200_base, CFG.approach_height),
+                    "theta_w_tolerance": _seed_zx200()[CFG.approach_record]["theta_w_tolerance"]}
+        _validate(CFG.approach_record, approach)
+        # The tree's return_over_mound (a pass-through change_pose from over the vessel) ends at the
+        # excavate's first point but for a bucket trim: it does the swing, the approach the rest. Also at
+        # the attack angle's bounds (a 20 deg target failed the task in the plant with a 0.5 rad tolerance).
+        q_over_vessel = PLANNER.kin.ik_position_with_angle(np.array([-0.065, 6.475, 2.726]), 1.48353)
+        back = PLANNER.change_pose(positions_with_angle=[([approach["x"], approach["y"], approach["z"]], approach["theta_w"])],
+                                   current_q=q_over_vessel, pass_through=True,
+                                   theta_w_tolerance=approach["theta_w_tolerance"])
+        q_above = PLANNER.excavate([fields["x"], fields["y"], fields["z"]], fields["theta_w"], fields["offset"])[0].q
+        end = PLANNER.pass_through_end(back)
+        assert abs(end[0] - q_above[0]) < 1e-9, (end, q_above)
+        for bound in (CFG.excavation.theta_w_min, CFG.excavation.theta_w_max):
+            _validate(CFG.approach_record, {**approach, "theta_w": bound})
         seen += 1
         surface = syn.dig_pit(surface, a.target.x, a.target.y, radius=0.7, depth=0.5)
     assert seen >= 5

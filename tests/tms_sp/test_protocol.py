@@ -205,3 +205,12 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
     excavations = sum(1 for e in world.log if e == "zx200:target_excavate_pose")
     dumps = sum(1 for e in world.log if e == "ic120:release_angle_1")
     assert excavations >= 2 * dumps >= 4
+    # After every release the arm goes back over the mound before the tree reads SENSING_LOADED_FLG; the
+    # approach record sensing writes is the excavation target approach_height higher.
+    zx = [e for e in world.log if e.startswith("zx200:")]
+    after_release = {zx[i + 1] for i, e in enumerate(zx[:-1]) if e == "zx200:release_angle"}
+    assert after_release == {"zx200:target_excavate_approach_pose"}, after_release
+    target = store.get_parameter("zx200", cfg.excavation_record)
+    approach = store.get_parameter("zx200", cfg.approach_record)
+    assert (approach["x"], approach["y"], approach["theta_w"]) == (target["x"], target["y"], target["theta_w"])
+    assert approach["z"] == pytest.approx(target["z"] + cfg.approach_height)

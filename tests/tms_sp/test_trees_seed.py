@@ -116,7 +116,8 @@ def test_leaf_records_exist_in_the_seed_with_the_subtask_shape(path):
                 assert set(payload) == {"trajectory", "swing_joint", "boom_joint", "arm_joint", "bucket_joint", "bucket_end_joint"}
             else:
                 assert payload.get("position_with_angle") == 1
-                assert set(payload) - {"pass_through"} == {"position_with_angle", "x", "y", "z", "theta_w"}
+                assert set(payload) - {"pass_through", "theta_w_tolerance"} == {"position_with_angle", "x", "y", "z", "theta_w"}
+                assert 0 <= payload.get("theta_w_tolerance", 0) <= 1.6, f"{record}: theta_w_tolerance [rad]"
             assert payload.get("pass_through", 0) in (0, 1, True, False), f"{record}: pass_through must be 0/1"
         else:  # pragma: no cover - a new subtask needs a shape check here
             raise AssertionError(f"no shape check for {subtask}")

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tms_rc.zx200.controller import CartesianTarget, JointTarget
+from tms_rp.zx200.errors import InvalidGoalError, JointLimitError
 from tms_rp.zx200.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
@@ -101,3 +102,29 @@ def test_pass_through_carry_ends_at_a_via_point_and_the_release_plans_from_it() 
     assert np.array_equal(PLAN.start_state(wrapped, end), end)
     assert PLAN.start_state(None, end) is None
     assert PLAN.start_state(lagging, None) is lagging
+
+
+def test_theta_w_tolerance_takes_the_nearest_holdable_angle_within_it_and_rejects_beyond() -> None:
+    # 0.5 m above the seeded excavation target (config/seeds/paper.yaml): its 1.112 rad edge angle would
+    # put the bucket joint below its limit there.
+    target, th = np.array([5.05, 1.25, 0.051349]), 1.111833
+    above = target + np.array([0.0, 0.0, 0.5])
+    q_over_vessel = KIN.ik_position_with_angle(RELEASE_TIP, CARRY_THETA_W)
+    with pytest.raises(JointLimitError, match="bucket_joint"):
+        PLAN.change_pose(positions_with_angle=[(above.tolist(), th)], current_q=q_over_vessel)
+    back = PLAN.change_pose(positions_with_angle=[(above.tolist(), th)], current_q=q_over_vessel,
+                            pass_through=True, theta_w_tolerance=0.5)
+    end = PLAN.pass_through_end(back)
+    np.testing.assert_allclose(KIN.tip_position(end), above, atol=1e-6)
+    assert 0 < KIN.theta_w(end) - th < 0.5
+    # near the excavate's first point: the return does the swing, the approach is left a bucket trim (the
+    # excavate also moves the entry angle inside its dig margin first, so the two angles differ slightly)
+    q_above = PLAN.excavate(target.tolist(), th, 1.1)[0].q
+    assert abs(end[0] - q_above[0]) < 1e-9 and np.max(np.abs(end - q_above)) < 0.15, (end, q_above)
+    with pytest.raises(JointLimitError, match=r"theta_w 1\.112 rad cannot be held.*more than theta_w_tolerance 0\.050"):
+        PLAN.change_pose(positions_with_angle=[(above.tolist(), th)], current_q=q_over_vessel, theta_w_tolerance=0.05)
+    with pytest.raises(InvalidGoalError, match="negative"):
+        PLAN.change_pose(positions_with_angle=[(above.tolist(), th)], theta_w_tolerance=-0.1)
+    # a holdable angle is kept as asked
+    ok = PLAN.change_pose(positions_with_angle=[(RELEASE_TIP.tolist(), CARRY_THETA_W)], theta_w_tolerance=0.5)
+    assert ok[-1].theta_w == CARRY_THETA_W

@@ -246,6 +246,7 @@ def _make_node():  # noqa: ANN202
                                           for p in g.position_with_angle_sequence],
                     current_q=q,
                     pass_through=bool(g.pass_through),
+                    theta_w_tolerance=float(g.theta_w_tolerance),
                 )
 
             return self._run(handle, Zx200ChangePose, plan)

@@ -113,12 +113,17 @@ class Zx200Planner:
         positions_with_angle: list[tuple[list[float], float]] | None = None,
         current_q: np.ndarray | None = None,
         pass_through: bool = False,
+        theta_w_tolerance: float = 0.0,
     ) -> list[JointTarget | CartesianTarget]:
         """Targets of one change_pose goal; exactly one of the three forms must be non-empty.
 
         ``pass_through`` makes the last target a via point too: the goal ends once the commands already
         sent bring the arm there (the controller's via tolerance, no wait for rest), for a goal the next
         one continues from (the paper tree's carry over the vessel, followed by the release).
+
+        ``theta_w_tolerance`` [rad] (pose / position_with_angle targets): where the edge angle cannot be held
+        at a target, the nearest holdable one (:meth:`feasible_theta_w`, as the excavate's approach picks it)
+        if it lies within the tolerance; 0 = exactly the requested angle or the goal is rejected.
 
         Joint points may name a subset of the joints (others are held at ``current_q``); unknown names
         (other than the IK dummy ``bucket_end_joint``, which is ignored) are rejected.
@@ -128,6 +133,9 @@ class Zx200Planner:
             raise InvalidGoalError("change_pose goal is empty: no trajectory point, pose or position_with_angle")
         if sum(given) > 1:
             raise InvalidGoalError("change_pose goal mixes trajectory, pose_sequence and position_with_angle_sequence")
+        tolerance = float(_finite([theta_w_tolerance], "theta_w_tolerance")[0])
+        if tolerance < 0:
+            raise InvalidGoalError(f"theta_w_tolerance {tolerance} rad is negative")
         targets: list[JointTarget | CartesianTarget] = []
         if joint_points:
             names = list(joint_names or [])
@@ -159,6 +167,8 @@ class Zx200Planner:
             q_prev = None if current_q is None else _finite(current_q, "current joint state")
             swung = False
             for k, (pos, th) in enumerate(tips):
+                if tolerance > 0:
+                    th = self._angle_within(pos, th, tolerance, f"{what} {k + 1}")
                 final = self._cartesian(pos, th, f"{what} {k + 1}", label=f"{what.split('_')[0]} {k + 1}")
                 q_goal = self.kin.ik_position_with_angle(final.position, final.theta_w)
                 swung = q_prev is not None and abs(math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)) > self.cfg.joint_space_swing
@@ -178,6 +188,21 @@ class Zx200Planner:
         if pass_through:
             targets[-1] = replace(targets[-1], via=True)
         return self._label(targets, "moving")
+
+    def _angle_within(self, position: Any, theta_w: float, tolerance: float, what: str) -> float:
+        """The holdable edge angle nearest ``theta_w`` at ``position``; JointLimitError if it is further than
+        ``tolerance`` (OutOfReachError if no angle reaches the point)."""
+        pos = _finite(position, f"{what} position")
+        th = float(_finite([theta_w], f"{what} theta_w")[0])
+        if pos.shape != (3,):
+            raise InvalidGoalError(f"{what}: position must have 3 coordinates, got {pos.tolist()}")
+        held = self.feasible_theta_w(pos, th)
+        if abs(held - th) > tolerance:
+            raise JointLimitError(
+                f"{what}: theta_w {th:.3f} rad cannot be held at {pos.round(3).tolist()}; the nearest holdable "
+                f"angle {held:.3f} rad is {abs(held - th):.3f} rad off, more than theta_w_tolerance {tolerance:.3f}"
+            )
+        return held
 
     def end_joints(self, targets: list[JointTarget | CartesianTarget]) -> np.ndarray:
         """The joint angles the last of ``targets`` puts the arm at (IK of a Cartesian one)."""

@@ -86,6 +86,7 @@ def planning_goal(plan: dict):  # noqa: ANN201 - one of the planning goal types
         else:
             goal.position_with_angle_sequence = [_pwa(plan["pwa"])]
         goal.pass_through = bool(plan.get("pass_through", False))
+        goal.theta_w_tolerance = float(plan.get("theta_w_tolerance", 0.0))
         return goal
     if kind == "excavate":
         return Zx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
