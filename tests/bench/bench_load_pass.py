@@ -1,7 +1,7 @@
 """ZX200 load passes in-process: tms_sp targets -> planner -> arm controller -> MuJoCo plant, no ROS/CAN.
 
 What one load pass of the paper experiment (trees/paper_zx200_load.xml: excavate, carry_over_vessel,
-release) yields when only the cores are in the loop: the excavation target from tms_sp's mound
+release, let_the_soil_fall, return_over_mound) yields when only the cores are in the loop: the excavation target from tms_sp's mound
 processor on the plant's height field, the release target from its vessel processor (IC120 standing at
 P1), the planner's segments, the HQP controller at the paper launch's 50 Hz on the plant's clock, and
 the plant's hydraulics (dead times, lags, pump) and soil model. It isolates geometry and motion from the
@@ -10,6 +10,8 @@ transport and CPU of the full launch, so it shows what digging and release setti
     python -m tests.bench load_pass            # LOAD_PASS_N passes (default 6)
     LOAD_PASS_LATE=0.4 python -m tests.bench load_pass   # 40 % of the control ticks a period late
     LOAD_PASS_PASS_THROUGH=0 python -m tests.bench load_pass   # the carry waits for rest at its goal
+    LOAD_PASS_RETURN=0 python -m tests.bench load_pass   # no return leaf: the excavate's approach swings back
+    LOAD_PASS_SOIL_FALL=0.5 python -m tests.bench load_pass   # the delay before the swing back [s] (tree: 1.0)
 
 Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
 soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
