@@ -111,8 +111,8 @@ class SiteSensing:
                     log.debug("excavation target locked (LOCK_FLG): not updated")
                 else:
                     self.store.set_fields(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model)
-                    self.store.set_fields(self.cfg.approach_record, a.target.approach_record_fields(self.base, self.cfg.approach_height),
-                                          model_name=self.cfg.excavation_model)
+                    approach = a.target.approach_record_fields(self.base, self.cfg.approach_height)
+                    self.store.set_fields(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model)
                     self.writes += 1
                     self._last_target = xyz
         self._set_flag("SENSING_CHECK_MOUND_FLG", a.has_soil)

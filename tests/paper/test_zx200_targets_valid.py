@@ -115,6 +115,8 @@ def test_every_sensed_excavation_target_passes_planner_validation():
         q_above = PLANNER.excavate([fields["x"], fields["y"], fields["z"]], fields["theta_w"], fields["offset"])[0].q
         end = PLANNER.pass_through_end(back)
         assert abs(end[0] - q_above[0]) < 1e-9, (end, q_above)
+        # same tip point: tms_sp's approach_height agrees with the planner's approach geometry
+        np.testing.assert_allclose(KIN.tip_position(end), KIN.tip_position(q_above), atol=1e-6)
         for bound in (CFG.excavation.theta_w_min, CFG.excavation.theta_w_max):
             _validate(CFG.approach_record, {**approach, "theta_w": bound})
         seen += 1
