@@ -179,6 +179,7 @@ def load_sensing_config(
             carry_theta_w=math.radians(float(_get(s, sw, v + ("carry_theta_w_deg",)))),
             target_fill=float(_get(s, sw, v + ("target_fill",))),
             release_hysteresis=float(_get(s, sw, v + ("release_hysteresis",))),
+            loaded_hysteresis=float(_get(s, sw, v + ("loaded_hysteresis",))),
         )
     except ValueError as exc:
         raise sw.error(v, str(exc)) from None

@@ -122,7 +122,8 @@ class SiteSensing:
         """Vessel points (vessel frame, see :mod:`tms_sp.vessel`) -> release target + SENSING_LOADED_FLG."""
         spec = self.cfg.vessel_geom.grid_spec(self.cfg.resolution)
         grid = rasterize(points, spec, sensor="vessel points")
-        v = assess_vessel(grid, self.cfg.vessel_geom, self.cfg.vessel, previous_xy=self._release_spot)
+        v = assess_vessel(grid, self.cfg.vessel_geom, self.cfg.vessel, previous_xy=self._release_spot,
+                          was_loaded=self.flags.get("SENSING_LOADED_FLG", False))
         self.vessel = v
         if self.ic120_pose is not None and self._at_loading_point():
             pose, angle = release_in_zx200(

@@ -5,7 +5,7 @@ x towards the IC120's front, y to its left, z up, vessel lowered (angle 0). The 
 rectangle ``inner_length x inner_width``; heights are soil surface above the floor (0 = bare floor).
 
 * load volume = sum of heights x cell area; fill = volume / heaped capacity; the vessel is *loaded*
-  (SENSING_LOADED_FLG) when fill >= ``target_fill``.
+  (SENSING_LOADED_FLG) when fill >= ``target_fill``, and stays so down to ``target_fill - loaded_hysteresis``.
 * release target = the lowest part of the load (heights smoothed over about a bucket width), at
   least ``wall_margin`` from the walls, ties broken towards the vessel centre; the bucket tip goes
   ``clearance`` above the higher of the rim and the heap top, so successive passes spread the soil.
@@ -68,12 +68,18 @@ class VesselParams:
     #: target_release_pose) and the release (reading release_angle ~5 s later) aimed 0.05-0.1 rad apart
     #: and the release added a swing of its own (6 of 16 passes, 3-cycle demo of 22 Nov 18:51)
     release_hysteresis: float = 0.03
+    #: fill fraction: a vessel found loaded stays loaded until its fill drops this far below ``target_fill``
+    #: (a load that ended near the threshold flipped SENSING_LOADED_FLG 42 times in 2 min with scan noise,
+    #: 3-cycle demo of 22 Nov 21:29); a dump empties it well below
+    loaded_hysteresis: float = 0.05
 
     def __post_init__(self) -> None:
         if not 0 < self.target_fill <= 1.5:
             raise ValueError(f"VesselParams: target_fill must be in (0, 1.5], got {self.target_fill}")
         if self.wall_margin < 0 or self.clearance < 0:
             raise ValueError(f"VesselParams: wall_margin/clearance must be >= 0, got {self.wall_margin}/{self.clearance}")
+        if not 0 <= self.loaded_hysteresis < self.target_fill:
+            raise ValueError(f"VesselParams: loaded_hysteresis must be in [0, target_fill), got {self.loaded_hysteresis}")
         if self.release_hysteresis < 0:
             raise ValueError(f"VesselParams: release_hysteresis must be >= 0, got {self.release_hysteresis}")
 
@@ -90,8 +96,11 @@ class VesselAssessment:
 
 
 def assess_vessel(grid: HeightGrid, geom: VesselGeometry, params: VesselParams,
-                  previous_xy: tuple[float, float] | None = None) -> VesselAssessment:
+                  previous_xy: tuple[float, float] | None = None, was_loaded: bool = False) -> VesselAssessment:
     """Load volume, loaded flag and release point from the vessel's height grid.
+
+    ``was_loaded``: the previous assessment's flag; loaded then holds down to ``target_fill -
+    loaded_hysteresis``.
 
     ``previous_xy`` (vessel frame) is the release spot chosen before: it stays the release point unless
     another allowed spot scores at least ``params.release_hysteresis`` lower.
@@ -117,7 +126,7 @@ def assess_vessel(grid: HeightGrid, geom: VesselGeometry, params: VesselParams,
     return VesselAssessment(
         volume=volume,
         fill=fill,
-        loaded=fill >= params.target_fill,
+        loaded=fill >= params.target_fill - (params.loaded_hysteresis if was_loaded else 0.0),
         release_xyz=(float(xg[row, col]), float(yg[row, col]), tip_z),
         lowest_height=float(smooth[row, col]),
     )

@@ -124,12 +124,33 @@ def test_no_points_in_region_names_the_sensor():
         rasterize(np.zeros((4, 2)), CFG.mound_grid, sensor="mound")
 
 
-def _vessel(volume, rng, cx=0.0):
+def _vessel(volume, rng, cx=0.0, was_loaded=False):
     g = CFG.vessel_geom
     spec = g.grid_spec(CFG.resolution)
     surface = syn.vessel_heap(volume, g.inner_length, g.inner_width, cx=cx) if volume > 0 else (lambda x, y: 0 * x)
     pts = syn.scan(surface, (spec.x_min, spec.x_max), (spec.y_min, spec.y_max), 8000, rng, noise=0.02)
-    return assess_vessel(rasterize(pts, spec, sensor="vessel"), g, CFG.vessel)
+    return assess_vessel(rasterize(pts, spec, sensor="vessel"), g, CFG.vessel, was_loaded=was_loaded)
+
+
+def test_loaded_flag_holds_through_scan_noise_at_the_threshold_and_clears_on_dump():
+    rng = np.random.default_rng(21)
+    cap = CFG.vessel_geom.capacity
+    # the load whose estimate lies at the threshold (the synthetic scan reads ~2.5 % high)
+    bias = np.mean([_vessel(0.6 * cap, rng).volume for _ in range(4)]) / (0.6 * cap)
+    at_threshold = CFG.vessel.target_fill * cap / bias
+    # Without the previous flag, repeated scans of a load at the threshold read loaded and not loaded.
+    plain = [_vessel(at_threshold, rng).loaded for _ in range(12)]
+    assert any(plain) and not all(plain), plain
+    # Once loaded, the same scans keep it loaded (the band is target_fill - loaded_hysteresis).
+    flag, held = False, []
+    for _ in range(12):
+        flag = _vessel(at_threshold, rng, was_loaded=flag).loaded
+        held.append(flag)
+    assert held[held.index(True):] == [True] * (12 - held.index(True)), held
+    # A dump (empty vessel) clears it, and a load clearly below the band does not count as loaded.
+    assert not _vessel(0.0, rng, was_loaded=True).loaded
+    below = (CFG.vessel.target_fill - CFG.vessel.loaded_hysteresis - 0.05) * cap
+    assert not _vessel(below, rng, was_loaded=True).loaded
 
 
 def test_vessel_volume_and_loaded_flag():
