@@ -12,6 +12,7 @@ transport and CPU of the full launch, so it shows what digging and release setti
     LOAD_PASS_PASS_THROUGH=0 python -m tests.bench load_pass   # the carry waits for rest at its goal
     LOAD_PASS_RETURN=0 python -m tests.bench load_pass   # no return leaf: the excavate's approach swings back
     LOAD_PASS_SOIL_FALL=0.5 python -m tests.bench load_pass   # the delay before the swing back [s] (tree: 1.0)
+    LOAD_PASS_TRANSPORT=2 python -m tests.bench load_pass   # measurements 2 periods old, commands 2 periods late
 
 Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
 soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
@@ -22,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections import deque
 
 import numpy as np
 
@@ -48,6 +50,8 @@ SOIL_FALL_S = float(os.environ.get("LOAD_PASS_SOIL_FALL", "1.0"))
 #: The tree's return_over_mound after that delay (seed record target_excavate_approach_pose); LOAD_PASS_RETURN=0:
 #: none, the excavate's approach does the swing back (the tree before 23 Nov).
 RETURN = os.environ.get("LOAD_PASS_RETURN", "1") != "0"
+#: Control periods of transport delay each way (LOAD_PASS_TRANSPORT; 0: none, the plant reads the command at once).
+TRANSPORT = int(os.environ.get("LOAD_PASS_TRANSPORT", "0"))
 #: The seed's theta_w_tolerance of that record.
 APPROACH_TOLERANCE = next(d["theta_w_tolerance"] for d in load_seed()["parameters"]
                           if d.get("record_name") == "target_excavate_approach_pose")
@@ -68,6 +72,8 @@ class PassRig:
         self.planner = Zx200Planner(self.kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
         self.sensing = load_sensing_config()
         self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
+        self._measured: deque = deque(maxlen=TRANSPORT + 1)
+        self._commands: deque = deque()
         pts = self.sensing.points
         self.base = pts["zx200_base"]
         self.plant.set_truth("ic120", pts["P1"].x, pts["P1"].y, pts["P1"].yaw, {})
@@ -98,10 +104,19 @@ class PassRig:
         return -1, f"no result within {limit_s} s", self.plant.time - t0
 
     def step_controller(self, skip: bool = False) -> None:
-        """One control period: the controller's command (the previous one again when ``skip``: a late tick)."""
+        """One control period: the controller's command (the previous one again when ``skip``: a late tick).
+
+        ``LOAD_PASS_TRANSPORT=k``: the measurement the controller gets is k periods old and its command
+        reaches the plant k periods later, as joint_states and commands over ROS and CAN do in the stack.
+        """
         front = self.plant.zx200.front
+        self._measured.append((np.array(front.q, dtype=float), np.array(front.v, dtype=float)))
+        q, v = self._measured[0]
         if not skip:
-            u = self.ctl.step(np.array(front.q, dtype=float), np.array(front.v, dtype=float), now=self.plant.time)
+            u = self.ctl.step(q, v, now=self.plant.time)
+            self._commands.append(u)
+        if len(self._commands) > TRANSPORT:
+            u = self._commands.popleft()
             self.plant.zx200.set_front_velocity(dict(zip(front.names, u.tolist(), strict=True)))
         for _ in range(self.sub_steps):
             self.plant.step()
