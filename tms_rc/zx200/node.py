@@ -44,6 +44,7 @@ def _make_node():  # noqa: ANN202
     from tms_msg.msg import JointCmd
     from tms_rc.zx200.controller import ArmController, load_controller_config
     from tms_rc.zx200.segments import targets_from_segments
+    from tms_rc.zx200.tick_stats import TickStats
     from tms_rp.zx200 import errors as codes
     from tms_rp.zx200.kinematics import JOINTS, load_kinematics
 
@@ -66,6 +67,8 @@ def _make_node():  # noqa: ANN202
             self.ctl = ArmController(self.kin, self.cfg)
             self._q: np.ndarray | None = None
             self._dq: np.ndarray | None = None
+            self._q_stamp: float | None = None  # header stamp of the last joint_states [s]
+            self._tick_stats: TickStats | None = None  # of the running goal
             self._goal_active = False
             self._pub = self.create_publisher(JointCmd, "front_cmd", 10)
             self.create_subscription(JointState, "joint_states", self._on_state, 20)
@@ -90,6 +93,8 @@ def _make_node():  # noqa: ANN202
             # no velocities (a driver that reports positions only): the controller predicts without them
             dq = np.array([msg.velocity[idx[n]] for n in JOINTS]) if len(msg.velocity) == len(msg.name) else None
             self._q, self._dq = q, dq
+            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            self._q_stamp = stamp if stamp > 0 else None
             self._wake(self._state_waiters)
 
         @staticmethod
@@ -112,7 +117,10 @@ def _make_node():  # noqa: ANN202
             # The ROS clock (simulated time in the launches): the controller advances its Smith
             # predictor, integrators and reference by the time that really passed, so late or
             # skipped ticks under CPU load do not corrupt the prediction (issue 9: swing stuck off).
-            u = self.ctl.step(q, dq, now=self.get_clock().now().nanoseconds * 1e-9)
+            now = self.get_clock().now().nanoseconds * 1e-9
+            if self._tick_stats is not None:
+                self._tick_stats.tick(now, self._q_stamp)
+            u = self.ctl.step(q, dq, now=now)
             msg = JointCmd()
             msg.joint_name = list(JOINTS)
             msg.control_type = JointCmd.VELOCITY
@@ -147,6 +155,7 @@ def _make_node():  # noqa: ANN202
                 result.message = str(exc)
                 return result
             self.ctl.start(targets)
+            self._tick_stats = TickStats(self.cfg.dt)
             canceling = False
             last_feedback = -1e9
             # (label, start) of each segment in ROS-clock seconds: logged at the end, where a motion's time went
@@ -177,9 +186,11 @@ def _make_node():  # noqa: ANN202
             result.message = st.message
             ends = [start for _, start in spans[1:]] + [self.get_clock().now().nanoseconds * 1e-9]
             took = f"after {ends[-1] - spans[0][1]:.1f} s; segments [s]: " if spans else "at once"
+            stats, self._tick_stats = self._tick_stats, None
             self.get_logger().info(
                 f"goal ended {st.result} ({st.message}) {took}"
                 + ", ".join(f"{label} {end - start:.1f}" for (label, start), end in zip(spans, ends, strict=True))
+                + (f"; control loop: {stats.summary()}" if stats else "")
             )
             if st.result == codes.SUCCESS:
                 handle.succeed()
