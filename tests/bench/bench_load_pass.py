@@ -48,7 +48,7 @@ PASS_THROUGH = os.environ.get("LOAD_PASS_PASS_THROUGH", "1") != "0"
 #: The tree's let_the_soil_fall delay after the release [s] (trees/paper_zx200_load.xml; LOAD_PASS_SOIL_FALL).
 SOIL_FALL_S = float(os.environ.get("LOAD_PASS_SOIL_FALL", "1.0"))
 #: The tree's return_over_mound after that delay (seed record target_excavate_approach_pose); LOAD_PASS_RETURN=0:
-#: none, the excavate's approach does the swing back (the tree before 23 Nov).
+#: none, the excavate's approach does the swing back (the tree until 22 Nov).
 RETURN = os.environ.get("LOAD_PASS_RETURN", "1") != "0"
 #: Control periods of transport delay each way (LOAD_PASS_TRANSPORT; 0: none, the plant reads the command at once).
 TRANSPORT = int(os.environ.get("LOAD_PASS_TRANSPORT", "0"))
@@ -120,9 +120,6 @@ class PassRig:
             self.plant.zx200.set_front_velocity(dict(zip(front.names, u.tolist(), strict=True)))
         for _ in range(self.sub_steps):
             self.plant.step()
-
-    def mound_target(self) -> tuple[list[float], float, float]:
-        return self.mound_targets()[0]
 
     def mound_targets(self) -> tuple[tuple[list[float], float, float], dict]:
         """(excavation position, theta_w, offset), and the approach record tms_sp writes with it."""

@@ -108,7 +108,8 @@ def test_every_sensed_excavation_target_passes_planner_validation():
         # The tree's return_over_mound (a pass-through change_pose from over the vessel) ends at the
         # excavate's first point but for a bucket trim: it does the swing, the approach the rest. Also at
         # the attack angle's bounds (a 20 deg target failed the task in the plant with a 0.5 rad tolerance).
-        q_over_vessel = PLANNER.kin.ik_position_with_angle(np.array([-0.065, 6.475, 2.726]), 1.48353)
+        carry = _seed_zx200()[CFG.release_record]
+        q_over_vessel = KIN.ik_position_with_angle(np.array([carry["x"], carry["y"], carry["z"]]), carry["theta_w"])
         back = PLANNER.change_pose(positions_with_angle=[([approach["x"], approach["y"], approach["z"]], approach["theta_w"])],
                                    current_q=q_over_vessel, pass_through=True,
                                    theta_w_tolerance=approach["theta_w_tolerance"])
