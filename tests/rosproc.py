@@ -64,6 +64,34 @@ def can_port(domain: int, k: int = 0) -> int:
     return port
 
 
+def _port_unbound(port: int) -> bool:
+    """True when no UDP socket on this host holds ``port`` now (a bind without SO_REUSEADDR succeeds)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind(("", port))
+        except OSError:
+            return False
+    return True
+
+
+def free_can_ports(domain: int, count: int, rng: random.Random | None = None) -> list[int]:
+    """``count`` distinct udp_multicast CAN ports of ``domain`` that no socket on this host holds now.
+
+    The domain's flock does not cover processes of an earlier test on the same domain that are still
+    closing (a clean-clone CI run once failed with EADDRINUSE on ``can_port(domain, 0)``), so ports are
+    probed, in random order, and a held one is passed over.
+    """
+    ks = list(range(CAN_PORTS_PER_DOMAIN))
+    (rng or random).shuffle(ks)
+    ports = [p for p in (can_port(domain, k) for k in ks) if _port_unbound(p)][:count]
+    if len(ports) < count:
+        raise RuntimeError(f"free_can_ports: only {len(ports)} of domain {domain}'s {CAN_PORTS_PER_DOMAIN} CAN ports "
+                           f"are unbound, {count} needed (ss -uapn shows who holds them)")
+    return ports
+
+
 def ros_env(domain: int, **extra: str) -> dict[str, str]:
     """Environment for a node process on ``domain``, discovery limited to this host."""
     env = dict(os.environ)

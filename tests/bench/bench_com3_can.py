@@ -14,7 +14,7 @@ import threading
 import time
 
 from tests.bench.stats import summary_ms
-from tests.rosproc import Proc, can_port, executable, isolated_domain, ros_env
+from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
 
 N_CODEC = 200_000
 N_LATENCY = 1000
@@ -57,7 +57,7 @@ def _latency() -> str:
     vid = codec.frame_id("Velocity_Cmd_1")
     with isolated_domain() as domain:
         group = f"239.74.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
-        port = can_port(domain, 0)
+        port = free_can_ports(domain, 1)[0]
         bridge = Proc([str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200", "-p", "machine:=zx200",
                        "-p", "can_interface:=udp_multicast", "-p", f"can_channel:={group}", "-p", f"can_port:={port}"],
                       ros_env(domain))

@@ -15,7 +15,7 @@ import time
 from sim_bridge.plant import Plant
 from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
 from tests.bench.stats import percentile, summary_ms
-from tests.rosproc import Proc, can_port, executable, isolated_domain, ros_env
+from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
 
 SIM_SECONDS = 120.0
 
@@ -75,7 +75,7 @@ def _jitter(seconds: float = 20.0) -> str:
     codec = load_codec("zx200")
     fid = codec.frame_id("Front_Angle")
     with isolated_domain() as domain:
-        port = can_port(domain, 0)
+        port = free_can_ports(domain, 1)[0]
         cfg = {"interface": "udp_multicast", "channel": f"239.76.1.{domain}", "port": port}
         bus = open_bus(cfg)
         proc = Proc([str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", "speed:=1.0", "-p", "realtime_priority:=20",

@@ -209,7 +209,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
-    from tests.rosproc import Proc, can_port, executable, isolated_domain, ros_env
+    from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
     from tests.zx200.conftest import ArmStack
     from tests.zx200.test_plant_integration import joint_goal, pose_goal, pwa_goal
     from tms_msg.msg import JointCmd
@@ -222,7 +222,7 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     lo = np.array([-1.5, -1.0, 0.8, -0.3])
     hi = np.array([1.5, -0.2, 2.4, 2.1])
     with isolated_domain() as domain:
-        port = can_port(domain, 0)
+        port = free_can_ports(domain, 1)[0]
         bus = ["-p", "zx200_can_interface:=udp_multicast", "-p", f"zx200_can_channel:=239.77.{domain}.9",
                "-p", f"zx200_can_port:={port}"]
         env = ros_env(domain)

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from tests.rosproc import can_port
+from tests.rosproc import free_can_ports
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -47,7 +47,7 @@ def can_cfg(domain: int) -> dict[str, Any]:
     return {
         "interface": "udp_multicast",
         "channel": f"239.74.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-        "port": can_port(domain, rng.randrange(20)),
+        "port": free_can_ports(domain, 1, rng)[0],
     }
 
 

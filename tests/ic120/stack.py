@@ -6,7 +6,7 @@ import os
 import random
 import time
 
-from tests.rosproc import can_port, executable
+from tests.rosproc import executable, free_can_ports
 
 
 def can_groups(domain: int) -> dict[str, dict]:
@@ -14,8 +14,8 @@ def can_groups(domain: int) -> dict[str, dict]:
     rng = random.Random(os.getpid() * 7919 + domain + time.monotonic_ns())
     return {
         m: {"interface": "udp_multicast", "channel": f"239.75.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-            "port": can_port(domain, 2 * i + rng.randrange(2) * 10)}
-        for i, m in enumerate(("zx200", "ic120"))
+            "port": port}
+        for m, port in zip(("zx200", "ic120"), free_can_ports(domain, 2, rng), strict=True)
     }
 
 

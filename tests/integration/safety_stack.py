@@ -24,7 +24,7 @@ from pathlib import Path
 
 import yaml
 
-from tests.rosproc import VENV, can_port, executable
+from tests.rosproc import VENV, executable, free_can_ports
 
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "config" / "launch" / "paper_experiment.yaml"
@@ -86,7 +86,7 @@ def start_stack(procs, domain: int, tmp: Path, speed: float) -> dict:  # noqa: A
     common = launch.get("parameters", {})
     rnd = random.Random(domain * 7 + 3)
     groups = {m: f"239.77.{rnd.randrange(1, 250)}.{rnd.randrange(1, 250)}" for m in ("zx200", "ic120")}
-    ports = {"zx200": can_port(domain, 0), "ic120": can_port(domain, 1)}
+    ports = dict(zip(("zx200", "ic120"), free_can_ports(domain, 2, rnd), strict=True))
     out = {}
     for node in launch["nodes"]:
         exe = node["executable"]

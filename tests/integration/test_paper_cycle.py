@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.rosproc import VENV, can_port
+from tests.rosproc import VENV, free_can_ports
 
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "config" / "launch" / "paper_experiment.yaml"
@@ -56,7 +56,7 @@ def _can_buses(domain: int, backend: str) -> dict[str, dict[str, object]]:
         return {m: {"interface": "socketcan", "channel": ch, "port": 0} for m, ch in VCAN.items()}
     rnd = random.Random(domain)
     return {m: {"interface": "udp_multicast", "channel": f"239.74.{rnd.randrange(1, 250)}.{rnd.randrange(1, 250)}",
-                "port": can_port(domain, k)} for k, m in enumerate(("zx200", "ic120"))}
+                "port": port} for m, port in zip(("zx200", "ic120"), free_can_ports(domain, 2, rnd), strict=True)}
 
 
 def _write_configs(tmp: Path, domain: int, supervisor: bool = True, backend: str = "udp_multicast") -> Path:

@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from tests.rosproc import can_port, executable
+from tests.rosproc import executable, free_can_ports
 
 
 def _bus_cfgs(domain: int) -> dict[str, dict[str, Any]]:
@@ -30,11 +30,11 @@ def _bus_cfgs(domain: int) -> dict[str, dict[str, Any]]:
             pytest.skip(f"SocketCAN interface {channel} is not available in this kernel")
         return {m: {"interface": "socketcan", "channel": channel} for m in ("zx200", "ic120")}
     rng = random.Random(os.getpid() * 7919 + domain + time.monotonic_ns())
-    k = rng.randrange(0, 18)
+    ports = free_can_ports(domain, 2, rng)
     return {
         m: {"interface": "udp_multicast", "channel": f"239.75.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-            "port": can_port(domain, k + i)}
-        for i, m in enumerate(("zx200", "ic120"))
+            "port": port}
+        for m, port in zip(("zx200", "ic120"), ports, strict=True)
     }
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.rosproc import ROOT, VENV, can_port
+from tests.rosproc import ROOT, VENV, free_can_ports
 from tests.tms_ur.conftest import free_port
 
 pytestmark = pytest.mark.integration
@@ -40,7 +40,7 @@ def _seed(db_path: Path) -> None:
 
 
 def _launch_yaml(tmp_path: Path, port: int, db: Path, domain: int) -> Path:
-    zx_port, ic_port = can_port(domain, 0), can_port(domain, 1)
+    zx_port, ic_port = free_can_ports(domain, 2)
     text = f"""
 name: panel_e2e
 parameters: {{use_sim_time: true, db_path: "{db}"}}

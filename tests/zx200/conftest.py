@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from tests.rosproc import can_port, executable
+from tests.rosproc import executable, free_can_ports
 
 #: Real-time factor of the plant in the integration tests (1.0: the nodes are timed against wall-clock
 #: CAN/DDS transport; the controller's dead-time model assumes real-time transport delays).
@@ -63,7 +63,7 @@ def _zx_bus(domain: int) -> dict[str, Any]:
         return {"interface": "socketcan", "channel": channel}
     rng = random.Random(os.getpid() * 7907 + domain + time.monotonic_ns())
     return {"interface": "udp_multicast", "channel": f"239.76.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-            "port": can_port(domain, rng.randrange(0, 18))}
+            "port": free_can_ports(domain, 1, rng)[0]}
 
 
 class ArmStack:
