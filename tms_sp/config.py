@@ -154,6 +154,7 @@ def load_sensing_config(
             min_height=ex("min_height"),
             min_volume=ex("min_volume"),
             ground_z=mound.ground_z,
+            target_hysteresis=ex("target_hysteresis"),
         )
     except ValueError as exc:
         raise sw.error(e, str(exc)) from None

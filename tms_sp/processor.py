@@ -53,6 +53,7 @@ class SiteSensing:
     writes: int = 0
     _written_flags: dict[str, bool] = field(default_factory=dict)
     _last_target: tuple[float, float, float] | None = None
+    _last_target_xy: tuple[float, float] | None = None  # map frame, kept by assess_mound while it scores near the best
     _last_release: tuple[float, float, float] | None = None
     _release_spot: tuple[float, float] | None = None  # vessel frame x, y of the written release target
     _arrival: ArrivalDetector | None = None
@@ -100,7 +101,7 @@ class SiteSensing:
         """Mound points (map frame) -> excavation target + SENSING_CHECK_MOUND_FLG."""
         grid = rasterize(points, self.cfg.mound_grid, sensor="mound points")
         axis = self.base.to_map(np.array([*self.cfg.swing_axis_in_base, 0.0]))
-        a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.cfg.excavation)
+        a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.cfg.excavation, previous_xy=self._last_target_xy)
         self.mound = a
         if a.target is not None:
             fields = a.target.record_fields(self.base)
@@ -115,6 +116,7 @@ class SiteSensing:
                     self.store.set_fields(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model)
                     self.writes += 1
                     self._last_target = xyz
+                    self._last_target_xy = (a.target.x, a.target.y)
         self._set_flag("SENSING_CHECK_MOUND_FLG", a.has_soil)
         return a
 

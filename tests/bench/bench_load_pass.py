@@ -11,8 +11,9 @@ transport and CPU of the full launch, so it shows what digging and release setti
     LOAD_PASS_LATE=0.4 python -m tests.bench load_pass   # 40 % of the control ticks a period late
     LOAD_PASS_PASS_THROUGH=0 python -m tests.bench load_pass   # the carry waits for rest at its goal
     LOAD_PASS_RETURN=0 python -m tests.bench load_pass   # no return leaf: the excavate's approach swings back
-    LOAD_PASS_SOIL_FALL=0.5 python -m tests.bench load_pass   # the delay before the swing back [s] (tree: 1.0)
+    LOAD_PASS_SOIL_FALL=0.5 python -m tests.bench load_pass   # the delay before the swing back [s] (default: the tree's)
     LOAD_PASS_TRANSPORT=2 python -m tests.bench load_pass   # measurements 2 periods old, commands 2 periods late
+    LOAD_PASS_GAP=0.2 python -m tests.bench load_pass   # the controller idles this long [s] before each next goal
 
 Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
 soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
@@ -23,12 +24,14 @@ from __future__ import annotations
 import math
 import os
 import time
+import xml.etree.ElementTree as ET
 from collections import deque
 
 import numpy as np
 
 from sim_bridge.config import load_plant
 from sim_bridge.plant import Plant
+from tests.rosproc import ROOT
 from tests.tms_sp.treeutil import load_seed
 from tms_common.config import config_path
 from tms_rc.zx200.controller import ArmController, load_controller_config
@@ -46,12 +49,16 @@ RATE_HZ = 50.0
 #: The carry as the seed's target_release_pose asks (pass_through: 1); LOAD_PASS_PASS_THROUGH=0 waits for rest.
 PASS_THROUGH = os.environ.get("LOAD_PASS_PASS_THROUGH", "1") != "0"
 #: The tree's let_the_soil_fall delay after the release [s] (trees/paper_zx200_load.xml; LOAD_PASS_SOIL_FALL).
-SOIL_FALL_S = float(os.environ.get("LOAD_PASS_SOIL_FALL", "1.0"))
+SOIL_FALL_S = float(os.environ.get("LOAD_PASS_SOIL_FALL") or 1e-3 * float(
+    ET.parse(ROOT / "trees" / "paper_zx200_load.xml").find(".//Delay[@name='let_the_soil_fall']").get("delay_msec")))
 #: The tree's return_over_mound after that delay (seed record target_excavate_approach_pose); LOAD_PASS_RETURN=0:
 #: none, the excavate's approach does the swing back (the tree until 22 Nov).
 RETURN = os.environ.get("LOAD_PASS_RETURN", "1") != "0"
 #: Control periods of transport delay each way (LOAD_PASS_TRANSPORT; 0: none, the plant reads the command at once).
 TRANSPORT = int(os.environ.get("LOAD_PASS_TRANSPORT", "0"))
+#: Simulated seconds the controller idles before each goal after the first (LOAD_PASS_GAP; 0: the next goal
+#: starts at the next tick), as the goal round trip tree -> subtask server -> planner -> controller takes in the stack.
+GAP_S = float(os.environ.get("LOAD_PASS_GAP", "0"))
 #: The seed's theta_w_tolerance of that record.
 APPROACH_TOLERANCE = next(d["theta_w_tolerance"] for d in load_seed()["parameters"]
                           if d.get("record_name") == "target_excavate_approach_pose")
@@ -74,6 +81,7 @@ class PassRig:
         self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
         self._measured: deque = deque(maxlen=TRANSPORT + 1)
         self._commands: deque = deque()
+        self._started = False
         pts = self.sensing.points
         self.base = pts["zx200_base"]
         self.plant.set_truth("ic120", pts["P1"].x, pts["P1"].y, pts["P1"].yaw, {})
@@ -89,8 +97,11 @@ class PassRig:
         """
         ctl = self.ctl
         self.segment_s: dict[str, float] = {}
+        t0 = self.plant.time  # the gap counts in the action's time, as in the stack's leaf times
+        while self._started and self.plant.time - t0 < GAP_S - 1e-9:
+            self.step_controller()
+        self._started = True
         ctl.start(targets)
-        t0 = self.plant.time
         # LOAD_PASS_LATE: the fraction of control ticks that come a period late (the previous command acts
         # for two periods), as a sim-time timer does on a loaded machine: the stack's conditions.
         late = float(os.environ.get("LOAD_PASS_LATE", "0"))

@@ -264,3 +264,18 @@ def test_release_spot_holds_against_scan_noise_and_moves_for_a_real_heap():
     heap = lambda x, y: 0.2 + 0.3 * np.exp(-((x - spot[0]) ** 2 + (y - spot[1]) ** 2) / 0.3)  # noqa: E731
     moved = assess_vessel(grid(heap), g, CFG.vessel, previous_xy=spot).release_xyz[:2]
     assert np.hypot(moved[0] - spot[0], moved[1] - spot[1]) > 0.5, (moved, spot)
+
+
+def test_excavation_target_holds_against_scan_noise_and_moves_once_dug():
+    rng = np.random.default_rng(13)
+    axis = CFG.swing_axis_map()
+    free = [assess_mound(_mound_grid(_cone(), rng, noise=0.02), axis, CFG.excavation).target for _ in range(12)]
+    assert max(math.hypot(t.x - free[0].x, t.y - free[0].y) for t in free) > 0.2, "noise alone should move the best cell"
+    spot = (free[0].x, free[0].y)
+    held = [assess_mound(_mound_grid(_cone(), rng, noise=0.02), axis, CFG.excavation, previous_xy=spot).target
+            for _ in range(12)]
+    assert all(math.hypot(t.x - spot[0], t.y - spot[1]) < 0.01 for t in held), [(t.x, t.y) for t in held]
+    # the target cell dug out: the target moves away from it
+    dug = syn.dig_pit(_cone(), spot[0], spot[1], radius=0.8, depth=1.2)
+    moved = assess_mound(_mound_grid(dug, rng, noise=0.02), axis, CFG.excavation, previous_xy=spot).target
+    assert math.hypot(moved.x - spot[0], moved.y - spot[1]) > 0.6
