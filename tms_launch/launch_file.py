@@ -19,6 +19,9 @@ A launch file::
         on_exit: shutdown            # optional: when this node exits 0 the whole launch ends with 0
                                      # (a job node, e.g. the experiment supervisor); non-zero is an error
         ready_timeout: 90            # seconds to wait until the node is visible on the ROS graph
+        nice: -10                    # optional scheduling niceness of the process and all its threads
+                                     # (-20..19, default: the launcher's); below the launcher's needs root
+                                     # or CAP_SYS_NICE, else the node runs unchanged and says so
 
 Every problem (malformed YAML, unknown key, unknown executable, duplicate name) is a
 :class:`~tms_common.errors.ConfigError` naming the file and line; nothing is started.
@@ -48,6 +51,7 @@ NODE_KEYS = {
     "required",
     "ready_timeout",
     "on_exit",
+    "nice",
 }
 TOP_KEYS = {"name", "nodes", "env", "parameters", "startup"}
 STARTUP = {"sequential", "parallel"}
@@ -70,6 +74,7 @@ class NodeSpec:
     required: bool = True
     ready_timeout: float = 90.0
     on_exit: str = "error"
+    nice: int | None = None
 
     @property
     def fqn(self) -> str:
@@ -196,6 +201,11 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
         on_exit = _expect(where, at + ("on_exit",), raw.get("on_exit", "error"), str, f"node {name!r}: 'on_exit'")
         if on_exit not in ON_EXIT:
             raise where.error(at + ("on_exit",), f"node {name!r}: on_exit must be one of {', '.join(sorted(ON_EXIT))}, got {on_exit!r}")
+        nice = raw.get("nice")
+        if nice is not None:
+            _expect(where, at + ("nice",), nice, int, f"node {name!r}: 'nice'")
+            if not -20 <= nice <= 19:
+                raise where.error(at + ("nice",), f"node {name!r}: nice must be within -20..19, got {nice}")
         nodes.append(
             NodeSpec(
                 name=name,
@@ -210,6 +220,7 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
                 required=required,
                 ready_timeout=float(timeout),
                 on_exit=on_exit,
+                nice=nice,
             )
         )
     title = data.get("name") or Path(path).stem

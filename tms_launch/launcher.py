@@ -46,6 +46,23 @@ def _die_with_parent() -> None:
     os.setpgrp()
 
 
+def _child_setup(nice: int | None):  # noqa: ANN202 - a preexec_fn
+    """Child-side setup before exec: :func:`_die_with_parent`, then the node's ``nice`` (set before exec, so
+    every thread the node starts inherits it; renicing a running process changes its main thread only)."""
+
+    def setup() -> None:
+        _die_with_parent()
+        if nice is None:
+            return
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, nice)
+        except OSError as exc:  # the node still starts; its output says why it runs at the launcher's niceness
+            os.write(2, f"tms-launch: nice {nice} refused ({exc.strerror}; below the launcher's niceness needs "
+                        f"root or CAP_SYS_NICE): running at nice {os.getpriority(os.PRIO_PROCESS, 0)}\n".encode())
+
+    return setup
+
+
 @dataclass
 class Running:
     spec: NodeSpec
@@ -108,7 +125,7 @@ class Launcher:
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
             env=env,
-            preexec_fn=_die_with_parent,  # noqa: PLW1509 - needed for PDEATHSIG and a process group
+            preexec_fn=_child_setup(spec.nice),  # noqa: PLW1509 - needed for PDEATHSIG, a process group, nice
         )
         run = Running(spec=spec, proc=proc, reader=threading.Thread(target=lambda: None))
         run.reader = threading.Thread(target=self._pump, args=(run,), daemon=True, name=f"pump-{spec.name}")

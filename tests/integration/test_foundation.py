@@ -148,8 +148,12 @@ def test_launcher_list_prints_nodes(procs):
             "nodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n    colour: red\n",
             "launch.yaml:5: node #1: unknown key 'colour'",
         ),
+        (
+            "nodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n    nice: 25\n",
+            "launch.yaml:5: node 'a': nice must be within -20..19, got 25",
+        ),
     ],
-    ids=["unknown-executable", "unknown-package", "malformed-yaml", "unknown-key"],
+    ids=["unknown-executable", "unknown-package", "malformed-yaml", "unknown-key", "nice-out-of-range"],
 )
 def test_bad_launch_file_names_file_and_line_and_starts_nothing(procs, tmp_path, text, expected):
     launcher = _launcher(procs, _write(tmp_path, text))
@@ -184,5 +188,29 @@ def test_launcher_parallel_startup_brings_all_nodes_up(procs, tmp_path):
     starts = [i for i, line in enumerate(launcher.lines) if "[tms-launch] starting" in line]
     first_running = next(i for i, line in enumerate(launcher.lines) if "[tms-launch] running" in line)
     assert len(starts) == 3 and max(starts) < first_running  # all started before any was waited for
+    launcher.signal(2)
+    assert launcher.wait(10) == 0
+
+
+def _thread_nices(pid: int) -> set[int]:
+    """The niceness of every thread of ``pid`` (field 19 of /proc/<pid>/task/<tid>/stat)."""
+    nices = set()
+    for stat in Path(f"/proc/{pid}/task").glob("*/stat"):
+        nices.add(int(stat.read_text().rsplit(")", 1)[1].split()[16]))
+    return nices
+
+
+def test_launcher_nice_applies_to_every_thread_of_the_node(procs, tmp_path):
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    text = f"""
+nodes:
+  - {{name: talker, package: tms_launch, executable: demo_talker, namespace: /nice, nice: {base + 5}}}
+  - {{name: listener, package: tms_launch, executable: demo_listener, namespace: /nice}}
+"""
+    launcher = _launcher(procs, _write(tmp_path, text))
+    assert launcher.wait_for("all 2 node(s)", timeout=90), launcher.output
+    talker, listener = _node_pids(launcher.popen.pid)
+    assert _thread_nices(talker) == {base + 5}  # DDS and executor threads too, not only the main thread
+    assert _thread_nices(listener) == {base}
     launcher.signal(2)
     assert launcher.wait(10) == 0
