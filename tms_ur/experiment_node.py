@@ -13,7 +13,7 @@ It is the job node of ``config/launch/paper_experiment.yaml`` (``on_exit: shutdo
 4. writes ``runs/<timestamp>/`` (metrics.json, PNG plots, index.html) and exits 0 when every task
    ended SUCCESS, 1 otherwise (or on ``timeout_s`` of simulated time).
 
-Inputs: ``/clock``, ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
+Inputs: ``/clock`` (as the node clock: ``use_sim_time`` must be true), ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
 ``/sim/truth/zx200/bucket_tip``, ``/zx200/joint_states`` (measured, for the end-effector error),
 ``/ic120/odometry/global`` (EKF estimate, for the localisation error), and the flags of
 ``blackboard_record`` from tms_db.
@@ -28,6 +28,7 @@ from datetime import datetime
 from pathlib import Path
 
 from tms_common.config import config_path, load_yaml, repo_root
+from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
 
@@ -52,7 +53,6 @@ def _make_node():  # noqa: ANN202
     from nav_msgs.msg import Odometry
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray, Int32
 
@@ -78,7 +78,9 @@ def _make_node():  # noqa: ANN202
             self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
             self.rec = ExperimentRecorder()
             self.rec.wall_start = time.monotonic()
-            self.sim_t = 0.0
+            if not self.get_parameter("use_sim_time").value:
+                raise ConfigError("tms_ur_experiment measures simulated time: run it with use_sim_time:=true "
+                                  "(sim_plant publishes /clock)")
             self.tasks: dict[int, dict] = {}
             self.started = False
             self.stopping = False
@@ -96,7 +98,6 @@ def _make_node():  # noqa: ANN202
             self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
             reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
             self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", reliable)
-            self.create_subscription(Clock, "/clock", self._on_clock, 10)
             self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
             self.create_subscription(Float64MultiArray, "/sim/truth/soil", self._on_soil, 10)
             for m in ("ic120", "zx200"):
@@ -108,8 +109,11 @@ def _make_node():  # noqa: ANN202
             self.create_timer(0.2, self._tick)
 
         # -- inputs ---------------------------------------------------------------------------
-        def _on_clock(self, msg: Clock) -> None:
-            self.sim_t = msg.clock.sec + msg.clock.nanosec * 1e-9
+        @property
+        def sim_t(self) -> float:
+            """Simulated time [s] (the node clock follows /clock; 0 until the first one arrives). Not a /clock
+            subscription of our own: the time source already has one, and every callback costs on 2 cores."""
+            return self.get_clock().now().nanoseconds * 1e-9
 
         def _on_status(self, msg: TaskStatus) -> None:
             for t in msg.tasks:
