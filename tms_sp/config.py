@@ -155,6 +155,7 @@ def load_sensing_config(
             min_volume=ex("min_volume"),
             ground_z=mound.ground_z,
             target_hysteresis=ex("target_hysteresis"),
+            depleted_hysteresis=ex("depleted_hysteresis"),
         )
     except ValueError as exc:
         raise sw.error(e, str(exc)) from None

@@ -54,6 +54,7 @@ class ExcavationParams:
     min_volume: float = 0.4
     ground_z: float = 0.0
     target_hysteresis: float = 0.0
+    depleted_hysteresis: float = 0.0
 
     def __post_init__(self) -> None:
         problems = []
@@ -66,7 +67,8 @@ class ExcavationParams:
             problems.append(f"max_penetration_depth {self.max_penetration_depth} < penetration_depth {self.penetration_depth}")
         if not self.bucket_volume > 0 or self.depth_steps < 1:
             problems.append(f"bucket_volume must be > 0 and depth_steps >= 1, got {self.bucket_volume}, {self.depth_steps}")
-        for name in ("penetration_depth", "min_height", "min_volume", "distance_penalty", "target_hysteresis"):
+        for name in ("penetration_depth", "min_height", "min_volume", "distance_penalty", "target_hysteresis",
+                     "depleted_hysteresis"):
             if getattr(self, name) < 0:
                 problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
         if not self.theta_w_min <= self.theta_w_max:
@@ -152,7 +154,7 @@ def _level_cuts(
 
 def assess_mound(
     grid: HeightGrid, swing_axis_xy: tuple[float, float], params: ExcavationParams,
-    previous_xy: tuple[float, float] | None = None,
+    previous_xy: tuple[float, float] | None = None, was_depleted: bool = False,
 ) -> MoundAssessment:
     """Assess the mound on ``grid`` (map frame) for a ZX200 whose swing axis is at ``swing_axis_xy``.
 
@@ -161,6 +163,10 @@ def assess_mound(
     nearly alike, and without the band the best one jumped from scan to scan (up to 2.3 m sideways, on 14
     of 19 consecutive scans at the plant's 2 cm noise), so the tree's return went to one target and the
     excavate read another.
+
+    ``was_depleted``: the previous assessment found no diggable soil; the mound then counts as diggable again
+    only from ``min_volume + depleted_hysteresis`` (scan noise at ``min_volume`` flipped
+    SENSING_CHECK_MOUND_FLG back and forth after the tree had read it false and ended the work).
     """
     spec = grid.spec
     h = np.clip(grid.z - params.ground_z, 0.0, None)
@@ -173,7 +179,8 @@ def assess_mound(
     volume_total = float(h.sum() * spec.cell_area)
     volume_in_reach = float((h_dig * in_reach).sum() * spec.cell_area)
     max_height = float(h.max())
-    has_soil = volume_in_reach >= params.min_volume and max_height >= params.min_height
+    min_volume = params.min_volume + (params.depleted_hysteresis if was_depleted else 0.0)
+    has_soil = volume_in_reach >= min_volume and max_height >= params.min_height
 
     target = None
     candidates = in_reach & (h_dig > 0)

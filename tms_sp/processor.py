@@ -101,7 +101,8 @@ class SiteSensing:
         """Mound points (map frame) -> excavation target + SENSING_CHECK_MOUND_FLG."""
         grid = rasterize(points, self.cfg.mound_grid, sensor="mound points")
         axis = self.base.to_map(np.array([*self.cfg.swing_axis_in_base, 0.0]))
-        a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.cfg.excavation, previous_xy=self._last_target_xy)
+        a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.cfg.excavation, previous_xy=self._last_target_xy,
+                         was_depleted=self.flags.get("SENSING_CHECK_MOUND_FLG") is False)
         self.mound = a
         if a.target is not None:
             fields = a.target.record_fields(self.base)

@@ -12,7 +12,7 @@ from tms_sp.arrival import ArrivalDetector, ArrivalParams
 from tms_sp.config import load_sensing_config
 from tms_sp.errors import SensingError
 from tms_sp.frames import Pose2D
-from tms_sp.heightgrid import GridSpec, rasterize
+from tms_sp.heightgrid import GridSpec, HeightGrid, rasterize
 from tms_sp.mound import assess_mound
 from tms_sp.vessel import assess_vessel, release_in_zx200
 
@@ -279,3 +279,21 @@ def test_excavation_target_holds_against_scan_noise_and_moves_once_dug():
     dug = syn.dig_pit(_cone(), spot[0], spot[1], radius=0.8, depth=1.2)
     moved = assess_mound(_mound_grid(dug, rng, noise=0.02), axis, CFG.excavation, previous_xy=spot).target
     assert math.hypot(moved.x - spot[0], moved.y - spot[1]) > 0.6
+
+
+def test_check_mound_flag_stays_down_through_noise_at_the_threshold():
+    e, spec = CFG.excavation, CFG.mound_grid
+    ax, ay = CFG.swing_axis_map()
+    m = CFG.mound
+    d = math.hypot(m.cx - ax, m.cy - ay)
+    px, py = ax + (m.cx - ax) / d * 5.5, ay + (m.cy - ay) / d * 5.5  # 5.5 m out towards the mound: in reach
+    xg, yg = spec.centres()
+    block = np.hypot(xg - px, yg - py) <= 0.6
+
+    def grid(volume):  # a level block of soil holding ``volume`` in reach, on bare ground
+        return HeightGrid(spec, np.where(block, m.ground_z + volume / (block.sum() * spec.cell_area), m.ground_z), 1.0)
+
+    just_above = grid(e.min_volume + 0.5 * e.depleted_hysteresis)
+    assert assess_mound(just_above, (ax, ay), e).has_soil  # still diggable while it was
+    assert not assess_mound(just_above, (ax, ay), e, was_depleted=True).has_soil  # noise does not revive it
+    assert assess_mound(grid(e.min_volume + 1.5 * e.depleted_hysteresis), (ax, ay), e, was_depleted=True).has_soil
