@@ -4,6 +4,10 @@
 -p key:=value --params-file f.yaml`` work as with ``ros2 run``), builds the node, spins it on the
 chosen executor and shuts down cleanly on SIGINT/SIGTERM, returning a process exit code.
 
+Every node's incompatible-QoS/-type event handlers are polled once a second instead of sitting in the
+executor's wait set (:mod:`tms_common.qos_events`: 0.58-0.62 of the executor CPU per wake,
+``python -m tests.bench executor_wake``).
+
 Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``). DESIGN.md §5 measured the
 EventsExecutor at about a third of the CPU of the SingleThreadedExecutor for a 100 Hz timer; nodes
 with high-rate timers may opt in with ``executor="events"``.
@@ -59,6 +63,7 @@ def run_node(
     from rclpy.executors import ExternalShutdownException
 
     from tms_common.dds import use_platform_profiles
+    from tms_common.qos_events import defer_qos_incompatibility_events
 
     use_platform_profiles()
     rclpy.init(args=list(args) if args is not None else sys.argv)
@@ -66,6 +71,7 @@ def run_node(
     spinner = None
     try:
         node = factory()
+        defer_qos_incompatibility_events(node)
         spinner = make_executor(executor, threads=threads)
         spinner.add_node(node)
         spinner.spin()

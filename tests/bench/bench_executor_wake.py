@@ -1,0 +1,110 @@
+"""CPU per executor wake of a converter-shaped node on simulated time, with and without polled QoS events.
+
+A /clock publisher process advances simulated time 10 ms every 5 ms of wall time (200 messages/s); the node
+under test (its own process, ``use_sim_time``) has the com3_bridge's shape (5 publishers, 7 subscriptions on
+idle topics) and a 20 ms timer, so it wakes about 300 times a second. Its CPU over ``EXEC_BENCH_S`` seconds
+is measured from its own rusage, once with rclpy's defaults and once after
+:func:`tms_common.qos_events.defer_qos_incompatibility_events`, alternating ``EXEC_BENCH_ROUNDS`` times
+so both see the same machine load. Printed: CPU % of a core, ms per wake, and the ratio.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import time
+
+from tests.rosproc import Proc, isolated_domain, ros_env
+
+SECONDS = float(os.environ.get("EXEC_BENCH_S", "10"))
+ROUNDS = int(os.environ.get("EXEC_BENCH_ROUNDS", "2"))
+
+
+def _clock_publisher() -> None:
+    import rclpy
+    from rosgraph_msgs.msg import Clock
+
+    rclpy.init()
+    node = rclpy.create_node("bench_clock")
+    pub = node.create_publisher(Clock, "/clock", 10)
+    sim_ns = [0]
+
+    def tick() -> None:
+        sim_ns[0] += 10_000_000
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(sim_ns[0], 1_000_000_000)
+        pub.publish(msg)
+
+    node.create_timer(0.005, tick)
+    print("clock publishing", flush=True)
+    rclpy.spin(node)
+
+
+def _node_under_test(variant: str) -> None:
+    import resource
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Float64
+
+    from tms_common.qos_events import defer_qos_incompatibility_events
+
+    rclpy.init()
+    node = rclpy.create_node("bench_wake", parameter_overrides=[Parameter("use_sim_time", value=True)])
+    for i in range(5):
+        node.create_publisher(Float64, f"out_{i}", 10)
+    for i in range(7):
+        node.create_subscription(Float64, f"in_{i}", lambda _msg: None, 10)
+    fired = [0]
+    node.create_timer(0.02, lambda: fired.__setitem__(0, fired[0] + 1))
+    moved = defer_qos_incompatibility_events(node) if variant == "deferred" else 0
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    end = time.monotonic() + 3.0  # discovery and the first /clock messages
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.1)
+    r0, f0 = resource.getrusage(resource.RUSAGE_SELF), fired[0]
+    w0 = time.monotonic()
+    while time.monotonic() < w0 + SECONDS:
+        ex.spin_once(timeout_sec=0.1)
+    r1, wall = resource.getrusage(resource.RUSAGE_SELF), time.monotonic() - w0
+    cpu = r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
+    print(f"RESULT {variant} cpu_s={cpu:.4f} wall_s={wall:.3f} timer={fired[0] - f0} moved={moved}", flush=True)
+    os._exit(0)  # the measurement is printed; skip rclpy teardown
+
+
+def main() -> None:
+    with isolated_domain() as domain:
+        env = ros_env(domain)
+        clock = Proc([sys.executable, "-m", "tests.bench.bench_executor_wake", "clock"], env, name="bench_clock")
+        try:
+            if not clock.wait_for("clock publishing", 30):
+                raise RuntimeError(f"/clock publisher did not start:\n{clock.output}")
+            totals: dict[str, list[float]] = {"default": [], "deferred": []}
+            for _ in range(ROUNDS):
+                for variant in totals:
+                    proc = Proc([sys.executable, "-m", "tests.bench.bench_executor_wake", "node", variant], env, name=variant)
+                    proc.wait(SECONDS + 60)
+                    match = re.search(r"RESULT \S+ cpu_s=(\S+) wall_s=(\S+) timer=(\d+) moved=(\d+)", proc.output)
+                    if match is None:
+                        raise RuntimeError(f"{variant} run printed no result:\n{proc.output}")
+                    cpu, wall, timer, moved = float(match[1]), float(match[2]), int(match[3]), int(match[4])
+                    wakes = timer + wall * 200  # timer callbacks + /clock messages
+                    totals[variant].append(cpu / wall)
+                    print(f"{variant:9s}: {cpu / wall * 100:5.1f} % of a core, {cpu / wakes * 1e3:.3f} ms per wake "
+                          f"({timer} timer callbacks, ~{wall * 200:.0f} /clock in {wall:.1f} s; {moved} handlers deferred)")
+        finally:
+            clock.kill()
+    base, deferred = (sum(v) / len(v) for v in totals.values())
+    print(f"executor CPU with deferred QoS events / default: {deferred / base:.2f} (mean of {ROUNDS} rounds each)")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["clock"]:
+        _clock_publisher()
+    elif sys.argv[1:2] == ["node"]:
+        _node_under_test(sys.argv[2])
+    else:
+        main()
