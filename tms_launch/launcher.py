@@ -11,6 +11,10 @@
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
   except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
 * ``--list`` prints the nodes of the file and exits.
+* When the launch stops it prints the CPU time (user + system, all threads) each node used and the total,
+  in seconds and in cores over the launch's wall time (``/proc/<pid>/stat``, read once a second while a
+  node runs, so a node that exits on its own is counted up to its last second). With a simulated-time
+  report's real-time factor this gives the core-seconds the stack needs per simulated second.
 
 Exit codes: 0 clean stop, 1 a required node died or did not come up, 2 bad launch file.
 """
@@ -70,6 +74,28 @@ class Running:
     reader: threading.Thread
     ready: bool = False
     lines: list[str] = field(default_factory=list)
+    cpu_s: float = 0.0  # user + system time of the process, last read
+
+
+def process_cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds of process ``pid`` (all its threads) from /proc; None if it is gone."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat[stat.rindex(")") + 2:].split()  # after "pid (comm) ": fields[0] is the state
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_table(rows: list[tuple[str, float]], wall_s: float) -> list[str]:
+    """Lines of the CPU summary: each node's seconds and share of one core, busiest first, then the total."""
+    wall_s = max(wall_s, 1e-9)
+    width = max((len(name) for name, _ in rows), default=0)
+    lines = [f"  {name:<{width}}  {cpu:8.1f} s  {cpu / wall_s * 100:5.1f} % of a core"
+             for name, cpu in sorted(rows, key=lambda r: -r[1])]
+    total = sum(cpu for _, cpu in rows)
+    lines.append(f"  {'total':<{width}}  {total:8.1f} s  {total / wall_s:5.2f} cores over {wall_s:.1f} s")
+    return lines
 
 
 class Launcher:
@@ -82,6 +108,8 @@ class Launcher:
         self._stop = threading.Event()
         self._print_lock = threading.Lock()
         self._graph_node = None
+        self._began = time.monotonic()
+        self._next_cpu_read = 0.0
 
     # -- output ---------------------------------------------------------------------------------
     def log(self, text: str) -> None:
@@ -162,8 +190,27 @@ class Launcher:
             return None
         return f"node {run.spec.name!r} did not appear on the ROS graph within {run.spec.ready_timeout:g} s"
 
+    def read_cpu(self) -> None:
+        """Record each live node's CPU time so far (a node that exits keeps its last reading)."""
+        for run in self.running:
+            cpu = process_cpu_seconds(run.proc.pid)
+            if cpu is not None:
+                run.cpu_s = cpu
+
+    def report_cpu(self) -> None:
+        if not self.running:
+            return
+        rows: dict[str, float] = {}
+        for run in self.running:
+            key = run.spec.fqn
+            rows[key] = rows.get(key, 0.0) + run.cpu_s
+        wall = time.monotonic() - self._began
+        self.log("CPU time per node (user + system, all threads):\n" + "\n".join(cpu_table(list(rows.items()), wall)))
+
     def stop_all(self) -> None:
         """SIGINT, then SIGTERM, then SIGKILL: every process is gone within 5 s."""
+        self.read_cpu()
+        self.report_cpu()
         alive = [r for r in self.running if r.proc.poll() is None]
         if alive:
             self.log(f"stopping {len(alive)} node(s): {', '.join(r.spec.name for r in alive)}")
@@ -229,6 +276,9 @@ class Launcher:
                     if not r.spec.required and r.proc.poll() is not None and r.ready:
                         self.log(f"optional node {r.spec.name!r} exited with code {r.proc.returncode}")
                         r.ready = False
+                if time.monotonic() >= self._next_cpu_read:
+                    self._next_cpu_read = time.monotonic() + 1.0
+                    self.read_cpu()
                 self._stop.wait(0.1)
         finally:
             self.stop_all()
