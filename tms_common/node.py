@@ -15,6 +15,7 @@ with high-rate timers may opt in with ``executor="events"``.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -52,30 +53,40 @@ def run_node(
     *,
     executor: str | None = None,
     threads: int = 8,
+    stop_in_context: bool = False,
 ) -> int:
     """Initialise rclpy, create the node with ``factory`` and spin until shutdown.
 
-    ``threads`` sizes the ``multi`` executor. Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when
+    ``threads`` sizes the ``multi`` executor. By default rclpy's signal handler shuts the context down on
+    SIGINT/SIGTERM, so ``destroy_node`` can no longer publish or call anything. A node that must act when
+    it is stopped (the task manager cancels its running subtasks and engages its machines' locks) passes
+    ``stop_in_context=True``: the signal then ends the spin between two callbacks and ``destroy_node`` runs
+    with the context still valid (:func:`_stop_on_signals`). Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when
     the node raised; the exception is
     printed with the node's name so a launcher log shows which node died and why.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
     from tms_common.dds import use_platform_profiles
     from tms_common.qos_events import defer_qos_incompatibility_events
 
     use_platform_profiles()
-    rclpy.init(args=list(args) if args is not None else sys.argv)
+    rclpy.init(args=list(args) if args is not None else sys.argv,
+               signal_handler_options=SignalHandlerOptions.NO if stop_in_context else SignalHandlerOptions.ALL)
     node = None
     spinner = None
+    signals = contextlib.ExitStack()
     try:
         node = factory()
+        if stop_in_context:
+            signals.enter_context(_stop_on_signals(node))
         defer_qos_incompatibility_events(node)
         spinner = make_executor(executor, threads=threads)
         spinner.add_node(node)
         spinner.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except (KeyboardInterrupt, ExternalShutdownException, _StopRequested):
         pass
     except Exception as exc:  # noqa: BLE001 - report any crash with the node's name, then exit non-zero
         if not rclpy.ok():
@@ -93,8 +104,52 @@ def run_node(
             _wait_for_callback_threads(spinner, timeout_s=2.0)
         if node is not None:
             node.destroy_node()
+        signals.close()  # after destroy_node: a second signal meanwhile must not cut it short
         rclpy.try_shutdown()
     return 0
+
+
+class _StopRequested(Exception):  # noqa: N818 - a request, not an error
+    """Raised by the stop guard condition's callback, between two callbacks, to end the spin."""
+
+
+@contextlib.contextmanager
+def _stop_on_signals(node):  # noqa: ANN001, ANN202
+    """SIGINT/SIGTERM end ``node``'s spin between two callbacks, with its context still valid.
+
+    A Python signal handler runs only when the main thread is back in Python, not while it waits in
+    ``rcl_wait``; so the signal is also written to a wake-up fd, and a thread reading it triggers a guard
+    condition whose callback raises :class:`_StopRequested` in the executor. No callback is cut in half.
+    """
+    import signal
+    import threading
+
+    def stop() -> None:
+        raise _StopRequested
+
+    guard = node.create_guard_condition(stop)
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+
+    def relay() -> None:
+        try:
+            while os.read(read_fd, 16):
+                guard.trigger()
+        except Exception:  # noqa: BLE001, S110 - the guard is gone (node destroyed): nothing left to stop
+            pass
+        finally:
+            os.close(read_fd)
+
+    previous = {sig: signal.signal(sig, lambda *_: None) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    threading.Thread(target=relay, name="tms-stop-relay", daemon=True).start()
+    try:
+        yield
+    finally:
+        signal.set_wakeup_fd(previous_fd)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        os.close(write_fd)  # the relay's read returns b"" and it ends
 
 
 def _wait_for_callback_threads(spinner, timeout_s: float) -> None:  # noqa: ANN001

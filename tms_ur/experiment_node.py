@@ -129,30 +129,40 @@ def _make_node():  # noqa: ANN202
             if {"mound", "bucket", "vessel", "dumped"} <= v.keys():
                 self.rec.on_soil(self.sim_t, v["mound"], v["bucket"], v["vessel"], v["dumped"])
 
+        def _stamp(self, header) -> float:  # noqa: ANN001
+            """A message's stamp [s of simulated time]; this node's clock when it is unset."""
+            if header.stamp.sec or header.stamp.nanosec:
+                return header.stamp.sec + header.stamp.nanosec * 1e-9
+            return self.sim_t
+
         def _on_pose(self, machine: str, msg: PoseStamped) -> None:
             p = msg.pose.position
             yaw = _yaw(msg.pose.orientation)
-            self.rec.on_truth_pose(self.sim_t, machine, p.x, p.y, yaw)
+            self.rec.on_truth_pose(self._stamp(msg.header), machine, p.x, p.y, yaw)
             if machine == "zx200":
                 self._zx200_base = (p.x, p.y, yaw)
 
         def _on_estimate(self, msg: Odometry) -> None:
             p = msg.pose.pose.position
-            self.rec.on_estimated_pose(self.sim_t, "ic120", p.x, p.y)
+            self.rec.on_estimated_pose(self._stamp(msg.header), "ic120", p.x, p.y)
 
         def _on_joints(self, msg: JointState) -> None:
-            self._joints = dict(zip(msg.name, msg.position, strict=False))
+            """End-effector estimate: FK of the joint angles measured over CAN, at their stamp.
 
-        def _on_tip(self, msg: PointStamped) -> None:
-            """End-effector error: truth tip vs FK of the joint angles measured over CAN."""
+            Only a message carrying every front joint counts: the converter publishes its joint sets
+            separately, and another set's stamp is not the time of the front angles."""
+            self._joints = dict(zip(msg.name, msg.position, strict=False))
             if self._zx200_base is None or not all(j in self._joints for j in self._joint_order):
                 return
             q = self._np.array([self._joints[j] for j in self._joint_order])
             local = self._kin.tip_position(q)
             bx, by, byaw = self._zx200_base
             c, s = math.cos(byaw), math.sin(byaw)
-            est = (bx + c * local[0] - s * local[1], by + s * local[0] + c * local[1])
-            self.rec.on_tip_error(math.hypot(est[0] - msg.point.x, est[1] - msg.point.y))
+            self.rec.on_estimated_tip(self._stamp(msg.header), bx + c * local[0] - s * local[1],
+                                      by + s * local[0] + c * local[1])
+
+        def _on_tip(self, msg: PointStamped) -> None:
+            self.rec.on_truth_tip(self._stamp(msg.header), msg.point.x, msg.point.y)
 
         # -- supervision ----------------------------------------------------------------------
         def _db(self):  # noqa: ANN202

@@ -129,6 +129,10 @@ def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path, backend):
     assert m["soil_moved_m3"] > 0.04, summary
     # What was dumped left the mound (its volume counts only the mound's area, not the dump pile).
     assert m["mound_initial_m3"] - m["mound_final_m3"] >= 0.9 * m["soil_moved_m3"], summary
+    # Errors against truth, taken at equal stamps (tms_ur.experiment_core.AlignedError), were measured.
+    for key in ("localisation_error_m", "end_effector_error_m"):
+        err = m[key]
+        assert err["n"] > 100 and err["rms"] < 0.15 and err["unmatched"] < 0.05 * err["n"], (key, err)
     first_pass, first_dump = m["pass_events_s"][0], m["dump_events_s"][0]
     assert first_pass < first_dump, (first_pass, first_dump)
 

@@ -132,3 +132,35 @@ def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):  #
     assert "'half_pose' field 'trajectory|pose|position_with_angle'" in system.task(8).message, system.task(8).message
     assert "99" in system.task(99).message
     assert "GOAL" not in system.procs["stub"].output  # nothing reached planning
+
+
+def test_a_manager_stopped_mid_task_cancels_its_subtasks_and_locks_the_machines(ts_system):  # noqa: ANN001
+    """SIGINT to the manager (Ctrl-C, or a launch stopping): its running subtasks are canceled down to the
+    planning servers and both machines' locks engaged before it exits 0, no traceback. With rclpy's own
+    signal handler the context was gone before destroy_node, and neither went out."""
+    import signal
+
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Bool
+
+    from tms_msg.msg import TaskIds
+
+    _seed(ts_system.store)
+    ts_system.store.add_task(_one_leaf("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere", "load_point"), task_id=3)
+    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4)
+    locks: dict[str, list[bool]] = {"zx200": [], "ic120": []}
+    for machine, seen in locks.items():
+        ts_system.node.create_subscription(Bool, f"/{machine}/lock", lambda msg, seen=seen: seen.append(msg.data),
+                                           QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    system = ts_system.start(stub_duration_s=60.0)
+    system.publish("/tms_ts/start", TaskIds(task_ids=[3, 4]))
+    system.wait(lambda: len([ln for ln in system.procs["stub"].lines if ln.startswith("GOAL")]) == 2, 30,
+                "both planning goals")
+    system.wait(lambda: all(system.task(i) and system.task(i).running_leaves for i in (3, 4)), 10, "running leaves")
+    manager = system.procs["manager"]
+    manager.signal(signal.SIGINT)
+    assert manager.wait(10) == 0, manager.output
+    assert "Traceback" not in manager.output, manager.output
+    system.wait(lambda: locks["zx200"] == [True] and locks["ic120"] == [True], 10, f"both locks engaged: {locks}")
+    for goal in ("/ic120/navigate_to_pose", "/zx200/tms_rp_zx200_change_pose"):
+        assert system.procs["stub"].wait_for(f"CANCELED {goal}", 10), system.procs["stub"].output

@@ -96,3 +96,45 @@ def test_a_failed_task_cancels_every_partner_that_still_runs():
     # a partner not heard from yet is cancelled too; one that already ended is not
     assert tasks_to_cancel_after_failure([1, 2, 3], {2: "FAILURE", 3: "SUCCESS"}) == [1]
     assert tasks_to_cancel_after_failure([1, 2], {1: "CANCELED", 2: "FAILURE"}) == []
+
+
+def test_errors_are_taken_at_the_estimate_stamp_not_against_the_last_truth_received():
+    """A tip swinging at 6 m/s: truth every 50 ms, exact estimates every 20 ms delivered 0.1 s after the truth of
+    their time. Pairing each with the last truth received reads up to 0.3 m of error that is not there."""
+    from tms_ur.experiment_core import AlignedError
+
+    def x_at(t: float) -> float:
+        return 6.0 * t
+
+    aligned: list[float] = []
+    errors = AlignedError(aligned)
+    naive: list[float] = []
+    last_truth = None
+    events = [(k * 0.05, "truth") for k in range(1, 101)] + [(k * 0.02 + 0.1, "estimate") for k in range(250)]
+    for arrival, kind in sorted(events):
+        if kind == "truth":
+            errors.truth(arrival, x_at(arrival), 0.0)
+            last_truth = x_at(arrival)
+        else:
+            stamp = arrival - 0.1
+            errors.estimate(stamp, x_at(stamp), 0.0)
+            if last_truth is not None:
+                naive.append(abs(x_at(stamp) - last_truth))
+    assert max(naive) > 0.25  # what the old pairing reported
+    assert len(aligned) > 200 and max(aligned) < 1e-9, (len(aligned), max(aligned))
+    assert errors.unmatched == 3  # stamped 0, 0.02 and 0.04 s: before the first truth sample
+
+
+def test_an_estimate_whose_truth_never_comes_is_unmatched_not_compared():
+    from tms_ur.experiment_core import AlignedError
+
+    aligned: list[float] = []
+    errors = AlignedError(aligned, horizon_s=1.0, max_gap_s=0.25)
+    errors.truth(0.0, 0.0, 0.0)
+    errors.truth(1.0, 1.0, 0.0)  # a gap of 1 s: no interpolation across it
+    errors.estimate(0.5, 0.5, 0.0)
+    for k in range(1, 40):  # truth stops after 1.0 s; estimates go on every 1/8 s, the last at 5.875 s
+        errors.estimate(1.0 + k / 8, 0.0, 0.0)
+    assert aligned == []
+    # the one in the gap, and the 30 that waited more than horizon_s (stamped before 4.875 s) for their truth
+    assert errors.unmatched == 1 + 30

@@ -207,4 +207,5 @@ class TaskManager(Node):
 
 
 def main() -> int:
-    return run_node(TaskManager, executor="single")
+    # stop_in_context: on SIGINT/SIGTERM destroy_node still cancels running tasks and engages their machines' locks
+    return run_node(TaskManager, executor="single", stop_in_context=True)
