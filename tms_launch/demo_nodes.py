@@ -18,13 +18,17 @@ def _make_talker():  # noqa: ANN202
     from std_msgs.msg import Header
 
     class Talker(Node):
-        """Publishes a time-stamped ``std_msgs/Header`` on ``chatter`` at ``rate_hz``."""
+        """Publishes a time-stamped ``std_msgs/Header`` on ``chatter`` at ``rate_hz``.
+
+        ``shutdown_delay_s`` (0): when stopped, take this long to shut down (a node finishing its work on the
+        way out), then print "talker: shut down"."""
 
         def __init__(self) -> None:
             super().__init__("talker")
             rate = self.declare_parameter("rate_hz", 100.0).value
             if not rate or rate <= 0:
                 raise ValueError(f"talker: rate_hz must be > 0, got {rate}")
+            self._shutdown_delay = float(self.declare_parameter("shutdown_delay_s", 0.0).value)
             self._pub = self.create_publisher(Header, "chatter", 10)
             self._seq = 0
             self.create_timer(1.0 / rate, self._tick)
@@ -35,6 +39,14 @@ def _make_talker():  # noqa: ANN202
             msg.frame_id = str(self._seq)
             self._seq += 1
             self._pub.publish(msg)
+
+        def destroy_node(self) -> None:
+            if self._shutdown_delay > 0:
+                import time
+
+                time.sleep(self._shutdown_delay)
+                print("talker: shut down", flush=True)
+            super().destroy_node()
 
     return Talker()
 

@@ -22,6 +22,9 @@ A launch file::
         nice: -10                    # optional scheduling niceness of the process and all its threads
                                      # (-20..19, default: the launcher's); below the launcher's needs root
                                      # or CAP_SYS_NICE, else the node runs unchanged and says so
+        stop_grace_s: 30             # seconds between SIGINT and SIGTERM when the launch stops (default
+                                     # 2.5): a node that writes results on its way out (the experiment
+                                     # supervisor's report) gets the time to finish; SIGKILL 1.5 s later
 
 Every problem (malformed YAML, unknown key, unknown executable, duplicate name) is a
 :class:`~tms_common.errors.ConfigError` naming the file and line; nothing is started.
@@ -52,6 +55,7 @@ NODE_KEYS = {
     "ready_timeout",
     "on_exit",
     "nice",
+    "stop_grace_s",
 }
 TOP_KEYS = {"name", "nodes", "env", "parameters", "startup"}
 STARTUP = {"sequential", "parallel"}
@@ -75,6 +79,7 @@ class NodeSpec:
     ready_timeout: float = 90.0
     on_exit: str = "error"
     nice: int | None = None
+    stop_grace_s: float = 2.5
 
     @property
     def fqn(self) -> str:
@@ -206,6 +211,10 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
             _expect(where, at + ("nice",), nice, int, f"node {name!r}: 'nice'")
             if not -20 <= nice <= 19:
                 raise where.error(at + ("nice",), f"node {name!r}: nice must be within -20..19, got {nice}")
+        grace = _expect(where, at + ("stop_grace_s",), raw.get("stop_grace_s", 2.5), (int, float),
+                        f"node {name!r}: 'stop_grace_s'")
+        if isinstance(grace, bool) or not 0 < grace <= 600:
+            raise where.error(at + ("stop_grace_s",), f"node {name!r}: stop_grace_s must be within (0, 600] s, got {grace}")
         nodes.append(
             NodeSpec(
                 name=name,
@@ -221,6 +230,7 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
                 ready_timeout=float(timeout),
                 on_exit=on_exit,
                 nice=nice,
+                stop_grace_s=float(grace),
             )
         )
     title = data.get("name") or Path(path).stem

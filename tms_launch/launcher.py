@@ -6,8 +6,8 @@
   next one (``startup: sequential``, the default) or starts all at once and then waits for each
   (``startup: parallel``, quicker for big launches), and prints progress lines
   ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
-* Ctrl-C (SIGINT) or SIGTERM stops everything within 5 s: SIGINT to every node, then SIGTERM after
-  2.5 s, then SIGKILL after 4 s.
+* Ctrl-C (SIGINT) or SIGTERM stops everything: SIGINT to every node, then SIGTERM after the node's
+  ``stop_grace_s`` (default 2.5 s), then SIGKILL 1.5 s later (within 5 s for nodes with the default).
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
   except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
 * ``--list`` prints the nodes of the file and exits.
@@ -35,7 +35,6 @@ from pathlib import Path
 from tms_common.errors import ConfigError
 from tms_launch.launch_file import LaunchFile, NodeSpec, parse_launch_file
 
-SIGINT_GRACE_S = 2.5
 SIGTERM_GRACE_S = 1.5
 _PR_SET_PDEATHSIG = 1
 
@@ -208,28 +207,32 @@ class Launcher:
         self.log("CPU time per node (user + system, all threads):\n" + "\n".join(cpu_table(list(rows.items()), wall)))
 
     def stop_all(self) -> None:
-        """SIGINT, then SIGTERM, then SIGKILL: every process is gone within 5 s."""
+        """SIGINT, then SIGTERM after each node's ``stop_grace_s``, then SIGKILL 1.5 s later."""
         self.read_cpu()
         self.report_cpu()
         alive = [r for r in self.running if r.proc.poll() is None]
         if alive:
             self.log(f"stopping {len(alive)} node(s): {', '.join(r.spec.name for r in alive)}")
-        for sig, grace in ((signal.SIGINT, SIGINT_GRACE_S), (signal.SIGTERM, SIGTERM_GRACE_S), (signal.SIGKILL, 0.5)):
-            alive = [r for r in self.running if r.proc.poll() is None]
-            if not alive:
-                break
+        # Each node: SIGINT, SIGTERM after its stop_grace_s, SIGKILL SIGTERM_GRACE_S later.
+        escalation = {id(r): [(signal.SIGINT, 0.0), (signal.SIGTERM, r.spec.stop_grace_s),
+                              (signal.SIGKILL, r.spec.stop_grace_s + SIGTERM_GRACE_S)] for r in alive}
+        began = time.monotonic()
+        while alive:
+            elapsed = time.monotonic() - began
             for r in alive:
-                try:
-                    os.killpg(r.proc.pid, sig)
-                except ProcessLookupError:
-                    pass
-            deadline = time.monotonic() + grace
-            while time.monotonic() < deadline and any(r.proc.poll() is None for r in alive):
-                time.sleep(0.02)
-            if sig != signal.SIGKILL:
-                for r in alive:
-                    if r.proc.poll() is None:
-                        self.log(f"{r.spec.name} ignored {sig.name}; escalating")
+                steps = escalation[id(r)]
+                while steps and elapsed >= steps[0][1]:
+                    sig, _ = steps.pop(0)
+                    if sig != signal.SIGINT:
+                        self.log(f"{r.spec.name} still running {elapsed:.1f} s after SIGINT; sending {sig.name}")
+                    try:
+                        os.killpg(r.proc.pid, sig)
+                    except ProcessLookupError:
+                        pass
+            time.sleep(0.02)
+            # after its SIGKILL a process is given 0.5 s to be reaped (one stuck in the kernel is left behind)
+            alive = [r for r in alive if r.proc.poll() is None
+                     and (escalation[id(r)] or elapsed < r.spec.stop_grace_s + SIGTERM_GRACE_S + 0.5)]
         for r in self.running:
             r.reader.join(timeout=0.5)
 

@@ -180,6 +180,8 @@ class ExperimentRecorder:
     sim_start: float | None = None
     sim_end: float | None = None
     initial_mound: float | None = None
+    #: how the run ended: "done" (the tasks ended), "timeout", or "stopped" (SIGINT/SIGTERM before the end)
+    ended: str = "done"
     _passes: _Episodes | None = None
     _dumps: _Episodes | None = None
     _aligned: dict[str, AlignedError] = field(default_factory=dict)
@@ -269,6 +271,7 @@ class ExperimentRecorder:
         wall = (self.wall_end or 0.0) - (self.wall_start or 0.0)
         last = self.soil[-1].values if self.soil else {}
         return {
+            "ended": self.ended,
             "cycles": self.cycles,
             "soil_moved_m3": self.soil_moved(),
             "mound_initial_m3": self.initial_mound,

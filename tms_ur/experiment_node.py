@@ -239,12 +239,19 @@ def _make_node():  # noqa: ANN202
                 flush=True,
             )
 
-        def _finish(self, timed_out: bool = False) -> None:
+        def _finish(self, timed_out: bool = False, stopped: bool = False) -> None:
             # Real-time factor over the run itself (from the start command), not the nodes' start-up.
             self.rec.wall_start, self.rec.sim_start = self._t0
             self.rec.wall_end, self.rec.sim_end = time.monotonic(), self.sim_t
-            index = self.rec.report(self.run_dir, site=self.site, title="Paper experiment: two-machine earthwork")
+            self.rec.ended = "stopped" if stopped else "timeout" if timed_out else "done"
+            title = "Paper experiment: two-machine earthwork" + (" (stopped before the end)" if stopped else "")
+            index = self.rec.report(self.run_dir, site=self.site, title=title)
             metrics = self.rec.metrics()
+            if stopped:
+                self.exit_code = 0
+                print(f"[experiment] STOPPED before the end: {metrics['cycles']} cycle(s), {metrics['soil_moved_m3']} m3 "
+                      f"moved, real-time factor {metrics['real_time_factor']}, report {index}", flush=True)
+                return
             ok = not timed_out and all(self.tasks.get(t, {}).get("state") == "SUCCESS" for t in self.task_ids)
             for tid in self.task_ids:
                 info = self.tasks.get(tid, {})
@@ -257,12 +264,21 @@ def _make_node():  # noqa: ANN202
             self.exit_code = 0 if ok else 1
             raise SystemExit(self.exit_code)
 
+        def destroy_node(self) -> None:
+            """Stopped (SIGINT/SIGTERM) during a run: write the report of what was recorded so far."""
+            if self.started and self.exit_code is None:
+                try:
+                    self._finish(stopped=True)
+                except Exception as exc:  # noqa: BLE001 - say what was lost, then shut down anyway
+                    print(f"[experiment] report of the stopped run not written: {type(exc).__name__}: {exc}", flush=True)
+            super().destroy_node()
+
     return ExperimentNode()
 
 
 def main() -> int:
-    code = run_node(_make_node)
-    return code
+    # stop_in_context: a stop mid-run still writes the report (destroy_node), with the node clock's last time
+    return run_node(_make_node, stop_in_context=True)
 
 
 if __name__ == "__main__":

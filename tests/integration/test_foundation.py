@@ -159,14 +159,44 @@ def test_launcher_list_prints_nodes(procs):
             "nodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n    nice: 25\n",
             "launch.yaml:5: node 'a': nice must be within -20..19, got 25",
         ),
+        (
+            "nodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n    stop_grace_s: 0\n",
+            "launch.yaml:5: node 'a': stop_grace_s must be within (0, 600] s, got 0",
+        ),
     ],
-    ids=["unknown-executable", "unknown-package", "malformed-yaml", "unknown-key", "nice-out-of-range"],
+    ids=["unknown-executable", "unknown-package", "malformed-yaml", "unknown-key", "nice-out-of-range",
+         "stop-grace-out-of-range"],
 )
 def test_bad_launch_file_names_file_and_line_and_starts_nothing(procs, tmp_path, text, expected):
     launcher = _launcher(procs, _write(tmp_path, text))
     assert launcher.wait(60) == 2, launcher.output
     assert expected in launcher.output
     assert "starting" not in launcher.output
+
+
+SLOW_STOP = """
+nodes:
+  - {name: patient, package: tms_launch, executable: demo_talker, namespace: /slow, stop_grace_s: 10,
+     parameters: {rate_hz: 5.0, shutdown_delay_s: 6.0}}
+  - {name: hasty, package: tms_launch, executable: demo_talker, namespace: /slow,
+     parameters: {rate_hz: 5.0, shutdown_delay_s: 6.0}}
+"""
+
+
+def test_launcher_gives_a_node_its_stop_grace_before_sigterm(procs, tmp_path):
+    """A node with stop_grace_s 10 finishes its 6 s shutdown; one with the default 2.5 s gets SIGTERM, then SIGKILL at 4 s."""
+    launcher = _launcher(procs, _write(tmp_path, SLOW_STOP))
+    assert launcher.wait_for("all 2 node(s)", timeout=90), launcher.output
+    # On the graph is not yet spinning: a SIGINT inside a node's __init__ ends it before it has a destroy_node.
+    time.sleep(3.0)
+    started = time.monotonic()
+    os.kill(launcher.popen.pid, signal.SIGINT)
+    assert launcher.wait(20) == 0, launcher.output
+    assert 5.5 < time.monotonic() - started < 10.0, launcher.output
+    assert "[patient] talker: shut down" in launcher.output, launcher.output
+    assert "[hasty] talker: shut down" not in launcher.output, launcher.output
+    assert re.search(r"hasty still running 2\.[5-9] s after SIGINT; sending SIGTERM", launcher.output), launcher.output
+    assert "patient still running" not in launcher.output, launcher.output
 
 
 JOB = """
