@@ -5,7 +5,7 @@
 chosen executor and shuts down cleanly on SIGINT/SIGTERM, returning a process exit code.
 
 Every node's incompatible-QoS/-type event handlers are polled once a second instead of sitting in the
-executor's wait set (:mod:`tms_common.qos_events`: 0.58-0.62 of the executor CPU per wake,
+executor's wait set (:mod:`tms_common.qos_events`: 0.58-0.68 of the executor CPU per wake in four runs of
 ``python -m tests.bench executor_wake``).
 
 Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``). DESIGN.md §5 measured the
