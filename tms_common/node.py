@@ -61,7 +61,10 @@ def run_node(
     SIGINT/SIGTERM, so ``destroy_node`` can no longer publish or call anything. A node that must act when
     it is stopped (the task manager cancels its running subtasks and engages its machines' locks) passes
     ``stop_in_context=True``: the signal then ends the spin between two callbacks and ``destroy_node`` runs
-    with the context still valid (:func:`_stop_on_signals`). Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when
+    with the context still valid (:func:`_stop_on_signals`). A node that has work to wind down first (the
+    subtask servers cancel their downstream goals and wait for them to end) defines
+    ``on_stop_requested() -> bool``: called when the signal arrives and every 50 ms after, the spin goes on
+    while it returns True. Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when
     the node raised; the exception is
     printed with the node's name so a launcher log shows which node died and why.
     """
@@ -124,7 +127,12 @@ def _stop_on_signals(node):  # noqa: ANN001, ANN202
     import signal
     import threading
 
+    winding_down = getattr(node, "on_stop_requested", None)
+
     def stop() -> None:
+        if winding_down is not None and winding_down():
+            threading.Timer(0.05, guard.trigger).start()  # ask again in 50 ms; the spin goes on meanwhile
+            return
         raise _StopRequested
 
     guard = node.create_guard_condition(stop)

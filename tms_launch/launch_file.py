@@ -6,6 +6,9 @@ A launch file::
     env: {TMS_DB_PATH: runs/db}      # optional, added to every node's environment
     parameters: {use_sim_time: true} # optional, ROS parameters given to every node (a node's own win)
     startup: sequential              # or parallel: start every process at once, then wait for each
+    shutdown: parallel               # or reverse: stop the nodes one at a time, last started first, each
+                                     # gone before the next is signalled (a scheduler cancels its subtasks
+                                     # while their servers and the controllers below are still up)
     nodes:
       - name: talker                 # ROS node name (``-r __node:=talker``); unique
         package: tms_launch          # ament package of the executable
@@ -57,8 +60,9 @@ NODE_KEYS = {
     "nice",
     "stop_grace_s",
 }
-TOP_KEYS = {"name", "nodes", "env", "parameters", "startup"}
+TOP_KEYS = {"name", "nodes", "env", "parameters", "startup", "shutdown"}
 STARTUP = {"sequential", "parallel"}
+SHUTDOWN = {"parallel", "reverse"}
 ON_EXIT = {"error", "shutdown"}
 
 
@@ -107,6 +111,7 @@ class LaunchFile:
     nodes: tuple[NodeSpec, ...]
     env: dict[str, str]
     startup: str = "sequential"
+    shutdown: str = "parallel"
 
 
 def _param_literal(value: Any) -> str:
@@ -237,7 +242,10 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
     startup = _expect(where, ("startup",), data.get("startup", "sequential"), str, "'startup'")
     if startup not in STARTUP:
         raise where.error(("startup",), f"startup must be one of {', '.join(sorted(STARTUP))}, got {startup!r}")
-    return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env, startup=startup)
+    shutdown = _expect(where, ("shutdown",), data.get("shutdown", "parallel"), str, "'shutdown'")
+    if shutdown not in SHUTDOWN:
+        raise where.error(("shutdown",), f"shutdown must be one of {', '.join(sorted(SHUTDOWN))}, got {shutdown!r}")
+    return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env, startup=startup, shutdown=shutdown)
 
 
 __all__ = ["NodeSpec", "LaunchFile", "parse_launch_file", "resolve_executable", "ConfigError"]

@@ -7,7 +7,8 @@
   (``startup: parallel``, quicker for big launches), and prints progress lines
   ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
 * Ctrl-C (SIGINT) or SIGTERM stops everything: SIGINT to every node, then SIGTERM after the node's
-  ``stop_grace_s`` (default 2.5 s), then SIGKILL 1.5 s later (within 5 s for nodes with the default).
+  ``stop_grace_s`` (default 2.5 s), then SIGKILL 1.5 s later (within 5 s for nodes with the default); with
+  ``shutdown: reverse`` one node at a time, last started first, each gone before the next is signalled.
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
   except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
 * ``--list`` prints the nodes of the file and exits.
@@ -206,14 +207,8 @@ class Launcher:
         wall = time.monotonic() - self._began
         self.log("CPU time per node (user + system, all threads):\n" + "\n".join(cpu_table(list(rows.items()), wall)))
 
-    def stop_all(self) -> None:
-        """SIGINT, then SIGTERM after each node's ``stop_grace_s``, then SIGKILL 1.5 s later."""
-        self.read_cpu()
-        self.report_cpu()
-        alive = [r for r in self.running if r.proc.poll() is None]
-        if alive:
-            self.log(f"stopping {len(alive)} node(s): {', '.join(r.spec.name for r in alive)}")
-        # Each node: SIGINT, SIGTERM after its stop_grace_s, SIGKILL SIGTERM_GRACE_S later.
+    def _stop_group(self, alive: list[Running]) -> None:
+        """Stop these nodes together: SIGINT, SIGTERM after each one's stop_grace_s, SIGKILL 1.5 s later."""
         escalation = {id(r): [(signal.SIGINT, 0.0), (signal.SIGTERM, r.spec.stop_grace_s),
                               (signal.SIGKILL, r.spec.stop_grace_s + SIGTERM_GRACE_S)] for r in alive}
         began = time.monotonic()
@@ -233,6 +228,20 @@ class Launcher:
             # after its SIGKILL a process is given 0.5 s to be reaped (one stuck in the kernel is left behind)
             alive = [r for r in alive if r.proc.poll() is None
                      and (escalation[id(r)] or elapsed < r.spec.stop_grace_s + SIGTERM_GRACE_S + 0.5)]
+
+    def stop_all(self) -> None:
+        """SIGINT, then SIGTERM after each node's ``stop_grace_s``, then SIGKILL 1.5 s later."""
+        self.read_cpu()
+        self.report_cpu()
+        alive = [r for r in self.running if r.proc.poll() is None]
+        if alive:
+            order = " (last started first, one at a time)" if self.launch.shutdown == "reverse" else ""
+            self.log(f"stopping {len(alive)} node(s){order}: {', '.join(r.spec.name for r in alive)}")
+        if self.launch.shutdown == "reverse":
+            for r in reversed(alive):
+                self._stop_group([r])
+        else:
+            self._stop_group(alive)
         for r in self.running:
             r.reader.join(timeout=0.5)
 

@@ -163,9 +163,13 @@ def test_launcher_list_prints_nodes(procs):
             "nodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n    stop_grace_s: 0\n",
             "launch.yaml:5: node 'a': stop_grace_s must be within (0, 600] s, got 0",
         ),
+        (
+            "shutdown: backwards\nnodes:\n  - name: a\n    package: tms_launch\n    executable: demo_talker\n",
+            "launch.yaml:1: shutdown must be one of parallel, reverse, got 'backwards'",
+        ),
     ],
     ids=["unknown-executable", "unknown-package", "malformed-yaml", "unknown-key", "nice-out-of-range",
-         "stop-grace-out-of-range"],
+         "stop-grace-out-of-range", "unknown-shutdown"],
 )
 def test_bad_launch_file_names_file_and_line_and_starts_nothing(procs, tmp_path, text, expected):
     launcher = _launcher(procs, _write(tmp_path, text))
@@ -197,6 +201,27 @@ def test_launcher_gives_a_node_its_stop_grace_before_sigterm(procs, tmp_path):
     assert "[hasty] talker: shut down" not in launcher.output, launcher.output
     assert re.search(r"hasty still running 2\.[5-9] s after SIGINT; sending SIGTERM", launcher.output), launcher.output
     assert "patient still running" not in launcher.output, launcher.output
+
+
+REVERSE_STOP = """
+shutdown: reverse
+nodes:
+  - {name: first, package: tms_launch, executable: demo_talker, namespace: /rev, parameters: {rate_hz: 5.0, shutdown_delay_s: 1.0}}
+  - {name: second, package: tms_launch, executable: demo_talker, namespace: /rev, parameters: {rate_hz: 5.0, shutdown_delay_s: 1.0}}
+"""
+
+
+def test_launcher_reverse_shutdown_stops_the_last_started_node_first_and_alone(procs, tmp_path):
+    launcher = _launcher(procs, _write(tmp_path, REVERSE_STOP))
+    assert launcher.wait_for("all 2 node(s)", timeout=90), launcher.output
+    time.sleep(3.0)  # both spinning (see test_launcher_gives_a_node_its_stop_grace_before_sigterm)
+    started = time.monotonic()
+    os.kill(launcher.popen.pid, signal.SIGINT)
+    assert launcher.wait(20) == 0, launcher.output
+    assert time.monotonic() - started > 1.9, "one node at a time: 1 s each"
+    lines = launcher.output.splitlines()
+    assert "stopping 2 node(s) (last started first, one at a time): first, second" in launcher.output
+    assert lines.index("[second] talker: shut down") < lines.index("[first] talker: shut down"), launcher.output
 
 
 JOB = """

@@ -164,3 +164,24 @@ def test_a_manager_stopped_mid_task_cancels_its_subtasks_and_locks_the_machines(
     system.wait(lambda: locks["zx200"] == [True] and locks["ic120"] == [True], 10, f"both locks engaged: {locks}")
     for goal in ("/ic120/navigate_to_pose", "/zx200/tms_rp_zx200_change_pose"):
         assert system.procs["stub"].wait_for(f"CANCELED {goal}", 10), system.procs["stub"].output
+
+
+def test_a_subtask_server_stopped_mid_goal_cancels_downstream_and_aborts_naming_why(ts_system):  # noqa: ANN001
+    """SIGINT to a subtask server while its goal runs: the planning goal is canceled, the task ends FAILURE saying
+    the server was stopping, the server exits 0 with no traceback (it used to die in the shut-down context)."""
+    import signal
+
+    from tms_msg.msg import TaskIds, TaskState
+
+    _seed(ts_system.store)
+    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4)
+    system = ts_system.start(stub_duration_s=60.0)
+    system.publish("/tms_ts/start", TaskIds(task_ids=[4]))
+    system.wait(lambda: any(ln.startswith("GOAL") for ln in system.procs["stub"].lines), 30, "the planning goal")
+    server = system.procs["zx200"]
+    server.signal(signal.SIGINT)
+    assert server.wait(15) == 0, server.output
+    assert "Traceback" not in server.output, server.output
+    assert system.procs["stub"].wait_for("CANCELED /zx200/tms_rp_zx200_change_pose", 10), system.procs["stub"].output
+    system.wait(lambda: _state(system, 4) == TaskState.FAILURE, 30, "task 4 FAILURE")
+    assert "subtask server stopping" in system.task(4).message, system.task(4).message

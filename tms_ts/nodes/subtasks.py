@@ -153,6 +153,10 @@ class SubtaskServers(Node):
                 callback_group=group,
             ))
         self.heartbeat = self.create_publisher(String, HEARTBEAT_TOPIC, 10)
+        self._stopping = threading.Event()  # SIGINT/SIGTERM: every running goal cancels downstream, then aborts
+        self._running = 0
+        self._running_lock = threading.Lock()
+        self._stop_deadline = 0.0
         self._beat_stop = threading.Event()
         threading.Thread(target=self._beat, name="subtask_heartbeat", daemon=True).start()
         self.get_logger().info(f"subtask servers for /{self.model_name}: {', '.join(s.name for s in specs)}")
@@ -184,6 +188,9 @@ class SubtaskServers(Node):
         return spec.build(doc, goal.record_name)
 
     def _on_goal(self, goal: Subtask.Goal, spec: SubtaskSpec) -> GoalResponse:
+        if self._stopping.is_set():
+            self.get_logger().error(f"/{self.model_name}/{spec.name}: goal rejected: the server is stopping")
+            return GoalResponse.REJECT
         try:
             self._plan(goal, spec)
         except SubtaskRecordError as exc:
@@ -207,7 +214,27 @@ class SubtaskServers(Node):
         self.get_logger().info(f"/{self.model_name}/{spec.name} '{gh.request.record_name}' {how}: {message}")
         return Subtask.Result(success=how == "succeed", message=message)
 
+    def on_stop_requested(self) -> bool:
+        """run_node's stop hook: cancel the running goals downstream; True while any is still running."""
+        if not self._stopping.is_set():
+            self._stop_deadline = time.monotonic() + self.stop_timeout_s + 1.0
+            self._stopping.set()
+            with self._running_lock:
+                if self._running:
+                    self.get_logger().warning(f"stopping: canceling {self._running} running goal(s) downstream")
+        with self._running_lock:
+            return self._running > 0 and time.monotonic() < self._stop_deadline
+
     def _execute(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
+        with self._running_lock:
+            self._running += 1
+        try:
+            return self._execute_goal(gh, spec)
+        finally:
+            with self._running_lock:
+                self._running -= 1
+
+    def _execute_goal(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
         record = gh.request.record_name
         try:
             plan = self._plan(gh.request, spec)
@@ -249,7 +276,7 @@ class SubtaskServers(Node):
                     return self._finish(gh, spec, "abort", f"planning server {planning} lost while running "
                                         f"record '{record}' (unavailable for {now - lost_since:.1f} s): "
                                         f"/{self.model_name}/emg_stop latched")
-            if gh.is_cancel_requested and cancel_deadline is None:
+            if (gh.is_cancel_requested or self._stopping.is_set()) and cancel_deadline is None:
                 handle.cancel_goal_async()
                 cancel_deadline = time.monotonic() + self.stop_timeout_s
             if cancel_deadline is not None and time.monotonic() > cancel_deadline:
@@ -258,6 +285,11 @@ class SubtaskServers(Node):
                                     f"{self.stop_timeout_s:g} s: /{self.model_name}/emg_stop latched")
         res = result_future.result()
         ok, detail = planning_ok(plan["kind"], res.result)
+        if self._stopping.is_set() and not gh.is_cancel_requested:
+            status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
+                res.status, "ABORTED")
+            return self._finish(gh, spec, "abort", f"subtask server stopping (SIGINT/SIGTERM): planning {planning} "
+                                f"canceled ({status})")
         if gh.is_cancel_requested:
             status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
                 res.status, "ABORTED")
@@ -275,4 +307,5 @@ class SubtaskServers(Node):
 def main() -> int:
     from tms_ts.nodes import run_threaded
 
-    return run_threaded(SubtaskServers, threads=32)
+    # stop_in_context: on SIGINT/SIGTERM running goals cancel their planning goals and end (on_stop_requested)
+    return run_threaded(SubtaskServers, threads=32, stop_in_context=True)
