@@ -64,6 +64,7 @@ TOP_KEYS = {"name", "nodes", "env", "parameters", "startup", "shutdown"}
 STARTUP = {"sequential", "parallel"}
 SHUTDOWN = {"parallel", "reverse"}
 ON_EXIT = {"error", "shutdown"}
+DEFAULT_STOP_GRACE_S = 2.5  # SIGINT -> SIGTERM when a node has no stop_grace_s
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ class NodeSpec:
     ready_timeout: float = 90.0
     on_exit: str = "error"
     nice: int | None = None
-    stop_grace_s: float = 2.5
+    stop_grace_s: float = DEFAULT_STOP_GRACE_S
 
     @property
     def fqn(self) -> str:
@@ -216,7 +217,7 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
             _expect(where, at + ("nice",), nice, int, f"node {name!r}: 'nice'")
             if not -20 <= nice <= 19:
                 raise where.error(at + ("nice",), f"node {name!r}: nice must be within -20..19, got {nice}")
-        grace = _expect(where, at + ("stop_grace_s",), raw.get("stop_grace_s", 2.5), (int, float),
+        grace = _expect(where, at + ("stop_grace_s",), raw.get("stop_grace_s", DEFAULT_STOP_GRACE_S), (int, float),
                         f"node {name!r}: 'stop_grace_s'")
         if isinstance(grace, bool) or not 0 < grace <= 600:
             raise where.error(at + ("stop_grace_s",), f"node {name!r}: stop_grace_s must be within (0, 600] s, got {grace}")

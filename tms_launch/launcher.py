@@ -234,14 +234,14 @@ class Launcher:
         self.read_cpu()
         self.report_cpu()
         alive = [r for r in self.running if r.proc.poll() is None]
+        one_at_a_time = self.launch.shutdown == "reverse"
+        if one_at_a_time:
+            alive.reverse()
         if alive:
-            order = " (last started first, one at a time)" if self.launch.shutdown == "reverse" else ""
+            order = " (last started first, one at a time)" if one_at_a_time else ""
             self.log(f"stopping {len(alive)} node(s){order}: {', '.join(r.spec.name for r in alive)}")
-        if self.launch.shutdown == "reverse":
-            for r in reversed(alive):
-                self._stop_group([r])
-        else:
-            self._stop_group(alive)
+        for group in ([r] for r in alive) if one_at_a_time else [alive]:
+            self._stop_group(group)
         for r in self.running:
             r.reader.join(timeout=0.5)
 

@@ -285,15 +285,13 @@ class SubtaskServers(Node):
                                     f"{self.stop_timeout_s:g} s: /{self.model_name}/emg_stop latched")
         res = result_future.result()
         ok, detail = planning_ok(plan["kind"], res.result)
-        if self._stopping.is_set() and not gh.is_cancel_requested:
-            status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
-                res.status, "ABORTED")
+        status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
+            res.status, "ABORTED")
+        if gh.is_cancel_requested:
+            return self._finish(gh, spec, "canceled", f"canceled; planning {planning} confirmed stop ({status})")
+        if self._stopping.is_set():
             return self._finish(gh, spec, "abort", f"subtask server stopping (SIGINT/SIGTERM): planning {planning} "
                                 f"canceled ({status})")
-        if gh.is_cancel_requested:
-            status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
-                res.status, "ABORTED")
-            return self._finish(gh, spec, "canceled", f"canceled; planning {planning} confirmed stop ({status})")
         if res.status == GoalStatus.STATUS_SUCCEEDED and ok:
             return self._finish(gh, spec, "succeed", f"{spec.name} '{record}' done")
         return self._finish(gh, spec, "abort", f"planning {planning} failed for record '{record}': {detail}")
