@@ -200,3 +200,30 @@ def test_paper_launch_poses_and_big_swings_always_end(arm_stack) -> None:
         assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, (q, status, res.message)
         tip = settled_tip(stack)
         assert np.linalg.norm(tip - KIN.tip_position(np.array(q))) < TOL_M, (q, tip, KIN.tip_position(np.array(q)))
+
+
+def test_a_planner_stopped_mid_goal_cancels_the_arm_and_aborts_naming_why(arm_stack) -> None:
+    """SIGINT to zx200_planner while a change_pose drives the arm: the controller goal is canceled, the arm
+    comes to rest, the goal ends ABORTED saying the planner was stopping, and the planner exits 0 with no
+    traceback (it used to die in the shut-down context, leaving the controller goal to run on its own)."""
+    import signal
+
+    stack = arm_stack()
+    q0 = np.array(stack.q)
+    handle = stack.send("change_pose", joint_goal([q0[0] + 1.2, -0.5, 1.3, 0.5]))
+    assert handle.accepted
+    assert stack.spin_until(lambda: abs(stack.q[0] - q0[0]) > 0.15, 30), "did not start moving"
+    planner = stack.procs["planner"]
+    planner.signal(signal.SIGINT)
+    status, res = stack.result(handle, 30)
+    t_end = time.monotonic()
+    assert status == ABORTED and res.error_code.val == codes.FAILURE, (status, res.message)
+    assert res.message.startswith("zx200_planner stopping (SIGINT/SIGTERM): canceled, arm at rest"), res.message
+    assert planner.wait(20) == 0, planner.output[-3000:]
+    assert "Traceback" not in planner.output, planner.output[-3000:]
+    assert stack.procs["controller"].wait_for("canceled", 5), stack.procs["controller"].output[-2000:]
+    _, _, v = min((s for s in stack.dq_log if s[0] >= t_end - 0.3), key=lambda s: abs(s[0] - t_end))
+    assert max(abs(x) for x in v) < 0.02, f"ended while moving: {v}"
+    q_c = np.array(stack.q)
+    stack.spin(2.0)
+    assert np.max(np.abs(np.array(stack.q) - q_c)) < 0.01, "arm kept moving after the planner stopped"

@@ -10,6 +10,10 @@ segments, so the arm passes the via phases without stopping; feedback ``state`` 
 (approach, penetrate, drag, curl, lift / swing, open / ...), forwarded from the controller. Cancel is
 forwarded; the goal ends CANCELED once the controller reports the arm at rest.
 
+Stopped (SIGINT/SIGTERM), the node cancels its running controller goals, waits until the controller reports
+them ended (the arm at rest; at most ``STOP_TIMEOUT_S``), aborts them with "zx200_planner stopping
+(SIGINT/SIGTERM): ..." and rejects new goals meanwhile; only then does it leave, with its context valid.
+
 Parameters: ``machine_config``, ``planner_config``, ``controller_config`` (YAML paths; defaults in config/).
 """
 
@@ -29,12 +33,13 @@ JOINT_STATES_WAIT_S = 2.0  # [s wall] a goal waits this long for a joint_states 
 GOAL_RESPONSE_TIMEOUT_S = 20.0  # [s wall] the controller answers at once (or after its <= 15 s joint_states wait)
 RESULT_GRACE_S = 3.0            # [s wall] after the goal status says it ended, wait this long for the result
 SERVER_GONE_S = 5.0             # [s wall] the controller's action server absent this long: the segment fails
+STOP_TIMEOUT_S = 15.0           # [s wall] stopped mid-goal: wait this long for the controller to end the goal
 
 
 def _make_node():  # noqa: ANN202
     import rclpy
     from action_msgs.msg import GoalStatus
-    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.action import ActionServer, CancelResponse, GoalResponse
     from rclpy.action.client import ClientGoalHandle
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.node import Node
@@ -74,13 +79,18 @@ def _make_node():  # noqa: ANN202
             # next plan starts there while the arm is still on its way (Zx200Planner.start_state)
             self._pass_through_end: np.ndarray | None = None
             self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=group)
+            self._stopping = threading.Event()
+            self._stop_deadline = 0.0
+            self._running = 0
+            self._running_lock = threading.Lock()
             accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
-            ActionServer(self, Zx200ChangePose, "tms_rp_zx200_change_pose", execute_callback=self._change_pose,
-                         cancel_callback=accept, callback_group=group)
-            ActionServer(self, Zx200ExcavateSimple, "tms_rp_zx200_excavate_simple", execute_callback=self._excavate,
-                         cancel_callback=accept, callback_group=group)
-            ActionServer(self, Zx200ReleaseSimple, "tms_rp_zx200_release_simple", execute_callback=self._release,
-                         cancel_callback=accept, callback_group=group)
+            for action_type, name, execute in (
+                (Zx200ChangePose, "tms_rp_zx200_change_pose", self._change_pose),
+                (Zx200ExcavateSimple, "tms_rp_zx200_excavate_simple", self._excavate),
+                (Zx200ReleaseSimple, "tms_rp_zx200_release_simple", self._release),
+            ):
+                ActionServer(self, action_type, name, execute_callback=self._counted(execute),
+                             goal_callback=self._on_goal, cancel_callback=accept, callback_group=group)
             self.get_logger().info("zx200_planner ready")
 
         def _current_q(self) -> np.ndarray | None:
@@ -97,6 +107,35 @@ def _make_node():  # noqa: ANN202
         def destroy_node(self) -> None:
             self._state_probe.destroy_node()
             super().destroy_node()
+
+        # -------------------------------------------------------------- stop (run_node's hook)
+        def _on_goal(self, _request) -> GoalResponse:  # noqa: ANN001
+            if self._stopping.is_set():
+                self.get_logger().error("goal rejected: zx200_planner is stopping")
+                return GoalResponse.REJECT
+            return GoalResponse.ACCEPT
+
+        def _counted(self, execute):  # noqa: ANN001, ANN202
+            def run(handle):  # noqa: ANN001, ANN202
+                with self._running_lock:
+                    self._running += 1
+                try:
+                    return execute(handle)
+                finally:
+                    with self._running_lock:
+                        self._running -= 1
+            return run
+
+        def on_stop_requested(self) -> bool:
+            """Cancel the running controller goals (the waits below see ``_stopping``); True while any runs."""
+            if not self._stopping.is_set():
+                self._stop_deadline = time.monotonic() + STOP_TIMEOUT_S
+                self._stopping.set()
+                with self._running_lock:
+                    if self._running:
+                        self.get_logger().warning(f"stopping: canceling {self._running} running goal(s) at the controller")
+            with self._running_lock:
+                return self._running > 0 and time.monotonic() < self._stop_deadline
 
         # -------------------------------------------------------------- common execution
         def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
@@ -131,7 +170,11 @@ def _make_node():  # noqa: ANN202
             if code != codes.SUCCESS:
                 result.error_code.val = code
                 result.message = message
-                if code == codes.CANCELED:
+                if code == codes.CANCELED and not handle.is_cancel_requested:  # canceled by our stop, not the client
+                    result.error_code.val = codes.FAILURE
+                    result.message = f"zx200_planner stopping (SIGINT/SIGTERM): {message}"
+                    handle.abort()
+                elif code == codes.CANCELED:
                     handle.canceled()
                 else:
                     handle.abort()
@@ -182,10 +225,13 @@ def _make_node():  # noqa: ANN202
             send = self._ctl.send_goal_async(goal, feedback_callback=forward, goal_uuid=goal_id)
             deadline = time.monotonic() + GOAL_RESPONSE_TIMEOUT_S
             while not send.done():
-                if time.monotonic() > deadline:
+                stopping = self._stopping.is_set()
+                if stopping or time.monotonic() > deadline:
                     # The goal may run on the controller without us knowing: cancel it by its id.
                     response = Zx200ArmMove.Impl.SendGoalService.Response(accepted=True)
                     ClientGoalHandle(self._ctl, goal_id, response).cancel_goal_async()
+                    if stopping:
+                        return codes.CANCELED, "goal sent to the arm controller canceled before its answer"
                     return codes.NO_VALID_CONTROL, (
                         f"arm controller did not answer the goal within {GOAL_RESPONSE_TIMEOUT_S:g} s (cancel sent)")
                 time.sleep(0.01)
@@ -209,7 +255,7 @@ def _make_node():  # noqa: ANN202
                         GoalStatus.STATUS_ABORTED: codes.FAILURE}
             while not res_future.done():
                 now = time.monotonic()
-                if handle.is_cancel_requested and not cancel_sent:
+                if (handle.is_cancel_requested or self._stopping.is_set()) and not cancel_sent:
                     gh.cancel_goal_async()
                     cancel_sent = True
                 if gh.status in terminal:
@@ -229,7 +275,7 @@ def _make_node():  # noqa: ANN202
                 time.sleep(0.02)
             res = res_future.result().result
             if cancel_sent:
-                return codes.CANCELED, "canceled, arm at rest"
+                return codes.CANCELED, f"canceled, arm at rest (controller: {res.message or 'no message'})"
             return res.error_code.val, res.message
 
         # -------------------------------------------------------------- the three actions
@@ -269,4 +315,5 @@ def _make_node():  # noqa: ANN202
 
 def main() -> int:
     """Console script ``zx200_planner``."""
-    return run_node(_make_node, executor="multi")
+    # stop_in_context: on SIGINT/SIGTERM running goals cancel their controller goals and end (on_stop_requested)
+    return run_node(_make_node, executor="multi", stop_in_context=True)
