@@ -6,7 +6,8 @@ chosen executor and shuts down cleanly on SIGINT/SIGTERM, returning a process ex
 
 Every node's incompatible-QoS/-type event handlers are polled once a second instead of sitting in the
 executor's wait set (:mod:`tms_common.qos_events`: 0.58-0.68 of the executor CPU per wake in four runs of
-``python -m tests.bench executor_wake``).
+``python -m tests.bench executor_wake``). A node on simulated time gets its ``/clock`` from a helper thread
+(:mod:`tms_common.sim_clock`), so its executor wakes for its timers and messages, not for every clock tick.
 
 Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``). DESIGN.md §5 measured the
 EventsExecutor at about a third of the CPU of the SingleThreadedExecutor for a 100 Hz timer; nodes
@@ -74,18 +75,21 @@ def run_node(
 
     from tms_common.dds import use_platform_profiles
     from tms_common.qos_events import defer_qos_incompatibility_events
+    from tms_common.sim_clock import relay_clock
 
     use_platform_profiles()
     rclpy.init(args=list(args) if args is not None else sys.argv,
                signal_handler_options=SignalHandlerOptions.NO if stop_in_context else SignalHandlerOptions.ALL)
     node = None
     spinner = None
+    relay = None
     signals = contextlib.ExitStack()
     try:
         node = factory()
         if stop_in_context:
             signals.enter_context(_stop_on_signals(node))
         defer_qos_incompatibility_events(node)
+        relay = relay_clock(node)
         spinner = make_executor(executor, threads=threads)
         spinner.add_node(node)
         spinner.spin()
@@ -106,7 +110,9 @@ def run_node(
             spinner.shutdown(timeout_sec=0)
             _wait_for_callback_threads(spinner, timeout_s=2.0)
         if node is not None:
-            node.destroy_node()
+            node.destroy_node()  # the clock still runs: destroy_node may wait on simulated time
+        if relay is not None:
+            relay.close()
         signals.close()  # after destroy_node: a second signal meanwhile must not cut it short
         rclpy.try_shutdown()
     return 0

@@ -1,11 +1,13 @@
-"""CPU per executor wake of a converter-shaped node on simulated time, with and without polled QoS events.
+"""CPU per executor wake of a converter-shaped node on simulated time: rclpy's defaults, polled QoS events, relayed /clock.
 
 A /clock publisher process advances simulated time 10 ms every 5 ms of wall time (200 messages/s); the node
 under test (its own process, ``use_sim_time``) has the com3_bridge's shape (5 publishers, 7 subscriptions on
 idle topics) and a 20 ms timer, so it wakes about 300 times a second. Its CPU over ``EXEC_BENCH_S`` seconds
-is measured from its own rusage, once with rclpy's defaults and once after
-:func:`tms_common.qos_events.defer_qos_incompatibility_events`, alternating ``EXEC_BENCH_ROUNDS`` times
-so both see the same machine load. Printed: CPU % of a core, ms per wake, and the ratio.
+is measured from its own rusage, with rclpy's defaults (``default``), after
+:func:`tms_common.qos_events.defer_qos_incompatibility_events` (``deferred``), and after that and
+:func:`tms_common.sim_clock.relay_clock` (``relayed``: /clock taken by a helper thread, the executor wakes for
+the timer only), alternating ``EXEC_BENCH_ROUNDS`` times so all see the same machine load. Printed: CPU % of a
+core, ms per wake (timer callbacks + /clock messages), and each variant's ratio to the default.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ def _node_under_test(variant: str) -> None:
     from std_msgs.msg import Float64
 
     from tms_common.qos_events import defer_qos_incompatibility_events
+    from tms_common.sim_clock import relay_clock
 
     rclpy.init()
     node = rclpy.create_node("bench_wake", parameter_overrides=[Parameter("use_sim_time", value=True)])
@@ -59,7 +62,9 @@ def _node_under_test(variant: str) -> None:
         node.create_subscription(Float64, f"in_{i}", lambda _msg: None, 10)
     fired = [0]
     node.create_timer(0.02, lambda: fired.__setitem__(0, fired[0] + 1))
-    moved = defer_qos_incompatibility_events(node) if variant == "deferred" else 0
+    moved = defer_qos_incompatibility_events(node) if variant in ("deferred", "relayed") else 0
+    if variant == "relayed":
+        relay_clock(node)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     end = time.monotonic() + 3.0  # discovery and the first /clock messages
@@ -82,7 +87,7 @@ def main() -> None:
         try:
             if not clock.wait_for("clock publishing", 30):
                 raise RuntimeError(f"/clock publisher did not start:\n{clock.output}")
-            totals: dict[str, list[float]] = {"default": [], "deferred": []}
+            totals: dict[str, list[float]] = {"default": [], "deferred": [], "relayed": []}
             for _ in range(ROUNDS):
                 for variant in totals:
                     proc = Proc([sys.executable, "-m", "tests.bench.bench_executor_wake", "node", variant], env, name=variant)
@@ -97,8 +102,9 @@ def main() -> None:
                           f"({timer} timer callbacks, ~{wall * 200:.0f} /clock in {wall:.1f} s; {moved} handlers deferred)")
         finally:
             clock.kill()
-    base, deferred = (sum(v) / len(v) for v in totals.values())
-    print(f"executor CPU with deferred QoS events / default: {deferred / base:.2f} (mean of {ROUNDS} rounds each)")
+    mean = {variant: sum(v) / len(v) for variant, v in totals.items()}
+    print(f"process CPU relative to the default (mean of {ROUNDS} rounds each): deferred QoS events "
+          f"{mean['deferred'] / mean['default']:.2f}, and /clock relayed {mean['relayed'] / mean['default']:.2f}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,63 @@
+"""tms_common.sim_clock: a simulated-time node's clock is fed by the relay thread; its executor wakes for timers only."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+
+def test_relayed_clock_fires_timers_at_simulated_times_without_waking_per_clock_message(ros_node):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    from tms_common.sim_clock import relay_clock
+
+    node = rclpy.create_node("sim_node", context=ros_node.context,
+                             parameter_overrides=[Parameter("use_sim_time", value=True)])
+    fired: list[float] = []
+    node.create_timer(0.1, lambda: fired.append(node.get_clock().now().nanoseconds * 1e-9))
+    relay = relay_clock(node)
+    assert relay is not None
+    assert not [s for s in node.subscriptions if s.topic_name == "/clock"], "the node still subscribes /clock itself"
+    pub = ros_node.create_publisher(Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    deadline = time.monotonic() + 10
+    while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert pub.get_subscription_count() >= 1, "the relay's /clock subscription was not discovered"
+
+    steps = 200  # 10 ms of simulated time every 5 ms of wall time: 2 s simulated
+
+    def publish() -> None:
+        for k in range(1, steps + 1):
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = divmod(k * 10_000_000, 1_000_000_000)
+            pub.publish(msg)
+            time.sleep(0.005)
+
+    executor = SingleThreadedExecutor(context=ros_node.context)
+    executor.add_node(node)
+    feeder = threading.Thread(target=publish, daemon=True)
+    wakes = 0
+    try:
+        feeder.start()
+        end = time.monotonic() + 15
+        while (feeder.is_alive() or node.get_clock().now().nanoseconds < steps * 10_000_000) and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.5)
+            wakes += 1
+        now = node.get_clock().now().nanoseconds * 1e-9
+        assert abs(now - 2.0) < 1e-6, f"the node's clock stopped at {now} s (relay received {relay.received})"
+        assert relay.received >= steps * 0.9, relay.received  # best effort: a few may be dropped locally
+        assert 18 <= len(fired) <= 21, fired
+        # the k-th call is due at k * 0.1 s simulated; it runs once the clock passed that (a few steps later at most)
+        late = [(k, t) for k, t in enumerate(fired, 1) if not k * 0.1 - 1e-6 <= t <= k * 0.1 + 0.05]
+        assert not late, f"timer calls off their simulated due times (k, t): {late}"
+        # without the relay every /clock message wakes the executor (>= 200); now timers (20) and timeouts do
+        assert wakes < steps / 4, f"{wakes} executor wakes for {steps} /clock messages"
+    finally:
+        executor.shutdown()
+        relay.close()
+        relay.close()  # idempotent
+        node.destroy_node()
