@@ -107,8 +107,10 @@ def run_node(
         return 1
     finally:
         if spinner is not None:
+            # the pool first: a handler still queued triggers the executor's guard condition, which
+            # spinner.shutdown destroys (rclpy 7.1.6 does not catch that in a handler that finds it shut down)
+            _wait_for_callback_threads(spinner, timeout_s=2.0, run_queued=node is not None and node.context.ok())
             spinner.shutdown(timeout_sec=0)
-            _wait_for_callback_threads(spinner, timeout_s=2.0)
         if node is not None:
             node.destroy_node()  # the clock still runs: destroy_node may wait on simulated time
         if relay is not None:
@@ -116,6 +118,9 @@ def run_node(
         signals.close()  # after destroy_node: a second signal meanwhile must not cut it short
         rclpy.try_shutdown()
     return 0
+
+
+_SETTLE_S = 0.2  # [s] spin left to a node stopped in context after its on_stop_requested hook is done
 
 
 class _StopRequested(Exception):  # noqa: N818 - a request, not an error
@@ -135,9 +140,18 @@ def _stop_on_signals(node):  # noqa: ANN001, ANN202
 
     winding_down = getattr(node, "on_stop_requested", None)
 
+    settled = threading.Event()
+
     def stop() -> None:
         if winding_down is not None and winding_down():
             threading.Timer(0.05, guard.trigger).start()  # ask again in 50 ms; the spin goes on meanwhile
+            return
+        if not settled.is_set():
+            # One more short spin: what the last callbacks left queued (an action server's result and status
+            # after its execute callback returned, a client's result response) is handled before the executor
+            # stops, instead of being dropped ("coroutine ... was never awaited") or run on destroyed handles.
+            settled.set()
+            threading.Timer(_SETTLE_S, guard.trigger).start()
             return
         raise _StopRequested
 
@@ -166,8 +180,11 @@ def _stop_on_signals(node):  # noqa: ANN001, ANN202
         os.close(write_fd)  # the relay's read returns b"" and it ends
 
 
-def _wait_for_callback_threads(spinner, timeout_s: float) -> None:  # noqa: ANN001
+def _wait_for_callback_threads(spinner, timeout_s: float, *, run_queued: bool) -> None:  # noqa: ANN001
     """Let callbacks still running in a MultiThreadedExecutor's threads end before the node is destroyed.
+
+    ``run_queued``: handlers queued but not started run too (the context is valid: stopped in context);
+    otherwise they are canceled (their coroutines are then never awaited, and Python says so at exit).
 
     Without this, a callback in flight at SIGINT touched handles that ``destroy_node`` had just destroyed and
     a multi-threaded node printed "exception was never retrieved: cannot use Destroyable because destruction
@@ -179,6 +196,6 @@ def _wait_for_callback_threads(spinner, timeout_s: float) -> None:  # noqa: ANN0
     pool = getattr(spinner, "_executor", None)  # rclpy.executors.MultiThreadedExecutor's ThreadPoolExecutor
     if pool is None:
         return
-    joiner = threading.Thread(target=pool.shutdown, kwargs={"wait": True, "cancel_futures": True}, daemon=True)
+    joiner = threading.Thread(target=pool.shutdown, kwargs={"wait": True, "cancel_futures": not run_queued}, daemon=True)
     joiner.start()
     joiner.join(timeout_s)
