@@ -48,6 +48,7 @@ def _make_node():  # noqa: ANN202
     from unique_identifier_msgs.msg import UUID
 
     from tms_common.action_client import RaceFreeActionClient
+    from tms_common.goals import RunningGoals
     from tms_msg.action import Zx200ArmMove, Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
     from tms_msg.msg import Zx200ArmSegment
     from tms_rc.zx200.controller import JointTarget, load_controller_config
@@ -79,10 +80,7 @@ def _make_node():  # noqa: ANN202
             # next plan starts there while the arm is still on its way (Zx200Planner.start_state)
             self._pass_through_end: np.ndarray | None = None
             self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=group)
-            self._stopping = threading.Event()
-            self._stop_deadline = 0.0
-            self._running = 0
-            self._running_lock = threading.Lock()
+            self._goals = RunningGoals()  # SIGINT/SIGTERM: running goals cancel their controller goal, then abort
             accept = lambda _h: CancelResponse.ACCEPT  # noqa: E731
             for action_type, name, execute in (
                 (Zx200ChangePose, "tms_rp_zx200_change_pose", self._change_pose),
@@ -110,32 +108,21 @@ def _make_node():  # noqa: ANN202
 
         # -------------------------------------------------------------- stop (run_node's hook)
         def _on_goal(self, _request) -> GoalResponse:  # noqa: ANN001
-            if self._stopping.is_set():
+            if self._goals.stopping.is_set():
                 self.get_logger().error("goal rejected: zx200_planner is stopping")
                 return GoalResponse.REJECT
             return GoalResponse.ACCEPT
 
         def _counted(self, execute):  # noqa: ANN001, ANN202
             def run(handle):  # noqa: ANN001, ANN202
-                with self._running_lock:
-                    self._running += 1
-                try:
+                with self._goals.running():
                     return execute(handle)
-                finally:
-                    with self._running_lock:
-                        self._running -= 1
             return run
 
         def on_stop_requested(self) -> bool:
-            """Cancel the running controller goals (the waits below see ``_stopping``); True while any runs."""
-            if not self._stopping.is_set():
-                self._stop_deadline = time.monotonic() + STOP_TIMEOUT_S
-                self._stopping.set()
-                with self._running_lock:
-                    if self._running:
-                        self.get_logger().warning(f"stopping: canceling {self._running} running goal(s) at the controller")
-            with self._running_lock:
-                return self._running > 0 and time.monotonic() < self._stop_deadline
+            """Cancel the running controller goals (the waits below see ``stopping``); True while any runs."""
+            return self._goals.wind_down(STOP_TIMEOUT_S, lambda n: self.get_logger().warning(
+                f"stopping: canceling {n} running goal(s) at the controller"))
 
         # -------------------------------------------------------------- common execution
         def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
@@ -225,7 +212,7 @@ def _make_node():  # noqa: ANN202
             send = self._ctl.send_goal_async(goal, feedback_callback=forward, goal_uuid=goal_id)
             deadline = time.monotonic() + GOAL_RESPONSE_TIMEOUT_S
             while not send.done():
-                stopping = self._stopping.is_set()
+                stopping = self._goals.stopping.is_set()
                 if stopping or time.monotonic() > deadline:
                     # The goal may run on the controller without us knowing: cancel it by its id.
                     response = Zx200ArmMove.Impl.SendGoalService.Response(accepted=True)
@@ -255,7 +242,7 @@ def _make_node():  # noqa: ANN202
                         GoalStatus.STATUS_ABORTED: codes.FAILURE}
             while not res_future.done():
                 now = time.monotonic()
-                if (handle.is_cancel_requested or self._stopping.is_set()) and not cancel_sent:
+                if (handle.is_cancel_requested or self._goals.stopping.is_set()) and not cancel_sent:
                     gh.cancel_goal_async()
                     cancel_sent = True
                 if gh.status in terminal:

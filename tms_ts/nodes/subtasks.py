@@ -37,6 +37,7 @@ from std_msgs.msg import Bool, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from tms_common.action_client import RaceFreeActionClient
+from tms_common.goals import RunningGoals
 from tms_msg.action import (
     FollowWaypoints,
     NavigateThroughPoses,
@@ -153,10 +154,7 @@ class SubtaskServers(Node):
                 callback_group=group,
             ))
         self.heartbeat = self.create_publisher(String, HEARTBEAT_TOPIC, 10)
-        self._stopping = threading.Event()  # SIGINT/SIGTERM: every running goal cancels downstream, then aborts
-        self._running = 0
-        self._running_lock = threading.Lock()
-        self._stop_deadline = 0.0
+        self._goals = RunningGoals()  # SIGINT/SIGTERM: every running goal cancels downstream, then aborts
         self._beat_stop = threading.Event()
         threading.Thread(target=self._beat, name="subtask_heartbeat", daemon=True).start()
         self.get_logger().info(f"subtask servers for /{self.model_name}: {', '.join(s.name for s in specs)}")
@@ -188,7 +186,7 @@ class SubtaskServers(Node):
         return spec.build(doc, goal.record_name)
 
     def _on_goal(self, goal: Subtask.Goal, spec: SubtaskSpec) -> GoalResponse:
-        if self._stopping.is_set():
+        if self._goals.stopping.is_set():
             self.get_logger().error(f"/{self.model_name}/{spec.name}: goal rejected: the server is stopping")
             return GoalResponse.REJECT
         try:
@@ -216,23 +214,12 @@ class SubtaskServers(Node):
 
     def on_stop_requested(self) -> bool:
         """run_node's stop hook: cancel the running goals downstream; True while any is still running."""
-        if not self._stopping.is_set():
-            self._stop_deadline = time.monotonic() + self.stop_timeout_s + 1.0
-            self._stopping.set()
-            with self._running_lock:
-                if self._running:
-                    self.get_logger().warning(f"stopping: canceling {self._running} running goal(s) downstream")
-        with self._running_lock:
-            return self._running > 0 and time.monotonic() < self._stop_deadline
+        return self._goals.wind_down(self.stop_timeout_s + 1.0, lambda n: self.get_logger().warning(
+            f"stopping: canceling {n} running goal(s) downstream"))
 
     def _execute(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
-        with self._running_lock:
-            self._running += 1
-        try:
+        with self._goals.running():
             return self._execute_goal(gh, spec)
-        finally:
-            with self._running_lock:
-                self._running -= 1
 
     def _execute_goal(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
         record = gh.request.record_name
@@ -276,7 +263,7 @@ class SubtaskServers(Node):
                     return self._finish(gh, spec, "abort", f"planning server {planning} lost while running "
                                         f"record '{record}' (unavailable for {now - lost_since:.1f} s): "
                                         f"/{self.model_name}/emg_stop latched")
-            if (gh.is_cancel_requested or self._stopping.is_set()) and cancel_deadline is None:
+            if (gh.is_cancel_requested or self._goals.stopping.is_set()) and cancel_deadline is None:
                 handle.cancel_goal_async()
                 cancel_deadline = time.monotonic() + self.stop_timeout_s
             if cancel_deadline is not None and time.monotonic() > cancel_deadline:
@@ -289,7 +276,7 @@ class SubtaskServers(Node):
             res.status, "ABORTED")
         if gh.is_cancel_requested:
             return self._finish(gh, spec, "canceled", f"canceled; planning {planning} confirmed stop ({status})")
-        if self._stopping.is_set():
+        if self._goals.stopping.is_set():
             return self._finish(gh, spec, "abort", f"subtask server stopping (SIGINT/SIGTERM): planning {planning} "
                                 f"canceled ({status})")
         if res.status == GoalStatus.STATUS_SUCCEEDED and ok:
