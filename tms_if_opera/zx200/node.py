@@ -157,7 +157,7 @@ def _make_node():  # noqa: ANN202
             if code != codes.SUCCESS:
                 result.error_code.val = code
                 result.message = message
-                if code == codes.CANCELED and not handle.is_cancel_requested:  # canceled by our stop, not the client
+                if self._goals.stopping.is_set() and not handle.is_cancel_requested:  # ended by our stop
                     result.error_code.val = codes.FAILURE
                     result.message = f"zx200_planner stopping (SIGINT/SIGTERM): {message}"
                     handle.abort()
@@ -260,9 +260,12 @@ def _make_node():  # noqa: ANN202
                 elif now - server_seen > SERVER_GONE_S:
                     return codes.NO_VALID_CONTROL, f"arm controller action server gone for {SERVER_GONE_S:g} s"
                 time.sleep(0.02)
-            res = res_future.result().result
-            if cancel_sent:
+            outcome = res_future.result()
+            res = outcome.result
+            if cancel_sent and outcome.status == GoalStatus.STATUS_CANCELED:  # the controller's CANCELED means at rest
                 return codes.CANCELED, f"canceled, arm at rest (controller: {res.message or 'no message'})"
+            if cancel_sent:
+                return res.error_code.val, f"cancel sent, but the controller ended the goal with status {outcome.status}: {res.message}"
             return res.error_code.val, res.message
 
         # -------------------------------------------------------------- the three actions
