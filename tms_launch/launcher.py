@@ -12,6 +12,7 @@
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
   except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
 * ``--list`` prints the nodes of the file and exits.
+* SIGUSR1 prints the stack of every thread of the launcher (to see what a launcher that does not stop waits for).
 * When the launch stops it prints the CPU time (user + system, all threads) each node used and the total,
   in seconds and in cores over the launch's wall time (``/proc/<pid>/stat``, read once a second while a
   node runs, so a node that exits on its own is counted up to its last second). With a simulated-time
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import faulthandler
 import os
 import signal
 import subprocess
@@ -326,6 +328,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{spec.fqn}\t{spec.package}/{spec.executable}\t{flag}")
         return 0
     launcher = Launcher(launch)
+    # `kill -USR1 <pid>` prints every thread's stack: what a launcher that does not stop is waiting for
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     signal.signal(signal.SIGINT, launcher.request_stop)
     signal.signal(signal.SIGTERM, launcher.request_stop)
     return launcher.run()

@@ -157,13 +157,18 @@ class Probe:
         self.emg_clear = {m: n.create_publisher(Bool, f"/{m}/emg_stop", reliable) for m in ("zx200", "ic120")}
         self._TaskIds, self._Int32 = TaskIds, Int32
         self._stop = threading.Event()
+        self._spin_error: BaseException | None = None
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
         ex = self.node.executor_for_test
-        while not self._stop.is_set():
-            ex.spin_once(timeout_sec=0.05)
+        try:
+            while not self._stop.is_set():
+                ex.spin_once(timeout_sec=0.05)
+        except BaseException as exc:  # the probe is blind from here on: wait() reports it
+            self._spin_error = exc
+            raise
 
     def close(self) -> None:
         self._stop.set()
@@ -242,6 +247,8 @@ class Probe:
         while time.monotonic() < end:
             if cond():
                 return True
+            if self._spin_error is not None:
+                raise RuntimeError(f"the probe's spin thread died, it receives nothing: {self._spin_error!r}")
             time.sleep(step)
         return cond()
 

@@ -112,7 +112,12 @@ def test_launcher_starts_three_nodes_visible_to_a_client_and_ctrl_c_stops_them(p
     assert launcher.wait_for("[listener] heard seq=", timeout=20), launcher.output
     started = time.monotonic()
     os.kill(launcher.popen.pid, signal.SIGINT)
-    assert launcher.wait(10) == 0, launcher.output
+    if launcher.wait(10) is None:  # stuck: its threads' stacks say where
+        os.kill(launcher.popen.pid, signal.SIGUSR1)
+        launcher.wait_for("most recent call first", 5.0)
+        time.sleep(0.5)
+        pytest.fail(f"tms-launch still running 10 s after SIGINT; its stacks (SIGUSR1) and output:\n{launcher.output}")
+    assert launcher.popen.returncode == 0, launcher.output
     assert time.monotonic() - started < 5.0
     assert not [p for p in pids if _alive(p)], "node processes outlived the launcher"
     # The stop prints each node's CPU time: every one of them spent some (rclpy import and init alone do).

@@ -248,9 +248,11 @@ def _tail(stack: dict, n: int = 15) -> str:
 
 def _bring_up(procs, domain, ros_node, tmp_path):  # noqa: ANN001, ANN202
     stack = start_stack(procs, domain, tmp_path, STACK_SPEED)
-    probe = Probe(ros_node)
+    # before the probe's spin thread starts: destroying an action client while another thread adds it
+    # to the executor's wait set kills that thread (rclpy: "action client pointer is invalid")
     missing = wait_servers(ros_node, 150.0)
     assert not missing, f"action servers not up: {missing}\n{_tail(stack)}"
+    probe = Probe(ros_node)
     assert probe.wait(lambda: len(probe.series()) > 10, 60.0), "no /sim/truth"
     return stack, probe
 
