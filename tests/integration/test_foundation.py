@@ -128,6 +128,19 @@ def test_launcher_starts_three_nodes_visible_to_a_client_and_ctrl_c_stops_them(p
     assert re.search(r"^\s+total\s+[0-9.]+ s\s+[0-9.]+ cores over [0-9.]+ s$", table, re.M), launcher.output
 
 
+def test_launcher_prints_its_threads_stacks_on_sigusr1_and_keeps_running(procs, tmp_path):
+    launch = "name: one\nnodes:\n  - {name: talker, package: tms_launch, executable: demo_talker, namespace: /u1}\n"
+    launcher = _launcher(procs, _write(tmp_path, launch))
+    assert launcher.wait_for("are up", timeout=90), launcher.output
+    os.kill(launcher.popen.pid, signal.SIGUSR1)
+    assert launcher.wait_for("most recent call first", 10.0), launcher.output
+    time.sleep(0.5)  # the rest of the dump
+    assert re.search(r'File ".*tms_launch/launcher\.py", line \d+ in run$', launcher.output, re.M), launcher.output
+    assert launcher.popen.poll() is None, "SIGUSR1 stopped the launcher"
+    os.kill(launcher.popen.pid, signal.SIGINT)
+    assert launcher.wait(10) == 0, launcher.output
+
+
 def test_launcher_exits_nonzero_naming_a_required_node_that_dies(procs, tmp_path):
     launcher = _launcher(procs, _write(tmp_path, THREE_NODES))
     assert launcher.wait_for("are up", timeout=90), launcher.output
