@@ -3,7 +3,7 @@
 Pure core (no ROS, no CAN): :class:`Plant` takes actuator commands (front joint velocities, track
 speeds, a vessel target angle or velocity), steps hydraulics, tracks, kinematics (MuJoCo) and soil,
 and exposes the true state. :mod:`sim_bridge.can_io` maps COM3 frames onto these commands and the
-state onto frames; :mod:`sim_bridge.nodes.plant_node` adds ``/clock`` and ``/sim/truth``.
+state onto frames; :mod:`sim_bridge.nodes.sim_plant` adds ``/clock`` and ``/sim/truth``.
 """
 
 from __future__ import annotations

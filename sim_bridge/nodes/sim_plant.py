@@ -23,9 +23,9 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering without a display (before mujoco loads)
 
-import logging  # noqa: E402
 import threading  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 from rclpy.node import Node  # noqa: E402
 
@@ -40,8 +40,8 @@ SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 class SimPlantNode(Node):
     """Owns the plant, its buses and the loop thread; publishes clock, truth and diagnostics."""
 
-    def __init__(self) -> None:
-        super().__init__("sim_plant")
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("sim_plant", **kwargs)
         from builtin_interfaces.msg import Time
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PointStamped, PoseStamped
@@ -245,7 +245,6 @@ class SimPlantNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    logging.basicConfig(level=logging.WARNING, format="[sim_plant] %(levelname)s %(name)s: %(message)s")
     return run_node(SimPlantNode, args)
 
 
