@@ -41,6 +41,7 @@ from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
 from com3_can.pilot_cutoff import CutoffSender
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_msg.msg import CrawlerCarrierMachineSetting, ExcavatorMachineSetting, JointCmd
 
 __all__ = ["main", "Com3Bridge"]
@@ -59,18 +60,18 @@ class Com3Bridge(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("com3_bridge", **kwargs)
-        machine = str(self.declare_parameter("machine", "zx200").value)
-        can_config = str(self.declare_parameter("can_config", "").value)
-        interface = str(self.declare_parameter("can_interface", "").value)
-        channel = str(self.declare_parameter("can_channel", "").value)
-        port = int(self.declare_parameter("can_port", 0).value)
-        watchdog = float(self.declare_parameter("watchdog_s", 0.5).value)
+        machine = str(declare_startup(self, "machine", "zx200").value)
+        can_config = str(declare_startup(self, "can_config", "").value)
+        interface = str(declare_startup(self, "can_interface", "").value)
+        channel = str(declare_startup(self, "can_channel", "").value)
+        port = int(declare_startup(self, "can_port", 0).value)
+        watchdog = float(declare_startup(self, "watchdog_s", 0.5).value)
         # joint_states at most once per this period [s of the node clock] per joint set; 0 = every
         # state frame (100 Hz for the ZX200 front). Every subscriber pays per message.
-        self._js_period = float(self.declare_parameter("joint_states_period_s", 0.0).value)
+        self._js_period = float(declare_startup(self, "joint_states_period_s", 0.0).value)
         if self._js_period < 0:
             raise ConfigError(f"com3_bridge: joint_states_period_s must be >= 0, got {self._js_period}")
-        self._odom_period = float(self.declare_parameter("odom_period_s", 0.0).value)
+        self._odom_period = float(declare_startup(self, "odom_period_s", 0.0).value)
         if self._odom_period < 0:
             raise ConfigError(f"com3_bridge: odom_period_s must be >= 0, got {self._odom_period}")
         self._last_published: dict[Any, float] = {}

@@ -33,6 +33,7 @@ from sim_bridge.config import load_plant  # noqa: E402
 from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
 from tms_common.node import run_node  # noqa: E402
+from tms_common.params import startup_parameters
 
 SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 
@@ -55,7 +56,7 @@ class SimPlantNode(Node):
         self._Time, self._Clock = Time, Clock
         self._PoseStamped, self._PointStamped, self._JointState = PoseStamped, PointStamped, JointState
         self._Float64MultiArray, self._Dim, self._DiagnosticArray = Float64MultiArray, MultiArrayDimension, DiagnosticArray
-        p = self.declare_parameter
+        p = startup_parameters(self)
         speed = float(p("speed", 1.0).value)
         config = str(p("config", "").value) or None
         watchdog = float(p("watchdog_s", -1.0).value)

@@ -20,6 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_db.errors import StoreError, ValidationError
 from tms_db.nodes.common import declare_and_open
 from tms_msg.msg import ParameterUpdate
@@ -45,7 +46,7 @@ class TmsDbWriter(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_db_writer", **kwargs)
         self.store = declare_and_open(self)
-        self.topic_upsert = bool(self.declare_parameter("topic_upsert", False).value)
+        self.topic_upsert = bool(declare_startup(self, "topic_upsert", False).value)
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(ParameterUpdate, "~/parameter_update", self._on_update, qos)
         self.create_service(SetParameter, "~/set_parameter", self._set_parameter)

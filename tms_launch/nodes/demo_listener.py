@@ -8,6 +8,7 @@ from rclpy.node import Node
 from std_msgs.msg import Header
 
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 
 
 class Listener(Node):
@@ -15,7 +16,7 @@ class Listener(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("listener", **kwargs)
-        self._every = int(self.declare_parameter("log_every", 100).value)
+        self._every = int(declare_startup(self, "log_every", 100).value)
         self.received = 0
         self.create_subscription(Header, "chatter", self._on_msg, 10)
 

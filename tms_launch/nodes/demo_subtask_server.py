@@ -10,6 +10,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_msg.action import Subtask
 
 
@@ -22,8 +23,8 @@ class DemoSubtaskServer(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("demo_subtask_server", **kwargs)
-        name = self.declare_parameter("action_name", "demo_subtask").value
-        self._duration = float(self.declare_parameter("duration_s", 1.0).value)
+        name = declare_startup(self, "action_name", "demo_subtask").value
+        self._duration = float(declare_startup(self, "duration_s", 1.0).value)
         self._server = ActionServer(
             self,
             Subtask,

@@ -7,7 +7,9 @@ from typing import Any
 from rclpy.node import Node
 from std_msgs.msg import Header
 
+from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 
 
 class Talker(Node):
@@ -18,10 +20,10 @@ class Talker(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("talker", **kwargs)
-        rate = self.declare_parameter("rate_hz", 100.0).value
+        rate = declare_startup(self, "rate_hz", 100.0).value
         if not rate or rate <= 0:
-            raise ValueError(f"talker: rate_hz must be > 0, got {rate}")
-        self._shutdown_delay = float(self.declare_parameter("shutdown_delay_s", 0.0).value)
+            raise ConfigError(f"talker: parameter rate_hz must be > 0, got {rate}")
+        self._shutdown_delay = float(declare_startup(self, "shutdown_delay_s", 0.0).value)
         self._pub = self.create_publisher(Header, "chatter", 10)
         self._seq = 0
         self.create_timer(1.0 / rate, self._tick)

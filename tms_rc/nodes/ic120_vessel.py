@@ -20,6 +20,7 @@ from std_msgs.msg import Float64
 
 from tms_common.config import config_path, load_yaml
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_msg.action import SetDumpAngle
 from tms_rc.ic120.vessel import VesselController, VesselError, VesselParams
 
@@ -29,9 +30,9 @@ __all__ = ["main", "Ic120Vessel"]
 class Ic120Vessel(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("ic120_vessel", **kwargs)
-        machine_yaml = str(self.declare_parameter("machine_config", "").value)
-        nav_yaml = str(self.declare_parameter("nav_config", "").value)
-        rate = float(self.declare_parameter("rate_hz", 10.0).value)
+        machine_yaml = str(declare_startup(self, "machine_config", "").value)
+        nav_yaml = str(declare_startup(self, "nav_config", "").value)
+        rate = float(declare_startup(self, "rate_hz", 10.0).value)
         mdata, _ = load_yaml(machine_yaml or config_path("machines", "ic120.yaml"))
         ndata, _ = load_yaml(nav_yaml or config_path("nav", "ic120_nav.yaml"))
         self.ctl = VesselController(VesselParams.from_config(mdata["vessel"], ndata["vessel"]))

@@ -30,7 +30,9 @@ from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
+from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import JointCmd
 from tms_rc.zx200.controller import ArmController, load_controller_config
@@ -51,13 +53,13 @@ class ArmControllerNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("zx200_arm_controller", **kwargs)
-        cfg_path = self.declare_parameter("config", "").value or None
-        machine_path = self.declare_parameter("machine_config", "").value or None
+        cfg_path = declare_startup(self, "config", "").value or None
+        machine_path = declare_startup(self, "machine_config", "").value or None
         self.kin = load_kinematics(machine_path)
         self.cfg = load_controller_config(cfg_path)
-        rate = float(self.declare_parameter("rate_hz", 0.0).value)  # 0 = rate_hz of the config file
+        rate = float(declare_startup(self, "rate_hz", 0.0).value)  # 0 = rate_hz of the config file
         if rate < 0:
-            raise ValueError(f"zx200_arm_controller: rate_hz must be >= 0, got {rate}")
+            raise ConfigError(f"zx200_arm_controller: parameter rate_hz must be >= 0, got {rate}")
         if rate > 0:  # e.g. 50 Hz in the two-machine launch, whose /clock comes every 20 ms
             import dataclasses
 

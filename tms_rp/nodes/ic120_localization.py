@@ -21,6 +21,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Imu, NavSatFix
 
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_rp.ic120.config import load_nav_config
 from tms_rp.ic120.ekf import Ic120Ekf
 from tms_rp.ic120.geo import projector_from_site
@@ -35,12 +36,12 @@ def _yaw_of(q) -> float:  # noqa: ANN001 - geometry_msgs/Quaternion
 class Ic120Localization(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("ic120_localization", **kwargs)
-        nav_config = str(self.declare_parameter("nav_config", "").value)
-        site_config = str(self.declare_parameter("site_config", "").value)
-        self.use_azimuth = bool(self.declare_parameter("use_azimuth", True).value)
-        self.base_frame = str(self.declare_parameter("base_frame", "base_link").value)
-        self.odom_frame = str(self.declare_parameter("odom_frame", "odom").value)
-        self.map_frame = str(self.declare_parameter("map_frame", "map").value)
+        nav_config = str(declare_startup(self, "nav_config", "").value)
+        site_config = str(declare_startup(self, "site_config", "").value)
+        self.use_azimuth = bool(declare_startup(self, "use_azimuth", True).value)
+        self.base_frame = str(declare_startup(self, "base_frame", "base_link").value)
+        self.odom_frame = str(declare_startup(self, "odom_frame", "odom").value)
+        self.map_frame = str(declare_startup(self, "map_frame", "map").value)
         cfg = load_nav_config(nav_config or None)
         self.projector = projector_from_site(site_config or None, cfg.geodetic_crs)
         self.ekf = Ic120Ekf(cfg.ekf)

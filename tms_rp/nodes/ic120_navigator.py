@@ -31,6 +31,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_msg.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
 from tms_rp.ic120 import errors
 from tms_rp.ic120.config import load_nav_config
@@ -65,11 +66,11 @@ kinds = {"navigate_to_pose": NavigateToPose, "navigate_through_poses": NavigateT
 class Ic120Navigator(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("ic120_navigator", **kwargs)
-        nav_config = str(self.declare_parameter("nav_config", "").value)
-        map_yaml = str(self.declare_parameter("map_yaml", "").value)
-        self.pose_timeout = float(self.declare_parameter("pose_timeout_s", 1.0).value)
+        nav_config = str(declare_startup(self, "nav_config", "").value)
+        map_yaml = str(declare_startup(self, "map_yaml", "").value)
+        self.pose_timeout = float(declare_startup(self, "pose_timeout_s", 1.0).value)
         self.pose_lost_timeout = max(self.pose_timeout,
-                                     float(self.declare_parameter("pose_lost_timeout_s", 10.0).value))
+                                     float(declare_startup(self, "pose_lost_timeout_s", 10.0).value))
         self.cfg = load_nav_config(nav_config or None, map_yaml=map_yaml or None)
         self.core = self.cfg.build_navigator()
         self.dt = 1.0 / self.cfg.controller.frequency

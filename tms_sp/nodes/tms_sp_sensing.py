@@ -31,7 +31,9 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 
+from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_db.nodes.common import declare_and_open
 from tms_sp.config import load_sensing_config
 from tms_sp.errors import SensingError
@@ -51,19 +53,19 @@ class SensingNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_sp_sensing", **kwargs)
         self._log = self.get_logger()
-        paths = {k: self.declare_parameter(k, "").value for k in ("config", "site", "ic120", "zx200")}
+        paths = {k: declare_startup(self, k, "").value for k in ("config", "site", "ic120", "zx200")}
         cfg = load_sensing_config(paths["config"] or None, paths["site"] or None, paths["ic120"] or None,
                                   paths["zx200"] or None)
-        rate = float(self.declare_parameter("rate_hz", 2.0).value)
+        rate = float(declare_startup(self, "rate_hz", 2.0).value)
         if rate <= 0:
-            raise ValueError(f"tms_sp_sensing: rate_hz must be > 0, got {rate}")
+            raise ConfigError(f"tms_sp_sensing: parameter rate_hz must be > 0, got {rate}")
         topics = {
             "mound_topic": "/sim/sensors/mound/points",
             "vessel_topic": "/sim/sensors/ic120/vessel_points",
             "ic120_pose_topic": "/sim/truth/ic120/pose",
             "zx200_pose_topic": "/sim/truth/zx200/pose",
         }
-        topics = {k: self.declare_parameter(k, v).value for k, v in topics.items()}
+        topics = {k: declare_startup(self, k, v).value for k, v in topics.items()}
         self.store = declare_and_open(self)
         self.sensing = SiteSensing(cfg, self.store)
         self.sensing.check_records()

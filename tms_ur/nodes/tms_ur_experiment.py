@@ -39,6 +39,7 @@ from std_msgs.msg import Float64MultiArray, Int32
 from tms_common.config import config_path, load_yaml, repo_root
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_common.params import startup_parameters
 from tms_msg.msg import TaskIds, TaskStatus
 from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
 
@@ -60,7 +61,7 @@ def _yaw(q) -> float:  # noqa: ANN001
 class ExperimentNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_ur_experiment", **kwargs)
-        d = self.declare_parameter
+        d = startup_parameters(self)
         self.task_ids = [int(i) for i in d("task_ids", [1, 2]).value]
         self.cycles_target = int(d("cycles", 3).value)
         self.record = d("blackboard_record", "PAPER_BLACKBOARD").value

@@ -36,6 +36,7 @@ from std_msgs.msg import Bool, Float64MultiArray, Int32, String
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_common.params import startup_parameters
 from tms_msg.msg import TaskIds, TaskStatus
 from tms_ur.panel_core import CommandError, PanelConfig, SiteState, arm_side_view, authorize, parse_command
 
@@ -56,7 +57,7 @@ class PanelNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_ur_panel", **kwargs)
-        d = self.declare_parameter
+        d = startup_parameters(self)
         self.config = PanelConfig(
             host=d("host", "127.0.0.1").value,
             port=int(d("port", 8088).value),
