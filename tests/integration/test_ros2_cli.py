@@ -37,7 +37,8 @@ def _expected_nodes(launch_path) -> set[str]:  # noqa: ANN001
 
 
 def _graph(node) -> set[str]:  # noqa: ANN001
-    return {f"{ns.rstrip('/')}/{name}" for name, ns in node.get_node_names_and_namespaces()}
+    """``ros2 node list``: the nodes on the graph, hidden ones (a name starting with "_") left out as ros2cli does."""
+    return {f"{ns.rstrip('/')}/{name}" for name, ns in node.get_node_names_and_namespaces() if not name.startswith("_")}
 
 
 def _wait(futures: dict, deadline: float, executor) -> None:  # noqa: ANN001
