@@ -2,7 +2,7 @@
 
 README.md, docs/*.md and every package README: each markdown link target and each backquoted path that
 names a repository file or folder must exist, and no document points outside the repository
-(``../shared``, the design brief's ``reference/`` notes). Paths are taken relative to the repository root
+(``../shared``, the design brief's ``reference/`` notes, its letter names for contracts). Paths are taken relative to the repository root
 or to the document's own folder. Generated places (``runs/``, ``.venv/``, ``build/``) and templates
 (``<machine>``, ``*``) are not checked.
 """
@@ -22,7 +22,8 @@ EXTENSIONS = (".py", ".yaml", ".yml", ".xml", ".dbc", ".md", ".png", ".pgm", ".s
               ".json", ".msg", ".srv", ".action", ".csv", ".html")
 _LINK = re.compile(r"\]\(([^)\s]+)\)")
 _CODE = re.compile(r"`([^`\n]+)`")
-_OUTSIDE = re.compile(r"\.\./shared|(?<![\w/])reference/|DESIGN\.md")
+#: outside the repository: the shared design brief and its notes, and its letter names for contracts
+_OUTSIDE = re.compile(r"\.\./shared|(?<![\w/])reference/|DESIGN(\.md| §)|tms_reference\.md|contract \[?[A-Z]\]?(?![\w])")
 
 
 def documents() -> list[Path]:
