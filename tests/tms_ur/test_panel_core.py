@@ -38,10 +38,10 @@ def test_arm_side_view_zero_pose_matches_reference_geometry():
     pts = arm_side_view({}, kin)
     # zx200_ros2 URDF: at q = 0 the tip is at (10.435, ., 1.957) in base_link.
     assert pts[-1] == pytest.approx([10.435, 1.957], abs=0.01)
-    # Boom down (+) lowers the tip; the view is the model's forward kinematics in the front's plane.
+    # Boom up (-) raises the tip; the view is the model's forward kinematics in the front's plane.
+    assert arm_side_view({"boom_joint": -0.5}, kin)[-1][1] > pts[-1][1]
     q = {"swing_joint": 0.7, "boom_joint": -0.5, "arm_joint": 1.2, "bucket_joint": 0.4}
     view = arm_side_view(q, kin)
-    assert view[-1][1] > pts[-1][1]
     tip = kin.tip_position([0.0, -0.5, 1.2, 0.4])
     assert view[-1] == pytest.approx([tip[0], tip[2]], abs=1e-3)
 
