@@ -276,7 +276,7 @@ def _fk_tip(q: dict[str, float]) -> np.ndarray:
 
 def test_fk_helper_matches_the_reference_home_tip():
     tip = _fk_tip({"swing_joint": 0, "boom_joint": 0, "arm_joint": 1.65806, "bucket_joint": 0})
-    assert tip == pytest.approx([5.60, -0.09, -2.48], abs=0.02)  # opera_machines.md §c
+    assert tip == pytest.approx([5.60, -0.09, -2.48], abs=0.02)  # the zx200_ros2 URDF chain
 
 
 def test_zx200_joint_poses_within_limits_and_above_ground():
