@@ -21,6 +21,7 @@ from std_msgs.msg import Float64
 from tms_common.config import config_path, load_yaml
 from tms_common.node import run_node
 from tms_common.params import declare_startup
+from tms_model.machines import CRAWLER_DUMP, load_machine
 from tms_msg.action import SetDumpAngle
 from tms_rc.ic120.vessel import VesselController, VesselError, VesselParams
 
@@ -33,9 +34,9 @@ class Ic120Vessel(Node):
         machine_yaml = str(declare_startup(self, "machine_config", "").value)
         nav_yaml = str(declare_startup(self, "nav_config", "").value)
         rate = float(declare_startup(self, "rate_hz", 10.0).value)
-        mdata, _ = load_yaml(machine_yaml or config_path("machines", "ic120.yaml"))
+        machine = load_machine("ic120", machine_yaml or None).require(CRAWLER_DUMP)
         ndata, _ = load_yaml(nav_yaml or config_path("nav", "ic120_nav.yaml"))
-        self.ctl = VesselController(VesselParams.from_config(mdata["vessel"], ndata["vessel"]))
+        self.ctl = VesselController(VesselParams.from_config(machine.vessel, ndata["vessel"]))
         self._angle: float | None = None
         self._vel = 0.0
         self._hold: float | None = None

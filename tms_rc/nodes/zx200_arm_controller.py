@@ -33,13 +33,13 @@ from sensor_msgs.msg import JointState
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import JointCmd
 from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.segments import targets_from_segments
 from tms_rc.zx200.tick_stats import TickStats
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import JOINTS, load_kinematics
 
 __all__ = ["ArmControllerNode", "main"]
 
@@ -55,7 +55,7 @@ class ArmControllerNode(Node):
         super().__init__("zx200_arm_controller", **kwargs)
         cfg_path = declare_startup(self, "config", "").value or None
         machine_path = declare_startup(self, "machine_config", "").value or None
-        self.kin = load_kinematics(machine_path)
+        self.kin = load_kinematics("zx200", path=machine_path or None)
         self.cfg = load_controller_config(cfg_path)
         rate = float(declare_startup(self, "rate_hz", 0.0).value)  # 0 = rate_hz of the config file
         if rate < 0:

@@ -36,10 +36,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Int32
 
-from tms_common.config import config_path, load_yaml, repo_root
+from tms_common.config import repo_root
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import startup_parameters
+from tms_model.geometry import yaw_from_quaternion
+from tms_model.site import load_site
 from tms_msg.msg import TaskIds, TaskStatus
 from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
 
@@ -52,10 +54,6 @@ DEFAULT_ACTIONS = (
     "/zx200/subtask_zx200_change_pose", "/zx200/subtask_zx200_excavate_simple", "/zx200/subtask_zx200_release_simple",
     "/ic120/st_ic120_follow_waypoints", "/ic120/st_ic120_navigate_anywhere", "/ic120/st_ic120_release_soil",
 )
-
-
-def _yaw(q) -> float:  # noqa: ANN001
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 class ExperimentNode(Node):
@@ -89,11 +87,11 @@ class ExperimentNode(Node):
         self._t0 = (time.monotonic(), 0.0)  # (wall, sim) when the tasks were started
         self._zx200_base: tuple[float, float, float] | None = None
         self._joints: dict[str, float] = {}
-        from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+        from tms_model.excavator.kinematics import JOINTS, load_kinematics
 
         self._kin, self._joint_order = load_kinematics(), JOINTS
         self._np = np
-        self.site, _ = load_yaml(config_path("site.yaml"))
+        self.site = load_site()
         self._store = None
         self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
@@ -137,7 +135,7 @@ class ExperimentNode(Node):
 
     def _on_pose(self, machine: str, msg: PoseStamped) -> None:
         p = msg.pose.position
-        yaw = _yaw(msg.pose.orientation)
+        yaw = yaw_from_quaternion(msg.pose.orientation)
         self.rec.on_truth_pose(self._stamp(msg.header), machine, p.x, p.y, yaw)
         if machine == "zx200":
             self._zx200_base = (p.x, p.y, yaw)
