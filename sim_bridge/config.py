@@ -16,10 +16,13 @@ from typing import Any
 
 from sim_bridge.errors import SimConfigError
 from tms_common.config import Where, config_path, load_yaml
+from tms_common.errors import ConfigError
 
 __all__ = [
     "JointSpec",
     "TrackSpec",
+    "ExcavatorSpec",
+    "CarrierSpec",
     "Zx200Spec",
     "Ic120Spec",
     "SiteSpec",
@@ -27,6 +30,8 @@ __all__ = [
     "SensorSpec",
     "PlantSpec",
     "CutoffSpec",
+    "load_excavator",
+    "load_carrier",
     "load_zx200",
     "load_ic120",
     "load_plant",
@@ -150,8 +155,8 @@ class TrackSpec:
 
 
 @dataclass(frozen=True)
-class Zx200Spec:
-    """The backhoe: front joints in bus order, bucket tip, tracks, pumps and bucket soil handling."""
+class ExcavatorSpec:
+    """A backhoe (ZX200, ZX120, ...): front joints in bus order, bucket tip, tracks, pumps and bucket soil handling."""
 
     joints: tuple[JointSpec, ...]
     bucket_tip_xyz: tuple[float, float, float]
@@ -174,8 +179,8 @@ class Zx200Spec:
 
 
 @dataclass(frozen=True)
-class Ic120Spec:
-    """The crawler dump: tracks and the vessel on its rear hinge."""
+class CarrierSpec:
+    """A crawler carrier (IC120): tracks and the vessel on its rear hinge."""
 
     tracks: TrackSpec
     hinge_xyz: tuple[float, float, float]
@@ -233,10 +238,15 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class PlantSpec:
-    """Everything the plant needs, with where it came from."""
+    """Everything the plant needs, with where it came from.
 
-    zx200: Zx200Spec
-    ic120: Ic120Spec
+    ``machines`` maps each machine's name on the site (``zx200``, ``ic120``, ``zx120``) to its spec and
+    ``kinds`` to its kind (the plant profile, :mod:`sim_bridge.profiles`). The soil is dug by
+    ``excavator`` and carried by ``carrier``: the first machine of each kind in the plant YAML.
+    """
+
+    machines: dict[str, Any]
+    kinds: dict[str, str]
     site: SiteSpec
     soil: SoilSpec
     sensors: SensorSpec
@@ -244,6 +254,18 @@ class PlantSpec:
     watchdog_s: float
     initial_poses: dict[str, tuple[float, float, float]]  # machine -> (x, y, yaw) in map
     files: tuple[str, ...]
+    excavator: str = ""
+    carrier: str = ""
+
+    @property
+    def zx200(self) -> ExcavatorSpec:
+        """The spec of the soil-digging excavator (the paper's ZX200)."""
+        return self.machines[self.excavator]
+
+    @property
+    def ic120(self) -> CarrierSpec:
+        """The spec of the soil-carrying crawler carrier (the paper's IC120)."""
+        return self.machines[self.carrier]
 
 
 def _tracks(r: _Reader, hyd: _Reader, footprint: tuple[float, float]) -> TrackSpec:
@@ -285,9 +307,9 @@ def _limits(r: _Reader) -> tuple[float | None, float | None]:
     return lo, hi
 
 
-def load_zx200(path: str | Path | None = None) -> Zx200Spec:
-    """Read the ZX200 machine YAML (geometry from the URDF section, actuators from ``hydraulics:``)."""
-    path = Path(path) if path else config_path("machines", "zx200.yaml")
+def load_excavator(path: str | Path) -> ExcavatorSpec:
+    """Read an excavator machine YAML (geometry from the URDF section, actuators from ``hydraulics:``)."""
+    path = Path(path)
     data, where = load_yaml(path)
     top = _Reader(data, where)
     hyd = top.sub("hydraulics")
@@ -325,7 +347,7 @@ def load_zx200(path: str | Path | None = None) -> Zx200Spec:
     tr = top.sub("tracks")
     b = hyd.sub("bucket")
     b.only({"width", "release_tip_angle", "spill_time_s", "cut_min_speed"})
-    return Zx200Spec(
+    return ExcavatorSpec(
         joints=tuple(joints),
         bucket_tip_xyz=top.vector("bucket_tip_xyz", 3),  # type: ignore[arg-type]
         home_pose=home,
@@ -341,9 +363,9 @@ def load_zx200(path: str | Path | None = None) -> Zx200Spec:
     )
 
 
-def load_ic120(path: str | Path | None = None) -> Ic120Spec:
-    """Read the IC120 machine YAML (tracks, vessel, ``hydraulics:``)."""
-    path = Path(path) if path else config_path("machines", "ic120.yaml")
+def load_carrier(path: str | Path) -> CarrierSpec:
+    """Read a crawler-carrier machine YAML (tracks, vessel, ``hydraulics:``)."""
+    path = Path(path)
     data, where = load_yaml(path)
     top = _Reader(data, where)
     hyd = top.sub("hydraulics")
@@ -367,7 +389,7 @@ def load_ic120(path: str | Path | None = None) -> Ic120Spec:
         time_constant=hv.number("time_constant_s", lo=0.0, hi=10.0),
         flow_at_limit=0.0,
     )
-    return Ic120Spec(
+    return CarrierSpec(
         tracks=_tracks(top.sub("tracks"), hyd, (fp.number("length", lo=0.1), fp.number("width", lo=0.1))),
         hinge_xyz=vessel.origin_xyz,
         vessel=vessel,
@@ -382,6 +404,20 @@ def load_ic120(path: str | Path | None = None) -> Ic120Spec:
         source=str(path),
         pilot_cutoff=_cutoff(top),
     )
+
+
+def load_zx200(path: str | Path | None = None) -> ExcavatorSpec:
+    """The ZX200 (default ``config/machines/zx200.yaml``)."""
+    return load_excavator(path or config_path("machines", "zx200.yaml"))
+
+
+def load_ic120(path: str | Path | None = None) -> CarrierSpec:
+    """The IC120 (default ``config/machines/ic120.yaml``)."""
+    return load_carrier(path or config_path("machines", "ic120.yaml"))
+
+
+Zx200Spec = ExcavatorSpec
+Ic120Spec = CarrierSpec
 
 
 def load_site(path: str | Path | None = None) -> SiteSpec:
@@ -407,25 +443,27 @@ def load_plant(
 ) -> PlantSpec:
     """Read the plant YAML and the machine/site YAMLs it names (paths relative to ``config/``).
 
-    Explicit ``zx200``/``ic120``/``site`` paths override the plant file's ``machines``/``site`` keys
-    (tests use this to feed a malformed machine YAML).
+    ``machines`` maps a machine name to its machine YAML; the YAML's ``kind`` picks the plant profile
+    that reads it. Explicit ``zx200``/``ic120``/``site`` paths override the plant file's entries of those
+    names (tests use this to feed a malformed machine YAML).
     """
+    from sim_bridge.profiles import PLANT_PROFILES
+
     path = Path(path) if path else config_path("sim", "plant.yaml")
     data, where = load_yaml(path)
     top = _Reader(data, where)
     top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "initial_front", "soil", "sensors"})
     m = top.sub("machines")
-    m.only({"zx200", "ic120"})
     base = config_path()
-    zx_path = Path(zx200) if zx200 else base / m.string("zx200")
-    ic_path = Path(ic120) if ic120 else base / m.string("ic120")
+    given = {"zx200": zx200, "ic120": ic120}
+    machine_paths = {name: Path(given[name]) if given.get(name) else base / m.string(name) for name in m.data}
     site_path = Path(site) if site else base / top.string("site")
     site_data, site_where = load_yaml(site_path)
     site_r = _Reader(site_data, site_where)
     poses_r = top.sub("initial_poses")
-    poses_r.only({"zx200", "ic120"})
+    poses_r.only(set(machine_paths))
     poses = {}
-    for name in ("zx200", "ic120"):
+    for name in machine_paths:
         if isinstance(poses_r.raw(name), str):  # a point name in site.yaml
             pt = site_r.sub("points").sub(poses_r.string(name))
             poses[name] = (pt.number("x"), pt.number("y"), pt.number("yaw"))
@@ -465,21 +503,36 @@ def load_plant(
         imu_sigma=sn.number("imu_sigma", lo=0.0),
         seed=int(sn.number("seed", lo=0)),
     )
-    zx = load_zx200(zx_path)
-    if top.has("initial_front"):  # ZX200 front joints at start (default: the machine file's home_pose)
+    specs: dict[str, Any] = {}
+    kinds: dict[str, str] = {}
+    for name, mpath in machine_paths.items():
+        mdata, mwhere = load_yaml(mpath)
+        kind = _Reader(mdata, mwhere).string("kind")
+        try:
+            profile = PLANT_PROFILES.get(kind)
+        except ConfigError as exc:
+            raise SimConfigError(f"{mwhere.file}:{mwhere.line_of(('kind',))}: kind: {exc}") from None
+        specs[name], kinds[name] = profile.load_spec(mpath), kind
+    first = {k: next((n for n in kinds if kinds[n] == k), "") for k in ("excavator", "crawler_carrier")}
+    if not first["excavator"] or not first["crawler_carrier"]:
+        raise top._err(("machines",), "the site needs an excavator and a crawler carrier (soil is dug and carried); "
+                       f"got kinds {kinds}")
+    if top.has("initial_front"):  # front joints of the digging excavator at start (default: its home_pose)
         import dataclasses
 
-        names = list(zx.home_pose)
-        front = top.per_name("initial_front", names)
-        zx = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
+        zx = specs[first["excavator"]]
+        front = top.per_name("initial_front", list(zx.home_pose))
+        specs[first["excavator"]] = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
     return PlantSpec(
-        zx200=zx,
-        ic120=load_ic120(ic_path),
+        machines=specs,
+        kinds=kinds,
         site=load_site(site_path),
         soil=soil,
         sensors=sensors,
         dt=top.number("step_s", lo=0.0005, hi=0.05),
         watchdog_s=top.number("watchdog_s", lo=0.01),
         initial_poses=poses,  # type: ignore[arg-type]
-        files=(str(path), str(zx_path), str(ic_path), str(site_path)),
+        files=(str(path), *(str(p) for p in machine_paths.values()), str(site_path)),
+        excavator=first["excavator"],
+        carrier=first["crawler_carrier"],
     )

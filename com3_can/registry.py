@@ -1,0 +1,67 @@
+"""Name -> implementation registries, as python-can finds its interfaces (``can.interfaces.BACKENDS``).
+
+A machine kind (``excavator``, ``crawler_carrier``) is a name; the converter and the plant each keep a
+:class:`Registry` of what serves that kind on their side. Registering a name twice is an error (two
+modules claiming one kind is a packaging mistake, not something to resolve silently), and looking up an
+unknown name names the known ones. :func:`machine_kind` says which kind a machine model is, from its
+machine description ``config/machines/<model>.yaml`` (key ``kind``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Generic, TypeVar
+
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+
+__all__ = ["Registry", "machine_kind"]
+
+T = TypeVar("T")
+
+
+class Registry(Generic[T]):
+    """Items found by name; ``what`` names the registry in error messages (e.g. "converter profile")."""
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+        self._items: dict[str, T] = {}
+
+    def register(self, name: str, item: T) -> T:
+        """Add ``item`` under ``name``; a name already taken raises ``ValueError``."""
+        if not name or not isinstance(name, str):
+            raise ValueError(f"{self.what}: name must be a non-empty string, got {name!r}")
+        if name in self._items:
+            raise ValueError(f"{self.what} {name!r} is already registered ({self._items[name]!r})")
+        self._items[name] = item
+        return item
+
+    def get(self, name: str) -> T:
+        """The item registered as ``name``; an unknown name raises ``ConfigError`` listing the known ones."""
+        try:
+            return self._items[name]
+        except KeyError:
+            raise ConfigError(f"unknown {self.what} {name!r}; known: {', '.join(sorted(self._items))}") from None
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(sorted(self._items))
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._items
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names())
+
+
+def machine_kind(model: str) -> str:
+    """The kind (profile name) of machine model ``model``: ``kind`` of ``config/machines/<model>.yaml``."""
+    path = config_path("machines", f"{model}.yaml")
+    if not path.is_file():
+        known = sorted(p.stem for p in path.parent.glob("*.yaml"))
+        raise ConfigError(f"unknown machine {model!r}: no {path}; known machines: {', '.join(known)}")
+    data, where = load_yaml(path)
+    kind = data.get("kind") if isinstance(data, dict) else None
+    if not isinstance(kind, str) or not kind:
+        raise ConfigError(f"{path}:{where.line_of(('kind',))}: kind: expected the machine kind "
+                          f"(e.g. excavator, crawler_carrier), got {kind!r}")
+    return kind
