@@ -1,9 +1,9 @@
 """The ROS-free core of the ``com3_bridge`` converter: commands -> COM3 frames, state frames -> outputs.
 
 :class:`BridgeCore` holds everything the node does except ROS I/O, so unit tests and benchmarks drive
-it with plain numbers and an injected clock. It is the same for every machine kind: what a kind does
+it with plain numbers and an injected clock. It is the same for every machine type: what a type does
 (its channels, how a command becomes frames, how a state frame becomes outputs) is its profile,
-:mod:`com3_can.profiles`, chosen by the ``kind`` of the machine description.
+:mod:`com3_can.profiles`, chosen by the ``type`` of the machine description.
 
 * Commands (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``, ``machine_setting``) are
   validated as a whole (unknown joint, NaN, array length, value outside the COM3 range ...). A bad
@@ -37,7 +37,7 @@ from typing import Any
 from com3_can.codec import AliveCounter, Com3Codec
 from com3_can.errors import Com3CommandError, Com3DecodeError, Com3EncodeError
 from com3_can.profiles import PROFILES, ConverterProfile
-from com3_can.registry import machine_kind
+from com3_can.registry import machine_type
 from com3_can.scheduler import FrameScheduler
 from com3_can.signal_map import PILOT_MAX_MPA
 from tms_common.config import config_path, load_yaml
@@ -130,7 +130,7 @@ class DiagSnapshot:
 class BridgeConfig:
     """Settings of one converter (config/can/<machine>.yaml ``bridge`` + config/machines/<machine>.yaml).
 
-    ``machine`` is the model (``zx200``, ``zx120``, ``ic120``); ``kind`` its profile name, read from the
+    ``machine`` is the model (``zx200``, ``zx120``, ``ic120``); ``type`` its profile name, read from the
     machine description when not given.
     """
 
@@ -144,12 +144,12 @@ class BridgeConfig:
     #: site map origin in the plane-rectangular CRS (excavator swing-centre -> map) and the CRS itself
     map_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     crs: str = "EPSG:6677"
-    kind: str = ""
+    machine_type: str = ""
 
     def __post_init__(self) -> None:
-        if not self.kind:
-            object.__setattr__(self, "kind", machine_kind(self.machine))
-        PROFILES.get(self.kind)  # unknown kind -> ConfigError naming the known ones
+        if not self.machine_type:
+            object.__setattr__(self, "machine_type", machine_type(self.machine))
+        PROFILES.get(self.machine_type)  # unknown type -> ConfigError naming the known ones
         if not (math.isfinite(self.watchdog_s) and self.watchdog_s > 0):
             raise ConfigError(f"com3_bridge: watchdog_s must be > 0 s, got {self.watchdog_s}")
         if not self.track_gauge > 0:
@@ -158,7 +158,7 @@ class BridgeConfig:
     @classmethod
     def load(cls, machine: str, can_config: Mapping[str, Any] | None = None, **overrides: Any) -> BridgeConfig:
         """Build from the YAML files of ``machine``; ``overrides`` (e.g. ``watchdog_s``) win."""
-        kind = machine_kind(machine)
+        kind = machine_type(machine)
         profile = PROFILES.get(kind)
         if can_config is None:
             can_config, _ = load_yaml(config_path("can", f"{machine}.yaml"))
@@ -168,7 +168,7 @@ class BridgeConfig:
         if unknown:
             raise ConfigError(f"config/can/{machine}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
         geo, _ = load_yaml(config_path("machines", f"{machine}.yaml"))
-        kwargs: dict[str, Any] = {"machine": machine, "kind": kind, **bridge}
+        kwargs: dict[str, Any] = {"machine": machine, "machine_type": kind, **bridge}
         kwargs.update(profile(machine).config_from_machine(geo))
         site, _ = load_yaml(config_path("site.yaml"))
         origin = site["map_origin_plane"]
@@ -211,8 +211,8 @@ class BridgeCore:
     def __init__(self, config: BridgeConfig, now: float, codec: Com3Codec | None = None) -> None:
         self.config = config
         self.machine = config.machine
-        #: what this machine kind does (channels, command and state handlers), see com3_can.profiles
-        self.profile: ConverterProfile = PROFILES.get(config.kind)(config.machine)
+        #: what this machine type does (channels, command and state handlers), see com3_can.profiles
+        self.profile: ConverterProfile = PROFILES.get(config.machine_type)(config.machine)
         self.codec = codec or self.profile.codec()
         self._lock = threading.RLock()
         self._alive = AliveCounter()
@@ -294,9 +294,9 @@ class BridgeCore:
         """Validate a JointCmd (control type, names, lengths, finite, effort in [-1, 1]): joint -> value."""
         arrays = {VELOCITY: velocity, EFFORT: effort}
         if control_type not in (VELOCITY, EFFORT):
-            kind = _CONTROL_NAMES.get(control_type, str(control_type))
+            ctl_name = _CONTROL_NAMES.get(control_type, str(control_type))
             raise Com3CommandError(
-                f"{topic}: control_type {kind} is not carried by COM3; use VELOCITY (1) or EFFORT (2)"
+                f"{topic}: control_type {ctl_name} is not carried by COM3; use VELOCITY (1) or EFFORT (2)"
             )
         if not names:
             raise Com3CommandError(f"{topic}: joint_name is empty")
@@ -341,7 +341,7 @@ class BridgeCore:
     def tracks_cmd(
         self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
     ) -> list[Tx]:
-        """``tracks_cmd`` (JointCmd left_track/right_track): per-track velocity [m/s] (or effort, if the kind takes it)."""
+        """``tracks_cmd`` (JointCmd left_track/right_track): per-track velocity [m/s] (or effort, if the type takes it)."""
         return self._command("tracks_cmd", self.profile.tracks_cmd, names, control_type, velocity, effort, now)
 
     def cmd_vel(self, linear_x: float, angular_z: float, now: float) -> list[Tx]:

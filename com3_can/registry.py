@@ -1,10 +1,10 @@
 """Name -> implementation registries, as python-can finds its interfaces (``can.interfaces.BACKENDS``).
 
-A machine kind (``excavator``, ``crawler_carrier``) is a name; the converter and the plant each keep a
-:class:`Registry` of what serves that kind on their side. Registering a name twice is an error (two
-modules claiming one kind is a packaging mistake, not something to resolve silently), and looking up an
-unknown name names the known ones. :func:`machine_kind` says which kind a machine model is, from its
-machine description ``config/machines/<model>.yaml`` (key ``kind``).
+A machine type (``excavator``, ``crawler_dump``) is a name; the converter and the plant each keep a
+:class:`Registry` of what serves that type on their side. Registering a name twice is an error (two
+modules claiming one type is a packaging mistake, not something to resolve silently), and looking up an
+unknown name names the known ones. :func:`machine_type` says which type a machine model is, from its
+machine description ``config/machines/<model>.yaml`` (key ``type``).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Generic, TypeVar
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 
-__all__ = ["Registry", "machine_kind"]
+__all__ = ["Registry", "machine_type"]
 
 T = TypeVar("T")
 
@@ -53,15 +53,15 @@ class Registry(Generic[T]):
         return iter(self.names())
 
 
-def machine_kind(model: str) -> str:
-    """The kind (profile name) of machine model ``model``: ``kind`` of ``config/machines/<model>.yaml``."""
+def machine_type(model: str) -> str:
+    """The type (profile name) of machine model ``model``: ``type`` of ``config/machines/<model>.yaml``."""
     path = config_path("machines", f"{model}.yaml")
     if not path.is_file():
         known = sorted(p.stem for p in path.parent.glob("*.yaml"))
         raise ConfigError(f"unknown machine {model!r}: no {path}; known machines: {', '.join(known)}")
     data, where = load_yaml(path)
-    kind = data.get("kind") if isinstance(data, dict) else None
+    kind = data.get("type") if isinstance(data, dict) else None
     if not isinstance(kind, str) or not kind:
-        raise ConfigError(f"{path}:{where.line_of(('kind',))}: kind: expected the machine kind "
-                          f"(e.g. excavator, crawler_carrier), got {kind!r}")
+        raise ConfigError(f"{path}:{where.line_of(('type',))}: type: expected the machine type "
+                          f"(e.g. excavator, crawler_dump), got {kind!r}")
     return kind

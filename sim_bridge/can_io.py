@@ -5,8 +5,8 @@ The plant is driven *only* through these frames, as the real machines are. Per m
 * Command frames are decoded with :mod:`com3_can.codec`. A frame that fails to decode (value outside
   its DBC range, wrong DLC, unknown id) is ignored and counted by reason; frames of the machine's
   own state direction (echoes) are ignored silently.
-* What a command frame does and what a state frame carries is the machine kind's plant profile
-  (:mod:`sim_bridge.profiles`: excavator, crawler_carrier); this module is the same for every kind.
+* What a command frame does and what a state frame carries is the machine type's plant profile
+  (:mod:`sim_bridge.profiles`: excavator, crawler_dump); this module is the same for every type.
 * Watchdog: no motion command frame for ``watchdog_s`` of simulated time -> the machine is brought to
   rest (commands zeroed; the hydraulics drain through their dead time and lag) and the trip counted.
 * Pilot cut-off (``Pilot_Cutoff_Cmd`` of :mod:`com3_can.pilot_cutoff`, a TMS extension beside COM3):
@@ -103,7 +103,7 @@ class PlantCanIO:
         self.watchdog_s = watchdog_s
         self.sides: dict[str, Side] = {}
         for m, bus in buses.items():
-            profile = PLANT_PROFILES.get(plant.spec.kinds[m])
+            profile = PLANT_PROFILES.get(plant.spec.types[m])
             codec = (codecs or {}).get(m) or profile.codec(m)
             self.sides[m] = Side(m, plant.machines[m], profile, bus, codec, plant.time)
         self.gnss = Gnss(plant.spec.site)

@@ -241,12 +241,12 @@ class PlantSpec:
     """Everything the plant needs, with where it came from.
 
     ``machines`` maps each machine's name on the site (``zx200``, ``ic120``, ``zx120``) to its spec and
-    ``kinds`` to its kind (the plant profile, :mod:`sim_bridge.profiles`). The soil is dug by
-    ``excavator`` and carried by ``carrier``: the first machine of each kind in the plant YAML.
+    ``types`` to its type (the plant profile, :mod:`sim_bridge.profiles`). The soil is dug by
+    ``excavator`` and carried by ``carrier``: the first machine of each type in the plant YAML.
     """
 
     machines: dict[str, Any]
-    kinds: dict[str, str]
+    types: dict[str, str]
     site: SiteSpec
     soil: SoilSpec
     sensors: SensorSpec
@@ -443,7 +443,7 @@ def load_plant(
 ) -> PlantSpec:
     """Read the plant YAML and the machine/site YAMLs it names (paths relative to ``config/``).
 
-    ``machines`` maps a machine name to its machine YAML; the YAML's ``kind`` picks the plant profile
+    ``machines`` maps a machine name to its machine YAML; the YAML's ``type`` picks the plant profile
     that reads it. Explicit ``zx200``/``ic120``/``site`` paths override the plant file's entries of those
     names (tests use this to feed a malformed machine YAML).
     """
@@ -504,19 +504,19 @@ def load_plant(
         seed=int(sn.number("seed", lo=0)),
     )
     specs: dict[str, Any] = {}
-    kinds: dict[str, str] = {}
+    types: dict[str, str] = {}
     for name, mpath in machine_paths.items():
         mdata, mwhere = load_yaml(mpath)
-        kind = _Reader(mdata, mwhere).string("kind")
+        kind = _Reader(mdata, mwhere).string("type")
         try:
             profile = PLANT_PROFILES.get(kind)
         except ConfigError as exc:
-            raise SimConfigError(f"{mwhere.file}:{mwhere.line_of(('kind',))}: kind: {exc}") from None
-        specs[name], kinds[name] = profile.load_spec(mpath), kind
-    first = {k: next((n for n in kinds if kinds[n] == k), "") for k in ("excavator", "crawler_carrier")}
-    if not first["excavator"] or not first["crawler_carrier"]:
+            raise SimConfigError(f"{mwhere.file}:{mwhere.line_of(('type',))}: type: {exc}") from None
+        specs[name], types[name] = profile.load_spec(mpath), kind
+    first = {k: next((n for n in types if types[n] == k), "") for k in ("excavator", "crawler_dump")}
+    if not first["excavator"] or not first["crawler_dump"]:
         raise top._err(("machines",), "the site needs an excavator and a crawler carrier (soil is dug and carried); "
-                       f"got kinds {kinds}")
+                       f"got types {types}")
     if top.has("initial_front"):  # front joints of the digging excavator at start (default: its home_pose)
         import dataclasses
 
@@ -525,7 +525,7 @@ def load_plant(
         specs[first["excavator"]] = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
     return PlantSpec(
         machines=specs,
-        kinds=kinds,
+        types=types,
         site=load_site(site_path),
         soil=soil,
         sensors=sensors,
@@ -534,5 +534,5 @@ def load_plant(
         initial_poses=poses,  # type: ignore[arg-type]
         files=(str(path), *(str(p) for p in machine_paths.values()), str(site_path)),
         excavator=first["excavator"],
-        carrier=first["crawler_carrier"],
+        carrier=first["crawler_dump"],
     )

@@ -1,4 +1,4 @@
-"""The machines of the plant, one class per kind: state, actuator commands, stepping.
+"""The machines of the plant, one class per type: state, actuator commands, stepping.
 
 Pure (no ROS, no CAN, no MuJoCo): the plant profiles (:mod:`sim_bridge.profiles`) build them from a
 machine spec and map COM3 frames onto their commands.

@@ -1,7 +1,7 @@
 """MuJoCo model of the site, generated from the machine YAMLs, and its kinematics.
 
 ``build_mjcf(spec)`` writes an MJCF document: the terrain height field and every machine of the plant,
-each written by its kind's profile (:mod:`sim_bridge.profiles`) with names prefixed by the machine's
+each written by its type's profile (:mod:`sim_bridge.profiles`) with names prefixed by the machine's
 name: an excavator is mocap base -> swing -> boom -> arm -> bucket with the URDF joint origins and a
 ``<name>_bucket_tip`` site, a crawler carrier is mocap base -> vessel on its rear hinge. The bases are mocap bodies and the joints are set
 from the hydraulic model (kinematic joints): MuJoCo computes the forward kinematics and renders; the
@@ -45,7 +45,7 @@ def build_mjcf(spec: PlantSpec) -> str:
         'material="soil" contype="0" conaffinity="0"/>',
     ]
     for name, machine in spec.machines.items():
-        lines += PLANT_PROFILES.get(spec.kinds[name]).mjcf(name, machine)
+        lines += PLANT_PROFILES.get(spec.types[name]).mjcf(name, machine)
     lines += [
         "  </worldbody>",
         "</mujoco>",

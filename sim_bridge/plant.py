@@ -1,7 +1,7 @@
 """The plant: the machines of the site and the soil, advanced in fixed steps of simulated time.
 
 Pure core (no ROS, no CAN): :class:`Plant` holds one machine per entry of the plant YAML's ``machines``
-(built by its kind's profile, :mod:`sim_bridge.profiles`), takes actuator commands (front joint
+(built by its type's profile, :mod:`sim_bridge.profiles`), takes actuator commands (front joint
 velocities, track speeds, a vessel target angle or velocity), steps hydraulics, tracks, kinematics
 (MuJoCo) and soil, and exposes the true state. The soil is dug by the plant's excavator and carried by
 its crawler carrier (``PlantSpec.excavator`` / ``carrier``). :mod:`sim_bridge.can_io` maps COM3 frames onto these commands and the
@@ -61,7 +61,7 @@ class Plant:
         self.time = 0.0  # = steps * dt (not accumulated: summing 0.01 drifts off the step grid)
         self.steps = 0
         self.machines: dict[str, Any] = {
-            name: PLANT_PROFILES.get(self.spec.kinds[name]).make_machine(ms, self.dt, self.spec.initial_poses[name])
+            name: PLANT_PROFILES.get(self.spec.types[name]).make_machine(ms, self.dt, self.spec.initial_poses[name])
             for name, ms in self.spec.machines.items()
         }
         #: the soil-digging excavator and the soil-carrying crawler carrier (the paper's ZX200 and IC120)

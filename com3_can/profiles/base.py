@@ -24,20 +24,20 @@ def codec_for(dbc: str, machine: str) -> Com3Codec:
 
 
 class ConverterProfile:
-    """What the converter does for one machine kind; one instance per converter (it may keep state).
+    """What the converter does for one machine type; one instance per converter (it may keep state).
 
     Class attributes a profile sets:
 
-    * ``kind``: registry name; ``dbc``: DBC file in ``com3_can/dbc``;
+    * ``type``: registry name; ``dbc``: DBC file in ``com3_can/dbc``;
     * ``channels``: channel name -> command frames it feeds (one watchdog per channel);
-    * ``topics``: the ROS commands the kind takes (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``);
+    * ``topics``: the ROS commands the type takes (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``);
     * ``state_handlers``: state frame name -> method name; the method gets ``(core, values, stamp)`` and
       returns outputs (:class:`~com3_can.bridge_core.JointStateOut`, ``OdomOut``, ...).
 
-    A command the kind does not take raises :class:`Com3CommandError`; the core counts it as rejected.
+    A command the type does not take raises :class:`Com3CommandError`; the core counts it as rejected.
     """
 
-    kind: ClassVar[str] = ""
+    machine_type: ClassVar[str] = ""
     dbc: ClassVar[str] = ""
     channels: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     topics: ClassVar[frozenset[str]] = frozenset()
@@ -58,7 +58,7 @@ class ConverterProfile:
         return None if name is None else getattr(self, name)
 
     def _refuse(self, topic: str) -> Com3CommandError:
-        return Com3CommandError(f"{topic}: the {self.machine} ({self.kind}) does not take {topic}; "
+        return Com3CommandError(f"{topic}: the {self.machine} ({self.machine_type}) does not take {topic}; "
                                 f"it takes {', '.join(sorted(self.topics))}")
 
     # ROS commands -> frames (``core.accept`` validates, commits and returns the frames to send)
@@ -76,7 +76,7 @@ class ConverterProfile:
     def vessel_cmd(self, core: BridgeCore, angle: float, now: float) -> list[Tx]:
         raise self._refuse("vessel_cmd")
 
-    # state handlers shared by the kinds (both DBCs carry these frames)
+    # state handlers shared by the types (both DBCs carry these frames)
     def roll_pitch(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
         from com3_can.bridge_core import ImuOut
 

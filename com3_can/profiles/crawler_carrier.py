@@ -27,7 +27,7 @@ __all__ = ["CrawlerCarrierProfile"]
 
 
 class CrawlerCarrierProfile(ConverterProfile):
-    kind = "crawler_carrier"
+    machine_type = "crawler_dump"
     dbc = "crawler_carrier_com3.dbc"
     channels = {"travel": (F["travel_velocity"],), "vessel": (F["vessel"],)}
     topics = frozenset({"tracks_cmd", "cmd_vel", "vessel_cmd"})

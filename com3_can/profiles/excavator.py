@@ -26,7 +26,7 @@ _FRONT = {j.joint: j for j in EXCAVATOR_FRONT}
 
 
 class ExcavatorProfile(ConverterProfile):
-    kind = "excavator"
+    machine_type = "excavator"
     dbc = "excavator_com3.dbc"
     channels = {
         "front": (F["front_velocity"], F["front_pilot"]),

@@ -15,13 +15,13 @@ __all__ = ["PlantProfile"]
 
 
 class PlantProfile:
-    """The plant side of one machine kind; class-level (no per-machine state: that lives in the :class:`Side`).
+    """The plant side of one machine type; class-level (no per-machine state: that lives in the :class:`Side`).
 
-    * ``kind``: registry name; ``dbc``: DBC file in ``com3_can/dbc`` (the converter profile's);
+    * ``type``: registry name; ``dbc``: DBC file in ``com3_can/dbc`` (the converter profile's);
     * ``motion_frames``: command frames that feed the command-loss watchdog.
     """
 
-    kind: ClassVar[str] = ""
+    machine_type: ClassVar[str] = ""
     dbc: ClassVar[str] = ""
     motion_frames: ClassVar[frozenset[str]] = frozenset()
 
@@ -31,7 +31,7 @@ class PlantProfile:
 
     @staticmethod
     def load_spec(path: Path) -> Any:
-        """The machine spec of a machine YAML of this kind."""
+        """The machine spec of a machine YAML of this type."""
         raise NotImplementedError
 
     @staticmethod

@@ -26,7 +26,7 @@ __all__ = ["CrawlerCarrierPlantProfile"]
 
 
 class CrawlerCarrierPlantProfile(PlantProfile):
-    kind = CrawlerCarrierProfile.kind
+    machine_type = CrawlerCarrierProfile.machine_type
     dbc = CrawlerCarrierProfile.dbc
     motion_frames = frozenset(f for frames in CrawlerCarrierProfile.channels.values() for f in frames)
 

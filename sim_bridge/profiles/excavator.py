@@ -42,7 +42,7 @@ def _wrap(angle: float) -> float:
 
 
 class ExcavatorPlantProfile(PlantProfile):
-    kind = ExcavatorProfile.kind
+    machine_type = ExcavatorProfile.machine_type
     dbc = ExcavatorProfile.dbc
     motion_frames = frozenset(f for frames in ExcavatorProfile.channels.values() for f in frames)
 
