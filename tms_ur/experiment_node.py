@@ -89,7 +89,7 @@ def _make_node():  # noqa: ANN202
             self._t0 = (time.monotonic(), 0.0)  # (wall, sim) when the tasks were started
             self._zx200_base: tuple[float, float, float] | None = None
             self._joints: dict[str, float] = {}
-            from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+            from tms_model.excavator.kinematics import JOINTS, load_kinematics
 
             self._kin, self._joint_order = load_kinematics(), JOINTS
             self._np = np

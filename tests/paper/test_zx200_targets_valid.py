@@ -14,7 +14,7 @@ import pytest
 
 from tests.tms_sp.treeutil import load_seed
 from tms_rc.zx200.controller import load_controller_config
-from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp import synthetic as syn
 from tms_sp.config import load_sensing_config

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tms_rp.zx200.errors import InvalidGoalError, JointLimitError, OutOfReachError
-from tms_rp.zx200.kinematics import load_kinematics
+from tms_model.excavator.codes import InvalidGoalError, JointLimitError, OutOfReachError
+from tms_model.excavator.kinematics import load_kinematics
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +84,7 @@ def test_pose_to_theta_w_is_not_wrapped_to_pi() -> None:
     # past pi (curled bucket); the pose's pitch must map back to the angle the joints can hold.
     import pinocchio as pin
 
-    from tms_rp.zx200.kinematics import load_kinematics
+    from tms_model.excavator.kinematics import load_kinematics
 
     kin = load_kinematics()
     rng = np.random.default_rng(1)

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from tms_common.config import config_path, load_yaml
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
 
 pytestmark = pytest.mark.integration
 

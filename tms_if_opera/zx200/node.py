@@ -49,12 +49,13 @@ def _make_node():  # noqa: ANN202
 
     from tms_common.action_client import RaceFreeActionClient
     from tms_common.goals import RunningGoals
+    from tms_model.excavator import codes
+    from tms_model.excavator.codes import PlanningError
+    from tms_model.excavator.kinematics import JOINTS, load_kinematics
+    from tms_model.excavator.targets import JointTarget
     from tms_msg.action import Zx200ArmMove, Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
     from tms_msg.msg import Zx200ArmSegment
-    from tms_rc.zx200.controller import JointTarget, load_controller_config
-    from tms_rp.zx200 import errors as codes
-    from tms_rp.zx200.errors import PlanningError
-    from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+    from tms_rc.zx200.controller import load_controller_config
     from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
     class PlannerNode(Node):
@@ -62,7 +63,7 @@ def _make_node():  # noqa: ANN202
 
         def __init__(self) -> None:
             super().__init__("zx200_planner")
-            kin = load_kinematics(self.declare_parameter("machine_config", "").value or None)
+            kin = load_kinematics("zx200", path=self.declare_parameter("machine_config", "").value or None)
             pcfg = load_planner_config(self.declare_parameter("planner_config", "").value or None)
             ccfg = load_controller_config(self.declare_parameter("controller_config", "").value or None)
             self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.ground_min_z)
