@@ -42,6 +42,8 @@ from com3_can.scheduler import FrameScheduler
 from com3_can.signal_map import PILOT_MAX_MPA
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.machines import load_machine
+from tms_model.site import Projector, load_site
 
 __all__ = [
     "BridgeConfig",
@@ -157,9 +159,9 @@ class BridgeConfig:
 
     @classmethod
     def load(cls, machine: str, can_config: Mapping[str, Any] | None = None, **overrides: Any) -> BridgeConfig:
-        """Build from the YAML files of ``machine``; ``overrides`` (e.g. ``watchdog_s``) win."""
-        kind = machine_type(machine)
-        profile = PROFILES.get(kind)
+        """Build from ``config/can/<machine>.yaml``, the machine description and the site; ``overrides`` win."""
+        description = load_machine(machine)
+        profile = PROFILES.get(description.type)
         if can_config is None:
             can_config, _ = load_yaml(config_path("can", f"{machine}.yaml"))
         bridge = dict((can_config or {}).get("bridge") or {})
@@ -167,13 +169,11 @@ class BridgeConfig:
         unknown = sorted(set(bridge) - known)
         if unknown:
             raise ConfigError(f"config/can/{machine}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
-        geo, _ = load_yaml(config_path("machines", f"{machine}.yaml"))
-        kwargs: dict[str, Any] = {"machine": machine, "machine_type": kind, **bridge}
-        kwargs.update(profile(machine).config_from_machine(geo))
-        site, _ = load_yaml(config_path("site.yaml"))
-        origin = site["map_origin_plane"]
-        kwargs["map_origin"] = (float(origin["easting"]), float(origin["northing"]), float(origin["altitude"]))
-        kwargs["crs"] = str(site["crs"])
+        kwargs: dict[str, Any] = {"machine": machine, "machine_type": description.type, **bridge}
+        kwargs.update(profile(machine).config_from_machine(description))
+        site = load_site()
+        kwargs["map_origin"] = site.origin_plane
+        kwargs["crs"] = site.crs
         kwargs.update(overrides)
         return cls(**kwargs)
 
@@ -240,7 +240,7 @@ class BridgeCore:
         #: latest decoded values of every state frame (profiles combine frames through it)
         self.state: dict[str, dict[str, float]] = {}
         self._machine_alive: int | None = None
-        self._transformer: Any = None
+        self._projector: Projector | None = None
 
     @property
     def topics(self) -> frozenset[str]:
@@ -496,13 +496,9 @@ class BridgeCore:
     # ------------------------------------------------------------------ for the profiles' state handlers
     def plane_to_geodetic(self, easting: float, northing: float) -> tuple[float, float]:
         """(lat, lon) [deg] of a point in the site CRS."""
-        if self._transformer is None:
-            from pyproj import CRS, Transformer
-
-            geo = CRS(self.config.crs).geodetic_crs
-            self._transformer = Transformer.from_crs(self.config.crs, geo, always_xy=True)
-        lon, lat = self._transformer.transform(easting, northing)
-        return float(lat), float(lon)
+        if self._projector is None:
+            self._projector = Projector(self.config.crs, self.config.map_origin)
+        return self._projector.plane_to_geodetic(easting, northing)
 
     def check_machine_alive(self, alive: int) -> None:
         """Count a ``Machine_State`` alive counter that is not the successor of the previous one."""

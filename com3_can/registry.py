@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Generic, TypeVar
 
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 
 __all__ = ["Registry", "machine_type"]
@@ -54,14 +53,7 @@ class Registry(Generic[T]):
 
 
 def machine_type(model: str) -> str:
-    """The type (profile name) of machine model ``model``: ``type`` of ``config/machines/<model>.yaml``."""
-    path = config_path("machines", f"{model}.yaml")
-    if not path.is_file():
-        known = sorted(p.stem for p in path.parent.glob("*.yaml"))
-        raise ConfigError(f"unknown machine {model!r}: no {path}; known machines: {', '.join(known)}")
-    data, where = load_yaml(path)
-    kind = data.get("type") if isinstance(data, dict) else None
-    if not isinstance(kind, str) or not kind:
-        raise ConfigError(f"{path}:{where.line_of(('type',))}: type: expected the machine type "
-                          f"(e.g. excavator, crawler_dump), got {kind!r}")
-    return kind
+    """The type (profile name) of machine model ``model``: ``type`` of its description (:mod:`tms_model.machines`)."""
+    from tms_model.machines import load_machine
+
+    return load_machine(model).type

@@ -11,13 +11,12 @@ what keeps the plant far faster than real time. URDF ``rpy`` is fixed-axis XYZ, 
 
 from __future__ import annotations
 
-import math
-
 import mujoco
 import numpy as np
 
 from sim_bridge.config import PlantSpec
 from sim_bridge.profiles import PLANT_PROFILES
+from tms_model.geometry import quaternion_from_yaw, yaw_from_wxyz
 
 __all__ = ["build_mjcf", "SiteModel"]
 
@@ -54,7 +53,9 @@ def build_mjcf(spec: PlantSpec) -> str:
 
 
 def yaw_quat(yaw: float) -> np.ndarray:
-    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    """MuJoCo's scalar-first quaternion (w, x, y, z) of a rotation ``yaw`` about z."""
+    x, y, z, w = quaternion_from_yaw(yaw)
+    return np.array([w, x, y, z])
 
 
 class SiteModel:
@@ -117,4 +118,5 @@ class SiteModel:
 
     @staticmethod
     def quat_to_yaw(q: np.ndarray) -> float:
-        return math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
+        """Yaw of a MuJoCo (w, x, y, z) quaternion."""
+        return yaw_from_wxyz(q)

@@ -12,6 +12,7 @@ from com3_can.errors import Com3CommandError
 
 if TYPE_CHECKING:
     from com3_can.bridge_core import BridgeCore, Tx
+    from tms_model.machines import Machine
 
 __all__ = ["ConverterProfile", "codec_for"]
 
@@ -49,9 +50,9 @@ class ConverterProfile:
     def codec(self) -> Com3Codec:
         return codec_for(self.dbc, self.machine)
 
-    def config_from_machine(self, description: Mapping[str, Any]) -> dict[str, Any]:
-        """:class:`~com3_can.bridge_core.BridgeConfig` fields read from the machine description."""
-        return {"track_gauge": float(description["tracks"]["gauge"])}
+    def config_from_machine(self, description: Machine) -> dict[str, Any]:
+        """:class:`~com3_can.bridge_core.BridgeConfig` fields taken from the machine description."""
+        return {"track_gauge": description.tracks.gauge}
 
     def handler(self, frame: str) -> Callable[[BridgeCore, dict[str, float], float], list[Any]] | None:
         name = self.state_handlers.get(frame)

@@ -10,7 +10,7 @@ positions), ``GNSS_Altitude_Status`` (with the latest latitude/longitude) -> fix
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from com3_can.errors import Com3CommandError
@@ -22,6 +22,7 @@ from com3_can.signal_map import TRACKS
 
 if TYPE_CHECKING:
     from com3_can.bridge_core import BridgeCore, Tx
+    from tms_model.machines import Machine
 
 __all__ = ["CrawlerCarrierProfile"]
 
@@ -45,9 +46,9 @@ class CrawlerCarrierProfile(ConverterProfile):
         self._stamp: float | None = None
         self._track_pos = [0.0, 0.0]
 
-    def config_from_machine(self, description: Mapping[str, Any]) -> dict[str, Any]:
-        return {**super().config_from_machine(description),
-                "vessel_max_angle": float(description["vessel"]["max_angle"])}
+    def config_from_machine(self, description: Machine) -> dict[str, Any]:
+        assert description.vessel is not None  # tms_model: every crawler dump has one
+        return {**super().config_from_machine(description), "vessel_max_angle": description.vessel.max_angle}
 
     def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
                    effort: Sequence[float], now: float) -> list[Tx]:

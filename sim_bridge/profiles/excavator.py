@@ -19,6 +19,7 @@ from com3_can.signal_map import EXCAVATOR_FRONT, EXCAVATOR_TRACKS, PILOT_MAX_MPA
 from sim_bridge.config import ExcavatorSpec, load_excavator
 from sim_bridge.machines import Excavator
 from sim_bridge.profiles.base import PlantProfile
+from tms_model.geometry import wrap_angle
 
 if TYPE_CHECKING:
     from sim_bridge.can_io import PlantCanIO, Side
@@ -37,8 +38,7 @@ def _v(values: tuple[float, ...] | list[float]) -> str:
     return " ".join(f"{v:.6g}" for v in values)
 
 
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
+_wrap = wrap_angle
 
 
 class ExcavatorPlantProfile(PlantProfile):
