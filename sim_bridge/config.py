@@ -1,10 +1,10 @@
-"""Plant configuration: machine YAMLs (``config/machines/*.yaml``) and the plant YAML (``config/sim/plant.yaml``).
+"""Plant configuration: the plant YAML (``config/sim/plant.yaml``) and the plant's view of the machines and site.
 
-Everything the plant needs is read here once, validated and frozen into dataclasses. A wrong value
-raises :class:`~sim_bridge.errors.SimConfigError` with ``file:line: key.path: problem (got value)``,
-so a malformed machine YAML names the key that is wrong. Top-level sections owned by other packages
-are left alone; inside the sections this package reads, unknown keys are errors (a typo must not
-silently fall back to a default).
+The machine descriptions (``config/machines/*.yaml``) and the site (``config/site.yaml``) are read by
+:mod:`tms_model`; this module reads the plant YAML and freezes what the plant needs into dataclasses. A
+wrong value raises :class:`~sim_bridge.errors.SimConfigError` with ``file:line: key.path: problem (got
+value)``, so a malformed machine YAML names the key that is wrong; inside the plant YAML, unknown keys are
+errors (a typo must not silently fall back to a default).
 """
 
 from __future__ import annotations
