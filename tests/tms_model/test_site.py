@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from tms_common.errors import ConfigError
-from tms_model.site import load_site
+from tms_model.site import Projector, load_site
 
 
 def test_project_site_loads_once_with_points_zone_and_mound() -> None:
@@ -53,3 +53,18 @@ def test_bad_site_names_file_and_line(tmp_path: Path) -> None:
     bad.write_text(bad.read_text().replace("y: oops", "y: 1.0").replace("shape: cone", "shape: pyramid"))
     with pytest.raises(ConfigError, match=r"site.yaml:5: mound.shape: unknown mound shape"):
         load_site(bad)
+
+
+def test_projection_matches_zone_ix_origin_and_axis_order() -> None:
+    # Zone IX origin 36N 139 50'E is plane (0, 0): with a zero map origin the projector returns it.
+    proj = Projector("EPSG:6677", (0.0, 0.0, 0.0), "EPSG:6668")
+    assert proj.geodetic_to_map(36.0, 139.0 + 50.0 / 60.0)[:2] == pytest.approx((0.0, 0.0), abs=1e-3)
+    site = load_site().projector
+    lat, lon, _ = site.map_to_geodetic(0.0, 0.0)
+    lat2, lon2, _ = site.map_to_geodetic(100.0, 50.0)  # x = east, y = north
+    assert lon2 > lon and lat2 > lat
+
+
+def test_projector_rejects_unknown_crs() -> None:
+    with pytest.raises(ValueError, match="EPSG:999999"):
+        Projector("EPSG:999999", (0.0, 0.0, 0.0))

@@ -23,7 +23,7 @@ def random_q(kin, rng, n):
 
 
 def test_zero_pose_matches_reference_geometry(kin):
-    # reference/opera_machines.md §c: at q = 0 the tip is at (10.435, -0.087, 1.957) in base_link.
+    # zx200_ros2 URDF: at q = 0 the tip is at (10.435, -0.087, 1.957) in base_link.
     np.testing.assert_allclose(kin.tip_position(np.zeros(4)), [10.435, -0.087, 1.957], atol=2e-3)
     assert kin.l_boom == pytest.approx(5.648, abs=1e-3)
     assert kin.l_arm == pytest.approx(2.890, abs=1e-3)

@@ -146,6 +146,18 @@ class ExcavatorKinematics:
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
         return self.data.oMf[self.tip_frame].translation.copy()
 
+    def side_view(self, q: np.ndarray) -> np.ndarray:
+        """The front in its own vertical plane: (radial, height) [m] of boom foot, arm pin, bucket pin, tip.
+
+        Swing is ignored (the plane turns with it); the small lateral offsets do not show in a side view.
+        """
+        q0 = np.asarray(q, dtype=float).copy()
+        q0[0] = 0.0
+        pin.framesForwardKinematics(self.model, self.data, q0)
+        pts = [self.data.oMi[self.model.getJointId(name)].translation for name in JOINTS[1:]]
+        pts.append(self.data.oMf[self.tip_frame].translation)
+        return np.array([[p[0], p[2]] for p in pts])
+
     def tip_pose(self, q: np.ndarray) -> pin.SE3:
         """Pose of the bucket tip frame (bucket_end_link) in base_link."""
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))

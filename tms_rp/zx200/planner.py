@@ -27,6 +27,7 @@ from tms_common.errors import ConfigError
 from tms_model.excavator.codes import InvalidGoalError, JointLimitError, PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
+from tms_model.geometry import wrap_angle
 
 __all__ = ["PlannerConfig", "load_planner_config", "Zx200Planner"]
 
@@ -328,7 +329,7 @@ class Zx200Planner:
         """
         ang = float(_finite([target_angle], "release target_angle")[0])
         q = _finite(current_q, "current joint state").copy()
-        q[0] = math.atan2(math.sin(ang), math.cos(ang))
+        q[0] = wrap_angle(ang)
         lim = self.kin.limits
         m = self.cfg.limit_margin
         q[1:] = np.clip(q[1:], lim.lower[1:] + m, lim.upper[1:] - m)
