@@ -1,7 +1,7 @@
 """``com3_bridge``: the ROS 2 <-> COM3 CAN converter of one machine (thin rclpy wrapper of BridgeCore).
 
 Run in the machine namespace, e.g. ``com3_bridge --ros-args -r __ns:=/zx200 -p machine:=zx200``.
-Parameters: ``machine`` (zx200|ic120), ``can_config`` (YAML, default config/can/<machine>.yaml),
+Parameters: ``machine`` (a config/machines/<machine>.yaml: zx200, zx120, ic120), ``can_config`` (YAML, default config/can/<machine>.yaml),
 ``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep), ``watchdog_s``,
 ``joint_states_period_s`` and ``odom_period_s`` (publish ``joint_states`` / ``odom_pose`` at most once per
 this period of the node clock; 0 = on every state frame, 100 Hz; the odometry is integrated on every frame
@@ -75,8 +75,6 @@ class Com3Bridge(Node):
         if self._odom_period < 0:
             raise ConfigError(f"com3_bridge: odom_period_s must be >= 0, got {self._odom_period}")
         self._last_published: dict[Any, float] = {}
-        if machine not in ("zx200", "ic120"):
-            raise ConfigError(f"com3_bridge: parameter machine must be zx200 or ic120, got {machine!r}")
         cfg = load_bus_config(machine, can_config or None)
         self.config = BridgeConfig.load(machine, cfg, watchdog_s=watchdog)
         bus_cfg = {k: v for k, v in cfg.items() if k != "bridge"}
@@ -110,10 +108,10 @@ class Com3Bridge(Node):
         self.create_subscription(Bool, "lock", self._on_lock, reliable)
         self.create_subscription(JointCmd, "tracks_cmd", self._on_tracks, depth)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, depth)
-        if machine == "zx200":
+        if "front_cmd" in self.core.topics:  # the machine type's profile says which commands it takes
             self.create_subscription(JointCmd, "front_cmd", self._on_front, depth)
             self.create_subscription(ExcavatorMachineSetting, "machine_setting", self._on_zx_setting, depth)
-        else:
+        if "vessel_cmd" in self.core.topics:
             self.create_subscription(Float64, "vessel_cmd", self._on_vessel, depth)
             self.create_subscription(CrawlerCarrierMachineSetting, "machine_setting", self._on_ic_setting, depth)
         self.create_timer(0.05, self._diag_timer)

@@ -73,7 +73,7 @@ class SimPlantNode(Node):
         spec = load_plant(config)
         self.plant = Plant(spec)
         buses = {}
-        for machine in ("zx200", "ic120"):
+        for machine in self.plant.machines:
             cfg = {k: v for k, v in load_bus_config(machine).items() if k != "bridge"}
             iface = str(p(f"{machine}_can_interface", "").value)
             channel = str(p(f"{machine}_can_channel", "").value)
@@ -94,9 +94,9 @@ class SimPlantNode(Node):
         log = TruthLog(replay) if replay else None
         self.runner = PlantRunner(self.plant, self.io, speed=speed, on_step=self._on_step, replay=log)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-        self.pose_pub = {m: self.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in ("zx200", "ic120")}
+        self.pose_pub = {m: self.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in self.plant.machines}
         self.joint_pub = {
-            m: self.create_publisher(JointState, f"/sim/truth/{m}/joint_states", 10) for m in ("zx200", "ic120")
+            m: self.create_publisher(JointState, f"/sim/truth/{m}/joint_states", 10) for m in self.plant.machines
         }
         self.tip_pub = self.create_publisher(PointStamped, "/sim/truth/zx200/bucket_tip", 10)
         self.soil_pub = self.create_publisher(Float64MultiArray, "/sim/truth/soil", 10)
@@ -155,14 +155,14 @@ class SimPlantNode(Node):
     def _publish_truth(self, plant: Plant, stamp) -> None:  # noqa: ANN001
         import math
 
-        for m in ("zx200", "ic120"):
+        for m in plant.machines:
             t = plant.truth(m)
             msg = self._PoseStamped()
             msg.header.stamp, msg.header.frame_id = stamp, "map"
             msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = t.x, t.y, t.z
             msg.pose.orientation.z, msg.pose.orientation.w = math.sin(t.yaw / 2), math.cos(t.yaw / 2)
             self.pose_pub[m].publish(msg)
-            bank = plant.zx200.front if m == "zx200" else plant.ic120.vessel
+            bank = plant.machines[m].bank
             js = self._JointState()
             js.header.stamp = stamp
             js.name, js.position, js.velocity = list(bank.names), list(bank.q), list(bank.v)
