@@ -9,27 +9,29 @@ errors (a typo must not silently fall back to a default).
 
 from __future__ import annotations
 
-import math
+import contextlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from sim_bridge.errors import SimConfigError
-from tms_common.config import Where, config_path, load_yaml
+from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_model.machines import (
     CRAWLER_DUMP,
     EXCAVATOR,
     Joint,
+    JointDrive,
     Machine,
     load_machine,
     machine_path,
     parse_machine,
 )
+from tms_model.reader import Reader
 from tms_model.site import Site, load_site
 
 __all__ = [
-    "JointSpec",
     "TrackSpec",
     "ExcavatorSpec",
     "CarrierSpec",
@@ -45,92 +47,6 @@ __all__ = [
     "load_ic120",
     "load_plant",
 ]
-
-
-class _Reader:
-    """Typed access to a YAML mapping that reports ``file:line: key.path: problem`` on bad input."""
-
-    def __init__(self, data: Any, where: Where, path: tuple[Any, ...] = ()) -> None:
-        self.where = where
-        self.path = path
-        if not isinstance(data, dict):
-            raise self._err(path, f"expected a mapping, got {type(data).__name__} {data!r}")
-        self.data = data
-
-    def _name(self, path: tuple[Any, ...]) -> str:
-        return ".".join(str(p) for p in path) or "<document>"
-
-    def _err(self, path: tuple[Any, ...], problem: str) -> SimConfigError:
-        return SimConfigError(f"{self.where.file}:{self.where.line_of(path)}: {self._name(path)}: {problem}")
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str) -> Any:
-        if key not in self.data:
-            raise self._err(self.path + (key,), "missing required key")
-        return self.data[key]
-
-    def sub(self, key: str) -> _Reader:
-        return _Reader(self.raw(key), self.where, self.path + (key,))
-
-    def only(self, allowed: set[str]) -> None:
-        """Reject keys not in ``allowed`` (typos in our own sections)."""
-        for key in self.data:
-            if key not in allowed:
-                raise self._err(self.path + (key,), f"unknown key; expected one of {sorted(allowed)}")
-
-    def number(self, key: str, *, lo: float | None = None, hi: float | None = None, default: float | None = None) -> float:
-        if default is not None and key not in self.data:
-            return float(default)
-        value = self.raw(key)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise self._err(self.path + (key,), f"expected a number, got {value!r}")
-        if lo is not None and value < lo:
-            raise self._err(self.path + (key,), f"must be >= {lo}, got {value!r}")
-        if hi is not None and value > hi:
-            raise self._err(self.path + (key,), f"must be <= {hi}, got {value!r}")
-        return float(value)
-
-    def vector(self, key: str, n: int) -> tuple[float, ...]:
-        value = self.raw(key)
-        ok = isinstance(value, list) and len(value) == n
-        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-        if not ok:
-            raise self._err(self.path + (key,), f"expected a list of {n} numbers, got {value!r}")
-        return tuple(float(v) for v in value)
-
-    def string(self, key: str, default: str | None = None) -> str:
-        if default is not None and key not in self.data:
-            return default
-        value = self.raw(key)
-        if not isinstance(value, str) or not value:
-            raise self._err(self.path + (key,), f"expected a non-empty string, got {value!r}")
-        return value
-
-    def per_name(self, key: str, names: list[str], *, lo: float | None = None) -> dict[str, float]:
-        """A mapping ``{name: number}`` that must list exactly ``names``."""
-        sub = self.sub(key)
-        sub.only(set(names))
-        return {name: sub.number(name, lo=lo) for name in names}
-
-
-@dataclass(frozen=True)
-class JointSpec:
-    """One hydraulically driven revolute joint (geometry from the URDF, actuator from ``hydraulics:``)."""
-
-    name: str
-    parent: str
-    child: str
-    origin_xyz: tuple[float, float, float]
-    origin_rpy: tuple[float, float, float]
-    axis: tuple[float, float, float]
-    lower: float | None  # None = continuous
-    upper: float | None
-    max_velocity: float  # [rad/s]
-    dead_time: float  # [s]
-    time_constant: float  # [s]
-    flow_at_limit: float  # [L/min] pump flow drawn at max_velocity; 0 = not on the shared pumps
 
 
 @dataclass(frozen=True)
@@ -167,7 +83,8 @@ class TrackSpec:
 class ExcavatorSpec:
     """A backhoe (ZX200, ZX120, ...): front joints in bus order, bucket tip, tracks, pumps and bucket soil handling."""
 
-    joints: tuple[JointSpec, ...]
+    joints: tuple[Joint, ...]  # tms_model's, in bus order
+    drives: Mapping[str, JointDrive]  # joint name -> its hydraulic actuator
     bucket_tip_xyz: tuple[float, float, float]
     home_pose: dict[str, float]
     tracks: TrackSpec
@@ -180,7 +97,7 @@ class ExcavatorSpec:
     source: str
     pilot_cutoff: CutoffSpec | None = None  # None: no pilot cut-off modelled (section absent)
 
-    def joint(self, name: str) -> JointSpec:
+    def joint(self, name: str) -> Joint:
         for j in self.joints:
             if j.name == name:
                 return j
@@ -193,7 +110,8 @@ class CarrierSpec:
 
     tracks: TrackSpec
     hinge_xyz: tuple[float, float, float]
-    vessel: JointSpec  # angle 0 = lowered, + = raised
+    vessel: Joint  # angle 0 = lowered, + = raised
+    drives: Mapping[str, JointDrive]  # the vessel joint's hydraulic actuator
     vessel_angle_gain: float  # [1/s] P gain of the machine's own angle controller (vessel_cmd is a target angle)
     inner_length: float
     inner_width: float
@@ -267,31 +185,29 @@ class PlantSpec:
         return self.machines[self.carrier]
 
 
+@contextlib.contextmanager
+def _as_plant_error():
+    """tms_model's ``ConfigError`` (``file:line: key: problem``) re-raised as a plant configuration error."""
+    try:
+        yield
+    except SimConfigError:
+        raise
+    except ConfigError as exc:
+        raise SimConfigError(str(exc)) from None
+
+
+@_as_plant_error()
 def _description(path: str | Path, machine_type: str | None = None) -> Machine:
     """The tms_model description of a machine YAML, required to be of ``machine_type`` when given.
 
     Files under ``config/`` are read once (tms_model's cache); others (tests' broken copies) every time.
     """
     path = Path(path)
-    try:
-        if path.resolve().is_relative_to(config_path().resolve()):
-            machine = load_machine(path.stem, path)
-        else:
-            machine = parse_machine(path)
-        return machine if machine_type is None else machine.require(machine_type)
-    except SimConfigError:
-        raise
-    except ConfigError as exc:  # file:line: key: problem, as a plant configuration error
-        raise SimConfigError(str(exc)) from None
-
-
-def _joint_spec(machine: Machine, j: Joint) -> JointSpec:
-    drive = machine.drives[j.name]
-    return JointSpec(
-        name=j.name, parent=j.parent, child=j.child, origin_xyz=j.origin_xyz, origin_rpy=j.origin_rpy, axis=j.axis,
-        lower=j.lower, upper=j.upper, max_velocity=j.velocity, dead_time=drive.dead_time,
-        time_constant=drive.time_constant, flow_at_limit=drive.flow_at_limit,
-    )
+    if path.resolve().is_relative_to(config_path().resolve()):
+        machine = load_machine(path.stem, path)
+    else:
+        machine = parse_machine(path)
+    return machine if machine_type is None else machine.require(machine_type)
 
 
 def _track_spec(m: Machine) -> TrackSpec:
@@ -314,7 +230,8 @@ def load_excavator(path: str | Path) -> ExcavatorSpec:
     b = m.bucket
     assert b is not None and m.pump_flow is not None  # tms_model: every excavator has them
     return ExcavatorSpec(
-        joints=tuple(_joint_spec(m, j) for j in m.joints),
+        joints=m.joints,
+        drives=m.drives,
         bucket_tip_xyz=b.tip_xyz,
         home_pose=dict(m.home_pose),
         tracks=_track_spec(m),
@@ -334,11 +251,11 @@ def load_carrier(path: str | Path) -> CarrierSpec:
     m = _description(path, CRAWLER_DUMP)
     v = m.vessel
     assert v is not None  # tms_model: every crawler dump has one
-    vessel = _joint_spec(m, m.joints[0])
     return CarrierSpec(
         tracks=_track_spec(m),
         hinge_xyz=v.hinge_xyz,
-        vessel=vessel,
+        vessel=m.joints[0],
+        drives=m.drives,
         vessel_angle_gain=v.angle_gain,
         inner_length=v.inner_length,
         inner_width=v.inner_width,
@@ -366,6 +283,7 @@ Zx200Spec = ExcavatorSpec
 Ic120Spec = CarrierSpec
 
 
+@_as_plant_error()
 def load_plant(
     path: str | Path | None = None,
     *,
@@ -383,7 +301,7 @@ def load_plant(
 
     path = Path(path) if path else config_path("sim", "plant.yaml")
     data, where = load_yaml(path)
-    top = _Reader(data, where)
+    top = Reader(data, where)
     top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "initial_front", "soil", "sensors"})
     m = top.sub("machines")
     base = config_path()
@@ -398,8 +316,8 @@ def load_plant(
         if isinstance(poses_r.raw(name), str):  # a point name in site.yaml
             point = poses_r.string(name)
             if point not in site_model.points:
-                raise poses_r._err(poses_r.path + (name,), f"no point {point!r} in {site_path} "
-                                   f"(known: {sorted(site_model.points)})")
+                raise poses_r.key_error(name, f"no point {point!r} in {site_path} "
+                                        f"(known: {sorted(site_model.points)})")
             p = site_model.points[point]
             poses[name] = (p.x, p.y, p.yaw)
         else:
@@ -443,7 +361,7 @@ def load_plant(
         specs[name], types[name] = profile.load_spec(mpath), kind
     first = {k: next((n for n in types if types[n] == k), "") for k in ("excavator", "crawler_dump")}
     if not first["excavator"] or not first["crawler_dump"]:
-        raise top._err(("machines",), "the site needs an excavator and a crawler carrier (soil is dug and carried); "
+        raise top.key_error("machines", "the site needs an excavator and a crawler carrier (soil is dug and carried); "
                        f"got types {types}")
     if top.has("initial_front"):  # front joints of the digging excavator at start (default: its home_pose)
         import dataclasses

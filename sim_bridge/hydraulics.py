@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
-from sim_bridge.config import JointSpec
+from tms_model.machines import Joint, JointDrive
 
 __all__ = ["DeadTimeLag", "JointBank"]
 
@@ -66,12 +66,18 @@ class DeadTimeLag:
 class JointBank:
     """The hydraulic joints of one machine with their positions, velocities and the shared pumps."""
 
-    def __init__(self, joints: Sequence[JointSpec], dt: float, *, pump_flow: float = math.inf) -> None:
-        self.specs = tuple(joints)
+    def __init__(
+        self, joints: Sequence[Joint], drives: Mapping[str, JointDrive], dt: float, *, pump_flow: float = math.inf
+    ) -> None:
+        """``joints`` (geometry, limits) and ``drives`` (actuator per joint name) as the machine description has them."""
+        self.joints = tuple(joints)
+        self.drives = tuple(drives[j.name] for j in joints)
         self.names = tuple(j.name for j in joints)
         self.dt = dt
         self.pump_flow = pump_flow
-        self.actuators = [DeadTimeLag(j.dead_time, j.time_constant, j.max_velocity, dt) for j in joints]
+        self.actuators = [
+            DeadTimeLag(d.dead_time, d.time_constant, j.velocity, dt) for j, d in zip(self.joints, self.drives, strict=True)
+        ]
         self.q = [0.0] * len(joints)
         self.v = [0.0] * len(joints)
         self.command = [0.0] * len(joints)
@@ -95,9 +101,9 @@ class JointBank:
     def set_positions(self, q: dict[str, float]) -> None:
         for name, value in q.items():
             i = self.names.index(name)
-            spec = self.specs[i]
-            if spec.lower is not None and spec.upper is not None:
-                value = max(spec.lower, min(spec.upper, value))
+            j = self.joints[i]
+            if j.lower is not None and j.upper is not None:
+                value = max(j.lower, min(j.upper, value))
             self.q[i] = value
 
     def step(self) -> None:
@@ -107,22 +113,22 @@ class JointBank:
         else:
             lagged = [act.step(cmd) for act, cmd in zip(self.actuators, self.command, strict=True)]
         demand = 0.0
-        for spec, v in zip(self.specs, lagged, strict=True):
-            if spec.flow_at_limit > 0.0 and spec.max_velocity > 0.0:
-                demand += spec.flow_at_limit * abs(v) / spec.max_velocity
+        for j, d, v in zip(self.joints, self.drives, lagged, strict=True):
+            if d.flow_at_limit > 0.0 and j.velocity > 0.0:
+                demand += d.flow_at_limit * abs(v) / j.velocity
         scale = self.pump_flow / demand if demand > self.pump_flow else 1.0
         self.flow_scale = scale
         dt = self.dt
-        for i, spec in enumerate(self.specs):
-            v = lagged[i] * scale if spec.flow_at_limit > 0.0 else lagged[i]
-            if scale < 1.0 and spec.flow_at_limit > 0.0:
+        for i, (j, d) in enumerate(zip(self.joints, self.drives, strict=True)):
+            v = lagged[i] * scale if d.flow_at_limit > 0.0 else lagged[i]
+            if scale < 1.0 and d.flow_at_limit > 0.0:
                 self.actuators[i].value = v  # the flow shortfall is what the joint actually did
             q = self.q[i] + v * dt
-            if spec.upper is not None and q >= spec.upper and v > 0.0:
-                q, v = spec.upper, 0.0
+            if j.upper is not None and q >= j.upper and v > 0.0:
+                q, v = j.upper, 0.0
                 self.actuators[i].value = 0.0
-            elif spec.lower is not None and q <= spec.lower and v < 0.0:
-                q, v = spec.lower, 0.0
+            elif j.lower is not None and q <= j.lower and v < 0.0:
+                q, v = j.lower, 0.0
                 self.actuators[i].value = 0.0
             self.q[i] = q
             self.v[i] = v
@@ -130,8 +136,8 @@ class JointBank:
     def flows(self) -> list[float]:
         """Flow [L/min] each joint draws now (0 for joints off the shared pumps)."""
         return [
-            s.flow_at_limit * abs(v) / s.max_velocity if s.flow_at_limit > 0 and s.max_velocity > 0 else 0.0
-            for s, v in zip(self.specs, self.v, strict=True)
+            d.flow_at_limit * abs(v) / j.velocity if d.flow_at_limit > 0 and j.velocity > 0 else 0.0
+            for j, d, v in zip(self.joints, self.drives, self.v, strict=True)
         ]
 
     def rest(self) -> None:

@@ -19,7 +19,7 @@ class Excavator:
     def __init__(self, spec: ExcavatorSpec, dt: float, pose: tuple[float, float, float]) -> None:
         s = spec
         self.spec = s
-        self.front = JointBank(s.joints, dt, pump_flow=s.pump_flow)
+        self.front = JointBank(s.joints, s.drives, dt, pump_flow=s.pump_flow)
         self.front.set_positions(s.home_pose)
         self.base = SkidSteer(s.tracks, dt, pose)
         self.z = 0.0
@@ -75,7 +75,7 @@ class CrawlerCarrier:
     def __init__(self, spec: CarrierSpec, dt: float, pose: tuple[float, float, float]) -> None:
         s = spec
         self.spec = s
-        self.vessel = JointBank([s.vessel], dt)
+        self.vessel = JointBank([s.vessel], s.drives, dt)
         self.base = SkidSteer(s.tracks, dt, pose)
         self.vessel_target: float | None = None  # angle mode when not None
         self.z = 0.0

@@ -92,7 +92,7 @@ class ExcavatorPlantProfile(PlantProfile):
         elif frame == F["front_pilot"]:
             side.pilot.update(v)
             if front_mode == 1:
-                vmax = {j.name: j.max_velocity for j in zx.spec.joints}
+                vmax = {j.name: j.velocity for j in zx.spec.joints}
                 zx.set_front_velocity({
                     j.joint: vmax[j.joint] * (v[j.pilot_plus] - v[j.pilot_minus]) / PILOT_MAX_MPA for j in EXCAVATOR_FRONT
                 })
@@ -152,7 +152,7 @@ class ExcavatorPlantProfile(PlantProfile):
                 f = math.copysign(flows[j.joint], dq[j.joint])
                 out[f"{j.short}_cylinder_bottom_flow_rate"] = f
                 out[f"{j.short}_cylinder_rod_flow_rate"] = -f
-            sw = 200.0 * dq["swing_joint"] / zx.spec.joint("swing_joint").max_velocity
+            sw = 200.0 * dq["swing_joint"] / zx.spec.joint("swing_joint").velocity
             out.update(swing_motor_a_flow_rate=sw, swing_motor_b_flow_rate=-sw)
             return out
         if frame == "Hydraulic_Flow_Rate_2":
@@ -174,7 +174,7 @@ class ExcavatorPlantProfile(PlantProfile):
 def _pilot_echo(zx: Excavator) -> dict[str, float]:
     """Measured pilot pressures equivalent to the current joint commands (velocity mode)."""
     cmd = dict(zip(zx.front.names, zx.front.command, strict=True))
-    vmax = {j.name: j.max_velocity for j in zx.spec.joints}
+    vmax = {j.name: j.velocity for j in zx.spec.joints}
     out: dict[str, float] = {}
     for j in EXCAVATOR_FRONT:
         p = PILOT_MAX_MPA * min(1.0, abs(cmd[j.joint]) / vmax[j.joint]) if vmax[j.joint] > 0 else 0.0

@@ -41,7 +41,7 @@ def test_command_above_limit_saturates_at_velocity_limit():
 
 def test_joint_stops_at_position_limit(spec):
     boom = spec.zx200.joint("boom_joint")
-    bank = JointBank([boom], spec.dt)
+    bank = JointBank([boom], spec.zx200.drives, spec.dt)
     bank.q[0] = -0.5
     bank.command[0] = 0.4  # + = down, towards the upper limit -0.1
     for _ in range(800):
@@ -52,20 +52,20 @@ def test_joint_stops_at_position_limit(spec):
 
 def test_shared_pump_flow_slows_arm_joints_together(spec):
     zx = spec.zx200
-    bank = JointBank(zx.joints, spec.dt, pump_flow=zx.pump_flow)
+    bank = JointBank(zx.joints, zx.drives, spec.dt, pump_flow=zx.pump_flow)
     bank.set_positions({"boom_joint": -0.2, "arm_joint": 1.0, "bucket_joint": 0.0})
     names = bank.names
     sign = {"boom_joint": -1.0, "arm_joint": 1.0, "bucket_joint": 1.0, "swing_joint": 0.0}
     for i, n in enumerate(names):  # all three at their velocity limits: demand 750 > 424 L/min
-        bank.command[i] = sign[n] * zx.joint(n).max_velocity
+        bank.command[i] = sign[n] * zx.joint(n).velocity
     for _ in range(200):
         bank.step()
     assert bank.flow_scale < 1.0
     assert sum(bank.flows()) == pytest.approx(zx.pump_flow, rel=1e-6)  # the pumps give all they have
-    ratios = [abs(bank.v[i]) / zx.joint(n).max_velocity for i, n in enumerate(names) if n != "swing_joint"]
+    ratios = [abs(bank.v[i]) / zx.joint(n).velocity for i, n in enumerate(names) if n != "swing_joint"]
     assert max(ratios) < 0.7  # every shared joint is well below its own limit
     # one joint alone is not flow-limited
-    solo = JointBank(zx.joints, spec.dt, pump_flow=zx.pump_flow)
+    solo = JointBank(zx.joints, zx.drives, spec.dt, pump_flow=zx.pump_flow)
     solo.set_positions({"arm_joint": 0.7})
     solo.command[names.index("arm_joint")] = 1.1
     for _ in range(160):
@@ -162,6 +162,19 @@ def test_malformed_machine_yaml_names_the_key(tmp_path):
     missing = _write_broken(tmp_path, "arm_joint: 0.4255, ", "")
     with pytest.raises(SimConfigError, match=r"hydraulics\.dead_time_s\.arm_joint: missing required key"):
         load_plant(zx200=missing)
+
+
+def test_malformed_plant_yaml_names_the_key(tmp_path):
+    text = config_path("sim", "plant.yaml").read_text()
+    for old, new, pattern in [
+        ("step_s:", "step_x:", r"plant\.yaml:\d+: step_x: unknown key; expected one of \["),
+        ("watchdog_s:", "watchdog_s: -1 #", r"plant\.yaml:\d+: watchdog_s: must be >= 0\.01, got -1"),
+    ]:
+        assert old in text
+        path = tmp_path / "plant.yaml"
+        path.write_text(text.replace(old, new, 1))
+        with pytest.raises(SimConfigError, match=pattern):
+            load_plant(path)
 
 
 def test_truth_record_and_replay(spec, tmp_path):

@@ -23,7 +23,7 @@ FIELD = {"swing_joint": "swing", "boom_joint": "boom", "arm_joint": "arm", "buck
 
 
 def _settle_lag(joint: str) -> float:
-    j = SPEC.zx200.joint(joint)
+    j = SPEC.zx200.drives[joint]
     return j.dead_time + 4.0 * j.time_constant  # within 2% of the step after dead time + 4 tau
 
 
@@ -51,7 +51,7 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
 
     # Boom up (-), arm crowd (+), bucket curl (+) within their limits; swing asked beyond its 1.1 rad/s limit.
     cmd = {"boom_joint": -0.3, "arm_joint": 0.3, "bucket_joint": 0.3, "swing_joint": 1.5}
-    expect = dict(cmd, swing_joint=SPEC.zx200.joint("swing_joint").max_velocity)
+    expect = dict(cmd, swing_joint=SPEC.zx200.joint("swing_joint").velocity)
     t0 = time.monotonic()
     zx.command("Velocity_Cmd_1", **{f"{FIELD[j]}_target_anguler_velocity": v for j, v in cmd.items()})
     reached: dict[str, float] = {}  # wall time of the first frame at speed
@@ -77,11 +77,11 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
         moved_s, reached_s = sim_at(moved[j]) - s0, sim_at(reached[j]) - s0
         # no motion during most of the dead time; at speed within the configured lag (+0.3 s: command
         # transit and the 10 ms frame period, in simulated time)
-        assert moved_s >= 0.6 * SPEC.zx200.joint(j).dead_time, (j, moved_s)
+        assert moved_s >= 0.6 * SPEC.zx200.drives[j].dead_time, (j, moved_s)
         assert reached_s <= lag + 0.3, (j, reached_s, lag)
     # The swing never exceeds its velocity limit (command 1.5 rad/s).
     swing = [v["swing_relative_angular_velocity"] for _, n, v in zx.history if n == "Front_Angular_Velocity"]
-    assert max(swing) <= SPEC.zx200.joint("swing_joint").max_velocity + 0.002
+    assert max(swing) <= SPEC.zx200.joint("swing_joint").velocity + 0.002
     # Keep commanding: boom, arm and bucket end at their position limits with zero velocity.
     limits = {"boom_joint": SPEC.zx200.joint("boom_joint").lower, "arm_joint": SPEC.zx200.joint("arm_joint").upper,
               "bucket_joint": SPEC.zx200.joint("bucket_joint").upper}
