@@ -83,7 +83,7 @@ def _make_subtask_server():  # noqa: ANN202
         """Serves ``tms_msg/Subtask`` on ``action_name``: runs ``duration_s``, publishing feedback.
 
         Goals whose ``record_name`` is empty are rejected. Cancel is accepted and acknowledged: the
-        goal ends CANCELED with ``success=False``.
+        goal ends CANCELED with ``error_code`` CANCELED.
         """
 
         def __init__(self) -> None:
@@ -110,8 +110,8 @@ def _make_subtask_server():  # noqa: ANN202
             while True:
                 if handle.is_cancel_requested:
                     handle.canceled()
-                    result.success = False
-                    result.message = f"canceled at step {step}"
+                    result.error_code = Subtask.Result.CANCELED
+                    result.error_msg = f"canceled at step {step}"
                     return result
                 if time.monotonic() >= end:
                     break
@@ -121,8 +121,7 @@ def _make_subtask_server():  # noqa: ANN202
                 step += 1
                 time.sleep(min(0.05, max(0.0, end - time.monotonic())))
             handle.succeed()
-            result.success = True
-            result.message = f"{handle.request.model_name}/{handle.request.record_name} done after {step} steps"
+            result.error_msg = f"{handle.request.model_name}/{handle.request.record_name} done after {step} steps"
             return result
 
     return DemoSubtaskServer()
@@ -193,7 +192,7 @@ def subtask_client_main() -> int:
             print("no result", flush=True)
             return 4
         names = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_ABORTED: "ABORTED"}
-        print(f"status {names.get(res.status, res.status)} success={res.result.success} message={res.result.message!r}", flush=True)
+        print(f"status {names.get(res.status, res.status)} error_code={res.result.error_code} error_msg={res.result.error_msg!r}", flush=True)
         expected = GoalStatus.STATUS_CANCELED if opts.cancel_after is not None else GoalStatus.STATUS_SUCCEEDED
         return 0 if res.status == expected else 5
     finally:

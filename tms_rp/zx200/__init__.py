@@ -5,5 +5,5 @@
 * :mod:`tms_rp.zx200.planner` turns change_pose / excavate_simple / release_simple goals into
   validated motion segments for the arm controller (``tms_rc.zx200``), rejecting bad goals first.
 
-Pure Python (no rclpy); the action servers live in :mod:`tms_if_opera.zx200.node`.
+Pure Python (no rclpy); the action servers live in :mod:`tms_if_opera.nodes.zx200_planner`.
 """
