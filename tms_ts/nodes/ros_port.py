@@ -97,9 +97,6 @@ class ManagerRosPort:
         self.locked: dict[str, bool] = {}
         self._confirm: list[tuple[int, str]] = []
         self._seq = 0
-        #: the planning action client of each subtask action, to see that server on the graph
-        self._planning: dict[str, RaceFreeActionClient | None] = {}
-        self._planning_clients: dict[str, RaceFreeActionClient] = {}
         self._lock = threading.Lock()
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(String, CONFIRM_TOPIC, self._on_confirm, reliable)
@@ -111,16 +108,6 @@ class ManagerRosPort:
         client = self._clients.get(name)
         if client is None:
             client = self._clients[name] = RaceFreeActionClient(self.node, Subtask, name)
-            # created with the subtask's client, so discovery has found the planning server long before it counts
-            spec = SUBTASKS.get(subtask_name)
-            planning_client = None
-            if spec is not None:
-                planning = f"/{model_name}/{spec.planning_action}"
-                planning_client = self._planning_clients.get(planning)
-                if planning_client is None:
-                    planning_client = self._planning_clients[planning] = RaceFreeActionClient(
-                        self.node, spec.action_type, planning)
-            self._planning[name] = planning_client
         return client
 
     # RosPort -----------------------------------------------------------------------------------
@@ -128,10 +115,15 @@ class ManagerRosPort:
         return self._client(model_name, subtask_name).server_is_ready()
 
     def planning_server_ready(self, model_name: str, subtask_name: str) -> bool | None:
-        """The subtask's planning action server on the graph; None for a subtask without a row."""
-        self._client(model_name, subtask_name)
-        planning = self._planning[f"/{model_name}/{subtask_name}"]
-        return None if planning is None else planning.server_is_ready()
+        """The subtask's planning action server on the ROS graph (None for a subtask without a row).
+
+        A graph query, not an action client: the manager need not receive every planning action's feedback
+        and status. An action server offers the service ``<action>/_action/send_goal`` (ROS 2 action design).
+        """
+        spec = SUBTASKS.get(subtask_name)
+        if spec is None:
+            return None
+        return self.node.count_services(f"/{model_name}/{spec.planning_action}/_action/send_goal") > 0
 
     def subtask_server_alive(self, model_name: str) -> bool | None:
         """Heartbeat of ``model_name``'s tms_ts_subtasks: True fresh, False silent, None never heard
