@@ -12,6 +12,7 @@ Usage: python scripts/register_ament.py <venv>
 
 from __future__ import annotations
 
+import shutil
 import stat
 import sys
 from importlib.metadata import distribution
@@ -59,8 +60,31 @@ def main(venv: str) -> int:
         )
         exe.chmod(exe.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
         count += 1
+    _register_data(prefix, index, dist.version)
     print(f"register_ament: {count} executables registered under {prefix}")
     return 0
+
+
+# config/ and trees/ are found through the share directory of this package (tms_common.config.data_root),
+# so a node run from any directory finds them. Symlinks into the checkout: editing config/ takes effect
+# without re-running this script; an install without a checkout would copy them here instead.
+DATA_PACKAGE = "tms_common"
+DATA_DIRS = ("config", "trees")
+
+
+def _register_data(prefix: Path, index: Path, version: str) -> None:
+    root = Path(__file__).resolve().parent.parent
+    (index / DATA_PACKAGE).write_text("")
+    share = prefix / "share" / DATA_PACKAGE
+    share.mkdir(parents=True, exist_ok=True)
+    (share / "package.xml").write_text(PACKAGE_XML.format(pkg=DATA_PACKAGE, version=version))
+    for name in DATA_DIRS:
+        link = share / name
+        if link.is_symlink() or link.is_file():
+            link.unlink()
+        elif link.is_dir():
+            shutil.rmtree(link)
+        link.symlink_to(root / name, target_is_directory=True)
 
 
 if __name__ == "__main__":

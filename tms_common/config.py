@@ -6,6 +6,8 @@
 
 from __future__ import annotations
 
+import functools
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,7 +16,7 @@ import yaml
 
 from tms_common.errors import ConfigError
 
-__all__ = ["Where", "load_yaml", "load_yaml_text", "repo_root", "config_path"]
+__all__ = ["Where", "load_yaml", "load_yaml_text", "repo_root", "config_path", "data_path", "data_root"]
 
 
 @dataclass(frozen=True)
@@ -81,10 +83,56 @@ def load_yaml(path: str | Path) -> tuple[Any, Where]:
 
 
 def repo_root() -> Path:
-    """The project checkout (the directory that holds ``config/``)."""
+    """The source checkout this module was imported from (for run outputs and files given relative to it)."""
     return Path(__file__).resolve().parent.parent
 
 
+# The package whose ament share directory holds config/ and trees/ (scripts/register_ament.py puts them there).
+DATA_PACKAGE = "tms_common"
+
+
+@functools.lru_cache(maxsize=1)
+def data_root() -> Path:
+    """The directory that holds the project's ``config/`` and ``trees/``, found through the installed package.
+
+    Searched in order: the ament share directory of ``tms_common`` (``<prefix>/share/tms_common``, found
+    through ``AMENT_PREFIX_PATH`` as ``ros2 run`` finds executables), then the source checkout this module
+    was imported from (an editable install or a plain clone). Never the current directory, so a node
+    works from anywhere.
+
+    Raises:
+        ConfigError: neither holds ``config/``; the message lists every place searched.
+    """
+    searched: list[str] = []
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+    except ImportError:
+        searched.append("ament share directory (ament_index_python not importable)")
+    else:
+        try:
+            share = Path(get_package_share_directory(DATA_PACKAGE))
+        except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
+            prefixes = os.environ.get("AMENT_PREFIX_PATH", "")
+            searched.append(f"ament share directory of {DATA_PACKAGE} (not registered under AMENT_PREFIX_PATH={prefixes!r})")
+        else:
+            if (share / "config").is_dir():
+                # resolved, so messages name the real file (the share entries link into the checkout)
+                return (share / "config").resolve().parent
+            searched.append(str(share / "config"))
+    checkout = repo_root()
+    if (checkout / "config").is_dir():
+        return checkout
+    searched.append(str(checkout / "config"))
+    raise ConfigError(
+        "project config/ not found; searched: " + "; ".join(searched) + " (run `make setup`, which registers it)"
+    )
+
+
 def config_path(*parts: str) -> Path:
-    """Path of a file under the project's ``config/`` directory."""
-    return repo_root().joinpath("config", *parts)
+    """Path of a file under the project's ``config/`` directory (see :func:`data_root`)."""
+    return data_root().joinpath("config", *parts)
+
+
+def data_path(*parts: str) -> Path:
+    """Path under the project's data root, e.g. ``data_path("trees", "paper.xml")``."""
+    return data_root().joinpath(*parts)

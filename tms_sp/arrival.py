@@ -14,7 +14,7 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-from tms_sp.frames import Pose2D, wrap_angle
+from tms_model.geometry import Pose2D, wrap_angle
 
 __all__ = ["ArrivalParams", "ArrivalDetector"]
 

@@ -1,4 +1,4 @@
-"""Sensing configuration: config/tms_sp/sensing.yaml + the site and machine files, validated once.
+"""Sensing configuration: config/tms_sp/sensing.yaml + the site and machine descriptions (tms_model).
 
 :func:`load_sensing_config` returns a frozen :class:`SensingConfig`; any missing or wrong key raises
 ``ConfigError`` with ``file:line: key: problem``.
@@ -12,29 +12,16 @@ from pathlib import Path
 from typing import Any
 
 from tms_common.config import Where, config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_model.geometry import Pose2D
+from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, load_machine
+from tms_model.site import Mound, load_site
 from tms_sp.arrival import ArrivalParams
-from tms_sp.frames import Pose2D
 from tms_sp.heightgrid import GridSpec
 from tms_sp.mound import ExcavationParams
 from tms_sp.vessel import VesselGeometry, VesselParams
 
-__all__ = ["SensingConfig", "MoundShape", "load_sensing_config"]
-
-
-@dataclass(frozen=True)
-class MoundShape:
-    """The mound of config/site.yaml (truncated cone)."""
-
-    cx: float
-    cy: float
-    base_radius: float
-    top_radius: float
-    height: float
-    ground_z: float
-
-    def bank_volume(self) -> float:
-        r1, r2, h = self.base_radius, self.top_radius, self.height
-        return math.pi * h / 3.0 * (r1 * r1 + r1 * r2 + r2 * r2)
+__all__ = ["SensingConfig", "load_sensing_config"]
 
 
 @dataclass(frozen=True)
@@ -44,7 +31,7 @@ class SensingConfig:
     blackboard_record: str
     resolution: float
     points: dict[str, Pose2D]
-    mound: MoundShape
+    mound: Mound
     mound_grid: GridSpec
     excavation: ExcavationParams
     excavation_model: str
@@ -85,14 +72,6 @@ def _get(data: Any, where: Where, path: tuple[Any, ...], kind: type | tuple[type
     return node
 
 
-def _pose(data: Any, where: Where, path: tuple[Any, ...]) -> Pose2D:
-    return Pose2D(
-        x=float(_get(data, where, path + ("x",))),
-        y=float(_get(data, where, path + ("y",))),
-        yaw=float(_get(data, where, path + ("yaw",))),
-    )
-
-
 def load_sensing_config(
     sensing: str | Path | None = None,
     site: str | Path | None = None,
@@ -101,30 +80,16 @@ def load_sensing_config(
 ) -> SensingConfig:
     """Load and validate the sensing configuration (defaults: the project's config/ files)."""
     s, sw = load_yaml(sensing or config_path("tms_sp", "sensing.yaml"))
-    t, tw = load_yaml(site or config_path("site.yaml"))
-    ic, iw = load_yaml(ic120 or config_path("machines", "ic120.yaml"))
-    zx, zw = load_yaml(zx200 or config_path("machines", "zx200.yaml"))
+    the_site = load_site(site)
+    ic = load_machine("ic120", ic120).require(CRAWLER_DUMP)
+    zx = load_machine("zx200", zx200).require(EXCAVATOR)
+    assert ic.vessel is not None and zx.bucket is not None
 
-    points: dict[str, Pose2D] = {}
-    pts = _get(t, tw, ("points",), dict)
-    for name, value in pts.items():
-        if isinstance(value, dict) and "yaw" in value:
-            points[name] = _pose(t, tw, ("points", name))
+    points = dict(the_site.points)
     for needed in ("zx200_base", "P1", "P2", "P3", "P4", "P5"):
         if needed not in points:
-            raise tw.error(("points",), f"points: missing pose {needed!r} (x, y, yaw)")
-
-    m = ("mound",)
-    mound = MoundShape(
-        cx=float(_get(t, tw, m + ("center", "x"))),
-        cy=float(_get(t, tw, m + ("center", "y"))),
-        base_radius=float(_get(t, tw, m + ("base_radius",))),
-        top_radius=float(_get(t, tw, m + ("top_radius",))),
-        height=float(_get(t, tw, m + ("height",))),
-        ground_z=float(_get(t, tw, m + ("ground_z",))),
-    )
-    if not 0 <= mound.top_radius < mound.base_radius or mound.height <= 0:
-        raise tw.error(m, "mound: need 0 <= top_radius < base_radius and height > 0")
+            raise ConfigError(f"{the_site.source}: points: missing pose {needed!r} (x, y, yaw)")
+    mound = the_site.mound
 
     res = float(_get(s, sw, ("grid_resolution",)))
     if res <= 0:
@@ -144,7 +109,7 @@ def load_sensing_config(
             bucket_radius=ex("bucket_radius"),
             penetration_depth=ex("penetration_depth"),
             max_penetration_depth=ex("max_penetration_depth"),
-            bucket_volume=float(_get(zx, zw, ("bucket_capacity",))),
+            bucket_volume=zx.bucket.capacity,
             depth_steps=int(ex("depth_steps")),
             drag_length=ex("drag_length"),
             attack_angle=math.radians(ex("attack_angle_deg")),
@@ -163,17 +128,14 @@ def load_sensing_config(
     if ex("approach_height") < 0:
         raise sw.error(e + ("approach_height",), f"approach_height: must be >= 0, got {ex('approach_height')}")
     v = ("vessel",)
-    vessel_cfg = _get(ic, iw, ("vessel",), dict)
-    hinge = _get(ic, iw, ("vessel", "hinge_xyz"), list)
     geom = VesselGeometry(
-        inner_length=float(_get(ic, iw, ("vessel", "inner_length"))),
-        inner_width=float(_get(ic, iw, ("vessel", "inner_width"))),
-        capacity=float(_get(ic, iw, ("vessel", "capacity"))),
-        hinge_xyz=(float(hinge[0]), float(hinge[1]), float(hinge[2])),
+        inner_length=ic.vessel.inner_length,
+        inner_width=ic.vessel.inner_width,
+        capacity=ic.vessel.capacity,
+        hinge_xyz=ic.vessel.hinge_xyz,
         floor_above_hinge=float(_get(s, sw, v + ("floor_above_hinge",))),
         rim_above_hinge=float(_get(s, sw, v + ("rim_above_hinge",))),
     )
-    del vessel_cfg
     try:
         vparams = VesselParams(
             wall_margin=float(_get(s, sw, v + ("wall_margin",))),
@@ -201,7 +163,7 @@ def load_sensing_config(
     except ValueError as exc:
         raise sw.error(a, str(exc)) from None
 
-    swing_origin = _get(zx, zw, ("joints", "swing_joint", "origin_xyz"), list)
+    swing_origin = zx.joints[0].origin_xyz
     return SensingConfig(
         blackboard_record=_get(s, sw, ("blackboard_record",), str),
         resolution=res,

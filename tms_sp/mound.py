@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from tms_sp.frames import Pose2D
+from tms_model.geometry import Pose2D
 from tms_sp.heightgrid import HeightGrid
 
 __all__ = ["ExcavationParams", "ExcavationTarget", "MoundAssessment", "assess_mound"]

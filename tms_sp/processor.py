@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from tms_model.geometry import Pose2D
 from tms_sp.arrival import ArrivalDetector
 from tms_sp.config import SensingConfig
 from tms_sp.errors import SensingError
-from tms_sp.frames import Pose2D
 from tms_sp.heightgrid import rasterize
 from tms_sp.mound import MoundAssessment, assess_mound
 from tms_sp.vessel import VesselAssessment, assess_vessel, release_in_zx200

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from tms_sp.frames import Pose2D
+from tms_model.geometry import Pose2D
 from tms_sp.heightgrid import GridSpec, HeightGrid
 
 __all__ = ["VesselGeometry", "VesselParams", "VesselAssessment", "assess_vessel", "release_in_zx200"]

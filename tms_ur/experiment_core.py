@@ -28,6 +28,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tms_model.excavator.kinematics import ExcavatorKinematics, load_kinematics
+from tms_model.machines import Machine, load_machine
+from tms_model.site import Site, load_site
+from tms_ur.site_map import render_site_map
+
 __all__ = ["AlignedError", "ExperimentRecorder", "Sample", "tasks_to_cancel_after_failure", "TASK_DONE"]
 
 #: task states (tms_msg/TaskState names) after which a task runs no more
@@ -299,8 +304,19 @@ class ExperimentRecorder:
         return self._aligned[key].unmatched if key in self._aligned else 0
 
     # -- report -------------------------------------------------------------------------------
-    def report(self, directory: Path, *, site: dict[str, Any] | None = None, title: str = "Earthwork run") -> Path:
-        """Write metrics.json, three PNG plots and index.html into ``directory``; returns index.html."""
+    def report(
+        self,
+        directory: Path,
+        *,
+        site: Site | None = None,
+        zx200: ExcavatorKinematics | None = None,
+        ic120: Machine | None = None,
+        title: str = "Earthwork run",
+    ) -> Path:
+        """Write metrics.json, three PNG plots and index.html into ``directory``; returns index.html.
+
+        ``site``, ``zx200`` and ``ic120`` default to the project's models (config/site.yaml, machines/).
+        """
         import matplotlib
 
         matplotlib.use("Agg")
@@ -310,28 +326,8 @@ class ExperimentRecorder:
         metrics = self.metrics()
         (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
 
-        fig, ax = plt.subplots(figsize=(7, 6))
-        colors = {"ic120": "tab:orange", "zx200": "tab:blue"}
-        for machine, path in self.paths.items():
-            if path:
-                ax.plot([p[1] for p in path], [p[2] for p in path], "-", color=colors.get(machine), label=f"{machine} path")
-                ax.plot(path[-1][1], path[-1][2], "o", color=colors.get(machine))
-        for name, point in ((site or {}).get("points") or {}).items():
-            if isinstance(point, dict) and "x" in point:
-                ax.plot(point["x"], point["y"], "k^")
-                ax.annotate(name, (point["x"], point["y"]), textcoords="offset points", xytext=(4, 4))
-        mound = (site or {}).get("mound") or {}
-        centre = mound.get("center") or {}
-        if "x" in centre:
-            ax.add_patch(plt.Circle((centre["x"], centre["y"]), mound.get("base_radius", 3.0), color="sienna", alpha=0.3,
-                                    label="mound"))
-        ax.set_aspect("equal")
-        ax.set_xlabel("x [m] (map)")
-        ax.set_ylabel("y [m] (map)")
-        ax.set_title("Site map: machine paths (truth)")
-        ax.legend(loc="best")
-        fig.savefig(directory / "site_map.png", dpi=90)
-        plt.close(fig)
+        render_site_map(directory / "site_map.png", site or load_site(), zx200=zx200 or load_kinematics("zx200"),
+                        ic120=ic120 or load_machine("ic120"), paths=self.paths)
 
         fig, ax = plt.subplots(figsize=(8, 4))
         if self.soil:

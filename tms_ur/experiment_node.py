@@ -27,9 +27,11 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from tms_common.config import config_path, load_yaml, repo_root
+from tms_common.config import repo_root
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
+from tms_model.geometry import yaw_from_quaternion
+from tms_model.site import load_site
 from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
 
 STATE_NAMES = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
@@ -43,8 +45,6 @@ DEFAULT_ACTIONS = (
 )
 
 
-def _yaw(q) -> float:  # noqa: ANN001
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 def _make_node():  # noqa: ANN202
@@ -89,11 +89,11 @@ def _make_node():  # noqa: ANN202
             self._t0 = (time.monotonic(), 0.0)  # (wall, sim) when the tasks were started
             self._zx200_base: tuple[float, float, float] | None = None
             self._joints: dict[str, float] = {}
-            from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+            from tms_model.excavator.kinematics import JOINTS, load_kinematics
 
             self._kin, self._joint_order = load_kinematics(), JOINTS
             self._np = np
-            self.site, _ = load_yaml(config_path("site.yaml"))
+            self.site = load_site()
             self._store = None
             self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
             reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
@@ -137,7 +137,7 @@ def _make_node():  # noqa: ANN202
 
         def _on_pose(self, machine: str, msg: PoseStamped) -> None:
             p = msg.pose.position
-            yaw = _yaw(msg.pose.orientation)
+            yaw = yaw_from_quaternion(msg.pose.orientation)
             self.rec.on_truth_pose(self._stamp(msg.header), machine, p.x, p.y, yaw)
             if machine == "zx200":
                 self._zx200_base = (p.x, p.y, yaw)

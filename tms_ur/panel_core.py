@@ -14,7 +14,10 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from tms_common.errors import ConfigError, TmsError
+from tms_model.excavator.kinematics import ExcavatorKinematics
 
 __all__ = [
     "PanelConfig",
@@ -120,31 +123,13 @@ def _task_id(value: Any, field_name: str) -> int:
     return task_id
 
 
-def arm_side_view(joints: dict[str, float], geometry: dict[str, Any]) -> list[list[float]]:
-    """Side-view polyline (radial distance, height) [m] of the ZX200 front: boom foot, arm pin, bucket pin, tip.
+def arm_side_view(joints: dict[str, float], kin: ExcavatorKinematics) -> list[list[float]]:
+    """Side-view polyline (radial distance, height) [m] of the excavator front: boom foot, arm pin, bucket pin, tip.
 
-    Uses the pitch chain of config/machines/zx200.yaml (origin x/z and fixed pitch of each joint; the
-    small y offsets do not matter for a side view). Pitch grows downward (+ = boom down).
+    ``joints`` maps joint names to angles (missing = 0); the geometry is the machine model's.
     """
-    chain = geometry["joints"]
-    x = z = 0.0
-    pitch = 0.0
-    points: list[list[float]] = []
-    for name in ("boom_joint", "arm_joint", "bucket_joint"):
-        j = chain[name]
-        ox, _, oz = j["origin_xyz"]
-        if name == "boom_joint":
-            sx, _, sz = chain["swing_joint"]["origin_xyz"]
-            ox, oz = ox + sx, oz + sz
-        x += math.cos(pitch) * ox + math.sin(pitch) * oz
-        z += -math.sin(pitch) * ox + math.cos(pitch) * oz
-        points.append([round(x, 3), round(z, 3)])
-        pitch += j["origin_rpy"][1] + float(joints.get(name, 0.0))
-    tx, _, tz = geometry["bucket_tip_xyz"]
-    x += math.cos(pitch) * tx + math.sin(pitch) * tz
-    z += -math.sin(pitch) * tx + math.cos(pitch) * tz
-    points.append([round(x, 3), round(z, 3)])
-    return points
+    q = np.array([float(joints.get(name, 0.0)) for name in kin.joints])
+    return [[round(float(x), 3), round(float(z), 3)] for x, z in kin.side_view(q)]
 
 
 @dataclass

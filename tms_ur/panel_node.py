@@ -20,14 +20,13 @@ from __future__ import annotations
 
 import asyncio
 import json
-import math
 import threading
 from pathlib import Path
-from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.geometry import yaw_from_quaternion
 from tms_ur.panel_core import CommandError, PanelConfig, SiteState, arm_side_view, authorize, parse_command
 
 WEB_DIR = Path(__file__).parent / "web"
@@ -35,8 +34,6 @@ STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/panel.js": ("panel.
           "/panel.css": ("panel.css", "text/css")}
 
 
-def _yaw(q: Any) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
@@ -68,7 +65,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
             pose_topics = d("pose_topics", ["ic120:/sim/truth/ic120/pose", "zx200:/sim/truth/zx200/pose"]).value
             self.lock = threading.Lock()
             self.site = SiteState()
-            self.geometry, _ = load_yaml(config_path("machines", "zx200.yaml"))
+            self.kin = load_kinematics("zx200")
             self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
             self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", 10)
             self.pub_emergency = self.create_publisher(Bool, "/emergency_signal", 10)
@@ -103,7 +100,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
         def _on_pose(self, machine: str, msg: PoseStamped) -> None:
             p = msg.pose.position
             with self.lock:
-                self.site.set_pose(machine, p.x, p.y, _yaw(msg.pose.orientation))
+                self.site.set_pose(machine, p.x, p.y, yaw_from_quaternion(msg.pose.orientation))
 
         def _on_plan(self, msg: PathMsg) -> None:
             pts = [[round(ps.pose.position.x, 2), round(ps.pose.position.y, 2)] for ps in msg.poses]
@@ -113,7 +110,7 @@ def _make_node():  # noqa: ANN202 - rclpy types are imported lazily
         def _on_joints(self, msg: JointState) -> None:
             joints = dict(zip(msg.name, msg.position, strict=False))
             with self.lock:
-                self.site.arm = arm_side_view(joints, self.geometry)
+                self.site.arm = arm_side_view(joints, self.kin)
                 self.site.swing = float(joints.get("swing_joint", 0.0))
 
         def _on_soil(self, msg: Float64MultiArray) -> None:

@@ -34,12 +34,12 @@ from sim_bridge.plant import Plant
 from tests.rosproc import ROOT
 from tests.tms_sp.treeutil import load_seed
 from tms_common.config import config_path
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.geometry import Pose2D
 from tms_rc.zx200.controller import ArmController, load_controller_config
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp.config import load_sensing_config
-from tms_sp.frames import Pose2D
 from tms_sp.heightgrid import HeightGrid
 from tms_sp.mound import assess_mound
 from tms_sp.vessel import assess_vessel, release_in_zx200

@@ -26,11 +26,11 @@ import numpy as np
 import pinocchio as pin
 
 from tests.bench.stats import summary_ms
+from tms_model.excavator import codes
+from tms_model.excavator.codes import PlanningError
+from tms_model.excavator.kinematics import load_kinematics
 from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.plant import LagDeadTimePlant
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.errors import PlanningError
-from tms_rp.zx200.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 #: at most this many control steps of QP problems are recorded for the solve-alone replay

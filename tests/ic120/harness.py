@@ -5,13 +5,12 @@ from __future__ import annotations
 import math
 
 from tests.ic120.kinematics import TrackedModel
-from tms_common.config import config_path, load_yaml
+from tms_model.site import load_site
 from tms_rp.ic120.navigator import NavigatorCore
 
 
 def site_points() -> dict:
-    data, _ = load_yaml(config_path("site.yaml"))
-    return {k: (float(v["x"]), float(v["y"]), float(v.get("yaw", 0.0))) for k, v in data["points"].items() if "yaw" in v}
+    return {k: (p.x, p.y, p.yaw) for k, p in load_site().points.items()}
 
 
 def paper_legs(points: dict) -> list[list[tuple[float, float, float]]]:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from tests.ic120.synth import simulate
-from tms_rp.ic120.ekf import EkfParams, Ic120Ekf, wrap_angle
-from tms_rp.ic120.geo import GnssProjector, projector_from_site
+from tms_model.geometry import wrap_angle
+from tms_rp.ic120.ekf import EkfParams, Ic120Ekf
 
 
 def _run(samples, *, outage=None, jump=None):
@@ -103,34 +103,6 @@ def test_bad_params_name_the_key():
         EkfParams(gnss_sigma=0.0)
     with pytest.raises(ValueError, match="unknown keys"):
         EkfParams.from_dict({"gnss_sigmaa": 0.1})
-
-
-def test_projection_origin_and_round_trip():
-    proj = projector_from_site()
-    # the site origin's geodetic coordinates map to ~(0, 0)
-    lat, lon, alt = proj.to_geodetic(0.0, 0.0, 0.0)
-    assert proj.to_map(lat, lon, alt) == pytest.approx((0.0, 0.0, 0.0), abs=1e-4)
-    # 100 m east / 50 m north round trip, axis order x = east, y = north
-    lat2, lon2, _ = proj.to_geodetic(100.0, 50.0)
-    assert lon2 > lon and lat2 > lat
-    assert proj.to_map(lat2, lon2)[:2] == pytest.approx((100.0, 50.0), abs=1e-4)
-    # the rounded geodetic origin of site.yaml is within 0.2 m of the plane origin
-    x, y, _ = proj.to_map(36.12626, 140.07103)
-    assert math.hypot(x, y) < 0.2
-
-
-def test_projection_matches_zone_ix_origin():
-    # Zone IX origin 36N 139 50'E is plane (0, 0): with a zero map origin the projector returns it.
-    proj = GnssProjector("EPSG:6677", {"easting": 0.0, "northing": 0.0})
-    assert proj.to_map(36.0, 139.0 + 50.0 / 60.0)[:2] == pytest.approx((0.0, 0.0), abs=1e-3)
-
-
-def test_projection_rejects_bad_fix_and_crs():
-    proj = projector_from_site()
-    with pytest.raises(ValueError, match="invalid GNSS fix"):
-        proj.to_map(float("nan"), 140.0)
-    with pytest.raises(ValueError, match="EPSG:999999"):
-        GnssProjector("EPSG:999999", {"easting": 0, "northing": 0})
 
 
 def test_estimate_drift_is_recovered_not_gated_forever():

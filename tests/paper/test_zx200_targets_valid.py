@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from tests.tms_sp.treeutil import load_seed
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.geometry import Pose2D
 from tms_rc.zx200.controller import load_controller_config
-from tms_rp.zx200.kinematics import JOINTS, load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp import synthetic as syn
 from tms_sp.config import load_sensing_config
-from tms_sp.frames import Pose2D
 from tms_sp.heightgrid import rasterize
 from tms_sp.mound import assess_mound
 from tms_sp.vessel import assess_vessel, release_in_zx200

@@ -247,9 +247,9 @@ def test_truth_stamps_and_clock_never_go_back_so_arrival_holds_at_p1(start_plant
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
+    from tms_model.geometry import Pose2D, yaw_from_quaternion
     from tms_sp.arrival import ArrivalDetector
     from tms_sp.config import load_sensing_config
-    from tms_sp.frames import Pose2D, yaw_from_quaternion
 
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     poses: list[tuple[int, int, float, float, float]] = []
@@ -258,7 +258,7 @@ def test_truth_stamps_and_clock_never_go_back_so_arrival_holds_at_p1(start_plant
     def on_pose(m: PoseStamped) -> None:
         q = m.pose.orientation
         poses.append((m.header.stamp.sec, m.header.stamp.nanosec, m.pose.position.x, m.pose.position.y,
-                       yaw_from_quaternion(q.x, q.y, q.z, q.w)))
+                       yaw_from_quaternion(q)))
 
     ros_node.create_subscription(PoseStamped, "/sim/truth/ic120/pose", on_pose, qos)
     ros_node.create_subscription(Clock, "/clock", lambda m: clock.append((m.clock.sec, m.clock.nanosec)), qos)

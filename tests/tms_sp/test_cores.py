@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from tms_model.geometry import Pose2D
 from tms_sp import synthetic as syn
 from tms_sp.arrival import ArrivalDetector, ArrivalParams
 from tms_sp.config import load_sensing_config
 from tms_sp.errors import SensingError
-from tms_sp.frames import Pose2D
 from tms_sp.heightgrid import GridSpec, HeightGrid, rasterize
 from tms_sp.mound import assess_mound
 from tms_sp.vessel import assess_vessel, release_in_zx200

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from tests.tms_sp.treeutil import ROOT, load_seed
+from tms_model.geometry import Pose2D, yaw_from_quaternion
 from tms_sp import synthetic as syn
 from tms_sp.config import load_sensing_config
-from tms_sp.frames import Pose2D, yaw_from_quaternion
 from tms_sp.processor import SiteSensing
 
 tms_ts_loader = pytest.importorskip("tms_ts.loader", reason="needs the tms_ts BT runtime (issue 8)")
@@ -91,7 +91,7 @@ class World:
         self.log.append(f"{goal.model}:{goal.record}")
         if goal.subtask in ("st_ic120_follow_waypoints", "st_ic120_navigate_anywhere"):
             last = (lambda k: doc[k][-1]) if isinstance(doc["x"], list) else (lambda k: doc[k])
-            self.ic120 = Pose2D(last("x"), last("y"), yaw_from_quaternion(last("qx"), last("qy"), last("qz"), last("qw")))
+            self.ic120 = Pose2D(last("x"), last("y"), yaw_from_quaternion((last("qx"), last("qy"), last("qz"), last("qw"))))
         elif goal.subtask == "st_ic120_release_soil":
             self.vessel_angle = doc["target_angle"]
             if self.vessel_angle > 0.5:

@@ -22,8 +22,8 @@ from tests.tms_sp.treeutil import (
     node_id,
     tree_root,
 )
+from tms_model.geometry import Pose2D, wrap_angle, yaw_from_quaternion
 from tms_sp.config import load_sensing_config
-from tms_sp.frames import Pose2D, wrap_angle, yaw_from_quaternion
 
 SEED = load_seed()
 CFG = load_sensing_config()
@@ -192,7 +192,7 @@ def _pose_list(doc) -> list[Pose2D]:
     for i in range(len(xs)):
         q = [get(k, i) for k in ("qx", "qy", "qz", "qw")]
         assert math.isclose(np.linalg.norm(q), 1.0, abs_tol=1e-6)
-        out.append(Pose2D(get("x", i), get("y", i), yaw_from_quaternion(*q)))
+        out.append(Pose2D(get("x", i), get("y", i), yaw_from_quaternion(q)))
     return out
 
 
@@ -276,7 +276,7 @@ def _fk_tip(q: dict[str, float]) -> np.ndarray:
 
 def test_fk_helper_matches_the_reference_home_tip():
     tip = _fk_tip({"swing_joint": 0, "boom_joint": 0, "arm_joint": 1.65806, "bucket_joint": 0})
-    assert tip == pytest.approx([5.60, -0.09, -2.48], abs=0.02)  # opera_machines.md §c
+    assert tip == pytest.approx([5.60, -0.09, -2.48], abs=0.02)  # the zx200_ros2 URDF chain
 
 
 def test_zx200_joint_poses_within_limits_and_above_ground():

@@ -2,9 +2,14 @@
 
 import json
 
+import numpy as np
 import pytest
 
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.machines import load_machine
+from tms_model.site import load_site
 from tms_ur.experiment_core import ExperimentRecorder
+from tms_ur.site_map import render_site_map
 
 
 def _scripted_run() -> ExperimentRecorder:
@@ -66,7 +71,7 @@ def test_a_bucketful_falling_over_many_samples_is_one_pass_and_a_dump_one_cycle(
 
 def test_report_writes_every_file(tmp_path):
     rec = _scripted_run()
-    index = rec.report(tmp_path, site={"points": {"P1": {"x": 1.0, "y": 6.5}}, "mound": {"center": {}}})
+    index = rec.report(tmp_path)
     for name in ("metrics.json", "site_map.png", "soil.png", "flags.png", "index.html"):
         assert (tmp_path / name).stat().st_size > 100, name
     assert json.loads((tmp_path / "metrics.json").read_text())["cycles"] == 3
@@ -138,3 +143,34 @@ def test_an_estimate_whose_truth_never_comes_is_unmatched_not_compared():
     assert aligned == []
     # the one in the gap, and the 30 that waited more than horizon_s (stamped before 4.875 s) for their truth
     assert errors.unmatched == 1 + 30
+
+
+def _route_run() -> ExperimentRecorder:
+    """Synthetic truth paths: the IC120 driving P3 -> P1 -> P5 and back, the ZX200 parked."""
+    rec = ExperimentRecorder()
+    t = 0.0
+    legs = [(22.0, 10.0), (12.0, 8.5), (1.2, 6.5), (12.0, 8.5), (22.0, 10.0), (30.0, 10.0), (38.0, 10.0)]
+    for (xa, ya), (xb, yb) in zip(legs, legs[1:], strict=False):
+        for s in np.linspace(0.0, 1.0, 20):
+            t += 0.5
+            rec.on_truth_pose(t, "ic120", xa + s * (xb - xa), ya + s * (yb - ya), 0.0)
+    rec.on_truth_pose(t, "zx200", 0.0, 0.0, 0.0)
+    return rec
+
+
+def test_site_map_labels_do_not_overlap_and_the_plot_fills_the_figure(tmp_path):
+    site = load_site()
+    kin = load_kinematics("zx200")
+    info = render_site_map(tmp_path / "site_map.png", site, zx200=kin, ic120=load_machine("ic120"),
+                           paths=_route_run().paths)
+    assert (tmp_path / "site_map.png").stat().st_size > 10_000
+    texts = [t for t, _ in info["labels"]]
+    # every pose is labelled once; poses at one position share one label; the dump zone is named
+    assert sorted(" / ".join(texts).replace(" / ", "|").split("|")) == sorted([*site.points, "dump zone"])
+    assert any("P3" in t and "ic120_start" in t for t in texts)
+    boxes = [b for _, b in info["labels"]]
+    for i, a in enumerate(boxes):
+        for j in range(i + 1, len(boxes)):
+            assert not a.overlaps(boxes[j]), (texts[i], texts[j])
+    assert info["axes_fraction"] > 0.6, info["axes_fraction"]
+    assert info["reach"] == pytest.approx(kin.envelope()["max_reach"])

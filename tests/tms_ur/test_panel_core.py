@@ -2,8 +2,8 @@
 
 import pytest
 
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.excavator.kinematics import load_kinematics
 from tms_ur.panel_core import CommandError, PanelConfig, SiteState, arm_side_view, authorize, parse_command
 
 
@@ -34,12 +34,16 @@ def test_parse_commands_and_errors():
 
 
 def test_arm_side_view_zero_pose_matches_reference_geometry():
-    geometry, _ = load_yaml(config_path("machines", "zx200.yaml"))
-    pts = arm_side_view({}, geometry)
-    # opera_machines.md §c: at q = 0 the tip is at (10.435, ., 1.957) in base_link.
+    kin = load_kinematics("zx200")
+    pts = arm_side_view({}, kin)
+    # zx200_ros2 URDF: at q = 0 the tip is at (10.435, ., 1.957) in base_link.
     assert pts[-1] == pytest.approx([10.435, 1.957], abs=0.01)
-    # Boom down (+) lowers the tip.
-    assert arm_side_view({"boom_joint": -0.5}, geometry)[-1][1] > pts[-1][1]
+    # Boom up (-) raises the tip; the view is the model's forward kinematics in the front's plane.
+    assert arm_side_view({"boom_joint": -0.5}, kin)[-1][1] > pts[-1][1]
+    q = {"swing_joint": 0.7, "boom_joint": -0.5, "arm_joint": 1.2, "bucket_joint": 0.4}
+    view = arm_side_view(q, kin)
+    tip = kin.tip_position([0.0, -0.5, 1.2, 0.4])
+    assert view[-1] == pytest.approx([tip[0], tip[2]], abs=1e-3)
 
 
 def test_site_state_trail_thins_close_points_and_snapshot_is_json_ready():

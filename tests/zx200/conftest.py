@@ -32,7 +32,7 @@ def joint_states_held_at(node: Any, q: list[float], period_s: float = 0.01) -> I
     process under test sees an arm that holds still wherever it is commanded."""
     from sensor_msgs.msg import JointState
 
-    from tms_rp.zx200.kinematics import JOINTS
+    from tms_model.excavator.kinematics import JOINTS
 
     pub = node.create_publisher(JointState, "/zx200/joint_states", 10)
     stop = threading.Event()

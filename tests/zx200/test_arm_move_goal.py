@@ -13,7 +13,7 @@ import pytest
 
 from tests.rosproc import executable
 from tests.zx200.conftest import joint_states_held_at
-from tms_rp.zx200 import errors as codes
+from tms_model.excavator import codes
 
 pytestmark = pytest.mark.integration
 

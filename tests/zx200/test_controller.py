@@ -7,10 +7,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tms_rc.zx200.controller import ArmController, CartesianTarget, JointTarget, load_controller_config
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.excavator.targets import CartesianTarget, JointTarget
+from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.plant import LagDeadTimePlant
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import load_kinematics
 
 
 @pytest.fixture(scope="module")

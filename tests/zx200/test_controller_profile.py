@@ -8,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from tms_rc.zx200.controller import ArmController, JointTarget, TrapezoidSegment, load_controller_config
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.excavator.targets import JointTarget
+from tms_rc.zx200.controller import ArmController, TrapezoidSegment, load_controller_config
 from tms_rc.zx200.plant import LagDeadTimePlant
-from tms_rp.zx200.kinematics import load_kinematics
 
 
 def test_trapezoid_timing_is_triangular_below_top_speed_and_trapezoidal_above() -> None:

@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 from tms_common.errors import ConfigError
-from tms_rc.zx200.controller import ArmController, JointTarget, load_controller_config
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.excavator.targets import JointTarget
+from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.plant import LagDeadTimePlant
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import load_kinematics
 
 PLANT_DT = 0.01  # [s] the MuJoCo plant's step
 # The MuJoCo plant's hydraulics (config/machines/zx200.yaml) + CAN/DDS transport.

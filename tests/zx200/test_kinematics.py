@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tms_rp.zx200.errors import InvalidGoalError, JointLimitError, OutOfReachError
-from tms_rp.zx200.kinematics import load_kinematics
+from tms_model.excavator.codes import InvalidGoalError, JointLimitError, OutOfReachError
+from tms_model.excavator.kinematics import load_kinematics
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +23,7 @@ def random_q(kin, rng, n):
 
 
 def test_zero_pose_matches_reference_geometry(kin):
-    # reference/opera_machines.md §c: at q = 0 the tip is at (10.435, -0.087, 1.957) in base_link.
+    # zx200_ros2 URDF: at q = 0 the tip is at (10.435, -0.087, 1.957) in base_link.
     np.testing.assert_allclose(kin.tip_position(np.zeros(4)), [10.435, -0.087, 1.957], atol=2e-3)
     assert kin.l_boom == pytest.approx(5.648, abs=1e-3)
     assert kin.l_arm == pytest.approx(2.890, abs=1e-3)
@@ -84,7 +84,7 @@ def test_pose_to_theta_w_is_not_wrapped_to_pi() -> None:
     # past pi (curled bucket); the pose's pitch must map back to the angle the joints can hold.
     import pinocchio as pin
 
-    from tms_rp.zx200.kinematics import load_kinematics
+    from tms_model.excavator.kinematics import load_kinematics
 
     kin = load_kinematics()
     rng = np.random.default_rng(1)

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from tms_rp.zx200.errors import InvalidGoalError, OutOfReachError
-from tms_rp.zx200.kinematics import load_kinematics
+from tms_model.excavator.codes import InvalidGoalError, OutOfReachError
+from tms_model.excavator.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 KIN = load_kinematics()

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from tms_rc.zx200.controller import CartesianTarget, JointTarget
-from tms_rp.zx200.errors import InvalidGoalError, JointLimitError
-from tms_rp.zx200.kinematics import load_kinematics
+from tms_model.excavator.codes import InvalidGoalError, JointLimitError
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 KIN = load_kinematics()

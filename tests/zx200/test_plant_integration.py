@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from tms_common.config import config_path, load_yaml
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.site import load_site
 
 pytestmark = pytest.mark.integration
 
@@ -135,20 +136,20 @@ def test_change_pose_reaches_rejects_and_cancels_in_the_plant(arm_stack) -> None
 def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) -> None:
     from tms_msg.action import Zx200ExcavateSimple, Zx200ReleaseSimple
 
-    site, _ = load_yaml(config_path("site.yaml"))
-    base = site["points"]["zx200_base"]
-    assert (base["x"], base["y"], base["yaw"]) == (0.0, 0.0, 0.0), "test assumes the ZX200 base at the map origin"
-    mound = site["mound"]
+    site = load_site()
+    base = site.point("zx200_base")
+    assert (base.x, base.y, base.yaw) == (0.0, 0.0, 0.0), "test assumes the ZX200 base at the map origin"
+    mound = site.mound
     stack = arm_stack(ic120_pose="P1")
     mound0, bucket0, vessel0 = stack.soil[:3]
     # Target on the near slope of the mound, 0.35 m below its surface, as tms_sp computes it.
-    cx = mound["center"]["x"]
+    cx = mound.cx
     x = cx - 0.65
     r = abs(x - cx)
-    surface = mound["ground_z"] + mound["height"] * (1.0 if r <= mound["top_radius"] else
-                                                      (mound["base_radius"] - r) / (mound["base_radius"] - mound["top_radius"]))
+    surface = mound.ground_z + mound.height * (1.0 if r <= mound.top_radius else
+                                               (mound.base_radius - r) / (mound.base_radius - mound.top_radius))
     g = Zx200ExcavateSimple.Goal()
-    g.position_with_angle.position.x, g.position_with_angle.position.y = x, mound["center"]["y"]
+    g.position_with_angle.position.x, g.position_with_angle.position.y = x, mound.cy
     g.position_with_angle.position.z = surface - 0.35
     g.position_with_angle.theta_w = math.radians(45.0)
     g.position_with_angle.offset = 1.5

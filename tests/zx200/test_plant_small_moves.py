@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from tests.zx200.test_plant_integration import SUCCEEDED, joint_goal, settled_tip
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import load_kinematics
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import load_kinematics
 
 pytestmark = pytest.mark.integration
 KIN = load_kinematics()

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from tms_rc.zx200.controller import CartesianTarget, JointTarget
+from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_rc.zx200.segments import CARTESIAN, JOINT, targets_from_segments
 
 

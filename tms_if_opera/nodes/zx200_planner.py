@@ -42,12 +42,13 @@ from tms_common.action_client import RaceFreeActionClient
 from tms_common.goals import RunningGoals
 from tms_common.node import run_node
 from tms_common.ticker import Ticker
+from tms_model.excavator import codes
+from tms_model.excavator.codes import PlanningError
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.excavator.targets import JointTarget
 from tms_msg.action import Zx200ArmMove, Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
 from tms_msg.msg import Zx200ArmSegment
-from tms_rc.zx200.controller import JointTarget, load_controller_config
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.errors import PlanningError
-from tms_rp.zx200.kinematics import JOINTS, load_kinematics
+from tms_rc.zx200.controller import load_controller_config
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 __all__ = ["Zx200PlannerNode", "main"]
@@ -70,7 +71,7 @@ class Zx200PlannerNode(Node):
         def path(name: str) -> str | None:
             return self.declare_parameter(name, "", read_only).value or None
 
-        kin = load_kinematics(path("machine_config"))
+        kin = load_kinematics("zx200", path=path("machine_config"))
         pcfg = load_planner_config(path("planner_config"))
         ccfg = load_controller_config(path("controller_config"))
         self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.ground_min_z)

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 from tms_common.errors import TmsError
+from tms_model.machines import Vessel
 
 __all__ = ["VesselParams", "VesselController", "VesselError", "VesselStep"]
 
@@ -38,8 +39,8 @@ class VesselParams:
                 raise ValueError(f"vessel.{name} must be > 0, got {value!r}")
 
     @classmethod
-    def from_config(cls, machine_vessel: dict, nav_vessel: dict) -> VesselParams:
-        return cls(float(machine_vessel["max_angle"]), float(machine_vessel["velocity"]),
+    def from_config(cls, machine_vessel: Vessel, nav_vessel: dict) -> VesselParams:
+        return cls(machine_vessel.max_angle, machine_vessel.velocity,
                    float(nav_vessel["tolerance"]), float(nav_vessel["settle_time"]), float(nav_vessel["timeout_margin"]))
 
 

@@ -38,16 +38,16 @@ import numpy as np
 
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.excavator.targets import JointTarget, Target
+from tms_model.geometry import wrap_angle
 from tms_rc.zx200.hqp import HierarchicalQP, LevelSpec
-from tms_rp.zx200 import errors as codes
-from tms_rp.zx200.kinematics import JOINTS, Zx200Kinematics
 
 __all__ = [
     "ControllerConfig",
     "load_controller_config",
     "TrapezoidSegment",
-    "JointTarget",
-    "CartesianTarget",
     "ControllerStatus",
     "ArmController",
 ]
@@ -226,30 +226,6 @@ class TrapezoidSegment:
         return self.p0 + s * delta, ds * delta
 
 
-@dataclass(frozen=True)
-class JointTarget:
-    """Move to joint angles ``q`` [rad] (joint order :data:`JOINTS`) along a joint-space spline."""
-
-    q: np.ndarray
-    label: str = ""
-    speed_scale: float = 1.0
-    via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
-
-
-@dataclass(frozen=True)
-class CartesianTarget:
-    """Move the bucket tip on a straight line to ``position`` [m] with edge angle ``theta_w`` [rad]."""
-
-    position: np.ndarray
-    theta_w: float
-    label: str = ""
-    speed_scale: float = 1.0
-    via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
-
-
-Target = JointTarget | CartesianTarget
-
-
 @dataclass
 class ControllerStatus:
     """What the controller is doing: ``mode`` idle | moving | stopping; ``result`` set when a run ends."""
@@ -287,10 +263,6 @@ class _Pid:
         return self.kp * error + self.ki * self.integral + self.kd * deriv
 
 
-def _wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
-
-
 # ---------------------------------------------------------------------------------------------- controller
 class ArmController:
     """The hierarchical arm controller; call :meth:`step` once per control period.
@@ -307,7 +279,7 @@ class ArmController:
         LevelSpec("collision", "ineq", 4),
     )
 
-    def __init__(self, kin: Zx200Kinematics, cfg: ControllerConfig) -> None:
+    def __init__(self, kin: ExcavatorKinematics, cfg: ControllerConfig) -> None:
         self.kin = kin
         self.cfg = cfg
         self.dt = cfg.dt
@@ -474,7 +446,7 @@ class ArmController:
     @staticmethod
     def _joint_delta(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
         d = np.asarray(q1, dtype=float) - q0
-        d[0] = _wrap(d[0])  # continuous swing: shortest way round
+        d[0] = wrap_angle(d[0])  # continuous swing: shortest way round
         return d
 
     def _begin_segment(self, qp: np.ndarray) -> None:
@@ -657,7 +629,7 @@ class ArmController:
         if isinstance(target, JointTarget):
             q_ref, v_ref = spline.sample(t_ref)
             err = q_ref - qp
-            err[0] = _wrap(err[0])
+            err[0] = wrap_angle(err[0])
             b = v_ref + self._pid_q(err, self.elapsed, hold)
             res = self.hqp_joint.solve([*tasks, (np.eye(N), b), (np.eye(N), np.zeros(N))])
             self.reference_tip = None

@@ -40,13 +40,13 @@ def _make_node():  # noqa: ANN202
     from rclpy.task import Future
     from sensor_msgs.msg import JointState
 
+    from tms_model.excavator import codes
+    from tms_model.excavator.kinematics import JOINTS, load_kinematics
     from tms_msg.action import Zx200ArmMove
     from tms_msg.msg import JointCmd
     from tms_rc.zx200.controller import ArmController, load_controller_config
     from tms_rc.zx200.segments import targets_from_segments
     from tms_rc.zx200.tick_stats import TickStats
-    from tms_rp.zx200 import errors as codes
-    from tms_rp.zx200.kinematics import JOINTS, load_kinematics
 
     class ArmControllerNode(Node):
         """joint_states -> hierarchical QP -> front_cmd at ``rate_hz``; goals through ``arm_controller/move``."""
@@ -55,7 +55,7 @@ def _make_node():  # noqa: ANN202
             super().__init__("zx200_arm_controller")
             cfg_path = self.declare_parameter("config", "").value or None
             machine_path = self.declare_parameter("machine_config", "").value or None
-            self.kin = load_kinematics(machine_path)
+            self.kin = load_kinematics("zx200", path=machine_path or None)
             self.cfg = load_controller_config(cfg_path)
             rate = float(self.declare_parameter("rate_hz", 0.0).value)  # 0 = rate_hz of the config file
             if rate < 0:

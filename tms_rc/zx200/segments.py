@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from tms_rc.zx200.controller import CartesianTarget, JointTarget
-from tms_rp.zx200.kinematics import JOINTS
+from tms_model.excavator.kinematics import JOINTS
+from tms_model.excavator.targets import CartesianTarget, JointTarget
 
 __all__ = ["JOINT", "CARTESIAN", "MAX_SPEED_SCALE", "targets_from_segments"]
 

@@ -12,6 +12,7 @@ from typing import Any
 
 from tms_common.config import Where, config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.machines import CRAWLER_DUMP, Machine, load_machine
 from tms_rp.ic120.controller import ControllerParams, Limits
 from tms_rp.ic120.costmap import Costmap, CostmapParams, Footprint, load_map
 from tms_rp.ic120.ekf import EkfParams
@@ -39,7 +40,7 @@ class NavConfig:
     vessel: dict
     limits: Limits
     footprint: Footprint
-    vessel_machine: dict
+    machine: Machine  # the IC120 description (tracks, footprint, vessel)
 
     def build_costmap(self, map_yaml: str | Path | None = None) -> Costmap:
         return Costmap(load_map(map_yaml or self.map_yaml), self.footprint, self.costmap)
@@ -77,13 +78,9 @@ def load_nav_config(nav_yaml: str | Path | None = None, machine_yaml: str | Path
     missing = _SECTIONS - set(data)
     if missing:
         raise where.error((), f"missing sections {sorted(missing)}")
-    mdata, mwhere = load_yaml(machine_yaml or config_path("machines", "ic120.yaml"))
-    try:
-        limits = Limits.from_tracks(mdata["tracks"])
-        footprint = Footprint(float(mdata["footprint"]["length"]), float(mdata["footprint"]["width"]))
-        vessel_machine = dict(mdata["vessel"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise mwhere.error(("tracks",), f"ic120 machine config: {exc}") from None
+    machine = load_machine("ic120", machine_yaml).require(CRAWLER_DUMP)
+    limits = Limits.from_tracks(machine.tracks, machine.source)
+    footprint = Footprint(machine.footprint.length, machine.footprint.width)
     loc = dict(data["localization"])
     costmap_sec = dict(data["costmap"])
     map_rel = costmap_sec.pop("map", None)
@@ -112,7 +109,7 @@ def load_nav_config(nav_yaml: str | Path | None = None, machine_yaml: str | Path
             vessel=dict(data["vessel"]),
             limits=limits,
             footprint=footprint,
-            vessel_machine=vessel_machine,
+            machine=machine,
         )
     except ConfigError:
         raise

@@ -16,7 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tms_rp.ic120.ekf import wrap_angle
+from tms_common.errors import ConfigError
+from tms_model.geometry import wrap_angle
+from tms_model.machines import Tracks
 
 __all__ = ["Limits", "ControllerParams", "TrackedPurePursuit", "Command"]
 
@@ -37,11 +39,11 @@ class Limits:
                 raise ValueError(f"tracks.{name} must be > 0, got {value!r}")
 
     @classmethod
-    def from_tracks(cls, tracks: dict) -> Limits:
-        try:
-            return cls(*(float(tracks[k]) for k in ("max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel")))
-        except KeyError as exc:
-            raise ValueError(f"ic120 tracks config: missing key {exc.args[0]!r}") from None
+    def from_tracks(cls, tracks: Tracks, source: str = "machine description") -> Limits:
+        """From a machine description's tracks; navigation needs the optional accelerations."""
+        if tracks.max_accel is None or tracks.max_yaw_accel is None:
+            raise ConfigError(f"{source}: tracks: navigation needs max_accel and max_yaw_accel")
+        return cls(tracks.max_speed, tracks.max_yaw_rate, tracks.max_accel, tracks.max_yaw_accel)
 
 
 @dataclass(frozen=True)

@@ -38,14 +38,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-__all__ = ["EkfParams", "Ic120Ekf", "wrap_angle", "UpdateResult"]
+from tms_model.geometry import wrap_angle
+
+__all__ = ["EkfParams", "Ic120Ekf", "UpdateResult"]
 
 LOGGER = logging.getLogger(__name__)
-
-
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,14 @@ from pathlib import Path
 import numpy as np
 
 from tms_common.config import config_path, load_yaml
+from tms_model.site import load_site
 from tms_rp.ic120.costmap import FREE, OCCUPIED, OccupancyMap, save_map
 
 
 def build_site_map(source_yaml: str | Path | None = None, site_yaml: str | Path | None = None) -> OccupancyMap:
     """The occupancy grid of the paper's site."""
     src, swhere = load_yaml(source_yaml or config_path("nav", "site_map_source.yaml"))
-    site, where = load_yaml(site_yaml or config_path("site.yaml"))
+    site = load_site(site_yaml)
     try:
         m = src["map"]
         res, x0, y0 = float(m["resolution"]), float(m["x_min"]), float(m["y_min"])
@@ -30,14 +31,12 @@ def build_site_map(source_yaml: str | Path | None = None, site_yaml: str | Path 
     yy, xx = np.mgrid[0:h, 0:w]
     cx = x0 + (xx + 0.5) * res
     cy = y0 + (yy + 0.5) * res
-    circles = []
     try:
-        mound = site["mound"]
-        circles.append((float(mound["center"]["x"]), float(mound["center"]["y"]), float(mound["base_radius"])))
-        base = site["points"]["zx200_base"]
-        circles.append((float(base["x"]), float(base["y"]), float(src["zx200_clearance_radius"])))
+        clearance = float(src["zx200_clearance_radius"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise where.error(("mound",), f"site config: {exc}") from None
+        raise swhere.error(("zx200_clearance_radius",), f"zx200_clearance_radius: {exc}") from None
+    base = site.point("zx200_base")
+    circles = [(site.mound.cx, site.mound.cy, site.mound.base_radius), (base.x, base.y, clearance)]
     for ox, oy, r in circles:
         grid[(cx - ox) ** 2 + (cy - oy) ** 2 <= r * r] = OCCUPIED
     if src.get("border", True):

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tms_model.geometry import wrap_angle, yaw_from_quaternion
 from tms_rp.ic120.controller import ControllerParams, Limits, TrackedPurePursuit
 from tms_rp.ic120.costmap import Costmap
-from tms_rp.ic120.ekf import wrap_angle
 from tms_rp.ic120.errors import InvalidGoalError, NavError, NavTimeoutError, NoValidPathError
 from tms_rp.ic120.planner import GridPlanner
 
@@ -89,7 +89,7 @@ def validate_pose(x: float, y: float, qz: float, qw: float, qx: float = 0.0, qy:
     if abs(norm - 1.0) > 0.01:
         raise InvalidGoalError(f"pose {index}: orientation quaternion is not normalised (norm {norm:.4f})")
     qx, qy, qz, qw = (q / norm for q in (qx, qy, qz, qw))
-    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    yaw = yaw_from_quaternion((qx, qy, qz, qw))
     return float(x), float(y), yaw
 
 

@@ -1,9 +1,7 @@
-"""ZX200 arm planning: pinocchio kinematics, analytic IK, goal validation and motion segments.
+"""ZX200 arm planning: goal validation and motion segments (the kinematics is :mod:`tms_model.excavator`).
 
-* :mod:`tms_rp.zx200.kinematics` builds the arm model from ``config/machines/zx200.yaml`` (FK,
-  bucket-tip Jacobians, theta_w) and solves position + theta_w IK in closed form.
 * :mod:`tms_rp.zx200.planner` turns change_pose / excavate_simple / release_simple goals into
-  validated motion segments for the arm controller (``tms_rc.zx200``), rejecting bad goals first.
+  validated motion targets (:mod:`tms_model.excavator.targets`) for the arm controller, rejecting bad goals first.
 
 Pure Python (no rclpy); the action servers live in :mod:`tms_if_opera.nodes.zx200_planner`.
 """

@@ -9,7 +9,7 @@
   tip held over the release point.
 
 Every target is checked here (finite, non-empty, reachable, inside the joint limits, above the
-ground limit); failures raise :class:`~tms_rp.zx200.errors.PlanningError` subclasses whose message
+ground limit); failures raise :class:`~tms_model.excavator.codes.PlanningError` subclasses whose message
 names the joint or the distance. The targets are consumed by :class:`tms_rc.zx200.controller.ArmController`.
 """
 
@@ -24,9 +24,10 @@ import numpy as np
 
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_rc.zx200.controller import CartesianTarget, JointTarget
-from tms_rp.zx200.errors import InvalidGoalError, JointLimitError, PlanningError
-from tms_rp.zx200.kinematics import JOINTS, Zx200Kinematics
+from tms_model.excavator.codes import InvalidGoalError, JointLimitError, PlanningError
+from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.excavator.targets import CartesianTarget, JointTarget
+from tms_model.geometry import wrap_angle
 
 __all__ = ["PlannerConfig", "load_planner_config", "Zx200Planner"]
 
@@ -80,7 +81,7 @@ def _finite(values: Any, what: str) -> np.ndarray:
 class Zx200Planner:
     """Turns planning goals into controller targets after validating every one of them."""
 
-    def __init__(self, kin: Zx200Kinematics, cfg: PlannerConfig | None = None, ground_min_z: float = -2.5) -> None:
+    def __init__(self, kin: ExcavatorKinematics, cfg: PlannerConfig | None = None, ground_min_z: float = -2.5) -> None:
         self.kin = kin
         self.cfg = cfg or PlannerConfig()
         self.ground_min_z = ground_min_z
@@ -328,7 +329,7 @@ class Zx200Planner:
         """
         ang = float(_finite([target_angle], "release target_angle")[0])
         q = _finite(current_q, "current joint state").copy()
-        q[0] = math.atan2(math.sin(ang), math.cos(ang))
+        q[0] = wrap_angle(ang)
         lim = self.kin.limits
         m = self.cfg.limit_margin
         q[1:] = np.clip(q[1:], lim.lower[1:] + m, lim.upper[1:] - m)

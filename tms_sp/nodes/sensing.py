@@ -35,15 +35,15 @@ def _make_node():  # noqa: ANN202
     from sensor_msgs.msg import PointCloud2
 
     from tms_db.nodes.common import declare_and_open
+    from tms_model.geometry import Pose2D, yaw_from_quaternion
     from tms_sp.config import load_sensing_config
     from tms_sp.errors import SensingError
-    from tms_sp.frames import Pose2D, yaw_from_quaternion
     from tms_sp.pointcloud import xyz_from_cloud
     from tms_sp.processor import SiteSensing
 
     def pose2d(msg: PoseStamped) -> Pose2D:
         p, q = msg.pose.position, msg.pose.orientation
-        return Pose2D(p.x, p.y, yaw_from_quaternion(q.x, q.y, q.z, q.w), p.z)
+        return Pose2D(p.x, p.y, yaw_from_quaternion(q), p.z)
 
     class SensingNode(Node):
         """Feeds SiteSensing from ROS topics; see the module docstring."""

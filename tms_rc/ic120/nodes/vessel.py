@@ -25,6 +25,7 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
     from std_msgs.msg import Float64
 
     from tms_common.config import config_path, load_yaml
+    from tms_model.machines import CRAWLER_DUMP, load_machine
     from tms_msg.action import SetDumpAngle
     from tms_rc.ic120.vessel import VesselController, VesselError, VesselParams
 
@@ -34,9 +35,9 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             machine_yaml = str(self.declare_parameter("machine_config", "").value)
             nav_yaml = str(self.declare_parameter("nav_config", "").value)
             rate = float(self.declare_parameter("rate_hz", 10.0).value)
-            mdata, _ = load_yaml(machine_yaml or config_path("machines", "ic120.yaml"))
+            machine = load_machine("ic120", machine_yaml or None).require(CRAWLER_DUMP)
             ndata, _ = load_yaml(nav_yaml or config_path("nav", "ic120_nav.yaml"))
-            self.ctl = VesselController(VesselParams.from_config(mdata["vessel"], ndata["vessel"]))
+            self.ctl = VesselController(VesselParams.from_config(machine.vessel, ndata["vessel"]))
             self._angle: float | None = None
             self._vel = 0.0
             self._hold: float | None = None

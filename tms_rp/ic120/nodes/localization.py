@@ -19,8 +19,6 @@ from tms_common.node import run_node
 __all__ = ["main", "make_node"]
 
 
-def _yaw_of(q) -> float:  # noqa: ANN001 - geometry_msgs/Quaternion
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 def make_node():  # noqa: ANN201 - rclpy imported lazily
@@ -29,9 +27,10 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
     from rclpy.node import Node
     from sensor_msgs.msg import Imu, NavSatFix
 
+    from tms_model.geometry import yaw_from_quaternion
+    from tms_model.site import Projector, load_site
     from tms_rp.ic120.config import load_nav_config
     from tms_rp.ic120.ekf import Ic120Ekf
-    from tms_rp.ic120.geo import projector_from_site
 
     class Ic120Localization(Node):
         def __init__(self) -> None:
@@ -43,7 +42,8 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             self.odom_frame = str(self.declare_parameter("odom_frame", "odom").value)
             self.map_frame = str(self.declare_parameter("map_frame", "map").value)
             cfg = load_nav_config(nav_config or None)
-            self.projector = projector_from_site(site_config or None, cfg.geodetic_crs)
+            site = load_site(site_config or None)
+            self.projector = Projector(site.crs, site.origin_plane, cfg.geodetic_crs)
             self.ekf = Ic120Ekf(cfg.ekf)
             self._log = self.get_logger()
             self.pub = self.create_publisher(Odometry, "odometry/global", 10)
@@ -64,7 +64,7 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
             if msg.status.status < 0:
                 return
             try:
-                x, y, _ = self.projector.to_map(msg.latitude, msg.longitude, msg.altitude)
+                x, y, _ = self.projector.geodetic_to_map(msg.latitude, msg.longitude, msg.altitude)
             except ValueError as exc:
                 self._log.warning(f"gnss/fix ignored: {exc}")
                 return
@@ -89,14 +89,14 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
                 return
             sigma = math.sqrt(msg.orientation_covariance[8]) if msg.orientation_covariance[8] > 0 else None
             try:
-                self.ekf.azimuth(self._now(msg.header), _yaw_of(q), sigma)
+                self.ekf.azimuth(self._now(msg.header), yaw_from_quaternion(q), sigma)
             except ValueError as exc:
                 self._log.warning(f"imu ignored: {exc}")
 
         def _on_odom(self, msg: Odometry) -> None:
             p = msg.pose.pose
             try:
-                self.ekf.odometry(self._now(msg.header), p.position.x, p.position.y, _yaw_of(p.orientation))
+                self.ekf.odometry(self._now(msg.header), p.position.x, p.position.y, yaw_from_quaternion(p.orientation))
             except ValueError as exc:
                 self._log.warning(f"odom_pose ignored: {exc}")
                 return

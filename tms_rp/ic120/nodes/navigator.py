@@ -54,6 +54,7 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.task import Future
 
+    from tms_model.geometry import yaw_from_quaternion
     from tms_msg.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
     from tms_rp.ic120 import errors
     from tms_rp.ic120.config import load_nav_config
@@ -100,7 +101,7 @@ def make_node():  # noqa: ANN201 - rclpy imported lazily
         def _on_pose(self, msg: Odometry) -> None:
             p = msg.pose.pose
             q = p.orientation
-            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+            yaw = yaw_from_quaternion(q)
             self._pose = (p.position.x, p.position.y, yaw)
             self._pose_t = self._now()
             self._vel = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)

@@ -1,9 +1,10 @@
-"""ZX200 arm kinematics: a pinocchio model built from ``config/machines/zx200.yaml``.
+"""Excavator arm kinematics: a pinocchio model built from any excavator kind's description.
 
 The chain is base_link -swing(z)-> body_link -boom(y)-> boom_link -arm(y)-> arm_link -bucket(y)->
-bucket_link, with the bucket tip (``bucket_tip_xyz``) as an operational frame, exactly as the
-zx200_ros2 URDF (reference/opera_machines.md §c). Pinocchio gives forward kinematics and the
-Jacobians of the bucket tip and the bucket pin that the arm controller (``tms_rc.zx200``) uses.
+bucket_link, with the bucket tip (``bucket_tip_xyz``) as an operational frame, as the zx200_ros2 URDF
+has it; joint origins, limits and the tip come from ``config/machines/<kind>.yaml`` (see
+:mod:`tms_model.machines`). Pinocchio gives forward kinematics and the Jacobians of the bucket tip and
+the bucket pin that the arm controller uses.
 
 theta_w (the seed paper's bucket-edge angle to the ground plane) is the angle of the bucket pin ->
 bucket tip line below the horizontal x-y plane, in the vertical plane of the front: 0 = edge
@@ -22,17 +23,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_rp.zx200.errors import InvalidGoalError, JointLimitError, OutOfReachError
+from tms_model.excavator.codes import InvalidGoalError, JointLimitError, OutOfReachError
+from tms_model.machines import EXCAVATOR, Machine, load_machine
 
-__all__ = ["JOINTS", "JointLimits", "Zx200Kinematics", "load_kinematics"]
+__all__ = ["JOINTS", "ExcavatorKinematics", "JointLimits", "load_kinematics"]
 
+# The front joints of every excavator kind, in COM3 bus / joint_states order (the names the URDF and the
+# COM3 relay use; a kind's YAML lists them in this order under front_joints).
 JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 
 
@@ -47,80 +49,55 @@ class JointLimits:
 
     def violation(self, q: np.ndarray, margin: float = 0.0) -> tuple[int, float, tuple[float, float]] | None:
         """First joint outside its limits (index, value, (lower, upper)) or None."""
-        for i in range(len(JOINTS)):
+        for i in range(len(self.lower)):
             if q[i] < self.lower[i] - margin or q[i] > self.upper[i] + margin:
                 return i, float(q[i]), (float(self.lower[i]), float(self.upper[i]))
         return None
 
 
-def _vec(data: Any, where: str, n: int = 3) -> np.ndarray:
-    if not isinstance(data, (list, tuple)) or len(data) != n:
-        raise ConfigError(f"{where}: expected a list of {n} numbers, got {data!r}")
-    try:
-        return np.array([float(v) for v in data])
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: expected numbers, got {data!r}") from None
-
-
-class Zx200Kinematics:
-    """Pinocchio model of the ZX200 front plus closed-form IK; joint order is :data:`JOINTS`.
+class ExcavatorKinematics:
+    """Pinocchio model of an excavator front plus closed-form IK; joint order is the kind's front joints.
 
     Args:
-        machine: the parsed ``config/machines/zx200.yaml`` mapping.
-        source: file name used in error messages.
+        machine: the kind's description (``load_machine("zx200")``); must be an excavator.
     """
 
-    def __init__(self, machine: dict[str, Any], source: str = "zx200.yaml") -> None:
-        try:
-            joints = machine["joints"]
-            tip = _vec(machine["bucket_tip_xyz"], f"{source}: bucket_tip_xyz")
-        except (KeyError, TypeError) as exc:
-            raise ConfigError(f"{source}: missing key {exc}") from None
+    def __init__(self, machine: Machine) -> None:
+        machine.require(EXCAVATOR)
+        assert machine.bucket is not None
+        self.machine = machine
+        self.kind = machine.kind
+        self.joints = machine.joint_names
+        if self.joints != JOINTS:
+            raise ConfigError(f"{machine.source}: front_joints must be {list(JOINTS)}, got {list(self.joints)}")
+        tip = np.array(machine.bucket.tip_xyz)
         origins, pitches = [], []
         lower, upper, vel, acc = [], [], [], []
         model = pin.Model()
-        model.name = "zx200"
+        model.name = machine.kind
         parent = 0
-        masses = machine.get("masses", {})
-        bodies = {"swing_joint": "body", "boom_joint": "boom", "arm_joint": "arm", "bucket_joint": "bucket"}
-        for name in JOINTS:
-            if name not in joints:
-                raise ConfigError(f"{source}: joints: missing {name}")
-            spec = joints[name]
-            xyz = _vec(spec.get("origin_xyz"), f"{source}: joints.{name}.origin_xyz")
-            rpy = _vec(spec.get("origin_rpy"), f"{source}: joints.{name}.origin_rpy")
-            axis = _vec(spec.get("axis"), f"{source}: joints.{name}.axis")
+        bodies = ("body", "boom", "arm", "bucket")
+        for joint, body in zip(machine.joints, bodies, strict=True):
+            xyz = np.array(joint.origin_xyz)
+            rpy = np.array(joint.origin_rpy)
             placement = pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)
-            if np.allclose(axis, [0, 0, 1]):
-                jmodel = pin.JointModelRZ()
-            elif np.allclose(axis, [0, 1, 0]):
-                jmodel = pin.JointModelRY()
-            else:
-                raise ConfigError(f"{source}: joints.{name}.axis: expected [0,0,1] or [0,1,0], got {axis.tolist()}")
-            parent = model.addJoint(parent, jmodel, placement, name)
-            mass = float(masses.get(bodies[name], 1.0))
+            jmodel = pin.JointModelRZ() if joint.axis == (0.0, 0.0, 1.0) else pin.JointModelRY()
+            parent = model.addJoint(parent, jmodel, placement, joint.name)
+            mass = float(machine.masses.get(body, 1.0))
             model.appendBodyToJoint(parent, pin.Inertia.FromSphere(mass, 0.5), pin.SE3.Identity())
             origins.append(xyz)
             pitches.append(float(rpy[1]))
-            pos = spec.get("position")
-            if pos is None:
-                lower.append(-math.inf)
-                upper.append(math.inf)
-            else:
-                lo, hi = _vec(pos, f"{source}: joints.{name}.position", 2)
-                if not lo < hi:
-                    raise ConfigError(f"{source}: joints.{name}.position: lower {lo} must be < upper {hi}")
-                lower.append(lo)
-                upper.append(hi)
-            vel.append(float(spec.get("velocity", 1.0)))
-            acc.append(float(spec.get("acceleration", 1.0)))
-        bucket_joint = model.getJointId("bucket_joint")
+            lower.append(-math.inf if joint.lower is None else joint.lower)
+            upper.append(math.inf if joint.upper is None else joint.upper)
+            vel.append(joint.velocity)
+            acc.append(joint.acceleration)
+        bucket_joint = model.getJointId(JOINTS[3])
         self.tip_frame = model.addFrame(pin.Frame("bucket_tip", bucket_joint, pin.SE3(np.eye(3), tip), pin.FrameType.OP_FRAME))
         self.pin_frame = model.addFrame(pin.Frame("bucket_pin", bucket_joint, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
         self.model = model
         self.data = model.createData()
         self.limits = JointLimits(np.array(lower), np.array(upper), np.array(vel), np.array(acc))
-        self.home = np.array([float(machine.get("home_pose", {}).get(n, 0.0)) for n in JOINTS])
+        self.home = np.array([machine.home_pose[n] for n in JOINTS])
 
         # Planar parameters of the front in the body (post-swing) x-z plane.
         swing_o, boom_o, arm_o, bucket_o = origins
@@ -140,6 +117,24 @@ class Zx200Kinematics:
         self.bucket_pitch0 = p3  # pitch of bucket_link at q = 0
         self.tip_local = tip
 
+    def envelope(self, samples: int = 81) -> dict[str, float]:
+        """Working range over the joint limits, as a spec sheet states it [m].
+
+        ``max_reach``: largest horizontal distance swing axis -> bucket tip; ``max_depth``: deepest tip
+        below the ground (base_link z = 0), positive down; ``max_height``: highest tip. Evaluated on a
+        ``samples``-per-joint grid of boom/arm/bucket in the front's plane (closed-form planar chain).
+        """
+        qb, qa, qk = np.meshgrid(
+            *(np.linspace(self.limits.lower[i], self.limits.upper[i], samples) for i in (1, 2, 3)), indexing="ij"
+        )
+        phi_b = qb + self.c_boom
+        phi_a = qb + qa + self.c_arm
+        phi_k = qb + qa + qk + self.c_bucket
+        x = self.boom_foot[0] + self.l_boom * np.cos(phi_b) + self.l_arm * np.cos(phi_a) + self.l_bucket * np.cos(phi_k)
+        z = self.boom_foot[1] - self.l_boom * np.sin(phi_b) - self.l_arm * np.sin(phi_a) - self.l_bucket * np.sin(phi_k)
+        z = z + self.swing_origin[2]
+        return {"max_reach": float(np.max(x)), "max_depth": float(-np.min(z)), "max_height": float(np.max(z))}
+
     # ------------------------------------------------------------------ forward kinematics
     def forward(self, q: np.ndarray) -> None:
         """Update joint placements, frame placements and Jacobians of the internal data for ``q``."""
@@ -150,6 +145,18 @@ class Zx200Kinematics:
         """Bucket tip position in base_link [m]."""
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
         return self.data.oMf[self.tip_frame].translation.copy()
+
+    def side_view(self, q: np.ndarray) -> np.ndarray:
+        """The front in its own vertical plane: (radial, height) [m] of boom foot, arm pin, bucket pin, tip.
+
+        Swing is ignored (the plane turns with it); the small lateral offsets do not show in a side view.
+        """
+        q0 = np.asarray(q, dtype=float).copy()
+        q0[0] = 0.0
+        pin.framesForwardKinematics(self.model, self.data, q0)
+        pts = [self.data.oMi[self.model.getJointId(name)].translation for name in JOINTS[1:]]
+        pts.append(self.data.oMf[self.tip_frame].translation)
+        return np.array([[p[0], p[2]] for p in pts])
 
     def tip_pose(self, q: np.ndarray) -> pin.SE3:
         """Pose of the bucket tip frame (bucket_end_link) in base_link."""
@@ -276,10 +283,9 @@ class Zx200Kinematics:
         return pos, theta_w
 
 
-def load_kinematics(path: str | Path | None = None) -> Zx200Kinematics:
-    """Build the model from ``config/machines/zx200.yaml`` (or ``path``)."""
-    path = Path(path) if path is not None else config_path("machines", "zx200.yaml")
-    data, _ = load_yaml(path)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level")
-    return Zx200Kinematics(data, str(path))
+def load_kinematics(kind: str = "zx200", path: str | Path | None = None) -> ExcavatorKinematics:
+    """A new model of excavator ``kind`` (from ``config/machines/<kind>.yaml`` or ``path``).
+
+    The description is parsed once per file; the pinocchio data is per instance (not thread-safe to share).
+    """
+    return ExcavatorKinematics(load_machine(kind, path))

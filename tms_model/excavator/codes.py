@@ -1,4 +1,5 @@
-"""Errors of ZX200 planning: each carries the ``tms_msg/ErrorCodes`` value an action result reports.
+"""Result codes and errors of excavator arm motion: each error carries the ``tms_msg/ErrorCodes`` value an
+action result reports.
 
 A goal is rejected *before* motion with one of these; the message names the culprit (which joint and
 its limit, which distance and the reachable range, which field is NaN or empty).

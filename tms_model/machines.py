@@ -1,0 +1,396 @@
+"""Per machine kind an immutable description, read once from ``config/machines/<kind>.yaml``.
+
+:func:`load_machine` parses and validates the file (every problem is ``file:line: key.path: problem``)
+and caches the result per file, so the converter, the plant, the planners, the controllers, sensing
+and the UI all see one description of a machine. Two types of machine exist today:
+
+* ``excavator`` (ZX200, ZX120): a front of four revolute joints swing/boom/arm/bucket, a bucket, tracks;
+* ``crawler_dump`` (IC120): tracks and a vessel on a rear hinge.
+
+The ``type:`` key of the YAML names the type; sections another package owns alone (e.g. ``sim``) are
+left to it, but inside the sections read here an unknown key is an error (a typo must not silently fall
+back to a default).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_model.reader import Reader
+
+__all__ = [
+    "Bucket",
+    "Footprint",
+    "Joint",
+    "JointDrive",
+    "Machine",
+    "PilotCutoff",
+    "TrackDrive",
+    "Tracks",
+    "Vessel",
+    "EXCAVATOR",
+    "CRAWLER_DUMP",
+    "load_machine",
+    "machine_path",
+]
+
+EXCAVATOR = "excavator"
+CRAWLER_DUMP = "crawler_dump"
+TYPES = (EXCAVATOR, CRAWLER_DUMP)
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A revolute joint of the URDF chain: origin in its parent, axis, limits.
+
+    ``lower``/``upper`` are None for a continuous joint (the swing); ``velocity`` [rad/s] and
+    ``acceleration`` [rad/s^2] are the motion limits the planner and the controller respect.
+    """
+
+    name: str
+    parent: str
+    child: str
+    origin_xyz: tuple[float, float, float]
+    origin_rpy: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    lower: float | None
+    upper: float | None
+    velocity: float
+    acceleration: float
+
+
+@dataclass(frozen=True)
+class JointDrive:
+    """Hydraulic actuator of one joint: dead time [s], first-order lag [s], pump flow drawn at its limit [L/min]."""
+
+    dead_time: float
+    time_constant: float
+    flow_at_limit: float  # 0 = on its own circuit, not sharing the main pumps
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """Rectangle centred on base_link [m]: ``length`` along x, ``width`` along y."""
+
+    length: float
+    width: float
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """Skid-steer undercarriage limits: gauge [m], speed [m/s], yaw rate [rad/s], optional accelerations."""
+
+    gauge: float
+    max_speed: float
+    max_yaw_rate: float
+    max_accel: float | None = None
+    max_yaw_accel: float | None = None
+
+
+@dataclass(frozen=True)
+class TrackDrive:
+    """Travel hydraulics: dead time [s], lag [s], slip ratio and yaw slip (fraction of yaw rate lost)."""
+
+    dead_time: float
+    time_constant: float
+    slip: float
+    yaw_slip: float
+
+
+@dataclass(frozen=True)
+class Bucket:
+    """The excavator's bucket: tip in bucket_link [m], heaped capacity [m^3] and soil handling of the plant."""
+
+    tip_xyz: tuple[float, float, float]
+    capacity: float
+    width: float  # [m] cutting edge
+    release_tip_angle: float  # [rad] spills while its pin->tip line is less than this below horizontal
+    spill_time: float  # [s] to empty a full bucket when fully open
+    cut_min_speed: float  # [m/s] the edge only cuts while moving
+
+
+@dataclass(frozen=True)
+class Vessel:
+    """The dump vessel on its rear hinge; angle 0 = lowered, + = raised (the URDF's sign is the opposite)."""
+
+    hinge_xyz: tuple[float, float, float]
+    max_angle: float  # [rad]
+    velocity: float  # [rad/s]
+    inner_length: float
+    inner_width: float
+    capacity: float  # [m^3] heaped
+    dead_time: float
+    time_constant: float
+    angle_gain: float  # [1/s] machine-side P gain from target angle to vessel velocity
+    load_max_angle: float
+    dump_start_angle: float
+    dump_time: float
+    dump_distance: float
+
+
+@dataclass(frozen=True)
+class PilotCutoff:
+    """Pilot cut-off (hydraulic lock): solenoid delay [s], then actuators decay with these time constants [s]."""
+
+    solenoid_delay: float
+    front_time_constant: float
+    tracks_time_constant: float
+
+
+@dataclass(frozen=True)
+class Machine:
+    """One machine kind. ``joints`` are the hydraulically driven joints in bus (COM3 / joint_states) order."""
+
+    kind: str
+    type: str
+    joints: tuple[Joint, ...]
+    drives: Mapping[str, JointDrive]
+    home_pose: Mapping[str, float]
+    masses: Mapping[str, float]
+    footprint: Footprint
+    tracks: Tracks
+    track_drive: TrackDrive
+    pilot_cutoff: PilotCutoff | None
+    pump_flow: float | None = None  # [L/min] shared by the joints with flow_at_limit > 0
+    bucket: Bucket | None = None
+    vessel: Vessel | None = None
+    source: str = field(default="", compare=False)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    def joint(self, name: str) -> Joint:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(f"{self.source}: {self.kind} has no joint {name!r} (joints: {list(self.joint_names)})")
+
+    def require(self, machine_type: str) -> Machine:
+        """``self`` if it is of ``machine_type``, else a ConfigError naming the file (for per-type consumers)."""
+        if self.type != machine_type:
+            raise ConfigError(f"{self.source}: machine kind {self.kind!r} is a {self.type}, expected a {machine_type}")
+        return self
+
+
+def machine_path(kind: str) -> Path:
+    """``config/machines/<kind>.yaml``."""
+    return config_path("machines", f"{kind}.yaml")
+
+
+def _joint(jr: Reader, name: str) -> Joint:
+    j = jr.sub(name)
+    j.only({"parent", "child", "origin_xyz", "origin_rpy", "axis", "position", "velocity", "acceleration"})
+    pos = j.raw("position")
+    lo = hi = None
+    if pos is not None:
+        lo, hi = j.vector("position", 2)
+        if not lo < hi:
+            raise j.key_error("position", f"lower limit must be below upper, got {pos!r}")
+    axis = j.vector("axis", 3)
+    if axis not in ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0)):
+        raise j.key_error("axis", f"expected [0, 0, 1] (swing) or [0, 1, 0] (pitch), got {list(axis)}")
+    return Joint(
+        name=name,
+        parent=j.string("parent"),
+        child=j.string("child"),
+        origin_xyz=j.vector("origin_xyz", 3),  # type: ignore[arg-type]
+        origin_rpy=j.vector("origin_rpy", 3),  # type: ignore[arg-type]
+        axis=axis,  # type: ignore[arg-type]
+        lower=lo,
+        upper=hi,
+        velocity=j.number("velocity", lo=0.0),
+        acceleration=j.number("acceleration", lo=0.0),
+    )
+
+
+def _tracks(top: Reader) -> tuple[Tracks, Footprint]:
+    t = top.sub("tracks")
+    if top.has("footprint"):
+        t.only({"gauge", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel"})
+        fp = top.sub("footprint")
+        fp.only({"length", "width"})
+        footprint = Footprint(fp.number("length", lo=0.1), fp.number("width", lo=0.1))
+    else:  # the excavator writes its footprint into tracks
+        t.only({"gauge", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel", "length", "width"})
+        footprint = Footprint(t.number("length", lo=0.1), t.number("width", lo=0.1))
+    tracks = Tracks(
+        gauge=t.number("gauge", lo=0.1),
+        max_speed=t.number("max_speed", lo=0.0),
+        max_yaw_rate=t.number("max_yaw_rate", lo=0.0),
+        max_accel=t.number("max_accel", lo=0.0) if t.has("max_accel") else None,
+        max_yaw_accel=t.number("max_yaw_accel", lo=0.0) if t.has("max_yaw_accel") else None,
+    )
+    return tracks, footprint
+
+
+def _track_drive(hyd: Reader) -> TrackDrive:
+    h = hyd.sub("tracks")
+    h.only({"dead_time_s", "time_constant_s", "slip", "yaw_slip"})
+    return TrackDrive(
+        dead_time=h.number("dead_time_s", lo=0.0, hi=5.0),
+        time_constant=h.number("time_constant_s", lo=0.0, hi=10.0),
+        slip=h.number("slip", lo=0.0, hi=0.9),
+        yaw_slip=h.number("yaw_slip", lo=0.0, hi=0.9),
+    )
+
+
+def _cutoff(top: Reader) -> PilotCutoff | None:
+    if not top.has("pilot_cutoff"):
+        return None
+    c = top.sub("pilot_cutoff")
+    c.only({"source", "solenoid_delay_s", "front_time_constant_s", "tracks_time_constant_s"})
+    return PilotCutoff(
+        solenoid_delay=c.number("solenoid_delay_s", lo=0.0, hi=1.0),
+        front_time_constant=c.number("front_time_constant_s", lo=0.0, hi=1.0),
+        tracks_time_constant=c.number("tracks_time_constant_s", lo=0.0, hi=1.0),
+    )
+
+
+def _masses(top: Reader) -> Mapping[str, float]:
+    m = top.sub("masses")
+    return MappingProxyType({name: m.number(name, lo=0.0) for name in m.keys()})
+
+
+def _excavator(top: Reader, kind: str, source: str) -> Machine:
+    front = top.names("front_joints")
+    if len(front) != 4:
+        raise top.key_error("front_joints", f"an excavator has 4 front joints (swing, boom, arm, bucket), got {list(front)}")
+    jr = top.sub("joints")
+    jr.only(set(front))
+    joints = tuple(_joint(jr, name) for name in front)
+    if joints[0].axis != (0.0, 0.0, 1.0):
+        raise jr.key_error(front[0], "the first front joint is the swing: axis must be [0, 0, 1]")
+    for j in joints[1:]:
+        if j.axis != (0.0, 1.0, 0.0):
+            raise jr.key_error(j.name, "boom, arm and bucket pitch about y: axis must be [0, 1, 0]")
+    hyd = top.sub("hydraulics")
+    hyd.only({"source", "dead_time_s", "time_constant_s", "pump_flow_lpm", "flow_at_limit_lpm", "tracks", "bucket"})
+    dead = hyd.per_name("dead_time_s", front, lo=0.0)
+    tau = hyd.per_name("time_constant_s", front, lo=0.0)
+    flows = hyd.sub("flow_at_limit_lpm")
+    flows.only(set(front))
+    drives = {n: JointDrive(dead[n], tau[n], flows.number(n, lo=0.0, default=0.0)) for n in front}
+    home_r = top.sub("home_pose")
+    home_r.only(set(front))
+    home = {n: home_r.number(n) for n in front}
+    b = hyd.sub("bucket")
+    b.only({"width", "release_tip_angle", "spill_time_s", "cut_min_speed"})
+    bucket = Bucket(
+        tip_xyz=top.vector("bucket_tip_xyz", 3),  # type: ignore[arg-type]
+        capacity=top.number("bucket_capacity", lo=0.01),
+        width=b.number("width", lo=0.1),
+        release_tip_angle=b.number("release_tip_angle"),
+        spill_time=b.number("spill_time_s", lo=0.01),
+        cut_min_speed=b.number("cut_min_speed", lo=0.0),
+    )
+    tracks, footprint = _tracks(top)
+    return Machine(
+        kind=kind,
+        type=EXCAVATOR,
+        joints=joints,
+        drives=MappingProxyType(drives),
+        home_pose=MappingProxyType(home),
+        masses=_masses(top),
+        footprint=footprint,
+        tracks=tracks,
+        track_drive=_track_drive(hyd),
+        pilot_cutoff=_cutoff(top),
+        pump_flow=hyd.number("pump_flow_lpm", lo=1.0),
+        bucket=bucket,
+        source=source,
+    )
+
+
+def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
+    hyd = top.sub("hydraulics")
+    hyd.only({"source", "tracks", "vessel"})
+    hv = hyd.sub("vessel")
+    hv.only({"dead_time_s", "time_constant_s", "angle_gain", "load_max_angle", "dump_start_angle", "dump_time_s", "dump_distance"})
+    v = top.sub("vessel")
+    v.only({"hinge_xyz", "max_angle", "velocity", "inner_length", "inner_width", "capacity"})
+    max_angle = v.number("max_angle", lo=0.01, hi=math.pi / 2)
+    vessel = Vessel(
+        hinge_xyz=v.vector("hinge_xyz", 3),  # type: ignore[arg-type]
+        max_angle=max_angle,
+        velocity=v.number("velocity", lo=0.0),
+        inner_length=v.number("inner_length", lo=0.1),
+        inner_width=v.number("inner_width", lo=0.1),
+        capacity=v.number("capacity", lo=0.01),
+        dead_time=hv.number("dead_time_s", lo=0.0, hi=5.0),
+        time_constant=hv.number("time_constant_s", lo=0.0, hi=10.0),
+        angle_gain=hv.number("angle_gain", lo=0.0),
+        load_max_angle=hv.number("load_max_angle", lo=0.0),
+        dump_start_angle=hv.number("dump_start_angle", lo=0.0, hi=max_angle),
+        dump_time=hv.number("dump_time_s", lo=0.01),
+        dump_distance=hv.number("dump_distance", lo=0.0),
+    )
+    joint = Joint(
+        name="vessel_joint",
+        parent="base_link",
+        child="vessel_link",
+        origin_xyz=vessel.hinge_xyz,
+        origin_rpy=(0.0, 0.0, 0.0),
+        axis=(0.0, -1.0, 0.0),  # URDF: negative = raised about +y; ours: positive = raised
+        lower=0.0,
+        upper=max_angle,
+        velocity=vessel.velocity,
+        acceleration=math.inf,
+    )
+    tracks, footprint = _tracks(top)
+    return Machine(
+        kind=kind,
+        type=CRAWLER_DUMP,
+        joints=(joint,),
+        drives=MappingProxyType({"vessel_joint": JointDrive(vessel.dead_time, vessel.time_constant, 0.0)}),
+        home_pose=MappingProxyType({"vessel_joint": 0.0}),
+        masses=_masses(top),
+        footprint=footprint,
+        tracks=tracks,
+        track_drive=_track_drive(hyd),
+        pilot_cutoff=_cutoff(top),
+        vessel=vessel,
+        source=source,
+    )
+
+
+def parse_machine(path: str | Path, kind: str | None = None) -> Machine:
+    """Parse one machine YAML (uncached; tests feed malformed files through this)."""
+    path = Path(path)
+    data, where = load_yaml(path)
+    top = Reader(data, where)
+    kind = kind or path.stem
+    name = top.string("model_name")
+    if name != kind:
+        raise top.key_error("model_name", f"expected {kind!r} (the file's kind), got {name!r}")
+    mtype = top.string("type")
+    if mtype == EXCAVATOR:
+        return _excavator(top, kind, str(path))
+    if mtype == CRAWLER_DUMP:
+        return _crawler_dump(top, kind, str(path))
+    raise top.key_error("type", f"unknown machine type {mtype!r}; expected one of {list(TYPES)}")
+
+
+@functools.lru_cache(maxsize=16)
+def _cached(path: str, kind: str) -> Machine:
+    return parse_machine(path, kind)
+
+
+def load_machine(kind: str, path: str | Path | None = None) -> Machine:
+    """The description of machine ``kind`` from ``config/machines/<kind>.yaml`` (or ``path``), parsed once.
+
+    Raises:
+        ConfigError: unknown kind (naming the file searched) or ``file:line: key: problem``.
+    """
+    resolved = Path(path) if path else machine_path(kind)
+    if not resolved.is_file():
+        known = sorted(p.stem for p in machine_path(kind).parent.glob("*.yaml"))
+        raise ConfigError(f"{resolved}: no such machine description (machine kind {kind!r}; known kinds: {known})")
+    return _cached(str(resolved.resolve()), kind)
