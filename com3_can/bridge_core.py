@@ -1,7 +1,9 @@
 """The ROS-free core of the ``com3_bridge`` converter: commands -> COM3 frames, state frames -> outputs.
 
 :class:`BridgeCore` holds everything the node does except ROS I/O, so unit tests and benchmarks drive
-it with plain numbers and an injected clock:
+it with plain numbers and an injected clock. It is the same for every machine type: what a type does
+(its channels, how a command becomes frames, how a state frame becomes outputs) is its profile,
+:mod:`com3_can.profiles`, chosen by the ``type`` of the machine description.
 
 * Commands (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``, ``machine_setting``) are
   validated as a whole (unknown joint, NaN, array length, value outside the COM3 range ...). A bad
@@ -32,11 +34,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from com3_can.codec import AliveCounter, Com3Codec, load_codec
+from com3_can.codec import AliveCounter, Com3Codec
 from com3_can.errors import Com3CommandError, Com3DecodeError, Com3EncodeError
+from com3_can.profiles import PROFILES, ConverterProfile
+from com3_can.registry import machine_type
 from com3_can.scheduler import FrameScheduler
+from com3_can.signal_map import PILOT_MAX_MPA
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.machines import load_machine
+from tms_model.site import Projector, load_site
 
 __all__ = [
     "BridgeConfig",
@@ -59,23 +66,6 @@ POSITION, VELOCITY, EFFORT = 0, 1, 2
 _CONTROL_NAMES = {POSITION: "POSITION", VELOCITY: "VELOCITY", EFFORT: "EFFORT"}
 
 DIAG_OK, DIAG_WARN, DIAG_ERROR = 0, 1, 2
-
-#: ZX200 joint -> Velocity_Cmd_1 signal, Front_Angle signal, Front_Angular_Velocity signal,
-#: (pilot signal for + effort, pilot signal for - effort). Sign convention: swing + = left (CCW),
-#: boom + = down, arm + = crowd, bucket + = crowd (opera_machines.md §a).
-_ZX_JOINTS: Mapping[str, tuple[str, str, str, tuple[str, str]]] = {
-    "swing_joint": ("swing_target_anguler_velocity", "swing_relative_angle", "swing_relative_angular_velocity",
-                    ("swing_left", "swing_right")),
-    "boom_joint": ("boom_target_anguler_velocity", "boom_relative_angle", "boom_relative_angular_velocity",
-                   ("boom_down", "boom_up")),
-    "arm_joint": ("arm_target_anguler_velocity", "arm_relative_angle", "arm_relative_angular_velocity",
-                  ("arm_crowd", "arm_dump")),
-    "bucket_joint": ("bucket_target_anguler_velocity", "bucket_relative_angle", "bucket_relative_angular_velocity",
-                     ("bucket_crowd", "bucket_dump")),
-}
-_TRACKS = ("left_track", "right_track")
-_PILOT_MAX_MPA = 5.0
-
 
 @dataclass(frozen=True)
 class Tx:
@@ -140,7 +130,11 @@ class DiagSnapshot:
 
 @dataclass(frozen=True)
 class BridgeConfig:
-    """Settings of one converter (config/can/<machine>.yaml ``bridge`` + config/machines/<machine>.yaml)."""
+    """Settings of one converter (config/can/<machine>.yaml ``bridge`` + config/machines/<machine>.yaml).
+
+    ``machine`` is the model (``zx200``, ``zx120``, ``ic120``); ``type`` its profile name, read from the
+    machine description when not given.
+    """
 
     machine: str
     watchdog_s: float = 0.5
@@ -149,13 +143,15 @@ class BridgeConfig:
     effort_dead_zone: Mapping[str, float] = field(default_factory=dict)
     track_gauge: float = 2.0
     vessel_max_angle: float = 1.134464
-    #: site map origin in the plane-rectangular CRS (ZX200 swing-centre -> odom) and the CRS itself
+    #: site map origin in the plane-rectangular CRS (excavator swing-centre -> map) and the CRS itself
     map_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     crs: str = "EPSG:6677"
+    machine_type: str = ""
 
     def __post_init__(self) -> None:
-        if self.machine not in ("zx200", "ic120"):
-            raise ConfigError(f"com3_bridge: machine must be zx200 or ic120, got {self.machine!r}")
+        if not self.machine_type:
+            object.__setattr__(self, "machine_type", machine_type(self.machine))
+        PROFILES.get(self.machine_type)  # unknown type -> ConfigError naming the known ones
         if not (math.isfinite(self.watchdog_s) and self.watchdog_s > 0):
             raise ConfigError(f"com3_bridge: watchdog_s must be > 0 s, got {self.watchdog_s}")
         if not self.track_gauge > 0:
@@ -163,9 +159,9 @@ class BridgeConfig:
 
     @classmethod
     def load(cls, machine: str, can_config: Mapping[str, Any] | None = None, **overrides: Any) -> BridgeConfig:
-        """Build from the YAML files of ``machine``; ``overrides`` (e.g. ``watchdog_s``) win."""
-        if machine not in ("zx200", "ic120"):
-            raise ConfigError(f"com3_bridge: machine must be zx200 or ic120, got {machine!r}")
+        """Build from ``config/can/<machine>.yaml``, the machine description and the site; ``overrides`` win."""
+        description = load_machine(machine)
+        profile = PROFILES.get(description.type)
         if can_config is None:
             can_config, _ = load_yaml(config_path("can", f"{machine}.yaml"))
         bridge = dict((can_config or {}).get("bridge") or {})
@@ -173,15 +169,11 @@ class BridgeConfig:
         unknown = sorted(set(bridge) - known)
         if unknown:
             raise ConfigError(f"config/can/{machine}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
-        geo, _ = load_yaml(config_path("machines", f"{machine}.yaml"))
-        kwargs: dict[str, Any] = {"machine": machine, **bridge}
-        kwargs["track_gauge"] = float(geo["tracks"]["gauge"])
-        if machine == "ic120":
-            kwargs["vessel_max_angle"] = float(geo["vessel"]["max_angle"])
-        site, _ = load_yaml(config_path("site.yaml"))
-        origin = site["map_origin_plane"]
-        kwargs["map_origin"] = (float(origin["easting"]), float(origin["northing"]), float(origin["altitude"]))
-        kwargs["crs"] = str(site["crs"])
+        kwargs: dict[str, Any] = {"machine": machine, "machine_type": description.type, **bridge}
+        kwargs.update(profile(machine).config_from_machine(description))
+        site = load_site()
+        kwargs["map_origin"] = site.origin_plane
+        kwargs["crs"] = site.crs
         kwargs.update(overrides)
         return cls(**kwargs)
 
@@ -219,7 +211,9 @@ class BridgeCore:
     def __init__(self, config: BridgeConfig, now: float, codec: Com3Codec | None = None) -> None:
         self.config = config
         self.machine = config.machine
-        self.codec = codec or load_codec(config.machine)
+        #: what this machine type does (channels, command and state handlers), see com3_can.profiles
+        self.profile: ConverterProfile = PROFILES.get(config.machine_type)(config.machine)
+        self.codec = codec or self.profile.codec()
         self._lock = threading.RLock()
         self._alive = AliveCounter()
         self._values: dict[str, dict[str, float]] = {f: self.codec.neutral(f) for f in self.codec.command_frames}
@@ -235,16 +229,7 @@ class BridgeCore:
             self.codec.encode("Machine_Setting_Cmd", setting)
         except Com3EncodeError as exc:
             raise ConfigError(f"config/can/{self.machine}.yaml: bridge.default_setting: {exc}") from None
-        if self.machine == "zx200":
-            self._channels = {
-                "front": _Channel("front", ("Velocity_Cmd_1", "Pilot_Pressure_Cmd_1")),
-                "travel": _Channel("travel", ("Velocity_Cmd_2", "Pilot_Pressure_Cmd_2")),
-            }
-        else:
-            self._channels = {
-                "travel": _Channel("travel", ("Velocity_Cmd",)),
-                "vessel": _Channel("vessel", ("Vessel_Cmd",)),
-            }
+        self._channels = {name: _Channel(name, frames) for name, frames in self.profile.channels.items()}
         self._motion_frames = tuple(f for ch in self._channels.values() for f in ch.frames)
         self._command_ids = frozenset(self.codec.frame_id(f) for f in self.codec.command_frames)
         self._scheduler = FrameScheduler({f: self.codec.cycle_ms(f) / 1000.0 for f in self.codec.command_frames}, now)
@@ -252,13 +237,15 @@ class BridgeCore:
         self.counters: Counter[str] = Counter()
         self._last_reject = ""
         self._last_rx_error = ""
-        self._state: dict[str, dict[str, float]] = {}
+        #: latest decoded values of every state frame (profiles combine frames through it)
+        self.state: dict[str, dict[str, float]] = {}
         self._machine_alive: int | None = None
-        # odometry (ic120: integrated from track velocities; zx200: swing centre)
-        self._odom_x = self._odom_y = self._odom_yaw = 0.0
-        self._odom_stamp: float | None = None
-        self._track_pos = [0.0, 0.0]
-        self._transformer: Any = None
+        self._projector: Projector | None = None
+
+    @property
+    def topics(self) -> frozenset[str]:
+        """The ROS commands this machine takes (its profile's)."""
+        return self.profile.topics
 
     # ------------------------------------------------------------------ helpers
     def _encode(self, name: str) -> Tx:
@@ -267,7 +254,7 @@ class BridgeCore:
             values["alive_counter"] = float(self._alive.next())
         return Tx(name, self.codec.frame_id(name), self.codec.encode(name, values))
 
-    def _accept(self, topic: str, channel: str, updates: Mapping[str, Mapping[str, float]], now: float) -> list[Tx]:
+    def accept(self, topic: str, channel: str, updates: Mapping[str, Mapping[str, float]], now: float) -> list[Tx]:
         """Validate ``updates`` (frame -> full signal dict) by encoding, then commit and return the frames."""
         if self._emg:
             self.counters["cmd_ignored_emg_stop"] += 1
@@ -295,17 +282,21 @@ class BridgeCore:
         self.counters["cmd_rejected"] += 1
         self._last_reject = str(exc)
 
-    def _set_switch(self, signal: str, value: float) -> None:
+    def set_switch(self, signal: str, value: float) -> None:
+        """Set a ``Machine_Setting_Cmd`` signal (the switch matching the last command's kind)."""
         self._values["Machine_Setting_Cmd"][signal] = value
 
     @staticmethod
-    def _check_joint_cmd(
-        topic: str, allowed: Sequence[str], names: Sequence[str], control_type: int, arrays: Mapping[int, Sequence[float]]
+    def check_joint_cmd(
+        topic: str, allowed: Sequence[str], names: Sequence[str], control_type: int,
+        velocity: Sequence[float], effort: Sequence[float],
     ) -> dict[str, float]:
+        """Validate a JointCmd (control type, names, lengths, finite, effort in [-1, 1]): joint -> value."""
+        arrays = {VELOCITY: velocity, EFFORT: effort}
         if control_type not in (VELOCITY, EFFORT):
-            kind = _CONTROL_NAMES.get(control_type, str(control_type))
+            ctl_name = _CONTROL_NAMES.get(control_type, str(control_type))
             raise Com3CommandError(
-                f"{topic}: control_type {kind} is not carried by COM3; use VELOCITY (1) or EFFORT (2)"
+                f"{topic}: control_type {ctl_name} is not carried by COM3; use VELOCITY (1) or EFFORT (2)"
             )
         if not names:
             raise Com3CommandError(f"{topic}: joint_name is empty")
@@ -325,74 +316,33 @@ class BridgeCore:
                     raise Com3CommandError(f"{topic}: {n} effort {v:g} outside [-1, 1] (normalised lever)")
         return out
 
-    def _pilot(self, effort: float, dead_zone: float) -> float:
+    @staticmethod
+    def pilot(effort: float, dead_zone: float) -> float:
+        """Pilot pressure [MPa] of a lever ``effort`` in [-1, 1] past its ``dead_zone`` (fraction of full lever)."""
         if abs(effort) < 0.001:
             return 0.0
-        return min(abs(effort) + dead_zone, 1.0) * _PILOT_MAX_MPA
+        return min(abs(effort) + dead_zone, 1.0) * PILOT_MAX_MPA
 
     # ------------------------------------------------------------------ commands
-    def front_cmd(
-        self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
-    ) -> list[Tx]:
-        """ZX200 ``front_cmd`` (JointCmd): VELOCITY -> Velocity_Cmd_1, EFFORT -> Pilot_Pressure_Cmd_1."""
+    def _command(self, topic: str, fn: Any, *args: Any) -> list[Tx]:
         with self._lock:
             try:
-                if self.machine != "zx200":
-                    raise Com3CommandError("front_cmd: the ic120 has no front joints")
-                vals = self._check_joint_cmd(
-                    "front_cmd", tuple(_ZX_JOINTS), names, control_type, {VELOCITY: velocity, EFFORT: effort}
-                )
-                if control_type == VELOCITY:
-                    frame = self.codec.neutral("Velocity_Cmd_1")
-                    for joint, v in vals.items():
-                        frame[_ZX_JOINTS[joint][0]] = v
-                    txs = self._accept("front_cmd", "front", {"Velocity_Cmd_1": frame}, now)
-                    self._set_switch("front_signal_switch_command", 2.0)
-                else:
-                    frame = self.codec.neutral("Pilot_Pressure_Cmd_1")
-                    dz = self.config.effort_dead_zone
-                    for joint, e in vals.items():
-                        plus, minus = _ZX_JOINTS[joint][3]
-                        side = plus if e > 0 else minus
-                        frame[side] = self._pilot(e, float(dz.get(side, 0.0)))
-                    txs = self._accept("front_cmd", "front", {"Pilot_Pressure_Cmd_1": frame}, now)
-                    self._set_switch("front_signal_switch_command", 1.0)
-                return txs
+                return fn(self, *args)
             except Com3CommandError as exc:
                 self._reject(exc)
                 raise
+
+    def front_cmd(
+        self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
+    ) -> list[Tx]:
+        """``front_cmd`` (JointCmd): front joints, VELOCITY or EFFORT (the excavator profile)."""
+        return self._command("front_cmd", self.profile.front_cmd, names, control_type, velocity, effort, now)
 
     def tracks_cmd(
         self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
     ) -> list[Tx]:
-        """``tracks_cmd`` (JointCmd left_track/right_track): per-track velocity [m/s] (ZX200 also effort)."""
-        with self._lock:
-            try:
-                vals = self._check_joint_cmd("tracks_cmd", _TRACKS, names, control_type, {VELOCITY: velocity, EFFORT: effort})
-                left, right = vals.get("left_track", 0.0), vals.get("right_track", 0.0)
-                if self.machine == "ic120":
-                    if control_type != VELOCITY:
-                        raise Com3CommandError("tracks_cmd: the ic120 takes VELOCITY track commands only")
-                    frame = self.codec.neutral("Velocity_Cmd")
-                    frame.update(target_travel_left_velocity=left, target_travel_right_velocity=right)
-                    txs = self._accept("tracks_cmd", "travel", {"Velocity_Cmd": frame}, now)
-                    self._set_switch("velocity_mode", 1.0)
-                elif control_type == VELOCITY:
-                    frame = self.codec.neutral("Velocity_Cmd_2")
-                    frame.update(target_travel_left_velocity=left, target_travel_right_velocity=right)
-                    txs = self._accept("tracks_cmd", "travel", {"Velocity_Cmd_2": frame}, now)
-                    self._set_switch("travel_signal_switch_command", 2.0)
-                else:
-                    frame = self.codec.neutral("Pilot_Pressure_Cmd_2")
-                    dz = float(self.config.effort_dead_zone.get("tracks", 0.0))
-                    for side, e in (("left", left), ("right", right)):
-                        frame[f"{side}_track_{'forward' if e > 0 else 'backward'}"] = self._pilot(e, dz)
-                    txs = self._accept("tracks_cmd", "travel", {"Pilot_Pressure_Cmd_2": frame}, now)
-                    self._set_switch("travel_signal_switch_command", 1.0)
-                return txs
-            except Com3CommandError as exc:
-                self._reject(exc)
-                raise
+        """``tracks_cmd`` (JointCmd left_track/right_track): per-track velocity [m/s] (or effort, if the type takes it)."""
+        return self._command("tracks_cmd", self.profile.tracks_cmd, names, control_type, velocity, effort, now)
 
     def cmd_vel(self, linear_x: float, angular_z: float, now: float) -> list[Tx]:
         """``cmd_vel`` (Twist): body-centre velocity [m/s] and yaw rate [rad/s]."""
@@ -400,36 +350,22 @@ class BridgeCore:
             try:
                 v = _finite("cmd_vel", "linear.x", linear_x)
                 w = _finite("cmd_vel", "angular.z", angular_z)
-                frame_name = "Velocity_Cmd_2" if self.machine == "zx200" else "Velocity_Cmd"
-                frame = self.codec.neutral(frame_name)
-                frame.update(target_travel_center_velocity=v, target_travel_yaw_rate=w)
-                txs = self._accept("cmd_vel", "travel", {frame_name: frame}, now)
-                if self.machine == "zx200":
-                    self._set_switch("travel_signal_switch_command", 3.0)
-                else:
-                    self._set_switch("velocity_mode", 0.0)
-                return txs
             except Com3CommandError as exc:
                 self._reject(exc)
                 raise
+            return self._command("cmd_vel", self.profile.cmd_vel, v, w, now)
 
     def vessel_cmd(self, angle: float, now: float) -> list[Tx]:
-        """IC120 ``vessel_cmd``: target vessel angle [rad], 0 = lowered, + = raised, up to the machine limit."""
+        """``vessel_cmd``: target vessel angle [rad], 0 = lowered, + = raised (the crawler-carrier profile)."""
         with self._lock:
             try:
-                if self.machine != "ic120":
-                    raise Com3CommandError("vessel_cmd: only the ic120 has a vessel")
+                if "vessel_cmd" not in self.profile.topics:
+                    raise self.profile._refuse("vessel_cmd")
                 a = _finite("vessel_cmd", "angle", angle)
-                if not 0.0 <= a <= self.config.vessel_max_angle:
-                    raise Com3CommandError(
-                        f"vessel_cmd: angle {a:g} rad outside [0, {self.config.vessel_max_angle:g}] rad "
-                        "(0 = lowered, + = raised; config/machines/ic120.yaml vessel.max_angle)"
-                    )
-                frame = {"target_vessel_angle": a, "vessel_control_enable": 1.0}
-                return self._accept("vessel_cmd", "vessel", {"Vessel_Cmd": frame}, now)
             except Com3CommandError as exc:
                 self._reject(exc)
                 raise
+            return self._command("vessel_cmd", self.profile.vessel_cmd, a, now)
 
     def machine_setting(self, fields: Mapping[str, float], now: float) -> list[Tx]:
         """``machine_setting``: signal name -> value of Machine_Setting_Cmd (the node maps the ROS message).
@@ -553,90 +489,22 @@ class BridgeCore:
                 self.counters["rx_command_echo"] += 1  # our own (or another controller's) command frames
                 return []
             self.counters["rx_ok"] += 1
-            self._state[name] = values
-            handler = _HANDLERS[self.machine].get(name)
+            self.state[name] = values
+            handler = self.profile.handler(name)
             return handler(self, values, stamp) if handler else []
 
-    # ZX200 state frames
-    def _zx_front_angle(self, values: dict[str, float], stamp: float) -> list[Any]:
-        vel = self._state.get("Front_Angular_Velocity", {})
-        names = tuple(_ZX_JOINTS)
-        return [
-            JointStateOut(
-                names,
-                tuple(values[_ZX_JOINTS[j][1]] for j in names),
-                tuple(vel.get(_ZX_JOINTS[j][2], 0.0) for j in names),
-            )
-        ]
+    # ------------------------------------------------------------------ for the profiles' state handlers
+    def plane_to_geodetic(self, easting: float, northing: float) -> tuple[float, float]:
+        """(lat, lon) [deg] of a point in the site CRS."""
+        if self._projector is None:
+            self._projector = Projector(self.config.crs, self.config.map_origin)
+        return self._projector.plane_to_geodetic(easting, northing)
 
-    def _roll_pitch(self, values: dict[str, float], stamp: float) -> list[Any]:
-        az = self._state.get("Vehicle_Azimuth", {})
-        yaw = -az.get("track_body_azimuth", 0.0)
-        rate = az.get("yaw_rate")  # clockwise-positive like the azimuth -> ROS angular z = -yaw_rate
-        return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, None if rate is None else -rate)]
-
-    def _zx_swing_centre(self, values: dict[str, float], stamp: float) -> list[Any]:
-        try:
-            x = self._state["Swing_Center_Position_1"]["swing_center_position_x"]
-            y = self._state["Swing_Center_Position_2"]["swing_center_position_y"]
-        except KeyError:
-            return []
-        z = values["swing_center_position_z"]
-        yaw = -self._state.get("Vehicle_Azimuth", {}).get("track_body_azimuth", 0.0)
-        ox, oy, oz = self.config.map_origin
-        out: list[Any] = [OdomOut(x - ox, y - oy, z - oz, yaw, 0.0, 0.0, frame_id="map")]
-        lat, lon = self._plane_to_geodetic(x, y)
-        out.append(FixOut(lat, lon, z, 2, None))
-        return out
-
-    def _plane_to_geodetic(self, easting: float, northing: float) -> tuple[float, float]:
-        if self._transformer is None:
-            from pyproj import CRS, Transformer
-
-            geo = CRS(self.config.crs).geodetic_crs
-            self._transformer = Transformer.from_crs(self.config.crs, geo, always_xy=True)
-        lon, lat = self._transformer.transform(easting, northing)
-        return float(lat), float(lon)
-
-    def _machine_state(self, values: dict[str, float], stamp: float) -> list[Any]:
-        alive = int(values["alive_counter"])
+    def check_machine_alive(self, alive: int) -> None:
+        """Count a ``Machine_State`` alive counter that is not the successor of the previous one."""
         if self._machine_alive is not None and not AliveCounter.is_successor(self._machine_alive, alive):
             self.counters["machine_alive_skips"] += 1
         self._machine_alive = alive
-        return []
-
-    # IC120 state frames
-    def _ic_tracks(self, values: dict[str, float], stamp: float) -> list[Any]:
-        vl, vr = values["left_track_velocity"], values["right_track_velocity"]
-        dt = 0.0 if self._odom_stamp is None else min(max(stamp - self._odom_stamp, 0.0), 0.1)
-        self._odom_stamp = stamp
-        v = 0.5 * (vl + vr)
-        w = (vr - vl) / self.config.track_gauge
-        az = self._state.get("Vehicle_Azimuth")
-        if az is not None:
-            self._odom_yaw = -az["track_body_azimuth"]
-        else:
-            self._odom_yaw += w * dt
-        self._odom_x += v * math.cos(self._odom_yaw) * dt
-        self._odom_y += v * math.sin(self._odom_yaw) * dt
-        self._track_pos[0] += vl * dt
-        self._track_pos[1] += vr * dt
-        vessel = self._state.get("Vessel_Angle", {})
-        joints = JointStateOut(
-            ("vessel_joint", "left_track", "right_track"),
-            (vessel.get("vessel_angle", 0.0), self._track_pos[0], self._track_pos[1]),
-            (vessel.get("vessel_angular_velocity", 0.0), vl, vr),
-        )
-        return [OdomOut(self._odom_x, self._odom_y, 0.0, self._odom_yaw, v, w), joints]
-
-    def _ic_gnss(self, values: dict[str, float], stamp: float) -> list[Any]:
-        try:
-            lat = self._state["GNSS_Latitude"]["latitude"]
-            lon = self._state["GNSS_Longitude"]["longitude"]
-        except KeyError:
-            return []
-        status = int(values["fix_status"]) - 1  # DBC 0 no fix .. 3 GBAS -> NavSatStatus -1 .. 2
-        return [FixOut(lat, lon, values["altitude"], status, values["horizontal_accuracy"])]
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self, now: float) -> DiagSnapshot:
@@ -666,23 +534,8 @@ class BridgeCore:
             values.append(("last_reject", self._last_reject))
             values.append(("last_rx_error", self._last_rx_error))
             values.append(("alive_counter_next", str(self._alive.value)))
-            state = self._state.get("Machine_State")
+            state = self.state.get("Machine_State")
             if state:
                 values += [(f"machine_state.{k}", f"{v:g}") for k, v in state.items()]
             return DiagSnapshot(level, message, tuple(values))
 
-
-_HANDLERS: Mapping[str, Mapping[str, Any]] = {
-    "zx200": {
-        "Front_Angle": BridgeCore._zx_front_angle,
-        "Roll_Pitch_Angle": BridgeCore._roll_pitch,
-        "Swing_Center_Position_3": BridgeCore._zx_swing_centre,
-        "Machine_State": BridgeCore._machine_state,
-    },
-    "ic120": {
-        "Track_Velocity": BridgeCore._ic_tracks,
-        "Roll_Pitch_Angle": BridgeCore._roll_pitch,
-        "GNSS_Altitude_Status": BridgeCore._ic_gnss,
-        "Machine_State": BridgeCore._machine_state,
-    },
-}

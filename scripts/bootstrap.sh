@@ -49,9 +49,13 @@ if ! fresh "$STAMPS/tms_msg" tms_msg "$STAMPS/cmake-fix"; then
   touch "$STAMPS/tms_msg"
 fi
 
-if ! fresh "$STAMPS/project" pyproject.toml constraints.txt "$STAMPS/deps"; then
+# The editable install maps the top-level packages it found at install time: a new package needs a reinstall.
+PACKAGES=$(find . -maxdepth 2 -name __init__.py -path './*/__init__.py' -not -path './.venv/*' | sort | tr '\n' ' ')
+if ! fresh "$STAMPS/project" pyproject.toml constraints.txt "$STAMPS/deps" \
+    || [ "$(cat "$STAMPS/project.packages" 2>/dev/null)" != "$PACKAGES" ]; then
   say "installing the project (editable)"
   "${PIP[@]}" install -c constraints.txt --no-build-isolation -e ".[test]"
+  printf '%s' "$PACKAGES" > "$STAMPS/project.packages"
   touch "$STAMPS/project"
 fi
 

@@ -1,10 +1,10 @@
-"""Plant configuration: machine YAMLs (``config/machines/*.yaml``) and the plant YAML (``config/sim/plant.yaml``).
+"""Plant configuration: the plant YAML (``config/sim/plant.yaml``) and the plant's view of the machines and site.
 
-Everything the plant needs is read here once, validated and frozen into dataclasses. A wrong value
-raises :class:`~sim_bridge.errors.SimConfigError` with ``file:line: key.path: problem (got value)``,
-so a malformed machine YAML names the key that is wrong. Top-level sections owned by other packages
-are left alone; inside the sections this package reads, unknown keys are errors (a typo must not
-silently fall back to a default).
+The machine descriptions (``config/machines/*.yaml``) and the site (``config/site.yaml``) are read by
+:mod:`tms_model`; this module reads the plant YAML and freezes what the plant needs into dataclasses. A
+wrong value raises :class:`~sim_bridge.errors.SimConfigError` with ``file:line: key.path: problem (got
+value)``, so a malformed machine YAML names the key that is wrong; inside the plant YAML, unknown keys are
+errors (a typo must not silently fall back to a default).
 """
 
 from __future__ import annotations
@@ -16,17 +16,31 @@ from typing import Any
 
 from sim_bridge.errors import SimConfigError
 from tms_common.config import Where, config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_model.machines import (
+    CRAWLER_DUMP,
+    EXCAVATOR,
+    Joint,
+    Machine,
+    load_machine,
+    machine_path,
+    parse_machine,
+)
+from tms_model.site import Site, load_site
 
 __all__ = [
     "JointSpec",
     "TrackSpec",
+    "ExcavatorSpec",
+    "CarrierSpec",
     "Zx200Spec",
     "Ic120Spec",
-    "SiteSpec",
     "SoilSpec",
     "SensorSpec",
     "PlantSpec",
     "CutoffSpec",
+    "load_excavator",
+    "load_carrier",
     "load_zx200",
     "load_ic120",
     "load_plant",
@@ -150,8 +164,8 @@ class TrackSpec:
 
 
 @dataclass(frozen=True)
-class Zx200Spec:
-    """The backhoe: front joints in bus order, bucket tip, tracks, pumps and bucket soil handling."""
+class ExcavatorSpec:
+    """A backhoe (ZX200, ZX120, ...): front joints in bus order, bucket tip, tracks, pumps and bucket soil handling."""
 
     joints: tuple[JointSpec, ...]
     bucket_tip_xyz: tuple[float, float, float]
@@ -174,8 +188,8 @@ class Zx200Spec:
 
 
 @dataclass(frozen=True)
-class Ic120Spec:
-    """The crawler dump: tracks and the vessel on its rear hinge."""
+class CarrierSpec:
+    """A crawler carrier (IC120): tracks and the vessel on its rear hinge."""
 
     tracks: TrackSpec
     hinge_xyz: tuple[float, float, float]
@@ -190,16 +204,6 @@ class Ic120Spec:
     dump_distance: float  # [m] behind the hinge where the dumped pile is centred
     source: str
     pilot_cutoff: CutoffSpec | None = None  # None: no pilot cut-off modelled (section absent)
-
-
-@dataclass(frozen=True)
-class SiteSpec:
-    """The map frame's anchor in Japan Plane Rectangular CS (ROS x = easting, y = northing)."""
-
-    crs: str
-    easting: float
-    northing: float
-    altitude: float
 
 
 @dataclass(frozen=True)
@@ -233,169 +237,133 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class PlantSpec:
-    """Everything the plant needs, with where it came from."""
+    """Everything the plant needs, with where it came from.
 
-    zx200: Zx200Spec
-    ic120: Ic120Spec
-    site: SiteSpec
+    ``machines`` maps each machine's name on the site (``zx200``, ``ic120``, ``zx120``) to its spec and
+    ``types`` to its type (the plant profile, :mod:`sim_bridge.profiles`). The soil is dug by
+    ``excavator`` and carried by ``carrier``: the first machine of each type in the plant YAML.
+    """
+
+    machines: dict[str, Any]
+    types: dict[str, str]
+    site: Site  # tms_model: points, mound, CRS, map origin and the one projector
     soil: SoilSpec
     sensors: SensorSpec
     dt: float
     watchdog_s: float
     initial_poses: dict[str, tuple[float, float, float]]  # machine -> (x, y, yaw) in map
     files: tuple[str, ...]
+    excavator: str = ""
+    carrier: str = ""
+
+    @property
+    def zx200(self) -> ExcavatorSpec:
+        """The spec of the soil-digging excavator (the paper's ZX200)."""
+        return self.machines[self.excavator]
+
+    @property
+    def ic120(self) -> CarrierSpec:
+        """The spec of the soil-carrying crawler carrier (the paper's IC120)."""
+        return self.machines[self.carrier]
 
 
-def _tracks(r: _Reader, hyd: _Reader, footprint: tuple[float, float]) -> TrackSpec:
-    h = hyd.sub("tracks")
-    h.only({"dead_time_s", "time_constant_s", "slip", "yaw_slip"})
+def _description(path: str | Path, machine_type: str | None = None) -> Machine:
+    """The tms_model description of a machine YAML, required to be of ``machine_type`` when given.
+
+    Files under ``config/`` are read once (tms_model's cache); others (tests' broken copies) every time.
+    """
+    path = Path(path)
+    try:
+        if path.resolve().is_relative_to(config_path().resolve()):
+            machine = load_machine(path.stem, path)
+        else:
+            machine = parse_machine(path)
+        return machine if machine_type is None else machine.require(machine_type)
+    except SimConfigError:
+        raise
+    except ConfigError as exc:  # file:line: key: problem, as a plant configuration error
+        raise SimConfigError(str(exc)) from None
+
+
+def _joint_spec(machine: Machine, j: Joint) -> JointSpec:
+    drive = machine.drives[j.name]
+    return JointSpec(
+        name=j.name, parent=j.parent, child=j.child, origin_xyz=j.origin_xyz, origin_rpy=j.origin_rpy, axis=j.axis,
+        lower=j.lower, upper=j.upper, max_velocity=j.velocity, dead_time=drive.dead_time,
+        time_constant=drive.time_constant, flow_at_limit=drive.flow_at_limit,
+    )
+
+
+def _track_spec(m: Machine) -> TrackSpec:
+    t, d = m.tracks, m.track_drive
     return TrackSpec(
-        gauge=r.number("gauge", lo=0.1),
-        max_speed=r.number("max_speed", lo=0.0),
-        max_yaw_rate=r.number("max_yaw_rate", lo=0.0),
-        length=footprint[0],
-        width=footprint[1],
-        dead_time=h.number("dead_time_s", lo=0.0, hi=5.0),
-        time_constant=h.number("time_constant_s", lo=0.0, hi=10.0),
-        slip=h.number("slip", lo=0.0, hi=0.9),
-        yaw_slip=h.number("yaw_slip", lo=0.0, hi=0.9),
+        gauge=t.gauge, max_speed=t.max_speed, max_yaw_rate=t.max_yaw_rate, length=m.footprint.length,
+        width=m.footprint.width, dead_time=d.dead_time, time_constant=d.time_constant, slip=d.slip,
+        yaw_slip=d.yaw_slip,
     )
 
 
-def _cutoff(top: _Reader) -> CutoffSpec | None:
-    """The optional ``pilot_cutoff:`` section of a machine YAML."""
-    if not top.has("pilot_cutoff"):
-        return None
-    c = top.sub("pilot_cutoff")
-    c.only({"source", "solenoid_delay_s", "front_time_constant_s", "tracks_time_constant_s"})
-    return CutoffSpec(
-        solenoid_delay=c.number("solenoid_delay_s", lo=0.0, hi=1.0),
-        front_time_constant=c.number("front_time_constant_s", lo=0.0, hi=1.0),
-        tracks_time_constant=c.number("tracks_time_constant_s", lo=0.0, hi=1.0),
-    )
+def _cutoff_spec(m: Machine) -> CutoffSpec | None:
+    c = m.pilot_cutoff
+    return None if c is None else CutoffSpec(c.solenoid_delay, c.front_time_constant, c.tracks_time_constant)
 
 
-def _limits(r: _Reader) -> tuple[float | None, float | None]:
-    value = r.raw("position")
-    if value is None:
-        return None, None
-    lo, hi = r.vector("position", 2)
-    if lo >= hi:
-        raise r._err(r.path + ("position",), f"lower limit must be below upper, got {value!r}")
-    return lo, hi
-
-
-def load_zx200(path: str | Path | None = None) -> Zx200Spec:
-    """Read the ZX200 machine YAML (geometry from the URDF section, actuators from ``hydraulics:``)."""
-    path = Path(path) if path else config_path("machines", "zx200.yaml")
-    data, where = load_yaml(path)
-    top = _Reader(data, where)
-    hyd = top.sub("hydraulics")
-    hyd.only({"source", "dead_time_s", "time_constant_s", "pump_flow_lpm", "flow_at_limit_lpm", "tracks", "bucket"})
-    front = top.raw("front_joints")
-    if not isinstance(front, list) or not all(isinstance(n, str) for n in front):
-        raise top._err(("front_joints",), f"expected a list of joint names, got {front!r}")
-    jr = top.sub("joints")
-    dead = hyd.per_name("dead_time_s", front, lo=0.0)
-    tau = hyd.per_name("time_constant_s", front, lo=0.0)
-    flows_r = hyd.sub("flow_at_limit_lpm")
-    flows_r.only(set(front))
-    joints = []
-    for name in front:
-        j = jr.sub(name)
-        lo, hi = _limits(j)
-        joints.append(
-            JointSpec(
-                name=name,
-                parent=j.string("parent"),
-                child=j.string("child"),
-                origin_xyz=j.vector("origin_xyz", 3),  # type: ignore[arg-type]
-                origin_rpy=j.vector("origin_rpy", 3),  # type: ignore[arg-type]
-                axis=j.vector("axis", 3),  # type: ignore[arg-type]
-                lower=lo,
-                upper=hi,
-                max_velocity=j.number("velocity", lo=0.0),
-                dead_time=dead[name],
-                time_constant=tau[name],
-                flow_at_limit=flows_r.number(name, lo=0.0, default=0.0),
-            )
-        )
-    home_r = top.sub("home_pose")
-    home = {name: home_r.number(name) for name in front}
-    tr = top.sub("tracks")
-    b = hyd.sub("bucket")
-    b.only({"width", "release_tip_angle", "spill_time_s", "cut_min_speed"})
-    return Zx200Spec(
-        joints=tuple(joints),
-        bucket_tip_xyz=top.vector("bucket_tip_xyz", 3),  # type: ignore[arg-type]
-        home_pose=home,
-        tracks=_tracks(tr, hyd, (tr.number("length", lo=0.1), tr.number("width", lo=0.1))),
-        pump_flow=hyd.number("pump_flow_lpm", lo=1.0),
-        bucket_capacity=top.number("bucket_capacity", lo=0.01),
-        bucket_width=b.number("width", lo=0.1),
-        release_tip_angle=b.number("release_tip_angle"),
-        spill_time=b.number("spill_time_s", lo=0.01),
-        cut_min_speed=b.number("cut_min_speed", lo=0.0),
+def load_excavator(path: str | Path) -> ExcavatorSpec:
+    """The plant's view of an excavator description (geometry from the URDF section, actuators from ``hydraulics:``)."""
+    m = _description(path, EXCAVATOR)
+    b = m.bucket
+    assert b is not None and m.pump_flow is not None  # tms_model: every excavator has them
+    return ExcavatorSpec(
+        joints=tuple(_joint_spec(m, j) for j in m.joints),
+        bucket_tip_xyz=b.tip_xyz,
+        home_pose=dict(m.home_pose),
+        tracks=_track_spec(m),
+        pump_flow=m.pump_flow,
+        bucket_capacity=b.capacity,
+        bucket_width=b.width,
+        release_tip_angle=b.release_tip_angle,
+        spill_time=b.spill_time,
+        cut_min_speed=b.cut_min_speed,
         source=str(path),
-        pilot_cutoff=_cutoff(top),
+        pilot_cutoff=_cutoff_spec(m),
     )
 
 
-def load_ic120(path: str | Path | None = None) -> Ic120Spec:
-    """Read the IC120 machine YAML (tracks, vessel, ``hydraulics:``)."""
-    path = Path(path) if path else config_path("machines", "ic120.yaml")
-    data, where = load_yaml(path)
-    top = _Reader(data, where)
-    hyd = top.sub("hydraulics")
-    hyd.only({"source", "tracks", "vessel"})
-    hv = hyd.sub("vessel")
-    hv.only({"dead_time_s", "time_constant_s", "angle_gain", "load_max_angle", "dump_start_angle", "dump_time_s", "dump_distance"})
-    v = top.sub("vessel")
-    fp = top.sub("footprint")
-    max_angle = v.number("max_angle", lo=0.01, hi=math.pi / 2)
-    vessel = JointSpec(
-        name="vessel_joint",
-        parent="base_link",
-        child="vessel_link",
-        origin_xyz=v.vector("hinge_xyz", 3),  # type: ignore[arg-type]
-        origin_rpy=(0.0, 0.0, 0.0),
-        axis=(0.0, -1.0, 0.0),  # URDF: negative = raised about +y; ours: positive = raised
-        lower=0.0,
-        upper=max_angle,
-        max_velocity=v.number("velocity", lo=0.0),
-        dead_time=hv.number("dead_time_s", lo=0.0, hi=5.0),
-        time_constant=hv.number("time_constant_s", lo=0.0, hi=10.0),
-        flow_at_limit=0.0,
-    )
-    return Ic120Spec(
-        tracks=_tracks(top.sub("tracks"), hyd, (fp.number("length", lo=0.1), fp.number("width", lo=0.1))),
-        hinge_xyz=vessel.origin_xyz,
+def load_carrier(path: str | Path) -> CarrierSpec:
+    """The plant's view of a crawler-dump description (tracks, vessel, ``hydraulics:``)."""
+    m = _description(path, CRAWLER_DUMP)
+    v = m.vessel
+    assert v is not None  # tms_model: every crawler dump has one
+    vessel = _joint_spec(m, m.joints[0])
+    return CarrierSpec(
+        tracks=_track_spec(m),
+        hinge_xyz=v.hinge_xyz,
         vessel=vessel,
-        vessel_angle_gain=hv.number("angle_gain", lo=0.0),
-        inner_length=v.number("inner_length", lo=0.1),
-        inner_width=v.number("inner_width", lo=0.1),
-        capacity=v.number("capacity", lo=0.01),
-        load_max_angle=hv.number("load_max_angle", lo=0.0),
-        dump_start_angle=hv.number("dump_start_angle", lo=0.0, hi=max_angle),
-        dump_time=hv.number("dump_time_s", lo=0.01),
-        dump_distance=hv.number("dump_distance", lo=0.0),
+        vessel_angle_gain=v.angle_gain,
+        inner_length=v.inner_length,
+        inner_width=v.inner_width,
+        capacity=v.capacity,
+        load_max_angle=v.load_max_angle,
+        dump_start_angle=v.dump_start_angle,
+        dump_time=v.dump_time,
+        dump_distance=v.dump_distance,
         source=str(path),
-        pilot_cutoff=_cutoff(top),
+        pilot_cutoff=_cutoff_spec(m),
     )
 
 
-def load_site(path: str | Path | None = None) -> SiteSpec:
-    """Read ``config/site.yaml`` (CRS and map origin in plane coordinates)."""
-    path = Path(path) if path else config_path("site.yaml")
-    data, where = load_yaml(path)
-    top = _Reader(data, where)
-    o = top.sub("map_origin_plane")
-    return SiteSpec(
-        crs=top.string("crs"),
-        easting=o.number("easting"),
-        northing=o.number("northing"),
-        altitude=o.number("altitude"),
-    )
+def load_zx200(path: str | Path | None = None) -> ExcavatorSpec:
+    """The ZX200 (default ``config/machines/zx200.yaml``)."""
+    return load_excavator(path or machine_path("zx200"))
+
+
+def load_ic120(path: str | Path | None = None) -> CarrierSpec:
+    """The IC120 (default ``config/machines/ic120.yaml``)."""
+    return load_carrier(path or machine_path("ic120"))
+
+
+Zx200Spec = ExcavatorSpec
+Ic120Spec = CarrierSpec
 
 
 def load_plant(
@@ -407,52 +375,51 @@ def load_plant(
 ) -> PlantSpec:
     """Read the plant YAML and the machine/site YAMLs it names (paths relative to ``config/``).
 
-    Explicit ``zx200``/``ic120``/``site`` paths override the plant file's ``machines``/``site`` keys
-    (tests use this to feed a malformed machine YAML).
+    ``machines`` maps a machine name to its machine YAML; the YAML's ``type`` picks the plant profile
+    that reads it. Explicit ``zx200``/``ic120``/``site`` paths override the plant file's entries of those
+    names (tests use this to feed a malformed machine YAML).
     """
+    from sim_bridge.profiles import PLANT_PROFILES
+
     path = Path(path) if path else config_path("sim", "plant.yaml")
     data, where = load_yaml(path)
     top = _Reader(data, where)
     top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "initial_front", "soil", "sensors"})
     m = top.sub("machines")
-    m.only({"zx200", "ic120"})
     base = config_path()
-    zx_path = Path(zx200) if zx200 else base / m.string("zx200")
-    ic_path = Path(ic120) if ic120 else base / m.string("ic120")
+    given = {"zx200": zx200, "ic120": ic120}
+    machine_paths = {name: Path(given[name]) if given.get(name) else base / m.string(name) for name in m.data}
     site_path = Path(site) if site else base / top.string("site")
-    site_data, site_where = load_yaml(site_path)
-    site_r = _Reader(site_data, site_where)
+    site_model = load_site(site_path)
     poses_r = top.sub("initial_poses")
-    poses_r.only({"zx200", "ic120"})
+    poses_r.only(set(machine_paths))
     poses = {}
-    for name in ("zx200", "ic120"):
+    for name in machine_paths:
         if isinstance(poses_r.raw(name), str):  # a point name in site.yaml
-            pt = site_r.sub("points").sub(poses_r.string(name))
-            poses[name] = (pt.number("x"), pt.number("y"), pt.number("yaw"))
+            point = poses_r.string(name)
+            if point not in site_model.points:
+                raise poses_r._err(poses_r.path + (name,), f"no point {point!r} in {site_path} "
+                                   f"(known: {sorted(site_model.points)})")
+            p = site_model.points[point]
+            poses[name] = (p.x, p.y, p.yaw)
         else:
             poses[name] = poses_r.vector(name, 3)
     s = top.sub("soil")
     s.only({"grid", "deposit_radius", "dump_radius", "mound_region_margin"})
     g = s.sub("grid")
     g.only({"x_min", "y_min", "size_x", "size_y", "resolution"})
-    mo = site_r.sub("mound")
-    shape = mo.string("shape")
-    if shape not in ("truncated_cone", "cone"):
-        raise mo._err(mo.path + ("shape",), f"unknown mound shape {shape!r}; expected truncated_cone or cone")
-    c = mo.sub("center")
-    base_radius = mo.number("base_radius", lo=0.0)
-    top_radius = mo.number("top_radius", lo=0.0, hi=base_radius) if shape == "truncated_cone" else 0.0
+    mound = site_model.mound
     soil = SoilSpec(
         x_min=g.number("x_min"),
         y_min=g.number("y_min"),
         size_x=g.number("size_x", lo=1.0),
         size_y=g.number("size_y", lo=1.0),
         resolution=g.number("resolution", lo=0.02, hi=2.0),
-        mound_center=(c.number("x"), c.number("y")),
-        mound_base_radius=base_radius,
-        mound_top_radius=top_radius,
-        mound_height=mo.number("height", lo=0.0),
-        ground_z=mo.number("ground_z", default=0.0),
+        mound_center=(mound.cx, mound.cy),
+        mound_base_radius=mound.base_radius,
+        mound_top_radius=mound.top_radius,
+        mound_height=mound.height,
+        ground_z=mound.ground_z,
         deposit_radius=s.number("deposit_radius", lo=0.0),
         dump_radius=s.number("dump_radius", lo=0.0),
         mound_region_margin=s.number("mound_region_margin", lo=0.0),
@@ -465,21 +432,35 @@ def load_plant(
         imu_sigma=sn.number("imu_sigma", lo=0.0),
         seed=int(sn.number("seed", lo=0)),
     )
-    zx = load_zx200(zx_path)
-    if top.has("initial_front"):  # ZX200 front joints at start (default: the machine file's home_pose)
+    specs: dict[str, Any] = {}
+    types: dict[str, str] = {}
+    for name, mpath in machine_paths.items():
+        kind = _description(mpath).type
+        try:
+            profile = PLANT_PROFILES.get(kind)
+        except ConfigError as exc:
+            raise SimConfigError(f"{mpath}: type: {exc}") from None
+        specs[name], types[name] = profile.load_spec(mpath), kind
+    first = {k: next((n for n in types if types[n] == k), "") for k in ("excavator", "crawler_dump")}
+    if not first["excavator"] or not first["crawler_dump"]:
+        raise top._err(("machines",), "the site needs an excavator and a crawler carrier (soil is dug and carried); "
+                       f"got types {types}")
+    if top.has("initial_front"):  # front joints of the digging excavator at start (default: its home_pose)
         import dataclasses
 
-        names = list(zx.home_pose)
-        front = top.per_name("initial_front", names)
-        zx = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
+        zx = specs[first["excavator"]]
+        front = top.per_name("initial_front", list(zx.home_pose))
+        specs[first["excavator"]] = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
     return PlantSpec(
-        zx200=zx,
-        ic120=load_ic120(ic_path),
-        site=load_site(site_path),
+        machines=specs,
+        types=types,
+        site=site_model,
         soil=soil,
         sensors=sensors,
         dt=top.number("step_s", lo=0.0005, hi=0.05),
         watchdog_s=top.number("watchdog_s", lo=0.01),
         initial_poses=poses,  # type: ignore[arg-type]
-        files=(str(path), str(zx_path), str(ic_path), str(site_path)),
+        files=(str(path), *(str(p) for p in machine_paths.values()), str(site_path)),
+        excavator=first["excavator"],
+        carrier=first["crawler_dump"],
     )

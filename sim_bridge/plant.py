@@ -1,9 +1,11 @@
-"""The plant: both machines and the soil, advanced in fixed steps of simulated time.
+"""The plant: the machines of the site and the soil, advanced in fixed steps of simulated time.
 
-Pure core (no ROS, no CAN): :class:`Plant` takes actuator commands (front joint velocities, track
-speeds, a vessel target angle or velocity), steps hydraulics, tracks, kinematics (MuJoCo) and soil,
-and exposes the true state. :mod:`sim_bridge.can_io` maps COM3 frames onto these commands and the
-state onto frames; :mod:`sim_bridge.nodes.plant_node` adds ``/clock`` and ``/sim/truth``.
+Pure core (no ROS, no CAN): :class:`Plant` holds one machine per entry of the plant YAML's ``machines``
+(built by its type's profile, :mod:`sim_bridge.profiles`), takes actuator commands (front joint
+velocities, track speeds, a vessel target angle or velocity), steps hydraulics, tracks, kinematics
+(MuJoCo) and soil, and exposes the true state. The soil is dug by the plant's excavator and carried by
+its crawler carrier (``PlantSpec.excavator`` / ``carrier``). :mod:`sim_bridge.can_io` maps COM3 frames onto these commands and the
+state onto frames; :mod:`sim_bridge.nodes.sim_plant` adds ``/clock`` and ``/sim/truth``.
 """
 
 from __future__ import annotations
@@ -11,14 +13,18 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from sim_bridge.config import PlantSpec, load_plant
-from sim_bridge.hydraulics import JointBank
+from sim_bridge.machines import CrawlerCarrier, Excavator
 from sim_bridge.model import SiteModel
+from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
-from sim_bridge.tracks import SkidSteer, centre_to_tracks
 
-__all__ = ["Plant", "MachineTruth", "stamp_parts"]
+__all__ = ["Plant", "MachineTruth", "stamp_parts", "Zx200", "Ic120"]
+
+#: the paper's machine classes under their former names
+Zx200, Ic120 = Excavator, CrawlerCarrier
 
 log = logging.getLogger(__name__)
 
@@ -46,114 +52,6 @@ class MachineTruth:
     yaw: float
 
 
-class Zx200:
-    """Backhoe state: tracked base + four hydraulic front joints."""
-
-    def __init__(self, spec: PlantSpec) -> None:
-        s = spec.zx200
-        self.spec = s
-        self.front = JointBank(s.joints, spec.dt, pump_flow=s.pump_flow)
-        self.front.set_positions(s.home_pose)
-        self.base = SkidSteer(s.tracks, spec.dt, spec.initial_poses["zx200"])
-        self.z = 0.0
-
-    def set_front_velocity(self, velocities: dict[str, float]) -> None:
-        for name, v in velocities.items():
-            self.front.command[self.front.names.index(name)] = v
-
-    def set_centre_velocity(self, v: float, yaw_rate: float) -> None:
-        t = self.spec.tracks
-        self.base.command[0], self.base.command[1] = centre_to_tracks(v, yaw_rate, t.gauge, t.max_yaw_rate)
-
-    def set_track_speeds(self, left: float, right: float) -> None:
-        self.base.command[0], self.base.command[1] = left, right
-
-    def rest(self) -> None:
-        self.front.rest()
-        self.base.rest()
-
-    def set_pilot_cutoff(self, engaged: bool) -> None:
-        """Pilot cut-off (hydraulic lock) on/off; no-op when the machine YAML has no ``pilot_cutoff``."""
-        c = self.spec.pilot_cutoff
-        if c is None:
-            return
-        self.front.set_cutoff(c.front_time_constant if engaged else None)
-        self.base.set_cutoff(c.tracks_time_constant if engaged else None)
-
-    def at_rest(self) -> bool:
-        return self.front.at_rest() and self.base.at_rest()
-
-    def step(self) -> None:
-        self.front.step()
-        self.base.step()
-
-    def tip_angle(self) -> float:
-        """Angle of the bucket pin->tip line below horizontal [rad] (0 = pointing out, pi/2 = down).
-
-        With all front axes parallel and the URDF's fixed pitches cancelling the link offsets, this is
-        exactly boom + arm + bucket.
-        """
-        q = self.front.q
-        return q[1] + q[2] + q[3]
-
-
-class Ic120:
-    """Crawler dump state: tracked base + vessel (target-angle or velocity control)."""
-
-    def __init__(self, spec: PlantSpec) -> None:
-        s = spec.ic120
-        self.spec = s
-        self.vessel = JointBank([s.vessel], spec.dt)
-        self.base = SkidSteer(s.tracks, spec.dt, spec.initial_poses["ic120"])
-        self.vessel_target: float | None = None  # angle mode when not None
-        self.z = 0.0
-
-    @property
-    def vessel_angle(self) -> float:
-        return self.vessel.q[0]
-
-    def set_vessel_target(self, angle: float) -> None:
-        lo, hi = self.spec.vessel.lower or 0.0, self.spec.vessel.upper or 0.0
-        self.vessel_target = max(lo, min(hi, angle))
-
-    def set_vessel_velocity(self, v: float) -> None:
-        self.vessel_target = None
-        self.vessel.command[0] = v
-
-    def set_centre_velocity(self, v: float, yaw_rate: float) -> None:
-        t = self.spec.tracks
-        self.base.command[0], self.base.command[1] = centre_to_tracks(v, yaw_rate, t.gauge, t.max_yaw_rate)
-
-    def set_track_speeds(self, left: float, right: float) -> None:
-        self.base.command[0], self.base.command[1] = left, right
-
-    def rest(self) -> None:
-        """Hold the vessel where it is and stop the tracks."""
-        self.vessel_target = None
-        self.vessel.rest()
-        self.base.rest()
-
-    def set_pilot_cutoff(self, engaged: bool) -> None:
-        """Pilot cut-off (hydraulic lock) on/off; no-op when the machine YAML has no ``pilot_cutoff``."""
-        c = self.spec.pilot_cutoff
-        if c is None:
-            return
-        if engaged:
-            self.vessel_target = None
-        self.vessel.set_cutoff(c.front_time_constant if engaged else None)
-        self.base.set_cutoff(c.tracks_time_constant if engaged else None)
-
-    def at_rest(self) -> bool:
-        return self.vessel.at_rest() and self.base.at_rest()
-
-    def step(self) -> None:
-        if self.vessel_target is not None:
-            err = self.vessel_target - self.vessel.q[0]
-            self.vessel.command[0] = err * self.spec.vessel_angle_gain
-        self.vessel.step()
-        self.base.step()
-
-
 class Plant:
     """Both machines, the site model and the soil; ``step()`` advances ``dt`` of simulated time."""
 
@@ -162,8 +60,13 @@ class Plant:
         self.dt = self.spec.dt
         self.time = 0.0  # = steps * dt (not accumulated: summing 0.01 drifts off the step grid)
         self.steps = 0
-        self.zx200 = Zx200(self.spec)
-        self.ic120 = Ic120(self.spec)
+        self.machines: dict[str, Any] = {
+            name: PLANT_PROFILES.get(self.spec.types[name]).make_machine(ms, self.dt, self.spec.initial_poses[name])
+            for name, ms in self.spec.machines.items()
+        }
+        #: the soil-digging excavator and the soil-carrying crawler carrier (the paper's ZX200 and IC120)
+        self.excavator: Excavator = self.machines[self.spec.excavator]
+        self.carrier: CrawlerCarrier = self.machines[self.spec.carrier]
         self.model = SiteModel(self.spec)
         self.ground = HeightField(self.spec.soil)
         self.soil = SoilState()
@@ -172,9 +75,19 @@ class Plant:
         self._tip = self.model.bucket_tip()
         self.tip_speed = 0.0
 
+    @property
+    def zx200(self) -> Excavator:
+        """The soil-digging excavator (the paper's ZX200)."""
+        return self.excavator
+
+    @property
+    def ic120(self) -> CrawlerCarrier:
+        """The soil-carrying crawler carrier (the paper's IC120)."""
+        return self.carrier
+
     # -- state -------------------------------------------------------------------------------------
     def truth(self, machine: str) -> MachineTruth:
-        m = self.zx200 if machine == "zx200" else self.ic120
+        m = self.machines[machine]
         return MachineTruth(m.base.x, m.base.y, m.z, m.base.yaw)
 
     def bucket_tip(self) -> tuple[float, float, float]:
@@ -186,7 +99,7 @@ class Plant:
 
     def roll_pitch(self, machine: str) -> tuple[float, float]:
         """Roll and pitch of a base resting on the height field under its footprint [rad]."""
-        m = self.zx200 if machine == "zx200" else self.ic120
+        m = self.machines[machine]
         t = m.spec.tracks
         c, s = math.cos(m.base.yaw), math.sin(m.base.yaw)
         x, y = m.base.x, m.base.y
@@ -202,18 +115,17 @@ class Plant:
     # -- stepping ----------------------------------------------------------------------------------
     def _update_model(self) -> None:
         m = self.model
-        for name, mach in (("zx200", self.zx200), ("ic120", self.ic120)):
+        for name, mach in self.machines.items():
             mach.z = self.ground.height(mach.base.x, mach.base.y)
             m.set_base(name, mach.base.x, mach.base.y, mach.z, mach.base.yaw)
-        for name, q in zip(self.zx200.front.names, self.zx200.front.q, strict=True):
-            m.set_joint(f"zx200_{name}", q)
-        m.set_joint("ic120_vessel_joint", self.ic120.vessel_angle)
+            for joint, q in zip(mach.bank.names, mach.bank.q, strict=True):
+                m.set_joint(f"{name}_{joint}", q)
         m.forward()
 
     def step(self) -> None:
         """Advance one ``dt``: actuators, kinematics, soil."""
-        self.zx200.step()
-        self.ic120.step()
+        for mach in self.machines.values():
+            mach.step()
         self._update_model()
         tip = self.model.bucket_tip()
         prev = self._tip
@@ -228,12 +140,12 @@ class Plant:
         self.time = self.steps * self.dt
 
     def _soil(self, prev, tip) -> None:  # noqa: ANN001 - numpy vectors
-        zx = self.zx200.spec
+        zx = self.excavator.spec
         soil = self.soil
         ground = self.ground
         surface = ground.height(tip[0], tip[1])
         if tip[2] < surface and self.tip_speed >= zx.cut_min_speed:
-            heading = self.zx200.base.yaw + self.zx200.front.q[0]
+            heading = self.excavator.base.yaw + self.excavator.front.q[0]
             lateral = (-math.sin(heading), math.cos(heading))
             got = ground.cut(
                 (prev[0], prev[1]),
@@ -245,7 +157,7 @@ class Plant:
             )
             soil.bucket += got
             soil.dug += got
-        alpha = self.zx200.tip_angle()
+        alpha = self.excavator.tip_angle()
         if soil.bucket > 0.0 and alpha < zx.release_tip_angle and tip[2] >= surface:
             rate = zx.bucket_capacity / zx.spill_time * min(1.0, (zx.release_tip_angle - alpha) / 0.5)
             out = min(soil.bucket, rate * self.dt)
@@ -255,7 +167,7 @@ class Plant:
 
     def _land(self, x: float, y: float, volume: float) -> None:
         """Soil falling at (x, y): into the IC120 vessel when over it and lowered, else on the ground."""
-        ic = self.ic120
+        ic = self.carrier
         s = ic.spec
         c, sn = math.cos(ic.base.yaw), math.sin(ic.base.yaw)
         dx, dy = x - ic.base.x, y - ic.base.y
@@ -270,7 +182,7 @@ class Plant:
         self.ground.deposit(x, y, volume, self.spec.soil.deposit_radius)
 
     def _dump(self) -> None:
-        ic = self.ic120
+        ic = self.carrier
         s = ic.spec
         angle = ic.vessel_angle
         if self.soil.vessel <= 0.0 or angle <= s.dump_start_angle:
@@ -287,9 +199,9 @@ class Plant:
     # -- replay ------------------------------------------------------------------------------------
     def set_truth(self, machine: str, x: float, y: float, yaw: float, joints: dict[str, float]) -> None:
         """Teleport a machine (replay mode): base pose and joint angles, actuators emptied."""
-        m = self.zx200 if machine == "zx200" else self.ic120
+        m = self.machines[machine]
         m.base.x, m.base.y, m.base.yaw = x, y, yaw
-        bank = self.zx200.front if machine == "zx200" else self.ic120.vessel
+        bank = m.bank
         bank.set_positions(joints)
         for act in bank.actuators:
             act.reset()

@@ -49,7 +49,7 @@ def make_executor(kind: str | None = None, *, threads: int = 8):  # noqa: ANN201
 
 
 def run_node(
-    factory: Callable[[], Node],
+    factory: Callable[..., Node],
     args: Sequence[str] | None = None,
     *,
     executor: str | None = None,
@@ -65,18 +65,26 @@ def run_node(
     with the context still valid (:func:`_stop_on_signals`). A node that has work to wind down first (the
     subtask servers cancel their downstream goals and wait for them to end) defines
     ``on_stop_requested() -> bool``: called when the signal arrives and every 50 ms after, the spin goes on
-    while it returns True. Returns 0 on a clean shutdown (SIGINT, SIGTERM) and 1 when
-    the node raised; the exception is
+    while it returns True. Returns 0 on a clean shutdown (SIGINT, SIGTERM), 2 on a deliberate error
+    (:class:`~tms_common.errors.TmsError`, e.g. a config file's ``file:line``, or a parameter of the wrong type:
+    one line, no traceback) and 1 when the node raised anything else (printed with its traceback). Either is
     printed with the node's name so a launcher log shows which node died and why.
     """
+    import logging
+
     import rclpy
+    from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
     from tms_common.dds import use_platform_profiles
+    from tms_common.errors import TmsError
     from tms_common.qos_events import defer_qos_incompatibility_events
     from tms_common.sim_clock import relay_clock
 
+    # Python logging of the cores (sim_bridge, com3_can) on stderr, prefixed with the executable's name
+    logging.basicConfig(level=logging.WARNING,
+                        format=f"[{os.path.basename(sys.argv[0]) or 'node'}] %(levelname)s %(name)s: %(message)s")
     use_platform_profiles()
     rclpy.init(args=list(args) if args is not None else sys.argv,
                signal_handler_options=SignalHandlerOptions.NO if stop_in_context else SignalHandlerOptions.ALL)
@@ -95,11 +103,17 @@ def run_node(
         spinner.spin()
     except (KeyboardInterrupt, ExternalShutdownException, _StopRequested):
         pass
+    except (TmsError, ParameterException) as exc:
+        # A deliberate error (bad config file or parameter): its message names the culprit (file:line,
+        # key, value), so one line says it all; a traceback would bury it.
+        name = node.get_name() if node is not None else _factory_name(factory)
+        print(f"[{name}] {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
+        return 2
     except Exception as exc:  # noqa: BLE001 - report any crash with the node's name, then exit non-zero
         if not rclpy.ok():
             # Shutdown (SIGINT/SIGTERM) raced with a callback whose handles were already torn down.
             return 0
-        name = node.get_name() if node is not None else getattr(factory, "__name__", "node")
+        name = node.get_name() if node is not None else _factory_name(factory)
         print(f"[{name}] fatal: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
         import traceback
 
@@ -118,6 +132,11 @@ def run_node(
         signals.close()  # after destroy_node: a second signal meanwhile must not cut it short
         rclpy.try_shutdown()
     return 0
+
+
+def _factory_name(factory: Callable[..., Node]) -> str:
+    """The executable's name (what the user typed), else the factory's: for a node that failed to build."""
+    return os.path.basename(sys.argv[0]) or getattr(factory, "__name__", "node")
 
 
 _SETTLE_S = 0.2  # [s] spin left to a node stopped in context after its on_stop_requested hook is done
@@ -193,7 +212,9 @@ def _wait_for_callback_threads(spinner, timeout_s: float, *, run_queued: bool) -
     """
     import threading
 
-    pool = getattr(spinner, "_executor", None)  # rclpy.executors.MultiThreadedExecutor's ThreadPoolExecutor
+    from tms_common.rclpy_compat import executor_thread_pool
+
+    pool = executor_thread_pool(spinner)
     if pool is None:
         return
     joiner = threading.Thread(target=pool.shutdown, kwargs={"wait": True, "cancel_futures": not run_queued}, daemon=True)

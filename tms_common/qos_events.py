@@ -14,7 +14,10 @@ executor's wait set and checks them from one steady-clock timer, so the warnings
 
 from __future__ import annotations
 
+import weakref
 from typing import TYPE_CHECKING, Any
+
+from tms_common import rclpy_compat
 
 if TYPE_CHECKING:  # pragma: no cover
     from rclpy.node import Node
@@ -33,26 +36,14 @@ class _DeferredEvents:
     """The handlers taken out of one node's wait set and the timer that polls them with a zero-timeout wait set.
 
     The handlers stay among the node's waitables (``destroy_publisher``/``destroy_subscription`` remove them
-    from there); they only move to a callback group the executor never finds ready, so it skips them at the
-    cost of one ``can_execute`` call each.
+    from there); they are only parked (:func:`tms_common.rclpy_compat.park`), so the executor skips them at
+    the cost of one ``can_execute`` call each.
     """
 
     def __init__(self, node: Node, period_s: float) -> None:
-        from rclpy.callback_groups import CallbackGroup
         from rclpy.clock import Clock, ClockType
 
-        class _PolledElsewhere(CallbackGroup):
-            def can_execute(self, entity: Any) -> bool:  # noqa: ARG002 - never from the executor's wait set
-                return False
-
-            def beginning_execution(self, entity: Any) -> bool:  # noqa: ARG002
-                return False
-
-            def ending_execution(self, entity: Any) -> None:
-                pass
-
         self._node = node
-        self._group = _PolledElsewhere()
         self.handlers: list[Any] = []
         self.timer = node.create_timer(period_s, self.poll, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
@@ -64,43 +55,37 @@ class _DeferredEvents:
         moved = 0
         for waitable in list(self._node.waitables):
             if (isinstance(waitable, EventHandler)
-                    and waitable.callback_group is not self._group
+                    and not rclpy_compat.is_parked(waitable)
                     and getattr(waitable.event_type, "name", "") in INCOMPATIBILITY_EVENTS
                     and not inspect.iscoroutinefunction(waitable.callback)):  # poll() calls it synchronously
-                waitable.callback_group = self._group
+                rclpy_compat.park(waitable)
                 self.handlers.append(waitable)
                 moved += 1
         return moved
 
     def poll(self) -> None:
         """Wait on the handlers for zero time and run the callback of each that is ready."""
-        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-
         alive = {id(w) for w in self._node.waitables}
         self.handlers = [h for h in self.handlers if id(h) in alive]  # destroyed with their publisher/subscription
-        if not self.handlers:
-            return
-        context = self._node.context
-        with context.handle:
-            wait_set = _rclpy.WaitSet(0, 0, 0, 0, 0, len(self.handlers), context.handle)
-            for handler in self.handlers:
-                handler.add_to_wait_set(wait_set)
-            wait_set.wait(0)
-            ready = [h for h in self.handlers if h.is_ready(wait_set)]
-        for handler in ready:
+        for handler in rclpy_compat.poll_ready(self._node.context, self.handlers):
             data = handler.take_data()
             if data:
                 handler.callback(data)
 
 
+_pollers: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # node -> its _DeferredEvents
+
+
 def defer_qos_incompatibility_events(node: Node, period_s: float = 1.0) -> int:
     """Take ``node``'s incompatible-QoS/-type handlers out of its executor's wait set; poll them every ``period_s``.
 
-    Returns how many handlers were moved. Handlers created later (a publisher made after this call) stay where
-    rclpy put them; call again to move them too.
+    Returns how many handlers were moved (0 on an rclpy other than the tested one: the handlers stay where
+    rclpy put them). Handlers created later (a publisher made after this call) stay where rclpy put them;
+    call again to move them too.
     """
-    deferred = getattr(node, "_tms_deferred_qos_events", None)
+    if not rclpy_compat.use_internals("polling QoS-incompatibility events off the executor"):
+        return 0
+    deferred = _pollers.get(node)
     if deferred is None:
-        deferred = _DeferredEvents(node, period_s)
-        node._tms_deferred_qos_events = deferred  # noqa: SLF001 - one poller per node, kept with it
+        deferred = _pollers[node] = _DeferredEvents(node, period_s)
     return deferred.take_from_node()

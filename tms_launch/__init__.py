@@ -3,5 +3,5 @@
 ``tms-launch <file.yaml>`` starts the nodes of a launch file as separate processes with their
 parameters and namespaces, prefixes their output, waits until each node is visible on the ROS graph,
 and stops them all cleanly. ``register_ament`` makes every console-script node findable by
-``ros2 run <package> <executable>``. ``demo_nodes`` are small nodes used by the foundation tests.
+``ros2 run <package> <executable>``. ``tms_launch.nodes`` holds small demonstration nodes used by the foundation tests.
 """

@@ -139,7 +139,9 @@ class Launcher:
                 args=["tms-launch", "--ros-args", "--disable-rosout-logs"],
                 signal_handler_options=SignalHandlerOptions.NO,
             )
-            self._graph_node = rclpy.create_node("tms_launch_monitor", start_parameter_services=False)
+            # a hidden name (leading "_"): `ros2 node list` shows the nodes of the launch, not the launcher's probe
+            self._graph_node = rclpy.create_node("_tms_launch_monitor", start_parameter_services=False,
+                                                 enable_rosout=False)
         return self._graph_node
 
     def visible(self, spec: NodeSpec) -> bool:

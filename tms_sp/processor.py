@@ -1,6 +1,6 @@
 """SiteSensing: the sensing processors wired to the document store (no rclpy).
 
-The node (:mod:`tms_sp.nodes.sensing`) feeds it sensor data; it runs the pure cores and writes what
+The node (:mod:`tms_sp.nodes.tms_sp_sensing`) feeds it sensor data; it runs the pure cores and writes what
 changed through a tms_db store (``open_store``), as the original tms_sp updaters did:
 
 * the excavation target -> ``(zx200, target_excavate_pose)`` (position_with_angle:1 + x,y,z,theta_w,offset,

@@ -1,6 +1,6 @@
 """Pure core of the experiment supervisor: records a run and writes its report.
 
-The recorder is fed time-stamped samples (simulated time ``t`` [s]) by ``tms_ur.experiment_node``:
+The recorder is fed time-stamped samples (simulated time ``t`` [s]) by ``tms_ur.nodes.tms_ur_experiment``:
 soil volumes, truth and estimated poses, bucket-tip truth and estimate, global-blackboard flags,
 task states and the leaves each task is running. From them it derives the events of the earthwork cycle:
 

@@ -1,6 +1,6 @@
 """Pure core of the web control panel: configuration, access control, commands and the site snapshot.
 
-Nothing here imports rclpy or a web framework, so it is unit-tested directly; ``tms_ur.panel_node``
+Nothing here imports rclpy or a web framework, so it is unit-tested directly; ``tms_ur.nodes.tms_ur_panel``
 wires it to ROS topics and a websocket server.
 """
 

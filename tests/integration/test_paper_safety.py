@@ -97,7 +97,7 @@ def test_pilot_cutoff_frame_stops_both_machines_within_its_solenoid_and_spool_ti
         zx.set_front_velocity({"swing_joint": 0.5})
         _run(plant, io, 1.0)
         assert abs(zx.front.v[zx.front.names.index("swing_joint")]) < 1e-6
-        state = io._machine_state(io.sides["zx200"])
+        state = io.machine_state(io.sides["zx200"])
         assert state["pilot_shutoff_valve_state"] == 0.0 and state["lock_cmd_state"] == 1.0
         # release: new commands move the machine again, through the normal dead time
         peers["zx200"].send(can.Message(arbitration_id=sender.frame_id, data=bytes(8), is_extended_id=True))
@@ -105,7 +105,7 @@ def test_pilot_cutoff_frame_stops_both_machines_within_its_solenoid_and_spool_ti
         zx.set_front_velocity({"swing_joint": 0.5})
         _run(plant, io, 2.0)
         assert zx.front.v[zx.front.names.index("swing_joint")] > 0.4
-        assert io._machine_state(io.sides["zx200"])["pilot_shutoff_valve_state"] == 1.0
+        assert io.machine_state(io.sides["zx200"])["pilot_shutoff_valve_state"] == 1.0
     finally:
         for b in (*buses.values(), *peers.values()):
             b.shutdown()

@@ -13,6 +13,7 @@ def test_relayed_clock_fires_timers_at_simulated_times_without_waking_per_clock_
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
+    from tms_common import rclpy_compat
     from tms_common.sim_clock import relay_clock
 
     node = rclpy.create_node("sim_node", context=ros_node.context,
@@ -21,7 +22,8 @@ def test_relayed_clock_fires_timers_at_simulated_times_without_waking_per_clock_
     node.create_timer(0.1, lambda: fired.append(node.get_clock().now().nanoseconds * 1e-9))
     relay = relay_clock(node)
     assert relay is not None
-    assert not [s for s in node.subscriptions if s.topic_name == "/clock"], "the node still subscribes /clock itself"
+    own = [s for s in node.subscriptions if s.topic_name == "/clock"]
+    assert own and all(rclpy_compat.is_parked(s) for s in own), "the node's /clock subscription is still in its executor"
     pub = ros_node.create_publisher(Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
     deadline = time.monotonic() + 10
     while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
@@ -59,6 +61,9 @@ def test_relayed_clock_fires_timers_at_simulated_times_without_waking_per_clock_
         assert not late, f"timer calls off their simulated due times (k, t): {late}"
         # without the relay every /clock message wakes the executor (>= 200); now timers (20) and timeouts do
         assert wakes < steps / 4, f"{wakes} executor wakes for {steps} /clock messages"
+        # no helper node on the graph: `ros2 node list` shows the nodes a user started
+        names = ros_node.get_node_names()
+        assert "sim_node" in names and not [n for n in names if n.startswith("sim_node_")], names
     finally:
         executor.shutdown()
         relay.close()

@@ -119,6 +119,6 @@ def test_sensing_node_refuses_an_unseeded_db(procs, tmp_path):
 
     open_store(path=tmp_path / "empty").close()
     node = procs([executable("tms_sp", "tms_sp_sensing"), "--ros-args", "-p", f"db_path:={tmp_path / 'empty'}"])
-    assert node.popen.wait(timeout=60) == 1
+    assert node.popen.wait(timeout=60) == 2  # a deliberate error (tms_common.node.run_node): one line, exit 2
     assert node.wait_for("seed it first", 10.0), node.output
-    assert "GLOBAL_BLACKBOARD_EARTHWORK" in node.output
+    assert "GLOBAL_BLACKBOARD_EARTHWORK" in node.output and "Traceback" not in node.output, node.output

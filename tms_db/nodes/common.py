@@ -7,6 +7,7 @@ from typing import Any
 
 from bson import json_util
 
+from tms_common.params import declare_startup
 from tms_db.store import Store, open_store
 
 __all__ = ["declare_and_open", "document_json", "flatten"]
@@ -16,8 +17,8 @@ _RELAXED = json_util.JSONOptions(json_mode=json_util.JSONMode.RELAXED, tz_aware=
 
 def declare_and_open(node: Any) -> Store:
     """Declare ``db_uri`` / ``db_path`` on ``node`` and open the store they name."""
-    uri = node.declare_parameter("db_uri", "").value
-    path = node.declare_parameter("db_path", "").value
+    uri = declare_startup(node, "db_uri", "").value
+    path = declare_startup(node, "db_path", "").value
     store = open_store(uri=uri or None, path=path or None)
     node.get_logger().info(f"document store: {store!r}")
     return store

@@ -6,5 +6,5 @@
   with PID feedback and dead-time compensation.
 * :mod:`tms_rc.zx200.segments`: an ``arm_controller/move`` goal's segments -> controller targets, validated.
 * :mod:`tms_rc.zx200.plant`: a first-order-lag + dead-time joint model for tests and benchmarks.
-* :mod:`tms_rc.zx200.node`: ``zx200_arm_controller`` (joint_states -> front_cmd, action ``arm_controller/move``).
+* :mod:`tms_rc.nodes.zx200_arm_controller`: ``zx200_arm_controller`` (joint_states -> front_cmd, action ``arm_controller/move``).
 """

@@ -22,7 +22,7 @@ state + what the lag still moves + commands still in flight), joints' delays are
 output, and each reference starts at the predicted state, so the machine follows it one predictor
 horizon (``preview_s``) later.
 
-Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.zx200.node`.
+Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.nodes.zx200_arm_controller`.
 """
 
 from __future__ import annotations

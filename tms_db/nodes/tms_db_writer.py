@@ -16,12 +16,17 @@ import sys
 from typing import Any
 
 from bson import json_util
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from tms_common.node import run_node
+from tms_common.params import declare_startup
 from tms_db.errors import StoreError, ValidationError
 from tms_db.nodes.common import declare_and_open
+from tms_msg.msg import ParameterUpdate
+from tms_msg.srv import SetParameter
 
-__all__ = ["main", "make_node", "apply_update"]
+__all__ = ["main", "TmsDbWriter", "apply_update"]
 
 
 def apply_update(store: Any, model_name: str, record_name: str, fields_json: str, upsert: bool) -> dict:
@@ -35,49 +40,40 @@ def apply_update(store: Any, model_name: str, record_name: str, fields_json: str
     return store.set_fields(record_name, fields, model_name=model_name or None, upsert=upsert)
 
 
-def make_node():  # noqa: ANN201 - rclpy Node
-    from rclpy.node import Node
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+class TmsDbWriter(Node):
+    """Applies parameter updates from sensing to the store."""
 
-    from tms_msg.msg import ParameterUpdate
-    from tms_msg.srv import SetParameter
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("tms_db_writer", **kwargs)
+        self.store = declare_and_open(self)
+        self.topic_upsert = bool(declare_startup(self, "topic_upsert", False).value)
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(ParameterUpdate, "~/parameter_update", self._on_update, qos)
+        self.create_service(SetParameter, "~/set_parameter", self._set_parameter)
+        self.get_logger().info("tms_db_writer ready")
 
-    class TmsDbWriter(Node):
-        """Applies parameter updates from sensing to the store."""
+    def _on_update(self, msg) -> None:  # noqa: ANN001
+        try:
+            apply_update(self.store, msg.model_name, msg.record_name, msg.fields_json, self.topic_upsert)
+        except StoreError as exc:
+            self.get_logger().error(f"parameter_update dropped: {exc}")
 
-        def __init__(self) -> None:
-            super().__init__("tms_db_writer")
-            self.store = declare_and_open(self)
-            self.topic_upsert = bool(self.declare_parameter("topic_upsert", False).value)
-            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-            self.create_subscription(ParameterUpdate, "~/parameter_update", self._on_update, qos)
-            self.create_service(SetParameter, "~/set_parameter", self._set_parameter)
-            self.get_logger().info("tms_db_writer ready")
-
-        def _on_update(self, msg) -> None:  # noqa: ANN001
-            try:
-                apply_update(self.store, msg.model_name, msg.record_name, msg.fields_json, self.topic_upsert)
-            except StoreError as exc:
-                self.get_logger().error(f"parameter_update dropped: {exc}")
-
-        def _set_parameter(self, request, response):  # noqa: ANN001, ANN202
-            try:
-                apply_update(self.store, request.model_name, request.record_name, request.fields_json, request.upsert)
-            except StoreError as exc:
-                response.success, response.message = False, str(exc)
-                return response
-            response.success, response.message = True, ""
+    def _set_parameter(self, request, response):  # noqa: ANN001, ANN202
+        try:
+            apply_update(self.store, request.model_name, request.record_name, request.fields_json, request.upsert)
+        except StoreError as exc:
+            response.success, response.message = False, str(exc)
             return response
+        response.success, response.message = True, ""
+        return response
 
-        def destroy_node(self) -> None:
-            self.store.close()
-            super().destroy_node()
-
-    return TmsDbWriter()
+    def destroy_node(self) -> None:
+        self.store.close()
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(make_node, args)
+    return run_node(TmsDbWriter, args)
 
 
 if __name__ == "__main__":

@@ -23,9 +23,9 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering without a display (before mujoco loads)
 
-import logging  # noqa: E402
 import threading  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 from rclpy.node import Node  # noqa: E402
 
@@ -33,6 +33,7 @@ from sim_bridge.config import load_plant  # noqa: E402
 from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
 from tms_common.node import run_node  # noqa: E402
+from tms_common.params import startup_parameters
 
 SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 
@@ -40,8 +41,8 @@ SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 class SimPlantNode(Node):
     """Owns the plant, its buses and the loop thread; publishes clock, truth and diagnostics."""
 
-    def __init__(self) -> None:
-        super().__init__("sim_plant")
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("sim_plant", **kwargs)
         from builtin_interfaces.msg import Time
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PointStamped, PoseStamped
@@ -55,7 +56,7 @@ class SimPlantNode(Node):
         self._Time, self._Clock = Time, Clock
         self._PoseStamped, self._PointStamped, self._JointState = PoseStamped, PointStamped, JointState
         self._Float64MultiArray, self._Dim, self._DiagnosticArray = Float64MultiArray, MultiArrayDimension, DiagnosticArray
-        p = self.declare_parameter
+        p = startup_parameters(self)
         speed = float(p("speed", 1.0).value)
         config = str(p("config", "").value) or None
         watchdog = float(p("watchdog_s", -1.0).value)
@@ -72,7 +73,7 @@ class SimPlantNode(Node):
         spec = load_plant(config)
         self.plant = Plant(spec)
         buses = {}
-        for machine in ("zx200", "ic120"):
+        for machine in self.plant.machines:
             cfg = {k: v for k, v in load_bus_config(machine).items() if k != "bridge"}
             iface = str(p(f"{machine}_can_interface", "").value)
             channel = str(p(f"{machine}_can_channel", "").value)
@@ -93,9 +94,9 @@ class SimPlantNode(Node):
         log = TruthLog(replay) if replay else None
         self.runner = PlantRunner(self.plant, self.io, speed=speed, on_step=self._on_step, replay=log)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-        self.pose_pub = {m: self.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in ("zx200", "ic120")}
+        self.pose_pub = {m: self.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in self.plant.machines}
         self.joint_pub = {
-            m: self.create_publisher(JointState, f"/sim/truth/{m}/joint_states", 10) for m in ("zx200", "ic120")
+            m: self.create_publisher(JointState, f"/sim/truth/{m}/joint_states", 10) for m in self.plant.machines
         }
         self.tip_pub = self.create_publisher(PointStamped, "/sim/truth/zx200/bucket_tip", 10)
         self.soil_pub = self.create_publisher(Float64MultiArray, "/sim/truth/soil", 10)
@@ -154,14 +155,14 @@ class SimPlantNode(Node):
     def _publish_truth(self, plant: Plant, stamp) -> None:  # noqa: ANN001
         import math
 
-        for m in ("zx200", "ic120"):
+        for m in plant.machines:
             t = plant.truth(m)
             msg = self._PoseStamped()
             msg.header.stamp, msg.header.frame_id = stamp, "map"
             msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = t.x, t.y, t.z
             msg.pose.orientation.z, msg.pose.orientation.w = math.sin(t.yaw / 2), math.cos(t.yaw / 2)
             self.pose_pub[m].publish(msg)
-            bank = plant.zx200.front if m == "zx200" else plant.ic120.vessel
+            bank = plant.machines[m].bank
             js = self._JointState()
             js.header.stamp = stamp
             js.name, js.position, js.velocity = list(bank.names), list(bank.q), list(bank.v)
@@ -245,7 +246,6 @@ class SimPlantNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    logging.basicConfig(level=logging.WARNING, format="[sim_plant] %(levelname)s %(name)s: %(message)s")
     return run_node(SimPlantNode, args)
 
 

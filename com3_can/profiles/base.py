@@ -1,0 +1,91 @@
+"""Base class of converter profiles (see :mod:`com3_can.profiles`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from functools import cache
+from importlib import resources
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from com3_can.codec import Com3Codec, load_codec_from_string
+from com3_can.errors import Com3CommandError
+
+if TYPE_CHECKING:
+    from com3_can.bridge_core import BridgeCore, Tx
+    from tms_model.machines import Machine
+
+__all__ = ["ConverterProfile", "codec_for"]
+
+
+@cache
+def codec_for(dbc: str, machine: str) -> Com3Codec:
+    """The (cached) codec of DBC file ``dbc`` (in ``com3_can/dbc``), named ``machine`` in its messages."""
+    text = resources.files("com3_can").joinpath("dbc", dbc).read_text()
+    return load_codec_from_string(text, machine)
+
+
+class ConverterProfile:
+    """What the converter does for one machine type; one instance per converter (it may keep state).
+
+    Class attributes a profile sets:
+
+    * ``type``: registry name; ``dbc``: DBC file in ``com3_can/dbc``;
+    * ``channels``: channel name -> command frames it feeds (one watchdog per channel);
+    * ``topics``: the ROS commands the type takes (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``);
+    * ``state_handlers``: state frame name -> method name; the method gets ``(core, values, stamp)`` and
+      returns outputs (:class:`~com3_can.bridge_core.JointStateOut`, ``OdomOut``, ...).
+
+    A command the type does not take raises :class:`Com3CommandError`; the core counts it as rejected.
+    """
+
+    machine_type: ClassVar[str] = ""
+    dbc: ClassVar[str] = ""
+    channels: ClassVar[Mapping[str, tuple[str, ...]]] = {}
+    topics: ClassVar[frozenset[str]] = frozenset()
+    state_handlers: ClassVar[Mapping[str, str]] = {}
+
+    def __init__(self, machine: str) -> None:
+        self.machine = machine
+
+    def codec(self) -> Com3Codec:
+        return codec_for(self.dbc, self.machine)
+
+    def config_from_machine(self, description: Machine) -> dict[str, Any]:
+        """:class:`~com3_can.bridge_core.BridgeConfig` fields taken from the machine description."""
+        return {"track_gauge": description.tracks.gauge}
+
+    def handler(self, frame: str) -> Callable[[BridgeCore, dict[str, float], float], list[Any]] | None:
+        name = self.state_handlers.get(frame)
+        return None if name is None else getattr(self, name)
+
+    def _refuse(self, topic: str) -> Com3CommandError:
+        return Com3CommandError(f"{topic}: the {self.machine} ({self.machine_type}) does not take {topic}; "
+                                f"it takes {', '.join(sorted(self.topics))}")
+
+    # ROS commands -> frames (``core.accept`` validates, commits and returns the frames to send)
+    def front_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+                  effort: Sequence[float], now: float) -> list[Tx]:
+        raise self._refuse("front_cmd")
+
+    def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+                   effort: Sequence[float], now: float) -> list[Tx]:
+        raise self._refuse("tracks_cmd")
+
+    def cmd_vel(self, core: BridgeCore, linear_x: float, angular_z: float, now: float) -> list[Tx]:
+        raise self._refuse("cmd_vel")
+
+    def vessel_cmd(self, core: BridgeCore, angle: float, now: float) -> list[Tx]:
+        raise self._refuse("vessel_cmd")
+
+    # state handlers shared by the types (both DBCs carry these frames)
+    def roll_pitch(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
+        from com3_can.bridge_core import ImuOut
+
+        az = core.state.get("Vehicle_Azimuth", {})
+        yaw = -az.get("track_body_azimuth", 0.0)
+        rate = az.get("yaw_rate")  # clockwise-positive like the azimuth -> ROS angular z = -yaw_rate
+        return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, None if rate is None else -rate)]
+
+    def machine_state(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
+        core.check_machine_alive(int(values["alive_counter"]))
+        return []

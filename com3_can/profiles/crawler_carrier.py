@@ -1,0 +1,118 @@
+"""Crawler-carrier profile (IC120): travel and vessel on our COM3 extension (``dbc/crawler_carrier_com3.dbc``).
+
+Commands: ``cmd_vel`` -> ``Velocity_Cmd`` centre + yaw rate (``velocity_mode`` 0), ``tracks_cmd`` VELOCITY ->
+``Velocity_Cmd`` per track (``velocity_mode`` 1), ``vessel_cmd`` -> ``Vessel_Cmd`` target angle in
+[0, ``vessel.max_angle``] of the machine description. States: ``Track_Velocity`` -> odometry integrated
+from the track speeds (heading from ``Vehicle_Azimuth`` when present) and joint states (vessel + track
+positions), ``GNSS_Altitude_Status`` (with the latest latitude/longitude) -> fix, ``Roll_Pitch_Angle`` -> IMU.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from com3_can.errors import Com3CommandError
+from com3_can.profiles.base import ConverterProfile
+from com3_can.signal_map import CARRIER_FRAMES as F
+from com3_can.signal_map import CARRIER_VESSEL as V
+from com3_can.signal_map import EXCAVATOR_TRACKS as T
+from com3_can.signal_map import TRACKS
+
+if TYPE_CHECKING:
+    from com3_can.bridge_core import BridgeCore, Tx
+    from tms_model.machines import Machine
+
+__all__ = ["CrawlerCarrierProfile"]
+
+
+class CrawlerCarrierProfile(ConverterProfile):
+    machine_type = "crawler_dump"
+    dbc = "crawler_carrier_com3.dbc"
+    channels = {"travel": (F["travel_velocity"],), "vessel": (F["vessel"],)}
+    topics = frozenset({"tracks_cmd", "cmd_vel", "vessel_cmd"})
+    state_handlers = {
+        F["track_velocity"]: "tracks",
+        "Roll_Pitch_Angle": "roll_pitch",
+        "GNSS_Altitude_Status": "gnss",
+        "Machine_State": "machine_state",
+    }
+
+    def __init__(self, machine: str) -> None:
+        super().__init__(machine)
+        # odometry integrated from the track velocities
+        self._x = self._y = self._yaw = 0.0
+        self._stamp: float | None = None
+        self._track_pos = [0.0, 0.0]
+
+    def config_from_machine(self, description: Machine) -> dict[str, Any]:
+        assert description.vessel is not None  # tms_model: every crawler dump has one
+        return {**super().config_from_machine(description), "vessel_max_angle": description.vessel.max_angle}
+
+    def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+                   effort: Sequence[float], now: float) -> list[Tx]:
+        from com3_can.bridge_core import VELOCITY
+
+        vals = core.check_joint_cmd("tracks_cmd", TRACKS, names, control_type, velocity, effort)
+        if control_type != VELOCITY:
+            raise Com3CommandError(f"tracks_cmd: the {self.machine} takes VELOCITY track commands only")
+        frame = core.codec.neutral(F["travel_velocity"])
+        frame.update({T.left_velocity_cmd: vals.get("left_track", 0.0), T.right_velocity_cmd: vals.get("right_track", 0.0)})
+        txs = core.accept("tracks_cmd", "travel", {F["travel_velocity"]: frame}, now)
+        core.set_switch("velocity_mode", 1.0)
+        return txs
+
+    def cmd_vel(self, core: BridgeCore, linear_x: float, angular_z: float, now: float) -> list[Tx]:
+        frame = core.codec.neutral(F["travel_velocity"])
+        frame.update({T.centre_velocity_cmd: linear_x, T.yaw_rate_cmd: angular_z})
+        txs = core.accept("cmd_vel", "travel", {F["travel_velocity"]: frame}, now)
+        core.set_switch("velocity_mode", 0.0)
+        return txs
+
+    def vessel_cmd(self, core: BridgeCore, angle: float, now: float) -> list[Tx]:
+        top = core.config.vessel_max_angle
+        if not 0.0 <= angle <= top:
+            raise Com3CommandError(
+                f"vessel_cmd: angle {angle:g} rad outside [0, {top:g}] rad "
+                f"(0 = lowered, + = raised; config/machines/{self.machine}.yaml vessel.max_angle)"
+            )
+        frame = {V.target_angle_cmd: angle, V.enable_cmd: 1.0}
+        return core.accept("vessel_cmd", "vessel", {F["vessel"]: frame}, now)
+
+    # state frames
+    def tracks(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
+        from com3_can.bridge_core import JointStateOut, OdomOut
+
+        vl, vr = values[V.left_track_velocity], values[V.right_track_velocity]
+        dt = 0.0 if self._stamp is None else min(max(stamp - self._stamp, 0.0), 0.1)
+        self._stamp = stamp
+        v = 0.5 * (vl + vr)
+        w = (vr - vl) / core.config.track_gauge
+        az = core.state.get("Vehicle_Azimuth")
+        if az is not None:
+            self._yaw = -az["track_body_azimuth"]
+        else:
+            self._yaw += w * dt
+        self._x += v * math.cos(self._yaw) * dt
+        self._y += v * math.sin(self._yaw) * dt
+        self._track_pos[0] += vl * dt
+        self._track_pos[1] += vr * dt
+        vessel = core.state.get(F["vessel_angle"], {})
+        joints = JointStateOut(
+            (V.joint, *TRACKS),
+            (vessel.get(V.angle, 0.0), self._track_pos[0], self._track_pos[1]),
+            (vessel.get(V.angular_velocity, 0.0), vl, vr),
+        )
+        return [OdomOut(self._x, self._y, 0.0, self._yaw, v, w), joints]
+
+    def gnss(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
+        from com3_can.bridge_core import FixOut
+
+        try:
+            lat = core.state["GNSS_Latitude"]["latitude"]
+            lon = core.state["GNSS_Longitude"]["longitude"]
+        except KeyError:
+            return []
+        status = int(values["fix_status"]) - 1  # DBC 0 no fix .. 3 GBAS -> NavSatStatus -1 .. 2
+        return [FixOut(lat, lon, values["altitude"], status, values["horizontal_accuracy"])]

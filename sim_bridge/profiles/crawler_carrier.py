@@ -1,0 +1,103 @@
+"""Crawler-carrier plant profile (IC120): our COM3 extension frames on a :class:`CrawlerCarrier`.
+
+Commands: ``Velocity_Cmd`` by ``velocity_mode`` (0 centre + yaw rate, 1 per track; pilot input is not
+modelled and stops the tracks), ``Vessel_Cmd`` (enable 1: target angle; 0 or lever dump mode: hold).
+States: track velocities, vessel angle, azimuth and yaw rate, roll/pitch, GNSS fix of the base (RTK noise).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from com3_can.profiles.crawler_carrier import CrawlerCarrierProfile
+from com3_can.signal_map import CARRIER_FRAMES as F
+from com3_can.signal_map import CARRIER_VESSEL as V
+from com3_can.signal_map import EXCAVATOR_TRACKS as T
+from sim_bridge.config import CarrierSpec, load_carrier
+from sim_bridge.machines import CrawlerCarrier
+from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.excavator import _v, _wrap
+
+if TYPE_CHECKING:
+    from sim_bridge.can_io import PlantCanIO, Side
+
+__all__ = ["CrawlerCarrierPlantProfile"]
+
+
+class CrawlerCarrierPlantProfile(PlantProfile):
+    machine_type = CrawlerCarrierProfile.machine_type
+    dbc = CrawlerCarrierProfile.dbc
+    motion_frames = frozenset(f for frames in CrawlerCarrierProfile.channels.values() for f in frames)
+
+    @staticmethod
+    def load_spec(path: Path) -> CarrierSpec:
+        return load_carrier(path)
+
+    @staticmethod
+    def make_machine(spec: CarrierSpec, dt: float, pose: tuple[float, float, float]) -> CrawlerCarrier:
+        return CrawlerCarrier(spec, dt, pose)
+
+    @staticmethod
+    def mjcf(name: str, spec: CarrierSpec) -> list[str]:
+        length, width = spec.inner_length, spec.inner_width
+        return [
+            f'    <body name="{name}_base" mocap="true">',
+            f'      <geom type="box" size="{spec.tracks.length / 2} {spec.tracks.width / 2} 0.45" pos="0 0 0.45" '
+            'material="ic" contype="0" conaffinity="0"/>',
+            f'      <body name="{name}_vessel_link" pos="{_v(spec.hinge_xyz)}">',
+            f'        <joint name="{name}_{spec.vessel.name}" type="hinge" axis="0 -1 0"'
+            f' range="{spec.vessel.lower} {spec.vessel.upper}" limited="true"/>',
+            f'        <geom type="box" size="{length / 2} {width / 2} 0.05" pos="{length / 2} 0 0.53" material="ic" '
+            'contype="0" conaffinity="0" mass="1"/>',
+            f'        <site name="{name}_vessel_centre" pos="{length / 2} 0 0.53" size="0.1"/>',
+            "      </body>",
+            "    </body>",
+        ]
+
+    @staticmethod
+    def command(io: PlantCanIO, side: Side, frame: str, v: dict[str, float]) -> None:
+        ic: CrawlerCarrier = side.machine
+        s = side.settings
+        if frame == F["setting"]:
+            side.settings = v
+        elif frame == F["travel_velocity"]:
+            mode = 0 if s is None else int(s["velocity_mode"])
+            if mode == 0:
+                ic.set_centre_velocity(v[T.centre_velocity_cmd], v[T.yaw_rate_cmd])
+            elif mode == 1:
+                ic.set_track_speeds(v[T.left_velocity_cmd], v[T.right_velocity_cmd])
+            else:  # pilot input: not modelled on the carrier
+                side.counters["ignored_unsupported_mode"] += 1
+                ic.set_track_speeds(0.0, 0.0)
+        elif frame == F["vessel"]:
+            lever = s is not None and int(s["dump_mode"]) == 1
+            if v[V.enable_cmd] >= 0.5 and not lever:
+                ic.set_vessel_target(v[V.target_angle_cmd])
+            else:
+                ic.set_vessel_velocity(0.0)
+
+    @staticmethod
+    def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+        ic: CrawlerCarrier = side.machine
+        if frame == "Machine_State":
+            return io.machine_state(side)
+        if frame == F["track_velocity"]:
+            return {V.left_track_velocity: ic.base.vl, V.right_track_velocity: ic.base.vr}
+        if frame == F["vessel_angle"]:
+            return {V.angle: ic.vessel.q[0], V.angular_velocity: ic.vessel.v[0]}
+        if frame == "Vehicle_Azimuth":
+            return {"track_body_azimuth": -_wrap(ic.base.yaw), "yaw_rate": -ic.base.w}
+        if frame == "Roll_Pitch_Angle":
+            return io.roll_pitch(side.name)
+        if frame.startswith("GNSS_"):
+            if frame == "GNSS_Latitude" or side.fix is None:  # one fix per 100 ms cycle, shared by the three frames
+                side.fix = io.gnss.fix(ic.base.x, ic.base.y, ic.z, io.noise)
+            fix = side.fix
+            if frame == "GNSS_Latitude":
+                return {"latitude": fix[0]}
+            if frame == "GNSS_Longitude":
+                return {"longitude": fix[1]}
+            return {"altitude": fix[2], "fix_status": 3.0, "num_satellites": 20.0,
+                    "horizontal_accuracy": io.plant.spec.sensors.gnss_sigma_h}
+        raise KeyError(f"{side.name}: no builder for state frame {frame}")

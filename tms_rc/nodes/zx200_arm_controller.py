@@ -1,0 +1,206 @@
+"""``zx200_arm_controller``: the 100 Hz hierarchical arm controller as a ROS 2 node.
+
+In the machine namespace (``/zx200``): subscribes ``joint_states`` (sensor_msgs/JointState, the four
+front joints), publishes ``front_cmd`` (tms_msg/JointCmd, VELOCITY) every period (contract [A] of the
+COM3 converter), and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
+that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
+joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
+malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.zx200.segments`). Cancel decelerates within the
+limits and the goal ends CANCELED only when the arm is at rest.
+
+One thread: the goal's execute callback is a coroutine that the control tick wakes (feedback at most
+every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On the MultiThreadedExecutor
+it had, the control step was 3.7 % of the node's py-spy samples and rclpy's dispatch most of the rest; the
+node took 28-29 % of a core in the paper demo then, 18 % on one thread (22 Nov).
+
+Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
+``machine_config`` (default config/machines/zx200.yaml).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+
+from tms_common.errors import ConfigError
+from tms_common.node import run_node
+from tms_common.params import declare_startup
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_msg.action import Zx200ArmMove
+from tms_msg.msg import JointCmd
+from tms_rc.zx200.controller import ArmController, load_controller_config
+from tms_rc.zx200.segments import targets_from_segments
+from tms_rc.zx200.tick_stats import TickStats
+
+__all__ = ["ArmControllerNode", "main"]
+
+
+JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states (wall clock)
+FEEDBACK_PERIOD_S = 0.05  # [s wall] feedback at most this often (the result is checked on every tick)
+
+
+class ArmControllerNode(Node):
+    """joint_states -> hierarchical QP -> front_cmd at ``rate_hz``; goals through ``arm_controller/move``."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("zx200_arm_controller", **kwargs)
+        cfg_path = declare_startup(self, "config", "").value or None
+        machine_path = declare_startup(self, "machine_config", "").value or None
+        self.kin = load_kinematics("zx200", path=machine_path or None)
+        self.cfg = load_controller_config(cfg_path)
+        rate = float(declare_startup(self, "rate_hz", 0.0).value)  # 0 = rate_hz of the config file
+        if rate < 0:
+            raise ConfigError(f"zx200_arm_controller: parameter rate_hz must be >= 0, got {rate}")
+        if rate > 0:  # e.g. 50 Hz in the two-machine launch, whose /clock comes every 20 ms
+            import dataclasses
+
+            self.cfg = dataclasses.replace(self.cfg, rate_hz=rate)
+        self.ctl = ArmController(self.kin, self.cfg)
+        self._q: np.ndarray | None = None
+        self._dq: np.ndarray | None = None
+        self._q_stamp: float | None = None  # header stamp of the last joint_states [s]
+        self._tick_stats: TickStats | None = None  # of the running goal
+        self._goal_active = False
+        self._pub = self.create_publisher(JointCmd, "front_cmd", 10)
+        self.create_subscription(JointState, "joint_states", self._on_state, 20)
+        # futures completed by the next control tick / the first joint_states (coroutines await them)
+        self._tick_waiters: list[Future] = []
+        self._state_waiters: list[Future] = []
+        self.create_timer(self.cfg.dt, self._tick, callback_group=MutuallyExclusiveCallbackGroup())
+        # Reentrant: a goal callback awaiting the first joint_states holds the server's group, and in the
+        # node's default group it would block the joint_states subscription it waits for.
+        self._server = ActionServer(
+            self, Zx200ArmMove, "arm_controller/move", execute_callback=self._execute,
+            goal_callback=self._on_goal, cancel_callback=lambda _h: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup(),
+        )
+        self.get_logger().info(f"zx200_arm_controller ready at {self.cfg.rate_hz} Hz")
+
+    def _on_state(self, msg: JointState) -> None:
+        idx = {n: i for i, n in enumerate(msg.name)}
+        if not all(n in idx for n in JOINTS):
+            return
+        q = np.array([msg.position[idx[n]] for n in JOINTS])
+        # no velocities (a driver that reports positions only): the controller predicts without them
+        dq = np.array([msg.velocity[idx[n]] for n in JOINTS]) if len(msg.velocity) == len(msg.name) else None
+        self._q, self._dq = q, dq
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._q_stamp = stamp if stamp > 0 else None
+        self._wake(self._state_waiters)
+
+    @staticmethod
+    def _wake(waiters: list) -> None:
+        pending = list(waiters)
+        waiters.clear()
+        for future in pending:
+            if not future.done():
+                future.set_result(True)
+
+    def _next_tick(self) -> Future:
+        future = Future()
+        self._tick_waiters.append(future)
+        return future
+
+    def _tick(self) -> None:
+        q, dq = self._q, self._dq
+        if q is None:
+            return
+        # The ROS clock (simulated time in the launches): the controller advances its Smith
+        # predictor, integrators and reference by the time that really passed, so late or
+        # skipped ticks under CPU load do not corrupt the prediction (issue 9: swing stuck off).
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self._tick_stats is not None:
+            self._tick_stats.tick(now, self._q_stamp)
+        u = self.ctl.step(q, dq, now=now)
+        msg = JointCmd()
+        msg.joint_name = list(JOINTS)
+        msg.control_type = JointCmd.VELOCITY
+        msg.velocity = [float(v) for v in u]
+        self._pub.publish(msg)
+        self._wake(self._tick_waiters)
+
+    async def _on_goal(self, goal) -> GoalResponse:  # noqa: ANN001
+        # Right after start-up the first joint_states may still be on its way (the plant, the CAN
+        # converter and this node start together): wait a bounded time (wall clock) before refusing.
+        if self._q is None:
+            waiter = Future()
+            self._state_waiters.append(waiter)
+            timer = self.create_timer(JOINT_STATES_WAIT_S, lambda: waiter.done() or waiter.set_result(False),
+                                      clock=Clock(clock_type=ClockType.STEADY_TIME))
+            await waiter
+            timer.cancel()
+            self.destroy_timer(timer)
+        if self._q is None:
+            self.get_logger().warning(f"goal rejected: no joint_states received within {JOINT_STATES_WAIT_S:g} s")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    async def _execute(self, handle):  # noqa: ANN001, ANN202
+        result = Zx200ArmMove.Result()
+        try:
+            targets = targets_from_segments(handle.request.segments)
+        except ValueError as exc:
+            self.get_logger().warning(f"goal rejected before motion: {exc}")
+            handle.abort()
+            result.error_code.val = codes.INVALID_GOAL
+            result.message = str(exc)
+            return result
+        self.ctl.start(targets)
+        self._tick_stats = TickStats(self.cfg.dt)
+        canceling = False
+        last_feedback = -1e9
+        # (label, start) of each segment in ROS-clock seconds: logged at the end, where a motion's time went
+        spans: list[list] = []
+        while True:
+            await self._next_tick()
+            st = self.ctl.status
+            label = "stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}")
+            if st.result is None and (not spans or spans[-1][0] != label):  # ended: idle, no segment
+                spans.append([label, self.get_clock().now().nanoseconds * 1e-9])
+            if handle.is_cancel_requested and not canceling:
+                self.ctl.stop("canceled")
+                canceling = True
+                st = self.ctl.status
+            if st.result is not None:
+                break
+            if time.monotonic() - last_feedback < FEEDBACK_PERIOD_S:
+                continue
+            last_feedback = time.monotonic()
+            fb = Zx200ArmMove.Feedback()
+            stopping = st.mode == "stopping"
+            fb.segment = 0 if stopping else int(st.segment)
+            fb.label = "" if stopping else st.label
+            fb.state = "stopping" if stopping else f"{st.label or 'moving'} ({st.segment}/{st.segments})"
+            fb.distance_remaining = float(st.distance_remaining)
+            handle.publish_feedback(fb)
+        result.error_code.val = int(st.result)
+        result.message = st.message
+        ends = [start for _, start in spans[1:]] + [self.get_clock().now().nanoseconds * 1e-9]
+        took = f"after {ends[-1] - spans[0][1]:.1f} s; segments [s]: " if spans else "at once"
+        stats, self._tick_stats = self._tick_stats, None
+        self.get_logger().info(
+            f"goal ended {st.result} ({st.message}) {took}"
+            + ", ".join(f"{label} {end - start:.1f}" for (label, start), end in zip(spans, ends, strict=True))
+            + (f"; control loop: {stats.summary()}" if stats else "")
+        )
+        if st.result == codes.SUCCESS:
+            handle.succeed()
+        elif st.result == codes.CANCELED and handle.is_cancel_requested:
+            handle.canceled()
+        else:
+            handle.abort()
+        return result
+
+
+def main() -> int:
+    """Console script ``zx200_arm_controller``."""
+    return run_node(ArmControllerNode, executor="single")

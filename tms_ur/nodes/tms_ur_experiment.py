@@ -1,0 +1,281 @@
+"""``tms_ur_experiment``: starts the earthwork tasks, shows progress, ends the run and writes the report.
+
+It is the job node of ``config/launch/paper_experiment.yaml`` (``on_exit: shutdown``):
+
+1. waits until the scheduler and the plant are up, then publishes ``task_ids`` on ``/tms_ts/start``;
+2. prints a progress line every ``progress_period_s`` (wall): cycle n, each task's running leaves
+   (the phase of each machine), soil moved, simulated time and real-time factor;
+3. after ``cycles`` haul cycles (soil reached the dump site that many times) it clears
+   ``CONTINUE_FLG`` in the global-blackboard record ``blackboard_record`` so both tasks finish their
+   current cycle and end; it also ends when every task has ended on its own (mound depleted);
+   when a task FAILS it cancels the others on ``/tms_ts/cancel`` (the partner would wait for a flag
+   that never comes) and ends with the failure's message;
+4. writes ``runs/<timestamp>/`` (metrics.json, PNG plots, index.html) and exits 0 when every task
+   ended SUCCESS, 1 otherwise (or on ``timeout_s`` of simulated time).
+
+Inputs: ``/clock`` (as the node clock: ``use_sim_time`` must be true), ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
+``/sim/truth/zx200/bucket_tip``, ``/zx200/joint_states`` (measured, for the end-effector error),
+``/ic120/odometry/global`` (EKF estimate, for the localisation error), and the flags of
+``blackboard_record`` from tms_db.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PointStamped, PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Int32
+
+from tms_common.config import repo_root
+from tms_common.errors import ConfigError
+from tms_common.node import run_node
+from tms_common.params import startup_parameters
+from tms_model.geometry import yaw_from_quaternion
+from tms_model.site import load_site
+from tms_msg.msg import TaskIds, TaskStatus
+from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
+
+STATE_NAMES = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
+DONE = TASK_DONE
+# Action servers the paper trees need (contracts D and E): planning and subtask servers of both machines.
+DEFAULT_ACTIONS = (
+    "/zx200/tms_rp_zx200_change_pose", "/zx200/tms_rp_zx200_excavate_simple", "/zx200/tms_rp_zx200_release_simple",
+    "/ic120/follow_waypoints", "/ic120/navigate_to_pose", "/ic120/set_dump_angle",
+    "/zx200/subtask_zx200_change_pose", "/zx200/subtask_zx200_excavate_simple", "/zx200/subtask_zx200_release_simple",
+    "/ic120/st_ic120_follow_waypoints", "/ic120/st_ic120_navigate_anywhere", "/ic120/st_ic120_release_soil",
+)
+
+
+class ExperimentNode(Node):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("tms_ur_experiment", **kwargs)
+        d = startup_parameters(self)
+        self.task_ids = [int(i) for i in d("task_ids", [1, 2]).value]
+        self.cycles_target = int(d("cycles", 3).value)
+        self.record = d("blackboard_record", "PAPER_BLACKBOARD").value
+        self.timeout = float(d("timeout_s", 3600.0).value)
+        self.progress_period = float(d("progress_period_s", 2.0).value)
+        # The flags are polled from the DB (no change stream in the embedded store): fast enough to see
+        # LOADED_FLG's short true phase, which a 5 Hz poll missed.
+        flags_period = float(d("flags_period_s", 0.05).value)
+        # Tasks start only once every planning and subtask action server is on the graph: with the
+        # launcher's parallel start-up a leaf sent before its server exists fails the task at once.
+        self.wait_for_actions = [str(a) for a in d("wait_for_actions", list(DEFAULT_ACTIONS)).value]
+        runs = Path(d("runs_dir", "runs").value)
+        self.run_dir = (runs if runs.is_absolute() else repo_root() / runs) / datetime.now().strftime("%Y%m%d-%H%M%S")
+        self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
+        self.rec = ExperimentRecorder()
+        self.rec.wall_start = time.monotonic()
+        if not self.get_parameter("use_sim_time").value:
+            raise ConfigError("tms_ur_experiment measures simulated time: run it with use_sim_time:=true "
+                              "(sim_plant publishes /clock)")
+        self.tasks: dict[int, dict] = {}
+        self.started = False
+        self.stopping = False
+        self.exit_code: int | None = None
+        self._last_progress = 0.0
+        self._t0 = (time.monotonic(), 0.0)  # (wall, sim) when the tasks were started
+        self._zx200_base: tuple[float, float, float] | None = None
+        self._joints: dict[str, float] = {}
+        from tms_model.excavator.kinematics import JOINTS, load_kinematics
+
+        self._kin, self._joint_order = load_kinematics(), JOINTS
+        self._np = np
+        self.site = load_site()
+        self._store = None
+        self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
+        reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", reliable)
+        self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
+        self.create_subscription(Float64MultiArray, "/sim/truth/soil", self._on_soil, 10)
+        for m in ("ic120", "zx200"):
+            self.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: self._on_pose(m, msg), 10)
+        self.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", self._on_tip, 10)
+        self.create_subscription(JointState, "/zx200/joint_states", self._on_joints, 10)
+        self.create_subscription(Odometry, "/ic120/odometry/global", self._on_estimate, 10)
+        self.create_timer(flags_period, self._sample_flags)
+        self.create_timer(0.2, self._tick)
+
+    # -- inputs ---------------------------------------------------------------------------
+    @property
+    def sim_t(self) -> float:
+        """Simulated time [s] (the node clock follows /clock; 0 until the first one arrives). Not a /clock
+        subscription of our own: the time source already has one, and every callback costs on 2 cores."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_status(self, msg: TaskStatus) -> None:
+        for t in msg.tasks:
+            if t.task_id in self.task_ids:
+                state = STATE_NAMES.get(t.state, str(t.state))
+                self.tasks[t.task_id] = {"state": state, "running": list(t.running_leaves), "message": t.message}
+                self.rec.on_task_state(self.sim_t, t.task_id, state)
+                self.rec.on_running_leaves(self.sim_t, t.task_id, list(t.running_leaves))
+
+    def _on_soil(self, msg: Float64MultiArray) -> None:
+        labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+        v = dict(zip(labels, msg.data, strict=False))
+        if {"mound", "bucket", "vessel", "dumped"} <= v.keys():
+            self.rec.on_soil(self.sim_t, v["mound"], v["bucket"], v["vessel"], v["dumped"])
+
+    def _stamp(self, header) -> float:  # noqa: ANN001
+        """A message's stamp [s of simulated time]; this node's clock when it is unset."""
+        if header.stamp.sec or header.stamp.nanosec:
+            return header.stamp.sec + header.stamp.nanosec * 1e-9
+        return self.sim_t
+
+    def _on_pose(self, machine: str, msg: PoseStamped) -> None:
+        p = msg.pose.position
+        yaw = yaw_from_quaternion(msg.pose.orientation)
+        self.rec.on_truth_pose(self._stamp(msg.header), machine, p.x, p.y, yaw)
+        if machine == "zx200":
+            self._zx200_base = (p.x, p.y, yaw)
+
+    def _on_estimate(self, msg: Odometry) -> None:
+        p = msg.pose.pose.position
+        self.rec.on_estimated_pose(self._stamp(msg.header), "ic120", p.x, p.y)
+
+    def _on_joints(self, msg: JointState) -> None:
+        """End-effector estimate: FK of the joint angles measured over CAN, at their stamp.
+
+        Only a message carrying every front joint counts: the converter publishes its joint sets
+        separately, and another set's stamp is not the time of the front angles."""
+        self._joints = dict(zip(msg.name, msg.position, strict=False))
+        if self._zx200_base is None or not all(j in self._joints for j in self._joint_order):
+            return
+        q = self._np.array([self._joints[j] for j in self._joint_order])
+        local = self._kin.tip_position(q)
+        bx, by, byaw = self._zx200_base
+        c, s = math.cos(byaw), math.sin(byaw)
+        self.rec.on_estimated_tip(self._stamp(msg.header), bx + c * local[0] - s * local[1],
+                                  by + s * local[0] + c * local[1])
+
+    def _on_tip(self, msg: PointStamped) -> None:
+        self.rec.on_truth_tip(self._stamp(msg.header), msg.point.x, msg.point.y)
+
+    # -- supervision ----------------------------------------------------------------------
+    def _db(self):  # noqa: ANN202
+        if self._store is None:
+            from tms_db import open_store
+
+            self._store = open_store(uri=self.db_uri or None, path=self.db_path or None)
+        return self._store
+
+    def _sample_flags(self) -> None:
+        if self.exit_code is not None:
+            return
+        try:
+            doc = self._db().get_record(self.record)
+        except KeyError:
+            return  # not seeded yet: the tasks cannot start either
+        self.rec.on_flags(self.sim_t, {k: v for k, v in doc.items() if k.endswith("_FLG") and isinstance(v, bool)})
+
+    def _tick(self) -> None:
+        if self.exit_code is not None:
+            return
+        if not self.started:
+            if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0 and not self._missing_actions():
+                self.pub_start.publish(TaskIds(task_ids=self.task_ids))
+                self.started = True
+                self._t0 = (time.monotonic(), self.sim_t)
+                self.get_logger().info(f"started tasks {self.task_ids}")
+                print(f"[experiment] started tasks {self.task_ids}", flush=True)
+            return
+        now = time.monotonic()
+        if now - self._last_progress >= self.progress_period:
+            self._last_progress = now
+            self._progress()
+        ended = [tid for tid in self.task_ids if self.tasks.get(tid, {}).get("state") in DONE]
+        if not self.stopping and (self.rec.cycles >= self.cycles_target or self._failed()):
+            self.stopping = True
+            reason = "a task failed" if self._failed() else f"{self.rec.cycles} cycle(s) done"
+            if self._failed():
+                for tid, info in sorted(self.tasks.items()):
+                    if info.get("state") == "FAILURE":
+                        print(f"[experiment] task {tid} FAILED: {info.get('message', '')}", flush=True)
+                states = {tid: info.get("state", "") for tid, info in self.tasks.items()}
+                for tid in tasks_to_cancel_after_failure(self.task_ids, states):
+                    print(f"[experiment] canceling task {tid}: its partner failed", flush=True)
+                    self.pub_cancel.publish(Int32(data=tid))
+            print(f"[experiment] {reason}: clearing CONTINUE_FLG", flush=True)
+            self._db().set_fields(self.record, {"CONTINUE_FLG": False})
+        if len(ended) == len(self.task_ids):
+            self._finish()
+        elif self.sim_t - (self.rec.sim_start or self.sim_t) > self.timeout:
+            print(f"[experiment] timeout: {self.timeout:g} s of simulated time", flush=True)
+            self._finish(timed_out=True)
+
+    def _missing_actions(self) -> list[str]:
+        # the server publishes <action>/_action/status (clients only subscribe to it)
+        missing = [a for a in self.wait_for_actions if self.count_publishers(f"{a}/_action/status") == 0]
+        if missing and time.monotonic() - self._last_progress >= self.progress_period:
+            self._last_progress = time.monotonic()
+            print(f"[experiment] waiting for action server(s): {', '.join(missing)}", flush=True)
+        return missing
+
+    def _failed(self) -> bool:
+        return any(t.get("state") == "FAILURE" for t in self.tasks.values())
+
+    def _progress(self) -> None:
+        wall = time.monotonic() - self._t0[0]
+        rtf = (self.sim_t - self._t0[1]) / wall if wall > 0 else 0.0
+        phases = "; ".join(
+            f"task {tid} {info['state']}: {', '.join(info['running']) or '-'}" for tid, info in sorted(self.tasks.items())
+        )
+        print(
+            f"[experiment] cycle {self.rec.cycles}/{self.cycles_target} | passes {len(self.rec.pass_events)} | "
+            f"soil moved {self.rec.soil_moved():.2f} m3 | t_sim {self.sim_t:.0f} s ({rtf:.1f}x) | {phases}",
+            flush=True,
+        )
+
+    def _finish(self, timed_out: bool = False, stopped: bool = False) -> None:
+        # Real-time factor over the run itself (from the start command), not the nodes' start-up.
+        self.rec.wall_start, self.rec.sim_start = self._t0
+        self.rec.wall_end, self.rec.sim_end = time.monotonic(), self.sim_t
+        self.rec.ended = "stopped" if stopped else "timeout" if timed_out else "done"
+        title = "Paper experiment: two-machine earthwork" + (" (stopped before the end)" if stopped else "")
+        index = self.rec.report(self.run_dir, site=self.site, title=title)
+        metrics = self.rec.metrics()
+        if stopped:
+            self.exit_code = 0
+            print(f"[experiment] STOPPED before the end: {metrics['cycles']} cycle(s), {metrics['soil_moved_m3']} m3 "
+                  f"moved, real-time factor {metrics['real_time_factor']}, report {index}", flush=True)
+            return
+        ok = not timed_out and all(self.tasks.get(t, {}).get("state") == "SUCCESS" for t in self.task_ids)
+        for tid in self.task_ids:
+            info = self.tasks.get(tid, {})
+            print(f"[experiment] task {tid}: {info.get('state')} {info.get('message', '')}", flush=True)
+        print(
+            f"[experiment] {'DONE' if ok else 'FAILED'}: {metrics['cycles']} cycle(s), {metrics['soil_moved_m3']} m3 moved, "
+            f"real-time factor {metrics['real_time_factor']}, load pass {metrics['load_pass_time_s']}, report {index}",
+            flush=True,
+        )
+        self.exit_code = 0 if ok else 1
+        raise SystemExit(self.exit_code)
+
+    def destroy_node(self) -> None:
+        """Stopped (SIGINT/SIGTERM) during a run: write the report of what was recorded so far."""
+        if self.started and self.exit_code is None:
+            try:
+                self._finish(stopped=True)
+            except Exception as exc:  # noqa: BLE001 - say what was lost, then shut down anyway
+                print(f"[experiment] report of the stopped run not written: {type(exc).__name__}: {exc}", flush=True)
+        super().destroy_node()
+
+
+def main() -> int:
+    # stop_in_context: a stop mid-run still writes the report (destroy_node), with the node clock's last time
+    return run_node(ExperimentNode, stop_in_context=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,274 @@
+"""``tms_ur_panel``: the web control panel and live site view.
+
+Serves ``tms_ur/web/index.html`` over HTTP and a websocket at ``/ws`` on ``host:port`` (loopback by
+default). The websocket pushes the site snapshot at ``rate_hz`` (>= 5 Hz) and takes commands
+(``start``, ``cancel``, ``emergency``, ``confirm``) that become ROS messages:
+
+| command | ROS |
+|---|---|
+| start task ids | ``/tms_ts/start`` (tms_msg/TaskIds) |
+| cancel one id | ``/tms_ts/cancel`` (std_msgs/Int32) |
+| emergency stop | ``/emergency_signal`` (std_msgs/Bool true) |
+| confirm | ``/tms_ts/confirm`` (std_msgs/String "yes"), answers WaitForClick nodes |
+
+Live view inputs: ``/tms_ts/status`` (tms_msg/TaskStatus), global-blackboard records read from tms_db
+(``flag_records``), machine poses (``pose_topics``: geometry_msgs/PoseStamped), the IC120 plan
+(``plan_topic``: nav_msgs/Path), ZX200 joints (``joint_states_topic``), soil (``soil_topic``: std_msgs/Float64MultiArray with comma-separated labels in layout.dim[0]).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import json
+import threading
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Path as PathMsg
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64MultiArray, Int32, String
+
+from tms_common.errors import ConfigError
+from tms_common.node import run_node
+from tms_common.params import startup_parameters
+from tms_model.excavator.kinematics import load_kinematics
+from tms_model.geometry import yaw_from_quaternion
+from tms_msg.msg import TaskIds, TaskStatus
+from tms_ur.panel_core import CommandError, PanelConfig, SiteState, arm_side_view, authorize, parse_command
+
+WEB_DIR = Path(__file__).parent.parent / "web"
+STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/panel.js": ("panel.js", "text/javascript"),
+          "/panel.css": ("panel.css", "text/css")}
+
+
+state_names = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
+
+
+class PanelNode(Node):
+    """ROS side of the panel: collects the live view into a SiteState and publishes commands."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("tms_ur_panel", **kwargs)
+        d = startup_parameters(self)
+        self.config = PanelConfig(
+            host=d("host", "127.0.0.1").value,
+            port=int(d("port", 8088).value),
+            token=d("token", "").value,
+            rate_hz=float(d("rate_hz", 5.0).value),
+            flag_records=tuple(d("flag_records", [""]).value or ()),
+            db_uri=d("db_uri", "").value,
+            db_path=d("db_path", "").value,
+        )
+        pose_topics = d("pose_topics", ["ic120:/sim/truth/ic120/pose", "zx200:/sim/truth/zx200/pose"]).value
+        self.lock = threading.Lock()
+        self.site = SiteState()
+        self.kin = load_kinematics("zx200")
+        self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
+        self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", 10)
+        self.pub_emergency = self.create_publisher(Bool, "/emergency_signal", 10)
+        self.pub_confirm = self.create_publisher(String, "/tms_ts/confirm", 10)
+        self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
+        for entry in pose_topics:
+            machine, _, topic = entry.partition(":")
+            if not topic:
+                raise ConfigError(f"tms_ur_panel: pose_topics entry {entry!r} must be 'machine:/topic'")
+            self.create_subscription(PoseStamped, topic, lambda m, name=machine: self._on_pose(name, m), 10)
+        self.create_subscription(PathMsg, d("plan_topic", "/ic120/plan").value, self._on_plan, 10)
+        self.create_subscription(JointState, d("joint_states_topic", "/zx200/joint_states").value, self._on_joints, 10)
+        self.create_subscription(Float64MultiArray, d("soil_topic", "/sim/truth/soil").value, self._on_soil, 10)
+        self._store = None
+        self._last_messages: dict[int, str] = {}
+        self.create_timer(0.5, self._poll_db)
+        self._web = _WebThread(self)  # last: it serves this node's snapshot and commands
+
+    # -- inputs ---------------------------------------------------------------------------
+    def _on_status(self, msg: TaskStatus) -> None:
+        tasks = []
+        for t in msg.tasks:
+            name = state_names.get(t.state, str(t.state))
+            tasks.append({"task_id": t.task_id, "state": name, "running": list(t.running_leaves),
+                          "message": t.message, "tree": t.tree_snapshot})
+            if t.message and self._last_messages.get(t.task_id) != t.message and name in ("FAILURE", "CANCELED"):
+                self._last_messages[t.task_id] = t.message
+                with self.lock:
+                    self.site.event("error" if name == "FAILURE" else "info", f"task {t.task_id}: {name}: {t.message}")
+        with self.lock:
+            self.site.tasks = tasks
+
+    def _on_pose(self, machine: str, msg: PoseStamped) -> None:
+        p = msg.pose.position
+        with self.lock:
+            self.site.set_pose(machine, p.x, p.y, yaw_from_quaternion(msg.pose.orientation))
+
+    def _on_plan(self, msg: PathMsg) -> None:
+        pts = [[round(ps.pose.position.x, 2), round(ps.pose.position.y, 2)] for ps in msg.poses]
+        with self.lock:
+            self.site.plan = pts[:: max(1, len(pts) // 400)]
+
+    def _on_joints(self, msg: JointState) -> None:
+        joints = dict(zip(msg.name, msg.position, strict=False))
+        with self.lock:
+            self.site.arm = arm_side_view(joints, self.kin)
+            self.site.swing = float(joints.get("swing_joint", 0.0))
+
+    def _on_soil(self, msg: Float64MultiArray) -> None:
+        """Soil volumes [m^3]; labels come from ``layout.dim[0].label`` (comma-separated)."""
+        labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+        with self.lock:
+            self.site.soil = {name: round(float(v), 3) for name, v in zip(labels, msg.data, strict=False)}
+
+    def _poll_db(self) -> None:
+        """Task catalogue and global-blackboard flags from tms_db (2 Hz)."""
+        try:
+            if self._store is None:
+                from tms_db import open_store
+
+                self._store = open_store(uri=self.config.db_uri or None, path=self.config.db_path or None)
+            catalogue = [{"task_id": t["task_id"], "description": t.get("description", ""),
+                          "model_name": t.get("model_name", "")} for t in self._store.list_tasks()]
+            flags = {}
+            for record in self.config.flag_records:
+                if not record:
+                    continue
+                try:
+                    doc = self._store.get_record(record)
+                except KeyError:
+                    continue
+                flags[record] = {k: v for k, v in doc.items()
+                                 if k not in ("_id", "record_name", "model_name", "type", "timestamps", "description")
+                                 and isinstance(v, (bool, int, float, str))}
+        except Exception as exc:  # noqa: BLE001 - the panel keeps serving; the problem is shown in its log
+            with self.lock:
+                self.site.event("error", f"database: {type(exc).__name__}: {exc}")
+            return
+        with self.lock:
+            self.site.task_catalogue = catalogue
+            self.site.flags = flags
+
+    # -- outputs --------------------------------------------------------------------------
+    def execute(self, text: str) -> str:
+        """Run one browser command; returns a human-readable acknowledgement."""
+        cmd = parse_command(text)
+        if cmd.op == "start":
+            self.pub_start.publish(TaskIds(task_ids=list(cmd.task_ids)))
+            return f"start requested for task(s) {', '.join(map(str, cmd.task_ids))}"
+        if cmd.op == "cancel":
+            self.pub_cancel.publish(Int32(data=cmd.task_ids[0]))
+            return f"cancel requested for task {cmd.task_ids[0]}"
+        if cmd.op == "emergency":
+            self.pub_emergency.publish(Bool(data=True))
+            return "EMERGENCY STOP sent on /emergency_signal"
+        self.pub_confirm.publish(String(data="yes"))
+        return "confirmation sent"
+
+    def snapshot(self) -> str:
+        with self.lock:
+            return json.dumps(self.site.snapshot())
+
+    def destroy_node(self) -> None:
+        self._web.close()
+        super().destroy_node()
+
+
+class _WebThread:
+    """The HTTP/websocket server on its own asyncio loop and thread, so the node spins like any other.
+
+    The constructor returns once the socket is bound, and raises :class:`ConfigError` when it cannot be.
+    """
+
+    def __init__(self, node: PanelNode) -> None:
+        self.loop = asyncio.new_event_loop()
+        self._ready: concurrent.futures.Future = concurrent.futures.Future()
+        self._task: asyncio.Task | None = None
+        self._thread = threading.Thread(target=self._run, args=(node,), daemon=True, name="tms-ur-web")
+        self._thread.start()
+        try:
+            self._ready.result(timeout=10.0)
+        except OSError as exc:
+            raise ConfigError(f"tms_ur_panel: cannot serve on {node.config.host}:{node.config.port}: {exc}") from None
+
+    def _run(self, node: PanelNode) -> None:
+        asyncio.set_event_loop(self.loop)
+        self._task = self.loop.create_task(_serve(node, self._ready))
+        try:
+            self.loop.run_until_complete(self._task)
+        except asyncio.CancelledError:
+            pass
+        except Exception as exc:  # noqa: BLE001 - a bind error goes to the constructor; later ones to the log
+            if not self._ready.done():
+                self._ready.set_exception(exc)
+            else:
+                node.get_logger().error(f"web server stopped: {type(exc).__name__}: {exc}")
+        finally:
+            self.loop.close()
+
+    def close(self) -> None:
+        if self._thread.is_alive():
+            self.loop.call_soon_threadsafe(lambda: self._task is not None and self._task.cancel())
+            self._thread.join(timeout=2.0)
+
+
+
+async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN001
+    from websockets.asyncio.server import serve
+    from websockets.datastructures import Headers
+    from websockets.http11 import Response
+
+    config: PanelConfig = node.config
+    clients: set = set()
+
+    def process_request(connection, request):  # noqa: ANN001, ANN202
+        url = urlsplit(request.path)
+        token = parse_qs(url.query).get("token", [None])[0]
+        ok, reason = authorize(config, connection.remote_address[0], token)
+        if not ok:
+            node.get_logger().warning(f"refused {connection.remote_address[0]} {url.path}: {reason}")
+            return connection.respond(403, f"403 Forbidden: {reason}\n")
+        if url.path == "/ws":
+            return None
+        if url.path in STATIC:
+            name, ctype = STATIC[url.path]
+            body = (WEB_DIR / name).read_bytes()
+            return Response(200, "OK", Headers([("Content-Type", ctype), ("Content-Length", str(len(body))),
+                                                ("Cache-Control", "no-store")]), body)
+        return connection.respond(404, "404 Not Found\n")
+
+    async def handler(ws) -> None:  # noqa: ANN001
+        clients.add(ws)
+        try:
+            async for text in ws:
+                try:
+                    reply = {"type": "ack", "ok": True, "text": node.execute(text)}
+                except CommandError as exc:
+                    reply = {"type": "ack", "ok": False, "text": str(exc)}
+                with node.lock:
+                    node.site.event("info" if reply["ok"] else "error", reply["text"])
+                await ws.send(json.dumps(reply))
+        finally:
+            clients.discard(ws)
+
+    async def broadcast() -> None:
+        period = 1.0 / config.rate_hz
+        while True:
+            if clients:
+                text = node.snapshot()
+                await asyncio.gather(*(c.send(text) for c in list(clients)), return_exceptions=True)
+            await asyncio.sleep(period)
+
+    async with serve(handler, config.host, config.port, process_request=process_request) as server:
+        node.get_logger().info(f"panel on http://{config.host}:{config.port}/")
+        print(f"tms_ur_panel: serving http://{config.host}:{config.port}/", flush=True)
+        broadcaster = asyncio.get_running_loop().create_task(broadcast())
+        ready.set_result(True)
+        try:
+            await server.serve_forever()
+        finally:
+            broadcaster.cancel()
+
+
+def main() -> int:
+    return run_node(PanelNode)
