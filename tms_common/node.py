@@ -9,8 +9,8 @@ executor's wait set (:mod:`tms_common.qos_events`: 0.58-0.68 of the executor CPU
 ``python -m tests.bench executor_wake``). A node on simulated time gets its ``/clock`` from a helper thread
 (:mod:`tms_common.sim_clock`), so its executor wakes for its timers and messages, not for every clock tick.
 
-Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``). DESIGN.md §5 measured the
-EventsExecutor at about a third of the CPU of the SingleThreadedExecutor for a 100 Hz timer; nodes
+Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``). The EventsExecutor used about a
+third of the CPU of the SingleThreadedExecutor for a 100 Hz timer; nodes
 with high-rate timers may opt in with ``executor="events"``.
 """
 

@@ -1,6 +1,6 @@
 """The embedded backend: a small document store on SQLite, safe across processes.
 
-Why not montydb: DESIGN §5 measured montydb (sqlite storage) losing ``$inc`` updates across processes
+Why not montydb: montydb was measured (sqlite storage) losing ``$inc`` updates across processes
 (4 x 1,000 increments left the counter at 177). Here every document is one row holding its JSON body,
 and every read-modify-write (set fields, compare-and-set, increment, add task) runs inside one
 ``BEGIN IMMEDIATE`` transaction, so writers in different processes serialise on SQLite's write lock and

@@ -1,6 +1,6 @@
 """Shape rules of the original ROS2-TMS documents, and helpers that read fields with clear errors.
 
-Documents follow reference/tms_reference.md §2: tasks ``{task_id, type: "task", model_name,
+Documents follow the original's tms_db (irvs/ros2_tms_for_construction): tasks ``{task_id, type: "task", model_name,
 description, task_sequence}``; parameter records ``{model_name?, type?, record_name, ...payload}``.
 Payload families checked here:
 

@@ -59,7 +59,7 @@ def main() -> int:
             print("no result", flush=True)
             return 4
         names = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_ABORTED: "ABORTED"}
-        print(f"status {names.get(res.status, res.status)} success={res.result.success} message={res.result.message!r}", flush=True)
+        print(f"status {names.get(res.status, res.status)} error_code={res.result.error_code} error_msg={res.result.error_msg!r}", flush=True)
         expected = GoalStatus.STATUS_CANCELED if opts.cancel_after is not None else GoalStatus.STATUS_SUCCEEDED
         return 0 if res.status == expected else 5
     finally:

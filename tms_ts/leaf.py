@@ -7,9 +7,10 @@ is this one class; ``model_name`` and ``subtask_name`` must be literals (read on
 constructor did), ``record_name`` may be a ``{key}`` resolved at each start.
 
 Protocol (reference §4.2, made non-blocking): first tick sends the goal -> RUNNING; not accepted
-within ``ctx.accept_timeout_s`` -> cancel, FAILURE; rejected -> FAILURE naming the action and the
-record (and the server's reason when it published one); SUCCEEDED -> SUCCESS; ABORTED/CANCELED ->
-FAILURE with the server's message.
+within ``ctx.accept_timeout_s`` -> cancel, FAILURE; rejected (the server is stopping) -> FAILURE naming
+the action and the record; SUCCEEDED -> SUCCESS; ABORTED/CANCELED -> FAILURE. Logic reads only the goal's
+status, its typed ``error_code`` (tms_msg/action/Subtask constants) and what the leaf observes itself; the
+server's ``message`` (or, for a result without one, its last feedback) only goes into the FAILURE text.
 
 Halt never blocks the tick: it requests the cancel and registers a :class:`PendingStop` in
 ``ctx.stops``. :func:`poll_stops` (called by the manager every tick) resolves it when the goal ends
@@ -26,8 +27,10 @@ the ROS graph and, when the port offers ``subtask_server_alive``, by its heartbe
 unavailable for ``ctx.server_lost_s`` (the process died, e.g. SIGKILL) the leaf latches
 ``/<model_name>/emg_stop`` (the machine's state is unknown: nothing may keep driving it; an operator
 clears the latch), records the action in ``ctx.lost_servers`` and ends FAILURE naming the server.
-A goal ABORTED by its subtask server because the *planning* server was lost ("planning server X lost
-while running ...", emg_stop latched there) is recorded in ``ctx.lost_servers`` the same way.
+A goal ABORTED because the subtask's *planning* server was lost (the subtask server latched emg_stop)
+is recorded in ``ctx.lost_servers`` the same way, under the planning action's name (its row in
+:mod:`tms_ts.subtask_specs`): when its code is SERVER_LOST, or when the leaf saw that planning server on
+the graph during the goal (the port's optional ``planning_server_ready``) and no longer sees it.
 
 The ROS side is the :class:`RosPort` protocol, implemented by the manager node with rclpy; this
 module imports no rclpy.
@@ -40,6 +43,8 @@ from typing import Protocol
 
 from tms_ts.bt.core import FAILURE, RUNNING, SUCCESS, Port, StatefulNode, Status
 from tms_ts.errors import TreeRuntimeError
+from tms_ts.outcomes import SERVER_LOST, code_name
+from tms_ts.subtask_specs import SUBTASKS
 
 __all__ = ["SubtaskGoal", "RosPort", "LeafNode", "PendingStop", "poll_stops"]
 
@@ -48,9 +53,11 @@ TERMINAL = frozenset({REJECTED, SUCCEEDED, ABORTED, CANCELED})
 
 
 class SubtaskGoal(Protocol):
-    """One goal in flight. ``state`` is pending|accepted|rejected|succeeded|aborted|canceled."""
+    """One goal in flight. ``state`` is pending|accepted|rejected|succeeded|aborted|canceled; ``error_code``
+    the result's code (0 until a result came); ``message`` and ``feedback`` are for people only."""
 
     state: str
+    error_code: int
     message: str
     feedback: str
 
@@ -66,9 +73,9 @@ class RosPort(Protocol):
 
     def emergency_stop(self, model_name: str, reason: str) -> None: ...
 
-    # optional: ``lock(model_name, engaged, reason)`` (hydraulic lock; ports without it skip locking)
-
-    def rejection_reason(self, action: str, record_name: str) -> str | None: ...
+    # optional: ``lock(model_name, engaged, reason)`` (hydraulic lock; ports without it skip locking),
+    # ``subtask_server_alive(model_name) -> bool | None`` (heartbeat) and
+    # ``planning_server_ready(model_name, subtask_name) -> bool | None`` (the subtask's planning server on the graph)
 
     def confirm_seq(self) -> int: ...
 
@@ -132,6 +139,10 @@ class LeafNode(StatefulNode):
         self.goal: SubtaskGoal | None = None
         self.record = ""
         self.lost_since: float | None = None
+        spec = SUBTASKS.get(self.subtask_name)
+        #: the planning action this subtask drives (None for a subtask this build has no row for)
+        self.planning_action = f"/{self.model_name}/{spec.planning_action}" if spec is not None else None
+        self.planning_seen = False
         self.ctx.leaves.append(self)
 
     def _ros(self):  # noqa: ANN202
@@ -156,6 +167,7 @@ class LeafNode(StatefulNode):
         if lock is not None:
             lock(self.model_name, False, f"new goal {self.action}")
         self.lost_since = None
+        self.planning_seen = False
         self.goal = ros.send_subtask_goal(self.model_name, self.subtask_name, self.record)
         self.sent_at = self.ctx.clock()
         self.feedback_message = f"sent {self.action} record '{self.record}'"
@@ -196,6 +208,8 @@ class LeafNode(StatefulNode):
                     return self._fail(reason + f": /{self.model_name}/emg_stop latched")
             else:
                 self.lost_since = None
+            if not self.planning_seen:
+                self.planning_seen = self._planning_ready() is True
             self.feedback_message = f"{self.action} '{self.record}': {goal.feedback or 'running'}"
             return RUNNING
         if state == SUCCEEDED:
@@ -203,13 +217,20 @@ class LeafNode(StatefulNode):
             self.goal = None
             return SUCCESS
         if state == REJECTED:
-            reason = self._ros().rejection_reason(self.action, self.record) or goal.message
-            detail = f": {reason}" if reason else ""
-            return self._fail(f"{self.action} rejected the goal for record '{self.record}'{detail}")
-        if state == ABORTED and "lost while running" in goal.message:
-            # the subtask server lost its planning server and latched emg_stop (tms_ts.nodes.subtasks)
-            self.ctx.lost_servers.append(goal.message.split(" lost while running")[0].removeprefix("planning server "))
-        return self._fail(f"{self.action} {state} record '{self.record}': {goal.message}")
+            return self._fail(f"{self.action} rejected the goal for record '{self.record}'")
+        if state == ABORTED and self._planning_lost(goal):
+            self.ctx.lost_servers.append(self.planning_action or f"planning server of {self.action}")
+        reason = goal.message or goal.feedback
+        label = f"{code_name(goal.error_code)}: " if goal.error_code else ""
+        return self._fail(f"{self.action} {state} record '{self.record}': {label}{reason}")
+
+    def _planning_ready(self) -> bool | None:
+        ready = getattr(self._ros(), "planning_server_ready", None)
+        return ready(self.model_name, self.subtask_name) if ready is not None else None
+
+    def _planning_lost(self, goal: SubtaskGoal) -> bool:
+        """The subtask's planning server was lost: its typed code says so, or the leaf saw it go."""
+        return goal.error_code == SERVER_LOST or (self.planning_seen and self._planning_ready() is False)
 
     def on_halted(self) -> None:
         goal = self.goal

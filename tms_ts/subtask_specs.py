@@ -1,9 +1,11 @@
-"""What every subtask reads from its DB record and which planning action it calls (no rclpy).
+"""Every subtask as one row: record -> planning goal data, downstream action and its result check.
 
-``SUBTASKS`` maps a subtask action name (DESIGN §3, reference §4.4/§4.5) to a :class:`SubtaskSpec`:
-the planning action (relative to the machine namespace, contract D), its kind, and ``build(doc,
-record_name) -> dict`` that validates the record and returns the planning goal as plain data.
-A missing or malformed field raises :class:`SubtaskRecordError` naming the record and the field.
+``SUBTASKS`` maps a subtask action name (served at ``/<model_name>/<name>``) to a :class:`SubtaskSpec`,
+the one place a subtask is defined: its machine family, its planning action (relative to the machine
+namespace) and that action's type, ``build(doc, record_name) -> dict`` that validates the record and
+returns the planning goal as plain data, ``goal(plan) -> <action>.Goal`` and ``check(result) -> (ok,
+detail)`` that reads the planning result's own typed code. A missing or malformed field raises
+:class:`SubtaskRecordError` naming the record and the field. Adding a subtask is adding a row.
 
 Planning goal data (``kind`` -> keys):
 
@@ -14,6 +16,8 @@ Planning goal data (``kind`` -> keys):
 * ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
 * ``navigate_to_pose``: ``pose`` {x, y, z, qx..qw}; ``follow_waypoints`` / ``navigate_through_poses``:
   ``poses`` [{x, y, z, qx..qw}, ...] in frame ``map``. ``_deg`` variants give yaw in degrees.
+
+Imports message types only (no rclpy).
 """
 
 from __future__ import annotations
@@ -23,9 +27,22 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from geometry_msgs.msg import Point, Pose, PoseStamped
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from tms_msg.action import (
+    FollowWaypoints,
+    NavigateThroughPoses,
+    NavigateToPose,
+    SetDumpAngle,
+    Zx200ChangePose,
+    Zx200ExcavateSimple,
+    Zx200ReleaseSimple,
+)
+from tms_msg.msg import ErrorCodes, Zx200PositionWithAngle
 from tms_ts.errors import SubtaskRecordError
 
-__all__ = ["SubtaskSpec", "SUBTASKS", "subtasks_for", "ZX200_JOINTS"]
+__all__ = ["SubtaskSpec", "SUBTASKS", "subtasks_for", "ZX200_JOINTS", "change_pose_goal", "zx200_ok", "nav2_ok", "dump_ok"]
 
 ZX200_JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 _QUAT = ("qx", "qy", "qz", "qw")
@@ -161,31 +178,105 @@ def build_poses(kind: str, deg: bool) -> Callable[[dict, str], dict]:
     return build
 
 
+# planning goal data -> goal messages -------------------------------------------------------------
+def _pose(p: dict) -> Pose:
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = p["x"], p["y"], p["z"]
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = p["qx"], p["qy"], p["qz"], p["qw"]
+    return pose
+
+
+def _stamped(p: dict) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id = "map"
+    msg.pose = _pose(p)
+    return msg
+
+
+def _pwa(d: dict) -> Zx200PositionWithAngle:
+    return Zx200PositionWithAngle(position=Point(x=d["x"], y=d["y"], z=d["z"]), theta_w=d["theta_w"],
+                                  offset=d.get("offset", 0.0))
+
+
+def change_pose_goal(plan: dict) -> Zx200ChangePose.Goal:
+    goal = Zx200ChangePose.Goal()
+    if plan["mode"] == "joints":
+        goal.trajectory = JointTrajectory(joint_names=list(plan["joints"]))
+        goal.trajectory.points = [JointTrajectoryPoint(positions=list(plan["joints"].values()))]
+    elif plan["mode"] == "pose":
+        goal.pose_sequence = [_pose(plan["pose"])]
+    else:
+        goal.position_with_angle_sequence = [_pwa(plan["pwa"])]
+    goal.pass_through = bool(plan.get("pass_through", False))
+    goal.theta_w_tolerance = float(plan.get("theta_w_tolerance", 0.0))
+    return goal
+
+
+def _poses_goal(action_type):  # noqa: ANN001, ANN202
+    return lambda plan: action_type.Goal(poses=[_stamped(p) for p in plan["poses"]])
+
+
+# planning results -> (ok, detail for people) ---------------------------------------------------------
+def zx200_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a Zx200* action result
+    """tms_msg/ErrorCodes (the original's TmsRpErrorCodes): SUCCESS or a failure code."""
+    return result.error_code.val == ErrorCodes.SUCCESS, f"error_code {result.error_code.val}: {result.message}"
+
+
+def nav2_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a Nav2-shaped action result
+    """Nav2 ``error_code``: NONE (0) or a failure code."""
+    return result.error_code == 0, f"error_code {result.error_code}: {result.error_msg}"
+
+
+def dump_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - SetDumpAngle.Result
+    """SetDumpAngle (com3_msgs fields): the ``success`` flag."""
+    return bool(result.success), result.message
+
+
 @dataclass(frozen=True)
 class SubtaskSpec:
-    """A subtask: its machine family, planning action (relative name) and record -> goal builder."""
+    """One subtask: machine family, downstream planning action, record -> goal, result check."""
 
     name: str
     machine: str
-    planning_action: str
+    planning_action: str  # relative to /<model_name>
+    action_type: Any  # the planning action's type, e.g. tms_msg.action.Zx200ChangePose
     build: Callable[[dict, str], dict]
+    goal: Callable[[dict], Any]
+    check: Callable[[Any], tuple[bool, str]]
     #: the original non-plan ZX200 change_pose / excavate_simple set LOCK_FLG=false when a result arrives
     clears_lock_flg: bool = False
 
 
+def _excavate_goal(plan: dict) -> Zx200ExcavateSimple.Goal:
+    return Zx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
+
+
+def _nav_pose_goal(plan: dict) -> NavigateToPose.Goal:
+    return NavigateToPose.Goal(pose=_stamped(plan["pose"]))
+
+
+_FW, _NTP = _poses_goal(FollowWaypoints), _poses_goal(NavigateThroughPoses)
 _SPECS = [
-    SubtaskSpec("subtask_zx200_change_pose", "zx200", "tms_rp_zx200_change_pose", build_change_pose, True),
-    SubtaskSpec("subtask_zx200_excavate_simple", "zx200", "tms_rp_zx200_excavate_simple", build_excavate, True),
-    SubtaskSpec("subtask_zx200_release_simple", "zx200", "tms_rp_zx200_release_simple", build_release),
-    SubtaskSpec("st_ic120_follow_waypoints", "ic120", "follow_waypoints", build_poses("follow_waypoints", False)),
-    SubtaskSpec("st_ic120_follow_waypoints_deg", "ic120", "follow_waypoints", build_poses("follow_waypoints", True)),
-    SubtaskSpec("st_ic120_navigate_anywhere", "ic120", "navigate_to_pose", build_nav_pose(False)),
-    SubtaskSpec("st_ic120_navigate_anywhere_deg", "ic120", "navigate_to_pose", build_nav_pose(True)),
-    SubtaskSpec("st_ic120_navigate_through_poses", "ic120", "navigate_through_poses",
-                build_poses("navigate_through_poses", False)),
-    SubtaskSpec("st_ic120_navigate_through_poses_deg", "ic120", "navigate_through_poses",
-                build_poses("navigate_through_poses", True)),
-    SubtaskSpec("st_ic120_release_soil", "ic120", "set_dump_angle", build_dump),
+    SubtaskSpec("subtask_zx200_change_pose", "zx200", "tms_rp_zx200_change_pose", Zx200ChangePose,
+                build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True),
+    SubtaskSpec("subtask_zx200_excavate_simple", "zx200", "tms_rp_zx200_excavate_simple", Zx200ExcavateSimple,
+                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True),
+    SubtaskSpec("subtask_zx200_release_simple", "zx200", "tms_rp_zx200_release_simple", Zx200ReleaseSimple,
+                build_release, lambda plan: Zx200ReleaseSimple.Goal(target_angle=plan["target_angle"]), zx200_ok),
+    SubtaskSpec("st_ic120_follow_waypoints", "ic120", "follow_waypoints", FollowWaypoints,
+                build_poses("follow_waypoints", False), _FW, nav2_ok),
+    SubtaskSpec("st_ic120_follow_waypoints_deg", "ic120", "follow_waypoints", FollowWaypoints,
+                build_poses("follow_waypoints", True), _FW, nav2_ok),
+    SubtaskSpec("st_ic120_navigate_anywhere", "ic120", "navigate_to_pose", NavigateToPose,
+                build_nav_pose(False), _nav_pose_goal, nav2_ok),
+    SubtaskSpec("st_ic120_navigate_anywhere_deg", "ic120", "navigate_to_pose", NavigateToPose,
+                build_nav_pose(True), _nav_pose_goal, nav2_ok),
+    SubtaskSpec("st_ic120_navigate_through_poses", "ic120", "navigate_through_poses", NavigateThroughPoses,
+                build_poses("navigate_through_poses", False), _NTP, nav2_ok),
+    SubtaskSpec("st_ic120_navigate_through_poses_deg", "ic120", "navigate_through_poses", NavigateThroughPoses,
+                build_poses("navigate_through_poses", True), _NTP, nav2_ok),
+    SubtaskSpec("st_ic120_release_soil", "ic120", "set_dump_angle", SetDumpAngle,
+                build_dump, lambda plan: SetDumpAngle.Goal(target_angle=plan["target_angle"]), dump_ok),
 ]
 SUBTASKS: dict[str, SubtaskSpec] = {s.name: s for s in _SPECS}
 

@@ -76,8 +76,8 @@ def _action(domain: int) -> str:
             ex.spin_until_future_complete(fut, timeout_sec=10)
             res_fut = fut.result().get_result_async()
             ex.spin_until_future_complete(res_fut, timeout_sec=10)
-            if not res_fut.result().result.success:
-                raise RuntimeError(f"goal {i} failed: {res_fut.result().result.message}")
+            if res_fut.result().result.error_code != Subtask.Result.NONE:
+                raise RuntimeError(f"goal {i} failed: {res_fut.result().result.error_msg}")
             rtts.append(time.perf_counter() - start)
     finally:
         server.kill()

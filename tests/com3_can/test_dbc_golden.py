@@ -1,4 +1,4 @@
-"""Golden test: our excavator DBC against every row of reference/com3_frames.csv, plus the known vector.
+"""Golden test: our excavator DBC against every row of tests/com3_can/data/com3_frames.csv (the published COM3 layout), plus the known vector.
 
 The csv was generated from the published COM3 excavator DBC; each row is one signal. We check what
 cantools parses from *our* DBC (id, DLC, direction, cycle time, start bit, length, byte order, sign,
@@ -94,7 +94,7 @@ def test_known_vector_velocity_cmd_1() -> None:
 
 
 def test_neutral_raws_are_the_documented_ones() -> None:
-    """opera_machines.md: neutral velocity raw 32000 (00 7D x4); 0 MPa pilot = raw 0; all-zero is not neutral."""
+    """pwri-opera/com3: neutral velocity raw 32000 (00 7D x4); 0 MPa pilot = raw 0; all-zero is not neutral."""
     codec = load_codec("zx200")
     assert codec.encode("Velocity_Cmd_1", codec.neutral("Velocity_Cmd_1")).hex() == "007d" * 4
     assert codec.encode("Velocity_Cmd_2", codec.neutral("Velocity_Cmd_2")).hex() == "007d" * 4

@@ -127,7 +127,7 @@ def test_cutoff_sender_is_silent_until_first_lock_then_cyclic() -> None:
 
 class _Goal:
     def __init__(self) -> None:
-        self.state, self.message, self.feedback = "pending", "", ""
+        self.state, self.error_code, self.message, self.feedback = "pending", 0, "", ""
         self.canceled = False
 
     def cancel(self) -> None:
@@ -154,9 +154,6 @@ class _Port:
 
     def lock(self, model_name: str, engaged: bool, reason: str) -> None:
         self.calls.append(("lock", model_name, engaged))
-
-    def rejection_reason(self, action: str, record_name: str) -> None:
-        return None
 
     def confirm_seq(self) -> int:
         return 0
@@ -397,22 +394,42 @@ def test_planning_server_killed_mid_task_fails_it_stops_both_machines(procs, dom
         probe.close()
 
 
-def test_planning_server_loss_reported_by_the_subtask_server_counts_as_lost() -> None:
+def test_planning_server_loss_counts_as_lost_by_its_code_or_by_what_the_leaf_sees() -> None:
+    from tms_msg.action import Subtask
+
+    # the subtask server's typed code; the text is for people only (any words do)
     port, clock = _Port(), [0.0]
     run = _run_task(port, clock)
     run.step()
     run.step()
-    port.goals[-1].state = "aborted"
-    port.goals[-1].message = ("planning server /zx200/tms_rp_zx200_excavate_simple lost while running record 'dig' "
-                              "(unavailable for 3.0 s): /zx200/emg_stop latched")
+    port.goals[-1].state, port.goals[-1].error_code = "aborted", Subtask.Result.SERVER_LOST
+    port.goals[-1].message = "whatever the server says"
     run.step()
-    assert run.state == "failure" and "planning server /zx200/tms_rp_zx200_excavate_simple lost" in run.message
+    assert run.state == "failure" and "SERVER_LOST: whatever the server says" in run.message, run.message
     assert run.ctx.lost_servers == ["/zx200/tms_rp_zx200_excavate_simple"]
-    # an ordinary abort is not a lost server (no stop policy for the other tasks)
+    # no code (a result type that carries none): the leaf saw the planning server during the goal, and now not
+    port1, clock1 = _Port(), [0.0]
+    planning = [True]
+    port1.planning_server_ready = lambda model, subtask: planning[0]  # type: ignore[attr-defined]
+    run1 = _run_task(port1, clock1)
+    run1.step()
+    run1.step()
+    port1.goals[-1].state = "accepted"
+    run1.step()
+    planning[0] = False
+    port1.goals[-1].state, port1.goals[-1].feedback = "aborted", "the reason, in the last feedback"
+    run1.step()
+    assert run1.state == "failure" and "the reason, in the last feedback" in run1.message, run1.message
+    assert run1.ctx.lost_servers == ["/zx200/tms_rp_zx200_excavate_simple"]
+    # an ordinary abort is not a lost server (no stop policy for the other tasks), whatever its text says
     port2, clock2 = _Port(), [0.0]
+    port2.planning_server_ready = lambda model, subtask: True  # type: ignore[attr-defined]
     run2 = _run_task(port2, clock2)
     run2.step()
     run2.step()
-    port2.goals[-1].state, port2.goals[-1].message = "aborted", "error_code 99999: out of reach"
+    port2.goals[-1].state = "accepted"
+    run2.step()
+    port2.goals[-1].state, port2.goals[-1].error_code = "aborted", Subtask.Result.PLANNING_FAILED
+    port2.goals[-1].message = "planning server /zx200/tms_rp_zx200_excavate_simple lost while running"
     run2.step()
     assert run2.state == "failure" and run2.ctx.lost_servers == []

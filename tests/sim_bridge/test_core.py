@@ -93,7 +93,7 @@ def test_mjcf_kinematics_match_urdf_zero_pose(spec):
     for name in ("swing_joint", "boom_joint", "arm_joint", "bucket_joint"):
         model.set_joint(f"zx200_{name}", 0.0)
     model.forward()
-    # opera_machines.md §c (derived): tip at (10.435, -0.087, 1.957) in base_link at q = 0
+    # zx200_ros2 URDF (derived): tip at (10.435, -0.087, 1.957) in base_link at q = 0
     assert model.bucket_tip() == pytest.approx([10.435, -0.087, 1.957], abs=2e-3)
     assert "<hfield" in model.xml and "ic120_vessel_joint" in model.xml
 
@@ -132,7 +132,7 @@ def test_soil_conserved_over_scripted_dig_load_dump(spec):
 def test_gnss_round_trip_and_site_origin(spec):
     gnss = Gnss(spec.site)
     lat, lon, alt = gnss.map_to_geodetic(0.0, 0.0, 0.0)
-    assert lat == pytest.approx(36.12626, abs=1e-5)  # opera_machines.md §f
+    assert lat == pytest.approx(36.12626, abs=1e-5)  # the OPERA test field's map origin
     assert lon == pytest.approx(140.07103, abs=1e-5)
     noise = Noise(spec.sensors)
     errs = []

@@ -30,7 +30,7 @@ DT = 0.5  # [s] world time per tick
 class Goal:
     def __init__(self, world: World, model: str, subtask: str, record: str) -> None:
         self.world, self.model, self.subtask, self.record = world, model, subtask, record
-        self.state, self.message, self.feedback = "accepted", "", ""
+        self.state, self.error_code, self.message, self.feedback = "accepted", 0, "", ""
         self.ticks_left = 2
 
     def cancel(self) -> None:
@@ -67,9 +67,6 @@ class World:
 
     def emergency_stop(self, model_name: str, reason: str) -> None:
         raise AssertionError(f"emergency stop {model_name}: {reason}")
-
-    def rejection_reason(self, action: str, record_name: str) -> None:
-        return None
 
     def confirm_seq(self) -> int:
         return 0

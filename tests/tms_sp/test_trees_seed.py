@@ -92,7 +92,7 @@ def test_leaf_records_exist_in_the_seed_with_the_subtask_shape(path):
     for el in leaves:
         model, record, subtask = el.get("model_name"), el.get("record_name"), el.get("subtask_name")
         assert node_id(el) == "LeafNode" + model.capitalize()
-        assert subtask in SUBTASKS[model], f"{record}: subtask {subtask!r} is not a DESIGN §3 name"
+        assert subtask in SUBTASKS[model], f"{record}: subtask {subtask!r} is not a subtask name of the original"
         doc = params.get((model, record))
         assert doc is not None, f"{path.name}: record ({model}, {record}) missing from config/seeds/paper.yaml"
         assert doc["type"] in ("static", "dynamic")

@@ -17,7 +17,7 @@ BUILTINS = {
     "RetryUntilSuccessful", "KeepRunningUntilFailure", "ForceSuccess", "AlwaysSuccess", "AlwaysFailure",
     "Delay", "SetBlackboard",
 }
-# Custom node ids (reference tms_reference.md §5) and their ports (BT.CPP rejects unknown ports).
+# Custom node ids (the original's tms_ts custom nodes) and their ports (BT.CPP rejects unknown ports).
 CUSTOM_PORTS = {
     "BlackboardValueReaderMongo": {"output_port", "mongo_record_name", "mongo_param_name"},
     "MongoValueWriter": {"input_value", "mongo_record_name", "mongo_param_name"},

@@ -94,6 +94,7 @@ class PlanningStub(Node):
 
 
 if __name__ == "__main__":
-    from tms_ts.nodes import run_threaded
+    from tms_common.node import run_node
 
-    raise SystemExit(run_threaded(PlanningStub, threads=32))
+    # one thread per goal: each goal's execute sleeps until it ends (a stand-in, not a model of a node)
+    raise SystemExit(run_node(PlanningStub, executor="multi", threads=32))

@@ -128,8 +128,11 @@ def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):  #
     system.publish("/tms_ts/start", TaskIds(task_ids=[5, 6, 8, 99]))
     system.wait(lambda: all(_state(system, i) == TaskState.FAILURE for i in (5, 6, 8, 99)), 60, "four failures")
     assert "/ic120/st_ic120_teleport" in system.task(5).message and "not available" in system.task(5).message
-    assert "no_such_pose" in system.task(6).message and "rejected" in system.task(6).message
-    assert "'half_pose' field 'trajectory|pose|position_with_angle'" in system.task(8).message, system.task(8).message
+    # a record that fails validation: the goal is accepted and aborted with its code, the reason names the record
+    assert "aborted record 'no_such_pose': RECORD_INVALID: record 'no_such_pose': not found" in system.task(6).message, \
+        system.task(6).message
+    assert "RECORD_INVALID: record 'half_pose' field 'trajectory|pose|position_with_angle'" in system.task(8).message, \
+        system.task(8).message
     assert "99" in system.task(99).message
     assert "GOAL" not in system.procs["stub"].output  # nothing reached planning
 

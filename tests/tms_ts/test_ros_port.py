@@ -14,3 +14,23 @@ def test_lock_engage_then_release_logs_both(ros_node) -> None:  # noqa: ANN001
         assert port.locked["zx200"] is True
         port.lock("zx200", False, "new goal")
         assert port.locked["zx200"] is False
+
+
+def test_planning_server_ready_sees_the_subtasks_planning_server_on_the_graph(ros_node) -> None:  # noqa: ANN001
+    import time
+
+    from rclpy.action import ActionServer
+
+    from tms_msg.action import NavigateToPose
+    from tms_ts.nodes.ros_port import ManagerRosPort
+
+    port = ManagerRosPort(ros_node)
+    assert port.planning_server_ready("ic120", "st_ic120_no_such_subtask") is None
+    assert port.planning_server_ready("ic120", "st_ic120_navigate_anywhere") is False
+    server = ActionServer(ros_node, NavigateToPose, "/ic120/navigate_to_pose", execute_callback=lambda gh: None)
+    end = time.monotonic() + 10.0
+    while not port.planning_server_ready("ic120", "st_ic120_navigate_anywhere") and time.monotonic() < end:
+        ros_node.executor_for_test.spin_once(timeout_sec=0.05)
+    assert port.planning_server_ready("ic120", "st_ic120_navigate_anywhere") is True
+    assert port.planning_server_ready("ic120", "st_ic120_navigate_anywhere_deg") is True  # same planning action
+    server.destroy()

@@ -3,7 +3,7 @@
 Runs where a SocketCAN interface exists: inside the VM that tests/vcan/test_vm.py boots (TMS_CAN_TEST_CHANNEL
 =vcan0), or on a developer machine with vcan0 up. Elsewhere it is skipped saying which of the two is missing.
 
-Expected ids and bytes are written out from the published COM3 layout (reference/com3_frames.csv:
+Expected ids and bytes are written out from the published COM3 layout (tests/com3_can/data/com3_frames.csv:
 Velocity_Cmd_1 = 0x18FF670A, four little-endian uint16 at 0.0005 rad/s per bit, offset -16 rad/s;
 Front_Angle = 0x18FF7DE8, 0.0004 rad per bit, offset -10 rad), so neither cantools nor the converter grades
 its own output.

@@ -18,7 +18,7 @@ class DemoSubtaskServer(Node):
     """Serves ``tms_msg/Subtask`` on ``action_name``: runs ``duration_s``, publishing feedback.
 
     Goals whose ``record_name`` is empty are rejected. Cancel is accepted and acknowledged: the
-    goal ends CANCELED with ``success=False``.
+    goal ends CANCELED with ``error_code`` CANCELED.
     """
 
     def __init__(self, **kwargs: Any) -> None:
@@ -45,8 +45,8 @@ class DemoSubtaskServer(Node):
         while True:
             if handle.is_cancel_requested:
                 handle.canceled()
-                result.success = False
-                result.message = f"canceled at step {step}"
+                result.error_code = Subtask.Result.CANCELED
+                result.error_msg = f"canceled at step {step}"
                 return result
             if time.monotonic() >= end:
                 break
@@ -56,8 +56,7 @@ class DemoSubtaskServer(Node):
             step += 1
             time.sleep(min(0.05, max(0.0, end - time.monotonic())))
         handle.succeed()
-        result.success = True
-        result.message = f"{handle.request.model_name}/{handle.request.record_name} done after {step} steps"
+        result.error_msg = f"{handle.request.model_name}/{handle.request.record_name} done after {step} steps"
         return result
 
 

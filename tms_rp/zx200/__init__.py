@@ -3,5 +3,5 @@
 * :mod:`tms_rp.zx200.planner` turns change_pose / excavate_simple / release_simple goals into
   validated motion targets (:mod:`tms_model.excavator.targets`) for the arm controller, rejecting bad goals first.
 
-Pure Python (no rclpy); the action servers live in :mod:`tms_if_opera.zx200.node`.
+Pure Python (no rclpy); the action servers live in :mod:`tms_if_opera.nodes.zx200_planner`.
 """

@@ -4,14 +4,13 @@ Everything is asynchronous (futures with done-callbacks) so the manager's single
 keeps ticking while goals are accepted, run and cancelled.
 
 Topics: ``/tms_ts/confirm`` (std_msgs/String; WaitForClick answers, "yes" / "no" / "<task_id>:yes"),
-``/tms_ts/subtask_rejections`` (std_msgs/String JSON ``{action, record_name, reason}``, published
-by the subtask servers just before they reject a goal), ``/<model_name>/emg_stop`` (std_msgs/Bool
-true, the escalation when a halted subtask never confirms its stop).
+``/tms_ts/subtask_heartbeat`` (std_msgs/String, model name of each living tms_ts_subtasks process),
+``/<model_name>/emg_stop`` (std_msgs/Bool true, the escalation when a halted subtask never confirms
+its stop).
 """
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 import uuid
@@ -25,11 +24,11 @@ from unique_identifier_msgs.msg import UUID
 from tms_common.action_client import RaceFreeActionClient
 from tms_msg.action import Subtask
 from tms_ts.leaf import ABORTED, ACCEPTED, CANCELED, PENDING, REJECTED, SUCCEEDED
+from tms_ts.subtask_specs import SUBTASKS
 
-__all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "REJECTIONS_TOPIC", "HEARTBEAT_TOPIC"]
+__all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "HEARTBEAT_TOPIC"]
 
 CONFIRM_TOPIC = "/tms_ts/confirm"
-REJECTIONS_TOPIC = "/tms_ts/subtask_rejections"
 #: std_msgs/String(model_name) from every tms_ts_subtasks process every HEARTBEAT_PERIOD_S (wall time)
 HEARTBEAT_TOPIC = "/tms_ts/subtask_heartbeat"
 HEARTBEAT_PERIOD_S = 0.2
@@ -43,6 +42,7 @@ class RosGoal:
 
     def __init__(self, client: RaceFreeActionClient, goal: Subtask.Goal) -> None:
         self.state = PENDING
+        self.error_code = 0
         self.message = ""
         self.feedback = ""
         self._handle = None
@@ -71,7 +71,8 @@ class RosGoal:
 
     def _on_result(self, future) -> None:  # noqa: ANN001
         res = future.result()
-        self.message = res.result.message
+        self.error_code = res.result.error_code
+        self.message = res.result.error_msg
         self.state = _STATUS.get(res.status, ABORTED)
 
     def cancel(self) -> None:
@@ -86,7 +87,7 @@ class RosGoal:
 
 
 class ManagerRosPort:
-    """Action clients, confirm inbox, rejection reasons and emergency-stop publishers of one node."""
+    """Action clients, confirm inbox, heartbeats and emergency-stop publishers of one node."""
 
     def __init__(self, node: Node) -> None:
         self.node = node
@@ -96,11 +97,9 @@ class ManagerRosPort:
         self.locked: dict[str, bool] = {}
         self._confirm: list[tuple[int, str]] = []
         self._seq = 0
-        self._rejections: dict[tuple[str, str], str] = {}
         self._lock = threading.Lock()
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(String, CONFIRM_TOPIC, self._on_confirm, reliable)
-        node.create_subscription(String, REJECTIONS_TOPIC, self._on_rejection, reliable)
         self._beats: dict[str, float] = {}
         node.create_subscription(String, HEARTBEAT_TOPIC, self._on_beat, 50)
 
@@ -114,6 +113,17 @@ class ManagerRosPort:
     # RosPort -----------------------------------------------------------------------------------
     def subtask_server_ready(self, model_name: str, subtask_name: str) -> bool:
         return self._client(model_name, subtask_name).server_is_ready()
+
+    def planning_server_ready(self, model_name: str, subtask_name: str) -> bool | None:
+        """The subtask's planning action server on the ROS graph (None for a subtask without a row).
+
+        A graph query, not an action client: the manager need not receive every planning action's feedback
+        and status. An action server offers the service ``<action>/_action/send_goal`` (ROS 2 action design).
+        """
+        spec = SUBTASKS.get(subtask_name)
+        if spec is None:
+            return None
+        return self.node.count_services(f"/{model_name}/{spec.planning_action}/_action/send_goal") > 0
 
     def subtask_server_alive(self, model_name: str) -> bool | None:
         """Heartbeat of ``model_name``'s tms_ts_subtasks: True fresh, False silent, None never heard
@@ -162,10 +172,6 @@ class ManagerRosPort:
         else:
             log.info(f"/{model_name}/lock released: {reason}")
 
-    def rejection_reason(self, action: str, record_name: str) -> str | None:
-        with self._lock:
-            return self._rejections.get((action, record_name))
-
     def confirm_seq(self) -> int:
         with self._lock:
             return self._seq
@@ -180,13 +186,3 @@ class ManagerRosPort:
             self._seq += 1
             self._confirm.append((self._seq, msg.data))
             del self._confirm[:-100]
-
-    def _on_rejection(self, msg: String) -> None:
-        try:
-            data = json.loads(msg.data)
-            key = (str(data["action"]), str(data["record_name"]))
-            reason = str(data["reason"])
-        except (ValueError, KeyError, TypeError):
-            return
-        with self._lock:
-            self._rejections[key] = reason

@@ -15,7 +15,7 @@ topic                      type                   meaning
 
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
 ``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
-``db_path`` ("" = tms_db default).
+``db_path`` ("" = tms_db default); all read-only (read at start-up).
 A task is ticked at the fixed rate; a tick that starts more than half a period late counts as missed.
 
 Lost-server policy: when a task ends FAILURE because a subtask or planning server was lost mid-goal (its
@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import time
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Int32, String
@@ -49,9 +50,12 @@ _STATE = {SUCCEEDED: TaskState.SUCCESS, FAILED: TaskState.FAILURE, CANCELED: Tas
 class TaskManager(Node):
     """The task scheduler manager node (see the module docstring)."""
 
-    def __init__(self) -> None:
-        super().__init__("tms_ts_manager")
-        p = self.declare_parameter
+    def __init__(self, node_name: str = "tms_ts_manager", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+        super().__init__(node_name, **kwargs)
+        read_only = ParameterDescriptor(read_only=True)  # every parameter is read once, here
+
+        def p(name: str, default):  # noqa: ANN001, ANN202
+            return self.declare_parameter(name, default, read_only)
         self.tick_rate = float(p("tick_rate_hz", 20.0).value)
         status_rate = float(p("status_rate_hz", 2.0).value)
         self.server_wait_s = float(p("server_wait_s", 5.0).value)

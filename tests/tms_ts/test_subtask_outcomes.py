@@ -1,0 +1,154 @@
+"""Typed subtask outcomes: one row per subtask, codes instead of prose, a cancel honoured before planning answers.
+
+The first tests need no process; the last ones run a real ``tms_ts_subtasks`` with no planning server at all.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from tests.rosproc import executable
+
+ROWS_SAMPLES = {
+    # a valid record per goal builder kind
+    "change_pose": {"trajectory": 1, "swing_joint": 0.1, "boom_joint": -0.3, "arm_joint": 1.2, "bucket_joint": 0.5},
+    "excavate": {"position_with_angle": 1, "x": 5.8, "y": 0.0, "z": 1.1, "theta_w": 1.2, "offset": 1.5},
+    "release": {"target_angle": 1.57},
+    "dump": {"target_angle": 0.8},
+    "navigate_to_pose": {"x": 1.0, "y": 2.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0, "yaw": 90.0},
+    "poses": {"x": [1.0, 2.0], "y": [0.0, 1.0], "qx": [0.0], "qy": [0.0], "qz": [0.0], "qw": [1.0], "yaw": [0.0, 90.0]},
+}
+
+
+def _sample(spec) -> dict:  # noqa: ANN001
+    for kind in ("change_pose", "excavate", "release"):
+        if kind in spec.name:
+            return ROWS_SAMPLES[kind]
+    if "release_soil" in spec.name:
+        return ROWS_SAMPLES["dump"]
+    return ROWS_SAMPLES["navigate_to_pose" if "anywhere" in spec.name else "poses"]
+
+
+def test_every_row_builds_its_own_actions_goal_and_reads_its_result() -> None:
+    from tms_msg.msg import ErrorCodes
+    from tms_ts.subtask_specs import SUBTASKS
+
+    assert len(SUBTASKS) == 10
+    for spec in SUBTASKS.values():
+        goal = spec.goal(spec.build(_sample(spec), "r"))
+        assert isinstance(goal, spec.action_type.Goal), (spec.name, type(goal))
+        ok_result, failed_result = spec.action_type.Result(), spec.action_type.Result()
+        if hasattr(ok_result, "success"):
+            ok_result.success = True
+        elif hasattr(ok_result.error_code, "val"):
+            ok_result.error_code.val, failed_result.error_code.val = ErrorCodes.SUCCESS, ErrorCodes.OUT_OF_REACH
+        else:
+            failed_result.error_code = 9004
+        assert spec.check(ok_result)[0] is True, spec.name
+        assert spec.check(failed_result)[0] is False, spec.name
+    deg = SUBTASKS["st_ic120_navigate_anywhere_deg"]
+    assert deg.goal(deg.build(ROWS_SAMPLES["navigate_to_pose"], "r")).pose.pose.orientation.z == pytest.approx(2**-0.5)
+
+
+def test_codes_have_names_and_the_leaf_constant_is_the_interfaces() -> None:
+    from tms_msg.action import Subtask
+    from tms_ts.outcomes import CODE_NAMES, SERVER_LOST, code_name
+
+    assert SERVER_LOST == Subtask.Result.SERVER_LOST
+    assert code_name(Subtask.Result.RECORD_INVALID) == "RECORD_INVALID"
+    assert code_name(4321) == "code 4321"
+    assert len(CODE_NAMES) == 10 and CODE_NAMES[0] == "NONE"
+
+
+def test_two_machines_servers_started_by_hand_get_their_own_names() -> None:
+    from tms_ts.nodes.tms_ts_subtasks import node_name_from_args
+
+    assert node_name_from_args(["x", "--ros-args", "-p", "machine:=zx200", "-p", "db_path:=/tmp/d"]) == "zx200_subtasks"
+    assert node_name_from_args(["x", "--ros-args", "-p", "db_path:=/tmp/d", "--param", "machine:=ic120"]) == "ic120_subtasks"
+    assert node_name_from_args(["x", "--ros-args", "--params-file", "f.yaml"]) == "tms_ts_subtasks"
+
+
+@pytest.fixture
+def lone_subtasks(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
+    """A zx200 ``tms_ts_subtasks`` whose planning server never comes (planning_wait_s 30 s)."""
+    from tms_db import open_store
+
+    db = str(tmp_path / "db")
+    store = open_store(path=db)
+    store.upsert_parameter({"model_name": "zx200", "type": "static", "record_name": "initial_pose", "trajectory": 1,
+                            "swing_joint": 0.0, "boom_joint": -0.3, "arm_joint": 1.2, "bucket_joint": 0.5})
+    store.close()
+    proc = procs([executable("tms_ts", "tms_ts_subtasks"), "--ros-args", "-p", "machine:=zx200",
+                  "-p", f"db_path:={db}", "-p", "planning_wait_s:=30.0"], name="zx200")
+    assert proc.wait_for("subtask servers", 60), proc.output
+    return proc
+
+
+def _spin_until(node, predicate, timeout: float, what: str):  # noqa: ANN001, ANN202
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        node.executor_for_test.spin_once(timeout_sec=0.05)
+        if predicate():
+            return
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+@pytest.mark.integration
+def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_with_its_code(lone_subtasks, ros_node):  # noqa: ANN001
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+
+    from tms_msg.action import Subtask
+
+    client = ActionClient(ros_node, Subtask, "/zx200/subtask_zx200_change_pose")
+    _spin_until(ros_node, client.server_is_ready, 30, "the subtask server")
+    feedback: list[str] = []
+
+    def send(record: str):  # noqa: ANN202
+        future = client.send_goal_async(Subtask.Goal(model_name="zx200", record_name=record),
+                                        feedback_callback=lambda msg: feedback.append(msg.feedback.state))
+        _spin_until(ros_node, future.done, 10, "the goal response")
+        return future.result()
+
+    # a record that does not exist: accepted (not rejected), then aborted RECORD_INVALID naming the record
+    handle = send("no_such_pose")
+    assert handle.accepted
+    result = handle.get_result_async()
+    _spin_until(ros_node, result.done, 10, "the RECORD_INVALID result")
+    assert result.result().status == GoalStatus.STATUS_ABORTED
+    assert result.result().result.error_code == Subtask.Result.RECORD_INVALID
+    assert "'no_such_pose'" in result.result().result.error_msg
+    # the reason is also the last feedback, for a client whose result carries no code
+    _spin_until(ros_node, lambda: any(f.startswith("RECORD_INVALID: ") for f in feedback), 5, "the reason in feedback")
+
+    # a valid record: the goal waits for the planning server (30 s); a cancel ends it at once
+    handle = send("initial_pose")
+    assert handle.accepted
+    result = handle.get_result_async()
+    ros_node.executor_for_test.spin_once(timeout_sec=0.3)  # the goal is now waiting for planning
+    asked = time.monotonic()
+    cancel = handle.cancel_goal_async()
+    _spin_until(ros_node, result.done, 5, "the CANCELED result")
+    took = time.monotonic() - asked
+    assert result.result().status == GoalStatus.STATUS_CANCELED, result.result()
+    assert result.result().result.error_code == Subtask.Result.CANCELED
+    assert "nothing was sent" in result.result().result.error_msg
+    assert took < 1.0, f"cancel took {took:.2f} s"
+    assert cancel.done()
+
+
+@pytest.mark.integration
+def test_the_server_is_named_after_its_machine_and_its_start_up_parameters_refuse_a_set(lone_subtasks, ros_node):  # noqa: ANN001
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    _spin_until(ros_node, lambda: "zx200_subtasks" in ros_node.get_node_names(), 20, "node zx200_subtasks")
+    cli = ros_node.create_client(SetParameters, "/zx200_subtasks/set_parameters")
+    _spin_until(ros_node, cli.service_is_ready, 20, "its set_parameters service")
+    value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=1.0)
+    future = cli.call_async(SetParameters.Request(parameters=[Parameter(name="planning_wait_s", value=value)]))
+    _spin_until(ros_node, future.done, 10, "the set_parameters answer")
+    answer = future.result().results[0]
+    assert answer.successful is False and "read-only" in answer.reason, answer

@@ -1,0 +1,1 @@
+"""rclpy nodes of tms_if_opera: the ZX200 planning action servers (``zx200_planner``)."""

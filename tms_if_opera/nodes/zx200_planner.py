@@ -1,0 +1,327 @@
+"""``zx200_planner``: the ZX200 planning actions of contract [D], in the ``/zx200`` namespace.
+
+Serves ``tms_rp_zx200_change_pose`` (Zx200ChangePose), ``tms_rp_zx200_excavate_simple``
+(Zx200ExcavateSimple) and ``tms_rp_zx200_release_simple`` (Zx200ReleaseSimple). Each goal is planned
+and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
+goal ends at once (no motion) with ``error_code`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT and a
+``message`` naming the joint or distance. A valid goal's phases go to the arm controller's action
+``arm_controller/move`` (node ``zx200_arm_controller``, tms_msg/action/Zx200ArmMove) as one goal of
+segments, so the arm passes the via phases without stopping; feedback ``state`` is the running phase
+(approach, penetrate, drag, curl, lift / swing, open / ...), forwarded from the controller. Cancel is
+forwarded; the goal ends CANCELED once the controller reports the arm at rest.
+
+Stopped (SIGINT/SIGTERM), the node cancels its running controller goals, waits until the controller reports
+them ended (the arm at rest; at most ``STOP_TIMEOUT_S``), aborts them with "zx200_planner stopping
+(SIGINT/SIGTERM): ..." and rejects new goals meanwhile; only then does it leave, with its context valid.
+
+Goals run as coroutines on one executor thread (:class:`tms_common.ticker.Ticker` paces their checks). The
+arm's joints are read when a goal needs them: a ``joint_states`` subscription exists only while a goal waits
+for one (subscribed all the time, the 50 Hz stream cost ~16 % of a core in executor overhead alone).
+
+Parameters (read-only, read at start-up): ``machine_config``, ``planner_config``, ``controller_config``
+(YAML paths; defaults in config/).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+import uuid
+
+import numpy as np
+from action_msgs.msg import GoalStatus
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from unique_identifier_msgs.msg import UUID
+
+from tms_common.action_client import RaceFreeActionClient
+from tms_common.goals import RunningGoals
+from tms_common.node import run_node
+from tms_common.ticker import Ticker
+from tms_model.excavator import codes
+from tms_model.excavator.codes import PlanningError
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.excavator.targets import JointTarget
+from tms_msg.action import Zx200ArmMove, Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
+from tms_msg.msg import Zx200ArmSegment
+from tms_rc.zx200.controller import load_controller_config
+from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+
+__all__ = ["Zx200PlannerNode", "main"]
+
+JOINT_STATES_WAIT_S = 2.0  # [s wall] a goal waits this long for a joint_states to plan from
+GOAL_RESPONSE_TIMEOUT_S = 20.0  # [s wall] the controller answers at once (or after its <= 15 s joint_states wait)
+RESULT_GRACE_S = 3.0            # [s wall] after the goal status says it ended, wait this long for the result
+SERVER_GONE_S = 5.0             # [s wall] the controller's action server absent this long: the segment fails
+STOP_TIMEOUT_S = 15.0           # [s wall] stopped mid-goal: wait this long for the controller to end the goal
+TICK_S = 0.02                   # [s wall] how often a waiting goal looks at cancel, stop, deadlines, the server
+
+
+class Zx200PlannerNode(Node):
+    """Validates and sequences ZX200 goals; motion is delegated to ``arm_controller/move``."""
+
+    def __init__(self, node_name: str = "zx200_planner", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+        super().__init__(node_name, **kwargs)
+        read_only = ParameterDescriptor(read_only=True)
+
+        def path(name: str) -> str | None:
+            return self.declare_parameter(name, "", read_only).value or None
+
+        kin = load_kinematics("zx200", path=path("machine_config"))
+        pcfg = load_planner_config(path("planner_config"))
+        ccfg = load_controller_config(path("controller_config"))
+        self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.ground_min_z)
+        self._group = ReentrantCallbackGroup()
+        self._ticker = Ticker(self, TICK_S, callback_group=self._group)
+        self._q_waiters: list[Future] = []
+        self._q_sub = None  # the joint_states subscription, only while a goal waits for one
+        # where the last goal left the arm when it ended at a pass-through point (None otherwise): the
+        # next plan starts there while the arm is still on its way (Zx200Planner.start_state)
+        self._pass_through_end: np.ndarray | None = None
+        self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=self._group)
+        self._goals = RunningGoals()  # SIGINT/SIGTERM: running goals cancel their controller goal, then abort
+        self._servers = [
+            ActionServer(self, action_type, name, execute_callback=functools.partial(self._execute, execute),
+                         goal_callback=self._on_goal, cancel_callback=self._on_cancel, callback_group=self._group)
+            for action_type, name, execute in (
+                (Zx200ChangePose, "tms_rp_zx200_change_pose", self._change_pose),
+                (Zx200ExcavateSimple, "tms_rp_zx200_excavate_simple", self._excavate),
+                (Zx200ReleaseSimple, "tms_rp_zx200_release_simple", self._release),
+            )
+        ]
+        self.get_logger().info("zx200_planner ready")
+
+    # -------------------------------------------------------------- joint_states, read when a goal needs them
+    def _on_state(self, msg: JointState) -> None:
+        idx = {n: i for i, n in enumerate(msg.name)}
+        if not all(n in idx for n in JOINTS):
+            return
+        q = np.array([msg.position[idx[n]] for n in JOINTS])
+        waiters, self._q_waiters = self._q_waiters, []
+        for future in waiters:
+            if not future.done():
+                future.set_result(q)
+
+    async def _current_q(self) -> np.ndarray | None:
+        """The four front joints of the next joint_states naming them all (None when none comes in time)."""
+        future = self._ticker.wake_on(Future())
+        self._q_waiters.append(future)
+        if self._q_sub is None:
+            self._q_sub = self.create_subscription(JointState, "joint_states", self._on_state, 1,
+                                                   callback_group=self._group)
+        deadline = time.monotonic() + JOINT_STATES_WAIT_S
+        while not future.done() and time.monotonic() < deadline:
+            await self._ticker.next()
+        if future in self._q_waiters:
+            self._q_waiters.remove(future)
+        if not self._q_waiters and self._q_sub is not None:
+            self.destroy_subscription(self._q_sub)
+            self._q_sub = None
+        return future.result() if future.done() else None
+
+    # -------------------------------------------------------------- goals, cancel, stop (run_node's hook)
+    def _on_goal(self, _request) -> GoalResponse:  # noqa: ANN001
+        if self._goals.stopping.is_set():
+            self.get_logger().error("goal rejected: zx200_planner is stopping")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _on_cancel(self, _handle) -> CancelResponse:  # noqa: ANN001
+        self._ticker.wake()  # forwarded to the controller now, not at the next tick
+        return CancelResponse.ACCEPT
+
+    async def _execute(self, execute, handle):  # noqa: ANN001, ANN202
+        with self._goals.running():
+            return await execute(handle)
+
+    def on_stop_requested(self) -> bool:
+        """Cancel the running controller goals (the waits below see ``stopping``); True while any runs."""
+        return self._goals.wind_down(STOP_TIMEOUT_S, lambda n: self.get_logger().warning(
+            f"stopping: canceling {n} running goal(s) at the controller"))
+
+    # -------------------------------------------------------------- common execution
+    async def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
+        result = action_type.Result()
+        t0 = time.monotonic()
+        pass_through_end, self._pass_through_end = self._pass_through_end, None
+        try:
+            q = await self._current_q() if needs_q else None
+            q_plan = self.planner.start_state(q, pass_through_end)
+            if q_plan is not q:
+                self.get_logger().info(
+                    f"{action_type.__name__}: planned from the previous goal's pass-through end "
+                    f"{np.round(q_plan, 3).tolist()} (measured {np.round(q, 3).tolist()})")
+            t_state = time.monotonic()
+            targets = plan(q_plan)
+        except PlanningError as exc:
+            self.get_logger().warning(f"goal rejected before motion: {exc}")
+            result.error_code.val = exc.code
+            result.message = str(exc)
+            handle.abort()
+            return result
+        deadline = time.monotonic() + 5.0
+        while not self._ctl.server_is_ready():
+            if time.monotonic() > deadline:
+                result.error_code.val = codes.NO_VALID_CONTROL
+                result.message = "arm controller action arm_controller/move is not available"
+                handle.abort()
+                return result
+            await self._ticker.next()
+        t_plan = time.monotonic()
+        code, message = await self._move(handle, action_type, targets, lambda: self.get_logger().info(
+            f"{action_type.__name__}: {len(targets)} segment(s); joint_states {1e3 * (t_state - t0):.0f} ms, "
+            f"plan {1e3 * (t_plan - t_state):.0f} ms, controller accepted {1e3 * (time.monotonic() - t_plan):.0f} ms "
+            "later (wall)"))
+        if code != codes.SUCCESS:
+            result.error_code.val = code
+            result.message = message
+            if self._goals.stopping.is_set() and not handle.is_cancel_requested:  # ended by our stop
+                result.error_code.val = codes.FAILURE
+                result.message = f"zx200_planner stopping (SIGINT/SIGTERM): {message}"
+                handle.abort()
+            elif code == codes.CANCELED:
+                handle.canceled()
+            else:
+                handle.abort()
+            return result
+        self._pass_through_end = self.planner.pass_through_end(targets)
+        result.error_code.val = codes.SUCCESS
+        result.message = "done"
+        handle.succeed()
+        return result
+
+    @staticmethod
+    def _segments(targets) -> list:  # noqa: ANN001
+        """The plan as controller segments. Every segment but the last is a via point (approach,
+        carry, ...: via_tolerance_*); so is a last one the planner marks (excavate's lift, release's
+        open: the next goal goes on from it)."""
+        out = []
+        for k, target in enumerate(targets):
+            seg = Zx200ArmSegment(label=target.label, speed_scale=float(target.speed_scale),
+                                  via=bool(target.via or k < len(targets) - 1))
+            if isinstance(target, JointTarget):
+                seg.kind = Zx200ArmSegment.JOINT
+                seg.joint_positions = [float(v) for v in target.q]
+            else:
+                seg.kind = Zx200ArmSegment.CARTESIAN
+                seg.position.x, seg.position.y, seg.position.z = (float(v) for v in target.position)
+                seg.theta_w = float(target.theta_w)
+            out.append(seg)
+        return out
+
+    async def _move(self, handle, action_type, targets, on_accepted) -> tuple[int, str]:  # noqa: ANN001
+        """Run the plan as one controller goal; the controller's phase feedback is forwarded."""
+        goal = Zx200ArmMove.Goal(segments=self._segments(targets))
+        fb = action_type.Feedback()
+        fb.state = targets[0].label
+        handle.publish_feedback(fb)
+        last_label = [fb.state]
+
+        def forward(msg) -> None:  # noqa: ANN001
+            label = msg.feedback.label
+            if label and label != last_label[0]:
+                last_label[0] = label
+                out = action_type.Feedback()
+                out.state = label
+                handle.publish_feedback(out)
+
+        # Every wait below is bounded: a goal always ends, and never leaves the arm driving blind.
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        send = self._ticker.wake_on(self._ctl.send_goal_async(goal, feedback_callback=forward, goal_uuid=goal_id))
+        deadline = time.monotonic() + GOAL_RESPONSE_TIMEOUT_S
+        while not send.done():
+            stopping = self._goals.stopping.is_set()
+            if stopping or time.monotonic() > deadline:
+                # The goal may run on the controller without us knowing: cancel it by its id.
+                self._ctl.cancel_goal_by_id(goal_id)
+                if stopping:
+                    return codes.CANCELED, "goal sent to the arm controller canceled before its answer"
+                return codes.NO_VALID_CONTROL, (
+                    f"arm controller did not answer the goal within {GOAL_RESPONSE_TIMEOUT_S:g} s (cancel sent)")
+            await self._ticker.next()
+        gh = send.result()
+        if not gh.accepted:
+            return codes.NO_VALID_CONTROL, "arm controller rejected the goal"
+        on_accepted()
+        code, message = await self._await_result(handle, gh)
+        if code not in (codes.SUCCESS, codes.CANCELED) and last_label[0] not in message:
+            message = f"{last_label[0]}: {message}"
+        return code, message
+
+    async def _await_result(self, handle, gh) -> tuple[int, str]:  # noqa: ANN001
+        """Wait for the controller's result; recover a lost result from the goal status topic."""
+        res_future = self._ticker.wake_on(gh.get_result_async())
+        cancel_sent = False
+        ended_at: float | None = None
+        asked_again = False
+        server_seen = time.monotonic()
+        terminal = {GoalStatus.STATUS_SUCCEEDED: codes.SUCCESS, GoalStatus.STATUS_CANCELED: codes.CANCELED,
+                    GoalStatus.STATUS_ABORTED: codes.FAILURE}
+        while not res_future.done():
+            now = time.monotonic()
+            if (handle.is_cancel_requested or self._goals.stopping.is_set()) and not cancel_sent:
+                gh.cancel_goal_async()
+                cancel_sent = True
+            if gh.status in terminal:
+                ended_at = ended_at or now
+                if now - ended_at > RESULT_GRACE_S:
+                    if not asked_again:  # the result server keeps results (result_timeout): ask again
+                        self.get_logger().warning("controller goal ended but its result did not arrive: asking again")
+                        res_future = self._ticker.wake_on(gh.get_result_async())
+                        asked_again, ended_at = True, now
+                        continue
+                    code = terminal[gh.status]
+                    return code, f"controller goal ended with status {gh.status} (result message lost)"
+            if self._ctl.server_is_ready():
+                server_seen = now
+            elif now - server_seen > SERVER_GONE_S:
+                return codes.NO_VALID_CONTROL, f"arm controller action server gone for {SERVER_GONE_S:g} s"
+            await self._ticker.next()
+        outcome = res_future.result()
+        res = outcome.result
+        if cancel_sent and outcome.status == GoalStatus.STATUS_CANCELED:  # the controller's CANCELED means at rest
+            return codes.CANCELED, f"canceled, arm at rest (controller: {res.message or 'no message'})"
+        if cancel_sent:
+            return res.error_code.val, f"cancel sent, but the controller ended the goal with status {outcome.status}: {res.message}"
+        return res.error_code.val, res.message
+
+    # -------------------------------------------------------------- the three actions
+    async def _change_pose(self, handle):  # noqa: ANN001, ANN202
+        g = handle.request
+
+        def plan(q_plan):  # noqa: ANN001, ANN202
+            return self.planner.change_pose(
+                joint_names=list(g.trajectory.joint_names),
+                joint_points=[list(p.positions) for p in g.trajectory.points],
+                poses=[([p.position.x, p.position.y, p.position.z],
+                        [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]) for p in g.pose_sequence],
+                positions_with_angle=[([p.position.x, p.position.y, p.position.z], p.theta_w)
+                                      for p in g.position_with_angle_sequence],
+                current_q=q_plan,
+                pass_through=bool(g.pass_through),
+                theta_w_tolerance=float(g.theta_w_tolerance),
+            )
+
+        return await self._run(handle, Zx200ChangePose, plan)
+
+    async def _excavate(self, handle):  # noqa: ANN001, ANN202
+        p = handle.request.position_with_angle
+        return await self._run(handle, Zx200ExcavateSimple, lambda _q_plan: self.planner.excavate(
+            [p.position.x, p.position.y, p.position.z], p.theta_w, p.offset), needs_q=False)
+
+    async def _release(self, handle):  # noqa: ANN001, ANN202
+        def plan(q_plan):  # noqa: ANN001, ANN202
+            if q_plan is None:
+                raise PlanningError(f"no joint_states received within {JOINT_STATES_WAIT_S:g} s")
+            return self.planner.release(handle.request.target_angle, q_plan)
+
+        return await self._run(handle, Zx200ReleaseSimple, plan)
+
+
+def main() -> int:
+    # stop_in_context: on SIGINT/SIGTERM running goals cancel their controller goals and end (on_stop_requested)
+    return run_node(Zx200PlannerNode, executor="single", stop_in_context=True)

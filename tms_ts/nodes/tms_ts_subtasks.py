@@ -1,0 +1,263 @@
+"""``tms_ts_subtasks``: the subtask action servers of one machine.
+
+For ``machine`` zx200 or ic120 it serves every subtask of :mod:`tms_ts.subtask_specs` at
+``/<model_name>/<subtask_name>`` (tms_msg/action/Subtask). Every goal is accepted (unless the server is
+stopping); a goal that cannot run ends ABORTED with its ``error_code`` (Subtask.Result constants) and an
+``error_msg`` for people. On a goal it reads the DB record (model_name, record_name) *at that moment*: a
+missing or malformed record ends RECORD_INVALID naming the record and field. A valid goal goes to the
+planning action ``/<model_name>/<planning>`` of its row, whose feedback is mirrored as ``state`` and whose
+result the row's check reads (PLANNING_FAILED when it reports a failure). A cancel is honoured at once while
+the goal still waits for its planning server (nothing was sent); later it is forwarded to planning, which
+brings the machine to rest, and the subtask reports CANCELED only after planning confirmed. If planning does
+not confirm within ``stop_timeout_s`` the node latches ``/<model_name>/emg_stop`` and aborts STOP_TIMEOUT.
+If the planning server disappears while a goal runs (its process died) for ``server_lost_s``, the node
+latches ``/<model_name>/emg_stop`` (nothing may keep driving the machine blind) and aborts SERVER_LOST.
+The last feedback of a failed goal is ``<CODE>: <error_msg>``, so the reason stays readable for a client
+whose result type carries no code.
+
+Goals run as coroutines on one executor thread (:class:`tms_common.ticker.Ticker` paces their checks).
+Heartbeat: a thread publishes the model name on ``/tms_ts/subtask_heartbeat`` (std_msgs/String) every
+0.2 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
+waiting for DDS discovery to drop it (~20 s with the default lease).
+ZX200 change_pose / excavate_simple set the record's ``LOCK_FLG`` false when a result arrives (so
+sensing may update the excavation target again), as the original subtasks did.
+
+Parameters (read-only, read at start-up): ``machine`` (required), ``model_name`` (default = machine),
+``planning_wait_s`` (5.0), ``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri``, ``db_path``.
+The node is named ``<machine>_subtasks`` when ``-p machine:=<m>`` is on the command line, so the two
+machines' servers started by hand do not share a name.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+import threading
+import time
+from collections.abc import Sequence
+
+from action_msgs.msg import GoalStatus
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from std_msgs.msg import Bool, String
+
+from tms_common.action_client import RaceFreeActionClient
+from tms_common.goals import RunningGoals
+from tms_common.node import run_node
+from tms_common.ticker import Ticker
+from tms_msg.action import Subtask
+from tms_ts.errors import SubtaskRecordError
+from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
+from tms_ts.outcomes import code_name
+from tms_ts.subtask_specs import SubtaskSpec, subtasks_for
+
+__all__ = ["SubtaskServers", "main", "node_name_from_args"]
+
+R = Subtask.Result
+TICK_S = 0.05  # [s wall] how often a running goal looks at cancel, stop, deadlines
+SERVER_CHECK_S = 0.2  # [s wall] how often a running goal looks for its planning server on the graph
+_READ_ONLY = ParameterDescriptor(read_only=True)
+
+
+def node_name_from_args(argv: Sequence[str]) -> str:
+    """``<machine>_subtasks`` for a ``-p machine:=<machine>`` among the ROS arguments, else ``tms_ts_subtasks``.
+
+    A node's name is fixed before its parameters can be read, so the default name is taken from the command
+    line; the ``machine`` parameter stays the authority for what is served (a launch names the node itself).
+    """
+    args = list(argv)
+    for i, arg in enumerate(args[:-1]):
+        if arg in ("-p", "--param") and args[i + 1].startswith("machine:="):
+            machine = args[i + 1].split(":=", 1)[1].strip()
+            if machine.isidentifier():
+                return f"{machine}_subtasks"
+    return "tms_ts_subtasks"
+
+
+def _feedback_text(fb) -> str:  # noqa: ANN001
+    for field in ("state", "current_waypoint", "distance_remaining", "current_error"):
+        if hasattr(fb, field):
+            return f"{field}={getattr(fb, field)}"
+    return ""
+
+
+class SubtaskServers(Node):
+    """All subtask action servers of one machine (see the module docstring)."""
+
+    def __init__(self, node_name: str = "tms_ts_subtasks", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+        super().__init__(node_name, **kwargs)
+
+        def param(name: str, default):  # noqa: ANN001, ANN202
+            return self.declare_parameter(name, default, _READ_ONLY).value
+
+        machine = str(param("machine", ""))
+        self.model_name = str(param("model_name", machine)) or machine
+        self.planning_wait_s = float(param("planning_wait_s", 5.0))
+        self.stop_timeout_s = float(param("stop_timeout_s", 5.0))
+        self.server_lost_s = float(param("server_lost_s", 3.0))
+        db_uri = str(param("db_uri", ""))
+        db_path = str(param("db_path", ""))
+        specs = subtasks_for(machine)  # ValueError naming the valid machines
+        from tms_db import open_store
+
+        self.store = open_store(uri=db_uri or None, path=db_path or None)
+        group = ReentrantCallbackGroup()
+        self._ticker = Ticker(self, TICK_S, callback_group=group)
+        self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
+        self.planners: dict[str, RaceFreeActionClient] = {}
+        self.action_servers = []
+        for spec in specs:
+            planning = f"/{self.model_name}/{spec.planning_action}"
+            if planning not in self.planners:
+                self.planners[planning] = RaceFreeActionClient(self, spec.action_type, planning, callback_group=group)
+            self.action_servers.append(ActionServer(
+                self, Subtask, f"/{self.model_name}/{spec.name}",
+                execute_callback=functools.partial(self._execute, spec),  # a partial stays a coroutine function
+                goal_callback=lambda _goal, s=spec: self._on_goal(s),
+                cancel_callback=self._on_cancel,
+                callback_group=group,
+            ))
+        self.heartbeat = self.create_publisher(String, HEARTBEAT_TOPIC, 10)
+        self._goals = RunningGoals()  # SIGINT/SIGTERM: every running goal cancels downstream, then aborts
+        self._beat_stop = threading.Event()
+        threading.Thread(target=self._beat, name="subtask_heartbeat", daemon=True).start()
+        self.get_logger().info(f"subtask servers for /{self.model_name}: {', '.join(s.name for s in specs)}")
+
+    def _beat(self) -> None:
+        msg = String(data=self.model_name)
+        while not self._beat_stop.wait(HEARTBEAT_PERIOD_S):
+            try:
+                self.heartbeat.publish(msg)
+            except Exception:  # noqa: BLE001 - context shut down at exit
+                return
+
+    def _plan(self, goal: Subtask.Goal, spec: SubtaskSpec) -> dict:
+        from tms_db.errors import RecordNotFound
+
+        model = goal.model_name or self.model_name
+        try:
+            doc = self.store.get_parameter(model, goal.record_name)
+        except RecordNotFound:
+            raise SubtaskRecordError(goal.record_name, None, f"not found in parameter (model_name '{model}')") from None
+        return spec.build(doc, goal.record_name)
+
+    def _on_goal(self, spec: SubtaskSpec) -> GoalResponse:
+        if self._goals.stopping.is_set():
+            self.get_logger().error(f"/{self.model_name}/{spec.name}: goal rejected: the server is stopping")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _on_cancel(self, _gh) -> CancelResponse:  # noqa: ANN001
+        self._ticker.wake()  # the goal looks at its cancel request now, not at the next tick
+        return CancelResponse.ACCEPT
+
+    def _finish(self, gh, spec: SubtaskSpec, code: int, message: str) -> Subtask.Result:  # noqa: ANN001
+        record = gh.request.record_name
+        if spec.clears_lock_flg and code != R.RECORD_INVALID:
+            try:
+                self.store.set_fields(record, {"LOCK_FLG": False}, model_name=gh.request.model_name or self.model_name)
+            except Exception as exc:  # noqa: BLE001 - a bookkeeping write must not hide the result
+                self.get_logger().warning(f"LOCK_FLG of '{record}' not cleared: {exc}")
+        action = f"/{self.model_name}/{spec.name}"
+        if code == R.NONE:
+            gh.succeed()
+            self.get_logger().info(f"{action} '{record}' succeeded: {message}")
+        else:
+            # the reason for people, also where a client whose result carries no code can show it
+            gh.publish_feedback(Subtask.Feedback(state=f"{code_name(code)}: {message}"))
+            if code == R.CANCELED:
+                gh.canceled()
+            else:
+                gh.abort()
+            self.get_logger().warning(f"{action} '{record}' {code_name(code)}: {message}")
+        return Subtask.Result(error_code=code, error_msg=message)
+
+    def on_stop_requested(self) -> bool:
+        """run_node's stop hook: cancel the running goals downstream; True while any is still running."""
+        return self._goals.wind_down(self.stop_timeout_s + 1.0, lambda n: self.get_logger().warning(
+            f"stopping: canceling {n} running goal(s) downstream"))
+
+    async def _execute(self, spec: SubtaskSpec, gh) -> Subtask.Result:  # noqa: ANN001
+        with self._goals.running():
+            return await self._execute_goal(gh, spec)
+
+    async def _execute_goal(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
+        record = gh.request.record_name
+        try:
+            plan = self._plan(gh.request, spec)
+        except SubtaskRecordError as exc:
+            return self._finish(gh, spec, R.RECORD_INVALID, str(exc))
+        planning = f"/{self.model_name}/{spec.planning_action}"
+        client = self.planners[planning]
+        deadline = time.monotonic() + self.planning_wait_s
+        while not client.server_is_ready():
+            if gh.is_cancel_requested:
+                return self._finish(gh, spec, R.CANCELED, f"canceled while waiting for planning server {planning} "
+                                    "(nothing was sent)")
+            if self._goals.stopping.is_set():
+                return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping while waiting for "
+                                    f"planning server {planning} (nothing was sent)")
+            if time.monotonic() > deadline:
+                return self._finish(gh, spec, R.PLANNING_UNAVAILABLE,
+                                    f"planning server {planning} not available within {self.planning_wait_s:g} s")
+            await self._ticker.next()
+
+        def on_feedback(msg) -> None:  # noqa: ANN001
+            gh.publish_feedback(Subtask.Feedback(state=_feedback_text(msg.feedback)))
+
+        # the goal response is awaited even when a cancel comes meanwhile: its handle is what cancels planning
+        handle = await client.send_goal_async(spec.goal(plan), feedback_callback=on_feedback)
+        if handle is None or not handle.accepted:
+            return self._finish(gh, spec, R.PLANNING_REJECTED, f"planning {planning} rejected the goal for record "
+                                f"'{record}'")
+        result_future = self._ticker.wake_on(handle.get_result_async())
+        cancel_deadline = None
+        lost_since = None
+        next_check = time.monotonic() + SERVER_CHECK_S
+        while not result_future.done():
+            await self._ticker.next()
+            if result_future.done():
+                break
+            now = time.monotonic()
+            if now >= next_check:  # the planning process may have died: its goal would never end
+                next_check = now + SERVER_CHECK_S
+                if client.server_is_ready():
+                    lost_since = None
+                elif lost_since is None:
+                    lost_since = now
+                elif now - lost_since >= self.server_lost_s:
+                    self.emg.publish(Bool(data=True))
+                    return self._finish(gh, spec, R.SERVER_LOST, f"planning server {planning} lost while running "
+                                        f"record '{record}' (unavailable for {now - lost_since:.1f} s): "
+                                        f"/{self.model_name}/emg_stop latched")
+            if (gh.is_cancel_requested or self._goals.stopping.is_set()) and cancel_deadline is None:
+                handle.cancel_goal_async()
+                cancel_deadline = now + self.stop_timeout_s
+            if cancel_deadline is not None and now > cancel_deadline:
+                self.emg.publish(Bool(data=True))
+                return self._finish(gh, spec, R.STOP_TIMEOUT, f"planning {planning} did not confirm the stop within "
+                                    f"{self.stop_timeout_s:g} s: /{self.model_name}/emg_stop latched")
+        res = result_future.result()
+        ok, detail = spec.check(res.result)
+        status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
+            res.status, "ABORTED")
+        if gh.is_cancel_requested:
+            return self._finish(gh, spec, R.CANCELED, f"canceled; planning {planning} confirmed stop ({status})")
+        if self._goals.stopping.is_set():
+            return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping (SIGINT/SIGTERM): planning "
+                                f"{planning} canceled ({status})")
+        if res.status == GoalStatus.STATUS_SUCCEEDED and ok:
+            return self._finish(gh, spec, R.NONE, f"{spec.name} '{record}' done")
+        return self._finish(gh, spec, R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
+
+    def destroy_node(self) -> None:
+        self._beat_stop.set()
+        self.store.close()
+        super().destroy_node()
+
+
+def main() -> int:
+    # stop_in_context: on SIGINT/SIGTERM running goals cancel their planning goals and end (on_stop_requested)
+    return run_node(lambda: SubtaskServers(node_name_from_args(sys.argv)), executor="single", stop_in_context=True)
