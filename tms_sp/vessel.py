@@ -66,11 +66,11 @@ class VesselParams:
     #: [m] the previous release spot is kept unless another is at least this much lower: with an even
     #: load, 2 cm scan noise moved the lowest spot up to 1 m between scans, so the carry (reading
     #: target_release_pose) and the release (reading release_angle ~5 s later) aimed 0.05-0.1 rad apart
-    #: and the release added a swing of its own (6 of 16 passes, 3-cycle demo of 22 Nov 18:51)
+    #: and the release added a swing of its own (6 of 16 passes of a 3-cycle demo)
     release_hysteresis: float = 0.03
     #: fill fraction: a vessel found loaded stays loaded until its fill drops this far below ``target_fill``
     #: (a load that ended near the threshold flipped SENSING_LOADED_FLG 42 times in 2 min with scan noise,
-    #: 3-cycle demo of 22 Nov 21:29); a dump empties it well below
+    #: in a 3-cycle demo); a dump empties it well below
     loaded_hysteresis: float = 0.05
 
     def __post_init__(self) -> None:

@@ -52,7 +52,7 @@ PASS_THROUGH = os.environ.get("LOAD_PASS_PASS_THROUGH", "1") != "0"
 SOIL_FALL_S = float(os.environ.get("LOAD_PASS_SOIL_FALL") or 1e-3 * float(
     ET.parse(ROOT / "trees" / "paper_zx200_load.xml").find(".//Delay[@name='let_the_soil_fall']").get("delay_msec")))
 #: The tree's return_over_mound after that delay (seed record target_excavate_approach_pose); LOAD_PASS_RETURN=0:
-#: none, the excavate's approach does the swing back (the tree until 22 Nov).
+#: none, the excavate's approach does the swing back (the tree's earlier form).
 RETURN = os.environ.get("LOAD_PASS_RETURN", "1") != "0"
 #: Control periods of transport delay each way (LOAD_PASS_TRANSPORT; 0: none, the plant reads the command at once).
 TRANSPORT = int(os.environ.get("LOAD_PASS_TRANSPORT", "0"))

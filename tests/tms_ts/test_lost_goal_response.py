@@ -1,6 +1,6 @@
 """A goal whose acceptance never reaches the manager is cancelled by its id, so it cannot run on unseen.
 
-The clean-clone CI of 2026-11-22 failed this way: at start-up on 2 cores, Fast DDS dropped the goal
+A clean-clone CI run failed this way: at start-up on 2 cores, Fast DDS dropped the goal
 response of ``/ic120/st_ic120_navigate_anywhere`` ("failed to send response (timeout): client will not
 receive response") while the subtask server accepted the goal and ran it. The leaf then failed on its
 accept timeout and could not cancel a goal it had no handle for. Here the dropped reply is emulated in

@@ -11,7 +11,7 @@ limits and the goal ends CANCELED only when the arm is at rest.
 One thread: the goal's execute callback is a coroutine that the control tick wakes (feedback at most
 every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On the MultiThreadedExecutor
 it had, the control step was 3.7 % of the node's py-spy samples and rclpy's dispatch most of the rest; the
-node took 28-29 % of a core in the paper demo then, 18 % on one thread (22 Nov).
+node took about a third more CPU in the paper demo than on one thread.
 
 Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
 ``machine_config`` (default config/machines/zx200.yaml).

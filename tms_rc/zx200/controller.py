@@ -368,7 +368,7 @@ class ArmController:
         ``preview_s - lag_i`` seconds (not yet acting: equalising delay + dead time) are added. Without
         velocities, the lag counts as more dead time (commands of the last ``preview_s``), which is wrong
         while the joint accelerates or brakes: at the end of a fast swing the prediction said "there"
-        while the swing overshot by 5 cm, and the goal then crept in for 2 s (paper load pass, 22 Nov).
+        while the swing overshot by 5 cm, and the goal then crept in for 2 s (paper load pass).
         """
         q = np.asarray(q, dtype=float)
         if dq is None:
@@ -605,7 +605,7 @@ class ArmController:
         self._seg_time += self.elapsed
         # The reference starts at the predicted state (p0 = qp at segment start), so it is a trajectory of
         # the predicted state and is read at the segment's own time: the plant follows it preview_s later.
-        # (Reading it preview_s ahead, as before 22 Nov, skipped the first 1.3 s of every swing: the PID
+        # (Reading it preview_s ahead instead skipped the first 1.3 s of every swing: the PID
         # chased a reference that had left without it, a trapezoidal swing overshot by 0.5 rad, and a
         # 1.1 s penetrate took 2.2 s to converge.)
         t_ref = self._seg_time

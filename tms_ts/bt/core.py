@@ -122,7 +122,7 @@ class TreeContext:
     monotonic seconds (injectable for tests) and times the transport: goal acceptance, halts, lost
     servers, DB retries. ``task_clock`` times the task itself (Delay, Timeout, Sleep; :meth:`task_time`):
     the manager passes its ROS clock, so under ``use_sim_time`` a 1.5 s Delay is 1.5 s of the plant's
-    time, not of the wall (it was wall time: 3.75 s of simulation at 2.5x real time, 22 Nov);
+    time, not of the wall (it was wall time: 3.75 s of simulation at 2.5x real time);
     None = ``clock``. ``sync_loop_budget`` bounds how many
     synchronous iterations a Repeat/RetryUntilSuccessful runs inside one tick before yielding RUNNING
     (BT.CPP loops forever there, which made the original manager deaf to the emergency stop).
