@@ -13,7 +13,21 @@ from sim_bridge.tracks import SkidSteer, centre_to_tracks
 __all__ = ["Excavator", "CrawlerCarrier"]
 
 
-class Excavator:
+class _Tracked:
+    """What every machine on tracks shares: its skid-steer base (``self.base``) driven by track commands."""
+
+    spec: ExcavatorSpec | CarrierSpec
+    base: SkidSteer
+
+    def set_centre_velocity(self, v: float, yaw_rate: float) -> None:
+        t = self.spec.tracks
+        self.base.command[0], self.base.command[1] = centre_to_tracks(v, yaw_rate, t.gauge, t.max_yaw_rate)
+
+    def set_track_speeds(self, left: float, right: float) -> None:
+        self.base.command[0], self.base.command[1] = left, right
+
+
+class Excavator(_Tracked):
     """Backhoe state: tracked base + hydraulic front joints (swing, boom, arm, bucket)."""
 
     def __init__(self, spec: ExcavatorSpec, dt: float, pose: tuple[float, float, float]) -> None:
@@ -32,13 +46,6 @@ class Excavator:
     def set_front_velocity(self, velocities: dict[str, float]) -> None:
         for name, v in velocities.items():
             self.front.command[self.front.names.index(name)] = v
-
-    def set_centre_velocity(self, v: float, yaw_rate: float) -> None:
-        t = self.spec.tracks
-        self.base.command[0], self.base.command[1] = centre_to_tracks(v, yaw_rate, t.gauge, t.max_yaw_rate)
-
-    def set_track_speeds(self, left: float, right: float) -> None:
-        self.base.command[0], self.base.command[1] = left, right
 
     def rest(self) -> None:
         self.front.rest()
@@ -69,7 +76,7 @@ class Excavator:
         return q[1] + q[2] + q[3]
 
 
-class CrawlerCarrier:
+class CrawlerCarrier(_Tracked):
     """Crawler dump state: tracked base + vessel (target-angle or velocity control)."""
 
     def __init__(self, spec: CarrierSpec, dt: float, pose: tuple[float, float, float]) -> None:
@@ -96,13 +103,6 @@ class CrawlerCarrier:
     def set_vessel_velocity(self, v: float) -> None:
         self.vessel_target = None
         self.vessel.command[0] = v
-
-    def set_centre_velocity(self, v: float, yaw_rate: float) -> None:
-        t = self.spec.tracks
-        self.base.command[0], self.base.command[1] = centre_to_tracks(v, yaw_rate, t.gauge, t.max_yaw_rate)
-
-    def set_track_speeds(self, left: float, right: float) -> None:
-        self.base.command[0], self.base.command[1] = left, right
 
     def rest(self) -> None:
         """Hold the vessel where it is and stop the tracks."""
