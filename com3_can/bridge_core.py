@@ -5,7 +5,7 @@ it with plain numbers and an injected clock. It is the same for every machine ty
 (its channels, how a command becomes frames, how a state frame becomes outputs) is its profile,
 :mod:`com3_can.profiles`, chosen by the ``type`` of the machine description.
 
-* Commands (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``, ``machine_setting``) are
+* Commands (``front_cmd``, ``tracks_cmd`` / ``track_cmd``, ``cmd_vel``, ``rot_dump_cmd``, ``machine_setting``) are
   validated as a whole (unknown joint, NaN, array length, value outside the COM3 range ...). A bad
   command raises :class:`Com3CommandError` naming topic, joint/field and value, and changes nothing:
   values are never clipped or wrapped. A good one updates the frame and returns it for an immediate
@@ -42,6 +42,7 @@ from com3_can.scheduler import FrameScheduler
 from com3_can.signal_map import PILOT_MAX_MPA
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.com3 import CONTROL_NAMES, EFFORT, POSITION, VELOCITY
 from tms_model.machines import load_machine
 from tms_model.site import Projector, load_site
 
@@ -61,9 +62,8 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-# JointCmd.control_type values (tms_msg/JointCmd)
-POSITION, VELOCITY, EFFORT = 0, 1, 2
-_CONTROL_NAMES = {POSITION: "POSITION", VELOCITY: "VELOCITY", EFFORT: "EFFORT"}
+# com3_msgs/JointCmd control_type values (named once in tms_model.com3; re-exported for the profiles)
+_CONTROL_NAMES = CONTROL_NAMES
 
 DIAG_OK, DIAG_WARN, DIAG_ERROR = 0, 1, 2
 
@@ -341,8 +341,10 @@ class BridgeCore:
     def tracks_cmd(
         self, names: Sequence[str], control_type: int, velocity: Sequence[float], effort: Sequence[float], now: float
     ) -> list[Tx]:
-        """``tracks_cmd`` (JointCmd left_track/right_track): per-track velocity [m/s] (or effort, if the type takes it)."""
-        return self._command("tracks_cmd", self.profile.tracks_cmd, names, control_type, velocity, effort, now)
+        """Per-track JointCmd (left_track/right_track) on the type's ``tracks_topic``: velocity [m/s] (or effort, if the
+        type takes it)."""
+        return self._command(self.profile.tracks_topic, self.profile.tracks_cmd, names, control_type, velocity, effort,
+                             now)
 
     def cmd_vel(self, linear_x: float, angular_z: float, now: float) -> list[Tx]:
         """``cmd_vel`` (Twist): body-centre velocity [m/s] and yaw rate [rad/s]."""
@@ -355,17 +357,10 @@ class BridgeCore:
                 raise
             return self._command("cmd_vel", self.profile.cmd_vel, v, w, now)
 
-    def vessel_cmd(self, angle: float, now: float) -> list[Tx]:
-        """``vessel_cmd``: target vessel angle [rad], 0 = lowered, + = raised (the crawler-carrier profile)."""
-        with self._lock:
-            try:
-                if "vessel_cmd" not in self.profile.topics:
-                    raise self.profile._refuse("vessel_cmd")
-                a = _finite("vessel_cmd", "angle", angle)
-            except Com3CommandError as exc:
-                self._reject(exc)
-                raise
-            return self._command("vessel_cmd", self.profile.vessel_cmd, a, now)
+    def rot_dump_cmd(self, names: Sequence[str], control_type: int, position: Sequence[float], now: float) -> list[Tx]:
+        """``rot_dump_cmd`` (JointCmd, com3_ros crawler carrier): POSITION of ``dump_joint`` = target vessel angle
+        [rad], 0 = lowered, + = raised (the crawler-carrier profile)."""
+        return self._command("rot_dump_cmd", self.profile.rot_dump_cmd, names, control_type, position, now)
 
     def machine_setting(self, fields: Mapping[str, float], now: float) -> list[Tx]:
         """``machine_setting``: signal name -> value of Machine_Setting_Cmd (the node maps the ROS message).

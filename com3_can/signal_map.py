@@ -13,6 +13,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
+from tms_model.com3 import CARRIER_DUMP_JOINT, CARRIER_ROTATE_JOINT
+
 __all__ = [
     "JointSignals",
     "TrackSignals",
@@ -70,7 +72,7 @@ EXCAVATOR_FRONT: tuple[JointSignals, ...] = (
     _joint("bucket_joint", "bucket", "crowd", "dump"),
 )
 
-#: Track joint names of every tracked machine (``tracks_cmd``, ``joint_states``).
+#: Track joint names of every tracked machine (``tracks_cmd`` / ``track_cmd``, ``joint_states``).
 TRACKS: tuple[str, str] = ("left_track", "right_track")
 
 
@@ -115,6 +117,9 @@ CARRIER_FRAMES: Mapping[str, str] = MappingProxyType({
 @dataclass(frozen=True)
 class VesselSignals:
     joint: str = "vessel_joint"
+    # the joint names of rot_dump_cmd (tms_model.com3): the vessel, and the rotating body the IC120 lacks
+    command_joint: str = CARRIER_DUMP_JOINT
+    rotate_joint: str = CARRIER_ROTATE_JOINT
     target_angle_cmd: str = "target_vessel_angle"
     enable_cmd: str = "vessel_control_enable"
     angle: str = "vessel_angle"

@@ -30,11 +30,9 @@ from typing import Any
 from geometry_msgs.msg import Point, Pose, PoseStamped
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from com3_msgs.action import SetDumpAngle
+from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
 from tms_msg.action import (
-    FollowWaypoints,
-    NavigateThroughPoses,
-    NavigateToPose,
-    SetDumpAngle,
     Zx200ChangePose,
     Zx200ExcavateSimple,
     Zx200ReleaseSimple,
@@ -227,9 +225,9 @@ def nav2_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a Nav2-shaped action 
     return result.error_code == 0, f"error_code {result.error_code}: {result.error_msg}"
 
 
-def dump_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - SetDumpAngle.Result
-    """SetDumpAngle (com3_msgs fields): the ``success`` flag."""
-    return bool(result.success), result.message
+def dump_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs SetDumpAngle.Result
+    """com3_msgs SetDumpAngle: the ``success`` flag (the peer's result carries no reason; the server logs it)."""
+    return bool(result.success), "" if result.success else "success false (the set_dump_angle server's log says why)"
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,12 @@ a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thr
 ``joint_states``, ``odom_pose``, ``imu``, ``gnss/fix``). ``diagnostic`` is published every
 ``diagnostic_period_s`` and at once when its level or message changes.
 
+Command topics and types are OPERA com3_ros's (``com3_msgs``), per machine type: an excavator takes
+``front_cmd`` and ``tracks_cmd`` (com3_msgs/JointCmd), ``machine_setting`` (ExcavatorCom3MachineSetting); a
+crawler carrier takes ``track_cmd`` and ``rot_dump_cmd`` (com3_msgs/JointCmd; ``dump_joint`` POSITION = vessel
+angle) and ``crawler_carrier_machine_setting`` (CrawlerCarrierCom3MachineSetting); both take ``cmd_vel``
+(geometry_msgs/Twist) and ``emg_stop`` (std_msgs/Bool).
+
 Pilot cut-off (:mod:`com3_can.pilot_cutoff`): ``lock`` (std_msgs/Bool, reliable) true engages the
 hydraulic lock (``Pilot_Cutoff_Cmd`` = 1 at once, then every 100 ms), false releases it; a latched
 ``emg_stop`` engages it too. Motion commands are still accepted while locked (the machine ignores
@@ -32,17 +38,17 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus
-from std_msgs.msg import Bool, Float64
+from std_msgs.msg import Bool
 
 from com3_can.bridge_core import BridgeConfig, BridgeCore, FixOut, ImuOut, JointStateOut, OdomOut, Tx
 from com3_can.bus import load_bus_config, open_bus
 from com3_can.errors import Com3CommandError
 from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
 from com3_can.pilot_cutoff import CutoffSender
+from com3_msgs.msg import CrawlerCarrierCom3MachineSetting, ExcavatorCom3MachineSetting, JointCmd
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
-from tms_msg.msg import CrawlerCarrierMachineSetting, ExcavatorMachineSetting, JointCmd
 
 __all__ = ["main", "Com3Bridge"]
 
@@ -106,14 +112,17 @@ class Com3Bridge(Node):
         self.cutoff = CutoffSender()
         self._cutoff_lock = threading.Lock()
         self.create_subscription(Bool, "lock", self._on_lock, reliable)
-        self.create_subscription(JointCmd, "tracks_cmd", self._on_tracks, depth)
+        # the machine type's profile names the topics it takes (com3_ros's names for that type)
+        profile = self.core.profile
+        self.create_subscription(JointCmd, profile.tracks_topic, self._on_tracks, depth)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, depth)
-        if "front_cmd" in self.core.topics:  # the machine type's profile says which commands it takes
+        if "front_cmd" in self.core.topics:
             self.create_subscription(JointCmd, "front_cmd", self._on_front, depth)
-            self.create_subscription(ExcavatorMachineSetting, "machine_setting", self._on_zx_setting, depth)
-        if "vessel_cmd" in self.core.topics:
-            self.create_subscription(Float64, "vessel_cmd", self._on_vessel, depth)
-            self.create_subscription(CrawlerCarrierMachineSetting, "machine_setting", self._on_ic_setting, depth)
+            self.create_subscription(ExcavatorCom3MachineSetting, profile.setting_topic, self._on_zx_setting, depth)
+        if "rot_dump_cmd" in self.core.topics:
+            self.create_subscription(JointCmd, "rot_dump_cmd", self._on_rot_dump, depth)
+            self.create_subscription(CrawlerCarrierCom3MachineSetting, profile.setting_topic, self._on_ic_setting,
+                                     depth)
         self.create_timer(0.05, self._diag_timer)
         self._threads = [
             threading.Thread(target=self._send_loop, name="com3_tx", daemon=True),
@@ -242,8 +251,8 @@ class Com3Bridge(Node):
     def _on_cmd_vel(self, msg: Any) -> None:
         self._command(self.core.cmd_vel, msg.linear.x, msg.angular.z)
 
-    def _on_vessel(self, msg: Any) -> None:
-        self._command(self.core.vessel_cmd, msg.data)
+    def _on_rot_dump(self, msg: Any) -> None:
+        self._command(self.core.rot_dump_cmd, list(msg.joint_name), msg.control_type, list(msg.position))
 
     def _on_zx_setting(self, msg: Any) -> None:
         self._command(self.core.machine_setting, {
@@ -252,11 +261,16 @@ class Com3Bridge(Node):
             "travel_speed_mode": float(msg.travel_speed_mode),  # true = turtle = DBC 1
             "working_mode_notice": float(msg.working_mode_notice),
             "yellow_led_mode": float(msg.yellow_led_mode),
+            "horn_cmd": float(msg.horn),
             "front_signal_switch_command": float(msg.front_control_mode),
             "travel_signal_switch_command": float(msg.tracks_control_mode),
         })
 
     def _on_ic_setting(self, msg: Any) -> None:
+        if msg.swing_mode:  # lever input for a rotating body: the IC120 has none, so the request cannot be met
+            self._log.warning(f"rejected: {self.core.profile.setting_topic}: swing_mode true (lever input) but the "
+                              f"{self.config.machine} has no rotating body", throttle_duration_sec=0.5)
+            return
         self._command(self.core.machine_setting, {
             "operation_mode": float(msg.operation_mode),
             "velocity_mode": float(msg.velocity_mode),

@@ -31,7 +31,9 @@ class ConverterProfile:
 
     * ``type``: registry name; ``dbc``: DBC file in ``com3_can/dbc``;
     * ``channels``: channel name -> command frames it feeds (one watchdog per channel);
-    * ``topics``: the ROS commands the type takes (``front_cmd``, ``tracks_cmd``, ``cmd_vel``, ``vessel_cmd``);
+    * ``topics``: the ROS command topics the type takes, named as OPERA's com3_ros names them for that type
+      (excavator ``front_cmd``, ``tracks_cmd``; crawler carrier ``track_cmd``, ``rot_dump_cmd``; both ``cmd_vel``);
+      ``tracks_topic``: which of them carries the per-track JointCmd; ``setting_topic``: the machine-setting topic;
     * ``state_handlers``: state frame name -> method name; the method gets ``(core, values, stamp)`` and
       returns outputs (:class:`~com3_can.bridge_core.JointStateOut`, ``OdomOut``, ...).
 
@@ -42,6 +44,8 @@ class ConverterProfile:
     dbc: ClassVar[str] = ""
     channels: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     topics: ClassVar[frozenset[str]] = frozenset()
+    tracks_topic: ClassVar[str] = "tracks_cmd"
+    setting_topic: ClassVar[str] = "machine_setting"
     state_handlers: ClassVar[Mapping[str, str]] = {}
 
     def __init__(self, machine: str) -> None:
@@ -69,13 +73,14 @@ class ConverterProfile:
 
     def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
                    effort: Sequence[float], now: float) -> list[Tx]:
-        raise self._refuse("tracks_cmd")
+        raise self._refuse(self.tracks_topic)
 
     def cmd_vel(self, core: BridgeCore, linear_x: float, angular_z: float, now: float) -> list[Tx]:
         raise self._refuse("cmd_vel")
 
-    def vessel_cmd(self, core: BridgeCore, angle: float, now: float) -> list[Tx]:
-        raise self._refuse("vessel_cmd")
+    def rot_dump_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+                     now: float) -> list[Tx]:
+        raise self._refuse("rot_dump_cmd")
 
     # state handlers shared by the types (both DBCs carry these frames)
     def roll_pitch(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:

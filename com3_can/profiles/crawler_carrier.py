@@ -1,8 +1,9 @@
 """Crawler-carrier profile (IC120): travel and vessel on our COM3 extension (``dbc/crawler_carrier_com3.dbc``).
 
-Commands: ``cmd_vel`` -> ``Velocity_Cmd`` centre + yaw rate (``velocity_mode`` 0), ``tracks_cmd`` VELOCITY ->
-``Velocity_Cmd`` per track (``velocity_mode`` 1), ``vessel_cmd`` -> ``Vessel_Cmd`` target angle in
-[0, ``vessel.max_angle``] of the machine description. States: ``Track_Velocity`` -> odometry integrated
+Commands, on com3_ros's crawler-carrier topics: ``cmd_vel`` -> ``Velocity_Cmd`` centre + yaw rate
+(``velocity_mode`` 0), ``track_cmd`` VELOCITY -> ``Velocity_Cmd`` per track (``velocity_mode`` 1),
+``rot_dump_cmd`` POSITION of ``dump_joint`` -> ``Vessel_Cmd`` target angle in [0, ``vessel.max_angle``] of the
+machine description (the IC120 has no ``rotate_joint``: a command naming it is refused). States: ``Track_Velocity`` -> odometry integrated
 from the track speeds (heading from ``Vehicle_Azimuth`` when present) and joint states (vessel + track
 positions), ``GNSS_Altitude_Status`` (with the latest latitude/longitude) -> fix, ``Roll_Pitch_Angle`` -> IMU.
 """
@@ -31,7 +32,9 @@ class CrawlerCarrierProfile(ConverterProfile):
     machine_type = "crawler_dump"
     dbc = "crawler_carrier_com3.dbc"
     channels = {"travel": (F["travel_velocity"],), "vessel": (F["vessel"],)}
-    topics = frozenset({"tracks_cmd", "cmd_vel", "vessel_cmd"})
+    topics = frozenset({"track_cmd", "cmd_vel", "rot_dump_cmd"})
+    tracks_topic = "track_cmd"
+    setting_topic = "crawler_carrier_machine_setting"
     state_handlers = {
         F["track_velocity"]: "tracks",
         "Roll_Pitch_Angle": "roll_pitch",
@@ -54,12 +57,12 @@ class CrawlerCarrierProfile(ConverterProfile):
                    effort: Sequence[float], now: float) -> list[Tx]:
         from com3_can.bridge_core import VELOCITY
 
-        vals = core.check_joint_cmd("tracks_cmd", TRACKS, names, control_type, velocity, effort)
+        vals = core.check_joint_cmd(self.tracks_topic, TRACKS, names, control_type, velocity, effort)
         if control_type != VELOCITY:
-            raise Com3CommandError(f"tracks_cmd: the {self.machine} takes VELOCITY track commands only")
+            raise Com3CommandError(f"{self.tracks_topic}: the {self.machine} takes VELOCITY track commands only")
         frame = core.codec.neutral(F["travel_velocity"])
         frame.update({T.left_velocity_cmd: vals.get("left_track", 0.0), T.right_velocity_cmd: vals.get("right_track", 0.0)})
-        txs = core.accept("tracks_cmd", "travel", {F["travel_velocity"]: frame}, now)
+        txs = core.accept(self.tracks_topic, "travel", {F["travel_velocity"]: frame}, now)
         core.set_switch("velocity_mode", 1.0)
         return txs
 
@@ -70,15 +73,30 @@ class CrawlerCarrierProfile(ConverterProfile):
         core.set_switch("velocity_mode", 0.0)
         return txs
 
-    def vessel_cmd(self, core: BridgeCore, angle: float, now: float) -> list[Tx]:
+    def rot_dump_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+                     now: float) -> list[Tx]:
+        from com3_can.bridge_core import POSITION, _finite
+
+        topic = "rot_dump_cmd"
+        if control_type != POSITION:
+            raise Com3CommandError(f"{topic}: the {self.machine} takes POSITION (0) dump commands only, "
+                                   f"got control_type {control_type}")
+        if list(names) != [V.command_joint]:
+            if V.rotate_joint in names:
+                raise Com3CommandError(f"{topic}: the {self.machine} has no {V.rotate_joint} (its body does not rotate); "
+                                       f"send joint_name [{V.command_joint!r}] only")
+            raise Com3CommandError(f"{topic}: joint_name {list(names)}; expected [{V.command_joint!r}]")
+        if len(position) != 1:
+            raise Com3CommandError(f"{topic}: 1 joint name but {len(position)} position values")
+        angle = _finite(topic, f"{V.command_joint} position", position[0])
         top = core.config.vessel_max_angle
         if not 0.0 <= angle <= top:
             raise Com3CommandError(
-                f"vessel_cmd: angle {angle:g} rad outside [0, {top:g}] rad "
+                f"{topic}: {V.command_joint} angle {angle:g} rad outside [0, {top:g}] rad "
                 f"(0 = lowered, + = raised; config/machines/{self.machine}.yaml vessel.max_angle)"
             )
         frame = {V.target_angle_cmd: angle, V.enable_cmd: 1.0}
-        return core.accept("vessel_cmd", "vessel", {F["vessel"]: frame}, now)
+        return core.accept(topic, "vessel", {F["vessel"]: frame}, now)
 
     # state frames
     def tracks(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:

@@ -51,7 +51,8 @@ def _latency() -> str:
 
     from com3_can.bus import open_bus
     from com3_can.codec import load_codec
-    from tms_msg.msg import JointCmd
+    from com3_msgs.msg import JointCmd
+    from tms_model.com3 import VELOCITY
 
     codec = load_codec("zx200")
     vid = codec.frame_id("Velocity_Cmd_1")
@@ -93,7 +94,7 @@ def _latency() -> str:
                 values = codec.neutral("Velocity_Cmd_1")
                 values["boom_target_anguler_velocity"] = boom
                 data = codec.encode("Velocity_Cmd_1", values)
-                msg = JointCmd(joint_name=["boom_joint"], control_type=JointCmd.VELOCITY, velocity=[boom])
+                msg = JointCmd(joint_name=["boom_joint"], control_type=VELOCITY, velocity=[boom])
                 t = time.monotonic()
                 pub.publish(msg)
                 sent.append((data, t))

@@ -241,11 +241,11 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import NavSatFix
 
+    from nav2_msgs.action import NavigateThroughPoses
     from tests.ic120.harness import paper_legs, site_points
     from tests.ic120.rosutil import ActionCall, Truth, pose_stamped, spin_for, spin_until, yaw_of
     from tests.ic120.stack import start_ours, start_plant_and_bridge
     from tests.rosproc import Proc, isolated_domain, ros_env
-    from tms_msg.action import NavigateThroughPoses
     from tms_rp.ic120.config import load_nav_config
 
     pts = site_points()

@@ -209,10 +209,10 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
+    from com3_msgs.msg import JointCmd
     from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
     from tests.zx200.conftest import ArmStack
     from tests.zx200.test_plant_integration import joint_goal, pose_goal, pwa_goal
-    from tms_msg.msg import JointCmd
 
     kin = load_kinematics()
     cfg = load_controller_config()

@@ -95,20 +95,31 @@ def test_cmd_vel_and_tracks_on_both_machines() -> None:
     assert car.current_values("Machine_Setting_Cmd")["velocity_mode"] == 0
     car.tracks_cmd(["right_track"], VELOCITY, [0.5], [], now=0.0)
     assert car.current_values("Machine_Setting_Cmd")["velocity_mode"] == 1
-    with pytest.raises(Com3CommandError, match="ic120 takes VELOCITY"):
+    with pytest.raises(Com3CommandError, match="track_cmd: the ic120 takes VELOCITY"):
         car.tracks_cmd(["right_track"], EFFORT, [], [0.5], now=0.0)
+    # com3_ros names the topics per type: an excavator's tracks_cmd, a crawler carrier's track_cmd
+    assert (zx().profile.tracks_topic, car.profile.tracks_topic) == ("tracks_cmd", "track_cmd")
+    assert car.topics == frozenset({"track_cmd", "cmd_vel", "rot_dump_cmd"})
 
 
-def test_vessel_cmd_range_from_machine_config() -> None:
+def test_rot_dump_cmd_range_from_machine_config() -> None:
     car = ic()
-    car.vessel_cmd(0.8, now=0.0)
+    car.rot_dump_cmd(["dump_joint"], POSITION, [0.8], now=0.0)
     assert car.current_values("Vessel_Cmd") == {"target_vessel_angle": 0.8, "vessel_control_enable": 1.0}
     for bad in (-0.1, 1.2, math.inf):
-        with pytest.raises(Com3CommandError, match="vessel_cmd: "):
-            car.vessel_cmd(bad, now=0.0)
+        with pytest.raises(Com3CommandError, match="rot_dump_cmd: "):
+            car.rot_dump_cmd(["dump_joint"], POSITION, [bad], now=0.0)
+    for names, ctl, pos, why in (
+        (["rotate_joint"], POSITION, [0.1], "has no rotate_joint"),
+        (["vessel_joint"], POSITION, [0.1], r"expected \['dump_joint'\]"),
+        (["dump_joint"], VELOCITY, [0.1], "POSITION \\(0\\) dump commands only"),
+        (["dump_joint"], POSITION, [], "1 joint name but 0 position values"),
+    ):
+        with pytest.raises(Com3CommandError, match=why):
+            car.rot_dump_cmd(names, ctl, pos, now=0.0)
     assert car.current_values("Vessel_Cmd")["target_vessel_angle"] == 0.8
-    with pytest.raises(Com3CommandError, match=r"vessel_cmd: the zx200 \(excavator\) does not take vessel_cmd"):
-        zx().vessel_cmd(0.1, now=0.0)
+    with pytest.raises(Com3CommandError, match=r"rot_dump_cmd: the zx200 \(excavator\) does not take rot_dump_cmd"):
+        zx().rot_dump_cmd(["dump_joint"], POSITION, [0.1], now=0.0)
 
 
 def test_emg_stop_latch() -> None:

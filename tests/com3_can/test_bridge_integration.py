@@ -96,9 +96,10 @@ def wait_subscribers(node: Any, pub: Any, timeout: float = 20.0) -> None:
 
 
 def front(velocities: list[float]) -> Any:
-    from tms_msg.msg import JointCmd
+    from com3_msgs.msg import JointCmd
+    from tms_model.com3 import VELOCITY
 
-    return JointCmd(joint_name=["swing_joint", "boom_joint", "arm_joint", "bucket_joint"], control_type=JointCmd.VELOCITY,
+    return JointCmd(joint_name=["swing_joint", "boom_joint", "arm_joint", "bucket_joint"], control_type=VELOCITY,
                     velocity=velocities)
 
 
@@ -107,7 +108,7 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Bool
 
-    from tms_msg.msg import JointCmd
+    from com3_msgs.msg import JointCmd
 
     bridge = start_bridge(procs, "zx200", can_cfg)
     pub = ros_node.create_publisher(JointCmd, "/zx200/front_cmd", 10)
@@ -224,11 +225,16 @@ def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import NavSatFix
-    from std_msgs.msg import Float64
+
+    from com3_msgs.msg import JointCmd
+    from tms_model.com3 import POSITION
+
+    def dump(angle: float) -> JointCmd:
+        return JointCmd(joint_name=["dump_joint"], control_type=POSITION, position=[angle])
 
     bridge = start_bridge(procs, "ic120", can_cfg)
     vel_pub = ros_node.create_publisher(Twist, "/ic120/cmd_vel", 10)
-    vessel_pub = ros_node.create_publisher(Float64, "/ic120/vessel_cmd", 10)
+    vessel_pub = ros_node.create_publisher(JointCmd, "/ic120/rot_dump_cmd", 10)
     odoms: list[Odometry] = []
     fixes: list[NavSatFix] = []
     diags: list[DiagnosticArray] = []
@@ -243,7 +249,7 @@ def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg
 
     def command() -> None:
         vel_pub.publish(twist)
-        vessel_pub.publish(Float64(data=0.5))
+        vessel_pub.publish(dump(0.5))
 
     def commanded(frame: str, key: str, value: float) -> bool:
         frames = peer.since(t0, IC.frame_id(frame))
@@ -262,8 +268,13 @@ def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg
     assert vessel == {"target_vessel_angle": pytest.approx(0.5, abs=4e-4), "vessel_control_enable": 1}
 
     # out-of-range vessel target: logged, not sent
-    vessel_pub.publish(Float64(data=2.0))
-    assert bridge.wait_for("rejected: vessel_cmd: angle 2 rad outside [0, 1.13446]", 10), bridge.output
+    vessel_pub.publish(dump(2.0))
+    assert bridge.wait_for("rejected: rot_dump_cmd: dump_joint angle 2 rad outside [0, 1.13446]", 10), bridge.output
+    # the IC120's body does not rotate: a rotate_joint command is refused, naming it (rejections are logged at
+    # most every 0.5 s, so it is repeated until the log shows it)
+    rotate = JointCmd(joint_name=["rotate_joint", "dump_joint"], control_type=POSITION, position=[0.3, 0.5])
+    assert spin_until(ros_node, lambda: "rejected: rot_dump_cmd: the ic120 has no rotate_joint" in bridge.output,
+                      10 * SCALE, (0.2, lambda: vessel_pub.publish(rotate))), bridge.output
 
     # state frames -> odom_pose and gnss/fix, with bursts of garbled frames in between. All of it is paced by
     # the bridge itself, through the counters of its diagnostic: the next garbled burst goes out once the
@@ -354,3 +365,33 @@ def test_odom_period_publishes_fewer_odom_pose_messages_without_losing_odometry(
     # at most one per 0.1 s (+1 for phase), far fewer than the frames
     assert 5 <= published <= elapsed / 0.1 + 2, (published, frames, elapsed)
     assert odoms[-1].pose.pose.position.x - x0 == pytest.approx(0.5 * 2.0, abs=0.35)
+
+
+def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+    """``machine_setting`` (excavator) and ``crawler_carrier_machine_setting`` (crawler carrier) take OPERA's
+    com3_msgs types and reach Machine_Setting_Cmd; a crawler-carrier swing_mode the IC120 cannot meet is refused."""
+    from com3_msgs.msg import CrawlerCarrierCom3MachineSetting, ExcavatorCom3MachineSetting
+
+    def latest(codec: Any, t0: float) -> dict[str, float]:
+        frames = peer.since(t0, codec.frame_id("Machine_Setting_Cmd"))
+        return codec.decode(frames[-1][1].arbitration_id, bytes(frames[-1][1].data))[1] if frames else {}
+
+    zx_bridge = start_bridge(procs, "zx200", can_cfg)
+    zx_pub = ros_node.create_publisher(ExcavatorCom3MachineSetting, "/zx200/machine_setting", 10)
+    wait_subscribers(ros_node, zx_pub)
+    zx_msg = ExcavatorCom3MachineSetting(engine_rpm=1500.0, power_eco_mode=True, travel_speed_mode=True,
+                                         working_mode_notice=True, yellow_led_mode=2, horn=True)
+    t0 = time.monotonic()
+    assert spin_until(ros_node, lambda: latest(ZX, t0).get("horn_cmd") == 1 and latest(ZX, t0).get("engine_rpm") == 1500,
+                      10 * SCALE, (0.2, lambda: zx_pub.publish(zx_msg))), zx_bridge.output
+    assert latest(ZX, t0)["yellow_led_mode"] == 2 and latest(ZX, t0)["working_mode_notice"] == 1
+
+    ic_bridge = start_bridge(procs, "ic120", can_cfg)
+    ic_pub = ros_node.create_publisher(CrawlerCarrierCom3MachineSetting, "/ic120/crawler_carrier_machine_setting", 10)
+    wait_subscribers(ros_node, ic_pub)
+    ic_msg = CrawlerCarrierCom3MachineSetting(operation_mode=1, eco_mode=True, speed_mode=True)
+    t0 = time.monotonic()
+    assert spin_until(ros_node, lambda: latest(IC, t0).get("eco_mode") == 1 and latest(IC, t0).get("speed_mode") == 1,
+                      10 * SCALE, (0.2, lambda: ic_pub.publish(ic_msg))), ic_bridge.output
+    ic_pub.publish(CrawlerCarrierCom3MachineSetting(swing_mode=True))
+    assert ic_bridge.wait_for("swing_mode true (lever input) but the ic120 has no rotating body", 10), ic_bridge.output

@@ -55,7 +55,7 @@ SERVERS = {
     "/ic120/st_ic120_follow_waypoints": "Subtask",
     "/zx200/tms_rp_zx200_excavate_simple": "Zx200ExcavateSimple",
     "/zx200/arm_controller/move": "Zx200ArmMove",
-    "/ic120/follow_waypoints": "FollowWaypoints",
+    "/ic120/follow_waypoints": "nav2_msgs.action.FollowWaypoints",
 }
 
 
@@ -255,11 +255,15 @@ class Probe:
 
 def wait_servers(node, timeout: float) -> list[str]:  # noqa: ANN001
     """Wait until every action server of :data:`SERVERS` is available; returns the missing ones."""
+    import importlib
+
     from rclpy.action import ActionClient
 
-    import tms_msg.action as actions
+    def action_type(name: str):  # noqa: ANN202 - "Type" (a tms_msg action) or "package.action.Type"
+        module, _, type_name = name.rpartition(".")
+        return getattr(importlib.import_module(module or "tms_msg.action"), type_name)
 
-    clients = {name: ActionClient(node, getattr(actions, t), name) for name, t in SERVERS.items()}
+    clients = {name: ActionClient(node, action_type(t), name) for name, t in SERVERS.items()}
     end = time.monotonic() + timeout
     missing = list(clients)
     while time.monotonic() < end:

@@ -16,11 +16,9 @@ from rclpy.action import ActionServer, CancelResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
+from com3_msgs.action import SetDumpAngle
+from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
 from tms_msg.action import (
-    FollowWaypoints,
-    NavigateThroughPoses,
-    NavigateToPose,
-    SetDumpAngle,
     Zx200ChangePose,
     Zx200ExcavateSimple,
     Zx200ReleaseSimple,

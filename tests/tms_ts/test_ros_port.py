@@ -21,7 +21,7 @@ def test_planning_server_ready_sees_the_subtasks_planning_server_on_the_graph(ro
 
     from rclpy.action import ActionServer
 
-    from tms_msg.action import NavigateToPose
+    from nav2_msgs.action import NavigateToPose
     from tms_ts.nodes.ros_port import ManagerRosPort
 
     port = ManagerRosPort(ros_node)

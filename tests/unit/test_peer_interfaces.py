@@ -504,7 +504,7 @@ def _parts(key: str) -> list[tuple[type, str]]:
     sections = PEER[key].split("---")
     names = {"msg": [""], "srv": ["Request", "Response"], "action": ["Goal", "Result", "Feedback"]}[kind]
     assert len(sections) == len(names), f"{key}: PEER table has {len(sections)} sections, a {kind} has {len(names)}"
-    return [(cls if not part else getattr(cls, part), section) for part, section in zip(names, sections)]
+    return [(cls if not part else getattr(cls, part), section) for part, section in zip(names, sections, strict=True)]
 
 
 def _constants(cls: type) -> dict[str, object]:

@@ -106,7 +106,8 @@ def test_converter_node_frames_on_vcan0_read_by_raw_socket(procs, ros_node, raw_
     """
     from sensor_msgs.msg import JointState
 
-    from tms_msg.msg import JointCmd
+    from com3_msgs.msg import JointCmd
+    from tms_model.com3 import VELOCITY
 
     bridge = procs([executable("com3_can", "com3_bridge"), "--ros-args", "-r", "__ns:=/zx200",
                     "-p", "machine:=zx200", "-p", "can_interface:=socketcan", "-p", f"can_channel:={vcan_channel()}",
@@ -117,7 +118,7 @@ def test_converter_node_frames_on_vcan0_read_by_raw_socket(procs, ros_node, raw_
     spin = ros_node.executor_for_test.spin_once
 
     cmd = JointCmd(joint_name=["swing_joint", "boom_joint", "arm_joint", "bucket_joint"],
-                   control_type=JointCmd.VELOCITY, velocity=[0.1, -0.2, 0.3, 0.0])
+                   control_type=VELOCITY, velocity=[0.1, -0.2, 0.3, 0.0])
     wanted = velocity_cmd_1_bytes(boom=-0.2, arm=0.3, bucket=0.0, swing=0.1)
     seen_ids: set[int] = set()
 

@@ -26,7 +26,7 @@ def controller(procs, ros_node):  # noqa: ANN001, ANN201
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from tms_msg.msg import JointCmd
+    from com3_msgs.msg import JointCmd
 
     ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
                 name="zx200_arm_controller")

@@ -1,6 +1,6 @@
 """Vessel (dump body) angle control of the IC120, pure Python.
 
-The COM3 carrier frame carries a *target vessel angle* (com3_can ``vessel_cmd``: 0 = lowered, + = raised);
+The COM3 carrier frame carries a *target vessel angle* (``rot_dump_cmd`` ``dump_joint`` position: 0 = lowered, + = raised);
 the machine's own hydraulics move the vessel there. This controller validates the target against the
 machine limit, keeps sending it, watches the measured angle (``joint_states`` ``vessel_joint``) and decides
 success (inside ``tolerance`` for ``settle_time``), timeout (``|delta| / vessel.velocity + timeout_margin``)

@@ -1,11 +1,13 @@
 """``ic120_vessel``: the ``set_dump_angle`` action server (thin rclpy wrapper of VesselController).
 
-Run in the machine namespace: ``ic120_vessel --ros-args -r __ns:=/ic120``. Goal ``target_angle`` [rad]
-(0 = lowered, + = raised, up to config/machines/ic120.yaml ``vessel.max_angle``); feedback
-``current_error`` [rad]; result ``success`` + ``message``. Publishes ``vessel_cmd`` (std_msgs/Float64 target
-angle) at ``rate_hz`` (10) while a goal runs and keeps holding the last target afterwards (com3_bridge's
-watchdog would otherwise neutralise the vessel channel); reads ``joint_states`` (``vessel_joint``).
-Cancel holds the vessel where it is, waits for it to stop, then reports CANCELED.
+Run in the machine namespace: ``ic120_vessel --ros-args -r __ns:=/ic120``. Action ``set_dump_angle``
+(com3_msgs/action/SetDumpAngle, OPERA's): goal ``target_angle`` [rad] (0 = lowered, + = raised, up to
+config/machines/ic120.yaml ``vessel.max_angle``); feedback ``current_error`` [rad]; result ``success`` (the
+reason of a failure is logged: the peer's result has no text field). Publishes ``rot_dump_cmd``
+(com3_msgs/JointCmd, ``dump_joint`` POSITION = target angle) at ``rate_hz`` (10) while a goal runs and keeps
+holding the last target afterwards (com3_bridge's watchdog would otherwise neutralise the vessel channel);
+reads ``joint_states`` (``vessel_joint``). Cancel holds the vessel where it is, waits for it to stop, then
+reports CANCELED.
 """
 
 from __future__ import annotations
@@ -16,13 +18,14 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
 
+from com3_msgs.action import SetDumpAngle
+from com3_msgs.msg import JointCmd
 from tms_common.config import config_path, load_yaml
 from tms_common.node import run_node
 from tms_common.params import declare_startup
+from tms_model.com3 import CARRIER_DUMP_JOINT, POSITION
 from tms_model.machines import CRAWLER_DUMP, load_machine
-from tms_msg.action import SetDumpAngle
 from tms_rc.ic120.vessel import VesselController, VesselError, VesselParams
 
 __all__ = ["main", "Ic120Vessel"]
@@ -41,7 +44,7 @@ class Ic120Vessel(Node):
         self._vel = 0.0
         self._hold: float | None = None
         self._active: tuple[Any, Future] | None = None
-        self.pub = self.create_publisher(Float64, "vessel_cmd", 10)
+        self.pub = self.create_publisher(JointCmd, "rot_dump_cmd", 10)
         self.create_subscription(JointState, "joint_states", self._on_joints, 20)
         self._server = ActionServer(self, SetDumpAngle, "set_dump_angle", execute_callback=self._execute,
                                     goal_callback=lambda _g: GoalResponse.ACCEPT,
@@ -58,26 +61,28 @@ class Ic120Vessel(Node):
             self._angle = float(msg.position[i])
             self._vel = float(msg.velocity[i]) if len(msg.velocity) > i else 0.0
 
+    def _command(self, angle: float) -> None:
+        self.pub.publish(JointCmd(joint_name=[CARRIER_DUMP_JOINT], control_type=POSITION, position=[angle]))
+
+    def _fail(self, handle, why: str) -> SetDumpAngle.Result:  # noqa: ANN001
+        handle.abort()
+        self.get_logger().warning(f"set_dump_angle: FAILED: {why}")
+        return SetDumpAngle.Result(success=False)
+
     async def _execute(self, handle):  # noqa: ANN001, ANN202
-        res = SetDumpAngle.Result()
         if self._active is not None:
             old, fut = self._active
             if old.is_active:
                 old.abort()
-            r = SetDumpAngle.Result()
-            r.success, r.message = False, "preempted by a new goal"
-            fut.set_result(r)
+            self.get_logger().warning("set_dump_angle: FAILED: preempted by a new goal")
+            fut.set_result(SetDumpAngle.Result(success=False))
             self._active = None
         if self._angle is None:
-            handle.abort()
-            res.success, res.message = False, "no vessel_joint on joint_states yet: is com3_bridge running?"
-            return res
+            return self._fail(handle, "no vessel_joint on joint_states yet: is com3_bridge running?")
         try:
             self.ctl.start(float(handle.request.target_angle), self._angle, self._now())
         except VesselError as exc:
-            handle.abort()
-            res.success, res.message = False, str(exc)
-            return res
+            return self._fail(handle, str(exc))
         fut = Future()
         self._active = (handle, fut)
         return await fut
@@ -85,7 +90,7 @@ class Ic120Vessel(Node):
     def _tick(self) -> None:
         if self._active is None:
             if self._hold is not None:
-                self.pub.publish(Float64(data=self._hold))
+                self._command(self._hold)
             return
         handle, fut = self._active
         if self._angle is None:
@@ -94,13 +99,12 @@ class Ic120Vessel(Node):
             self.ctl.cancel(self._angle)
         step = self.ctl.step(self._angle, self._vel, self._now())
         self._hold = step.command
-        self.pub.publish(Float64(data=step.command))
+        self._command(step.command)
         fb = SetDumpAngle.Feedback()
         fb.current_error = float(step.error)
         handle.publish_feedback(fb)
         if step.status in ("SUCCEEDED", "FAILED", "CANCELED"):
-            res = SetDumpAngle.Result()
-            res.success, res.message = step.status == "SUCCEEDED", step.message
+            res = SetDumpAngle.Result(success=step.status == "SUCCEEDED")
             {"SUCCEEDED": handle.succeed, "FAILED": handle.abort, "CANCELED": handle.canceled}[step.status]()
             self._active = None
             self.get_logger().info(f"set_dump_angle: {step.status}: {step.message}")

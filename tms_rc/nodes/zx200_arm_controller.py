@@ -1,8 +1,8 @@
 """``zx200_arm_controller``: the 100 Hz hierarchical arm controller as a ROS 2 node.
 
 In the machine namespace (``/zx200``): subscribes ``joint_states`` (sensor_msgs/JointState, the four
-front joints), publishes ``front_cmd`` (tms_msg/JointCmd, VELOCITY) every period (contract [A] of the
-COM3 converter), and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
+front joints), publishes ``front_cmd`` (com3_msgs/JointCmd, VELOCITY: OPERA com3_ros's type and topic) every period
+to the COM3 converter, and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
 that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
 joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
 malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.zx200.segments`). Cancel decelerates within the
@@ -30,13 +30,14 @@ from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
+from com3_msgs.msg import JointCmd
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
+from tms_model.com3 import VELOCITY
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_msg.action import Zx200ArmMove
-from tms_msg.msg import JointCmd
 from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.segments import targets_from_segments
 from tms_rc.zx200.tick_stats import TickStats
@@ -123,7 +124,7 @@ class ArmControllerNode(Node):
         u = self.ctl.step(q, dq, now=now)
         msg = JointCmd()
         msg.joint_name = list(JOINTS)
-        msg.control_type = JointCmd.VELOCITY
+        msg.control_type = VELOCITY
         msg.velocity = [float(v) for v in u]
         self._pub.publish(msg)
         self._wake(self._tick_waiters)

@@ -1,32 +1,47 @@
-"""Errors of IC120 planning, each carrying the Nav2 action ``error_code`` it maps to.
+"""Errors of IC120 planning, each carrying the Nav2 ``error_code`` a Nav2 (jazzy) navigator reports for it.
 
 The navigator node turns any :class:`NavError` into an aborted action result with ``error_code`` =
 ``exc.code`` and ``error_msg`` = ``str(exc)`` through one table (no per-class catch ladder).
+
+Nav2 jazzy's ``NavigateToPose`` / ``NavigateThroughPoses`` results define only ``NONE``; a failed navigation
+reports the code of the behaviour-tree node that failed: the planner's (``nav2_msgs/action/ComputePathToPose``,
+2xx) or the controller's (``nav2_msgs/action/FollowPath``, 1xx). Our failures take those values, so a client
+written against Nav2 reads the same codes. ``FollowWaypoints`` has its own (6xx).
 """
 
 from __future__ import annotations
 
 from tms_common.errors import TmsError
 
-# Nav2 NavigateToPose / NavigateThroughPoses result codes (tms_msg/action/NavigateToPose.action).
-UNKNOWN = 9000
-TIMEOUT = 9002
-GOAL_OCCUPIED = 9003
-NO_VALID_PATH = 9004
-INVALID_GOAL = 9005
-CANCELED = 9006
+NONE = 0
+# nav2_msgs/action/ComputePathToPose (jazzy) result codes
+PLANNER_UNKNOWN = 200
+PLANNER_TF_ERROR = 202
+GOAL_OUTSIDE_MAP = 204
+GOAL_OCCUPIED = 206
+NO_VALID_PATH = 208
+# nav2_msgs/action/FollowPath (jazzy) result codes
+FAILED_TO_MAKE_PROGRESS = 105
+# nav2_msgs/action/FollowWaypoints (jazzy) result codes
+WAYPOINTS_UNKNOWN = 600
 
 
 class NavError(TmsError):
     """Base of navigation failures; ``code`` is the Nav2 result error code."""
 
-    code = UNKNOWN
+    code = PLANNER_UNKNOWN
 
 
 class InvalidGoalError(NavError, ValueError):
-    """A goal pose is malformed (NaN, zero quaternion, outside the map, wrong frame)."""
+    """A goal pose is malformed (NaN, zero quaternion, wrong frame, no poses)."""
 
-    code = INVALID_GOAL
+    code = PLANNER_UNKNOWN
+
+
+class GoalOutsideMapError(InvalidGoalError):
+    """A goal pose lies outside the map."""
+
+    code = GOAL_OUTSIDE_MAP
 
 
 class GoalOccupiedError(NavError):
@@ -44,10 +59,10 @@ class NoValidPathError(NavError):
 class NavTimeoutError(NavError):
     """The machine made no progress for too long."""
 
-    code = TIMEOUT
+    code = FAILED_TO_MAKE_PROGRESS
 
 
 class LocalizationError(NavError):
-    """No pose estimate is available (no GNSS fix yet, or the estimate is too old)."""
+    """No pose estimate is available (no GNSS fix yet, or the estimate is too old): Nav2 sees no transform."""
 
-    code = UNKNOWN
+    code = PLANNER_TF_ERROR

@@ -22,7 +22,13 @@ import numpy as np
 from tms_model.geometry import wrap_angle, yaw_from_quaternion
 from tms_rp.ic120.controller import ControllerParams, Limits, TrackedPurePursuit
 from tms_rp.ic120.costmap import Costmap
-from tms_rp.ic120.errors import InvalidGoalError, NavError, NavTimeoutError, NoValidPathError
+from tms_rp.ic120.errors import (
+    GoalOutsideMapError,
+    InvalidGoalError,
+    NavError,
+    NavTimeoutError,
+    NoValidPathError,
+)
 from tms_rp.ic120.planner import GridPlanner
 
 __all__ = ["GoalChecker", "ProgressChecker", "NavigatorCore", "NavStep", "validate_pose", "leg_direction"]
@@ -142,7 +148,7 @@ class NavigatorCore:
         if cm.map.world_to_cell(x, y) is None:
             ox, oy = cm.map.origin
             sx, sy = cm.map.size_m
-            raise InvalidGoalError(f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]")
+            raise GoalOutsideMapError(f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]")
         from tms_rp.ic120.errors import GoalOccupiedError
 
         if cm.obstacles[cm.map.world_to_cell(x, y)]:

@@ -25,7 +25,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from tms_rp.ic120.costmap import INSCRIBED, Costmap
-from tms_rp.ic120.errors import GoalOccupiedError, InvalidGoalError, NoValidPathError
+from tms_rp.ic120.errors import GoalOccupiedError, GoalOutsideMapError, InvalidGoalError, NoValidPathError
 
 __all__ = ["PlannerParams", "GridPlanner"]
 
@@ -120,7 +120,7 @@ class GridPlanner:
             if omap.world_to_cell(x, y) is None:
                 ox, oy = omap.origin
                 sx, sy = omap.size_m
-                raise InvalidGoalError(
+                raise GoalOutsideMapError(
                     f"{name} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]"
                 )
         blocked = costmap.blocked

@@ -1,7 +1,8 @@
 """``ic120_navigator``: Nav2-named navigation actions of the IC120 (thin rclpy wrapper of NavigatorCore).
 
 Run in the machine namespace: ``ic120_navigator --ros-args -r __ns:=/ic120``. Action servers
-``navigate_to_pose``, ``navigate_through_poses``, ``follow_waypoints`` (tms_msg, Nav2 field names); input
+``navigate_to_pose``, ``navigate_through_poses``, ``follow_waypoints`` (nav2_msgs, Nav2 jazzy's types and
+action names under the machine namespace, as a Nav2 bt_navigator / waypoint_follower serves them); input
 ``odometry/global`` (from ic120_localization) and ``map`` (nav_msgs/OccupancyGrid, transient local: replaces
 the static map, e.g. when an obstacle appears; the running path is checked and replanned); output
 ``cmd_vel`` (geometry_msgs/Twist) to com3_bridge. Parameters: ``nav_config`` (default
@@ -13,7 +14,9 @@ CPU-starved localisation or a DDS hiccup); it resumes when poses return, and the
 One goal at a time; a new goal preempts the running one (as Nav2). Execution is an async execute
 callback awaiting a future that the control timer completes, so everything runs on one thread. Cancel:
 the machine is brought to rest (measured speed below 0.02 m/s and 0.02 rad/s, at most 5 s) before the
-goal reports CANCELED. Failures abort with the Nav2 error code and a message naming the reason.
+goal reports CANCELED. Failures abort with the error code a Nav2 navigator reports for that failure (the
+planner's or controller's code, :mod:`tms_rp.ic120.errors`) and an ``error_msg`` naming the reason; a failed
+``follow_waypoints`` reports ``UNKNOWN`` (600) with the missed waypoint, its index and that code.
 """
 
 from __future__ import annotations
@@ -30,10 +33,11 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
+from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
+from nav2_msgs.msg import MissedWaypoint
 from tms_common.node import run_node
 from tms_common.params import declare_startup
 from tms_model.geometry import yaw_from_quaternion
-from tms_msg.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
 from tms_rp.ic120 import errors
 from tms_rp.ic120.config import load_nav_config
 from tms_rp.ic120.costmap import OccupancyMap
@@ -133,11 +137,14 @@ class Ic120Navigator(Node):
         action = kinds[kind]
         fut = Future()
         if self._active is not None:
-            self._finish(self._active, "abort", errors.UNKNOWN, "preempted by a new goal")
+            self._finish(self._active, "abort", errors.PLANNER_UNKNOWN, "preempted by a new goal")
         pose_msgs = [goal.pose] if kind == "navigate_to_pose" else list(goal.poses)
+        first = 0
         if kind == "follow_waypoints":
-            pose_msgs = pose_msgs[int(goal.goal_index):]
+            first = int(goal.goal_index)
+            pose_msgs = pose_msgs[first:]
         act = _Active(handle, kind, fut, [], self._now())
+        act.extra.update(pose_msgs=pose_msgs, first=first)
         try:
             if not pose_msgs:
                 raise errors.InvalidGoalError("no poses in the goal")
@@ -155,9 +162,9 @@ class Ic120Navigator(Node):
             self.core.start(poses, yaw_at_each=kind != "navigate_through_poses")
         except errors.NavError as exc:
             self._log.warning(f"{kind}: rejected: {exc}")
-            code = exc.code if kind != "follow_waypoints" else 9002  # NO_VALID_WAYPOINTS
+            code = exc.code if kind != "follow_waypoints" else errors.WAYPOINTS_UNKNOWN
             handle.abort()
-            return self._result(action, code, str(exc), [0])
+            return self._result(action, code, str(exc))
         act.poses = poses
         self._active = act
         self._log.info(f"{kind}: {len(poses)} pose(s), first ({poses[0][0]:.2f}, {poses[0][1]:.2f})")
@@ -180,20 +187,23 @@ class Ic120Navigator(Node):
         self.destroy_timer(timer)
         return bool(ok)
 
-    def _result(self, action, code: int, msg: str, missed: list[int] | None = None):  # noqa: ANN001, ANN202
+    def _result(self, action, code: int, msg: str, missed: list | None = None):  # noqa: ANN001, ANN202
         res = action.Result()
         res.error_code = int(code)
         res.error_msg = msg
-        if hasattr(res, "missed_waypoints") and missed is not None and code:
-            res.missed_waypoints = [int(m) for m in missed]
+        if missed:
+            res.missed_waypoints = missed
         return res
 
     def _finish(self, act: _Active, how: str, code: int, msg: str) -> None:
         action = kinds[act.kind]
-        if act.kind == "follow_waypoints" and how == "abort" and code not in (0, errors.CANCELED):
-            code, missed = 9003, [self.core._index]  # STOP_ON_MISSED_WAYPOINT
-        else:
-            missed = None
+        missed = None
+        if act.kind == "follow_waypoints" and how == "abort" and code != errors.NONE:
+            # the waypoint follower stops at the first waypoint it cannot reach and names it, with the code the
+            # navigation to it failed with
+            i = min(self.core._index, len(act.extra["pose_msgs"]) - 1)
+            missed = [MissedWaypoint(index=act.extra["first"] + i, goal=act.extra["pose_msgs"][i], error_code=int(code))]
+            code = errors.WAYPOINTS_UNKNOWN
         if act.handle.is_active:
             getattr(act.handle, {"succeed": "succeed", "abort": "abort", "cancel": "canceled"}[how])()
         if not act.future.done():
@@ -219,12 +229,12 @@ class Ic120Navigator(Node):
         if act.stopping_since is None and act.handle.is_cancel_requested:
             self.core.cancel()
             act.stopping_since = now
-            act.final, act.result_code, act.result_msg = "cancel", errors.CANCELED, "canceled: machine at rest"
+            act.final, act.result_code, act.result_msg = "cancel", errors.NONE, "canceled: machine at rest"
         stale = self._pose is None or now - self._pose_t > self.pose_timeout
         if act.stopping_since is None and stale and (self._pose is None or now - self._pose_t > self.pose_lost_timeout):
             self.core.cancel()
             act.stopping_since = now
-            act.final, act.result_code = "abort", errors.UNKNOWN
+            act.final, act.result_code = "abort", errors.LocalizationError.code
             act.result_msg = f"localisation lost: no odometry/global for more than {self.pose_lost_timeout:g} s"
         elif act.stopping_since is None and stale:
             if not act.extra.get("holding"):
@@ -251,7 +261,7 @@ class Ic120Navigator(Node):
             return
         if step.status == "FAILED":
             act.stopping_since = now
-            act.final, act.result_code = "abort", step.error.code if step.error else errors.UNKNOWN
+            act.final, act.result_code = "abort", step.error.code if step.error else errors.PLANNER_UNKNOWN
             act.result_msg = str(step.error)
             return
         if act.ticks % 4 == 0:
