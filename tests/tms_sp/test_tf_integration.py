@@ -3,8 +3,9 @@
 sim_plant (CAN only) <-> com3_bridge (zx200, ic120) -> ic120_localization, all -> tms_sp_tf -> this test, which
 moves the ZX200's arm with a JointCmd publisher on /zx200/front_cmd and listens with a tf listener built on
 tf2_msgs only (tests/tflisten.py). While the arm moves, the chain map -> bucket_end_link composed from /tf
-agrees with tms_model's kinematics of the joint_states of the same stamp within 1 cm; the bases sit where the
-plant has them; a subscriber that joins late still receives each machine's URDF and /tf_static.
+agrees with tms_model's kinematics of the joint_states of the same stamp within 1 cm; at rest the tip and the
+bases sit where the plant has them; a subscriber that joins late still receives each machine's URDF and
+/tf_static.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -23,6 +25,7 @@ from tests.rosproc import executable
 from tests.tflisten import TfListener
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.geometry import yaw_from_quaternion
+from tms_model.transform import Transform
 from tms_model.urdf import load_tree
 
 pytestmark = pytest.mark.integration
@@ -52,6 +55,10 @@ def _start_stack(procs: Any, domain: int) -> dict[str, Any]:
             name, "com3_bridge ready")
         assert proc.wait_for(ready, 90), f"{name}:\n{proc.output}"
     return out
+
+
+def _seconds(header: Any) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
 def _cpu_seconds(pid: int) -> float:
@@ -86,7 +93,7 @@ def _spin_until(node: Any, done: Any, timeout: float, every: tuple[float, Any] |
 
 
 def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(procs, domain, ros_node) -> None:  # noqa: ANN001
-    from geometry_msgs.msg import PoseStamped
+    from geometry_msgs.msg import PointStamped, PoseStamped
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
@@ -97,9 +104,11 @@ def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(proc
 
     def on_joints(m: JointState) -> None:
         q = dict(zip(m.name, m.position, strict=True))
-        joints[m.header.stamp.sec + m.header.stamp.nanosec * 1e-9] = np.array([q[j] for j in JOINTS])
+        joints[_seconds(m.header)] = np.array([q[j] for j in JOINTS])
 
     truth: dict[str, PoseStamped] = {}
+    tip_truth: deque[PointStamped] = deque(maxlen=300)  # 3 s of the plant's 100 Hz truth
+    ros_node.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", lambda m: tip_truth.append(m), 10)
     ros_node.create_subscription(JointState, "/zx200/joint_states", on_joints, 200)
     for m in ("zx200", "ic120"):
         ros_node.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: truth.__setitem__(m, msg), 10)
@@ -126,7 +135,22 @@ def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(proc
           f"{(tf.messages - tf0) / wall:.0f} /tf messages/s (both machines' joint_states, odometry, map_to_odom)")
     for _ in range(5):
         pub.publish(joint_cmd(joint_name=list(JOINTS), control_type=VELOCITY, velocity=[0.0] * 4))
-    _spin_until(ros_node, lambda: False, 0.5)
+    # wait for rest (the swing's dead time, lag and acceleration limit take seconds) on both sides: the /tf tip
+    # and the plant's tip each unchanged over 0.5 s of their own stamps (this process may lag behind the
+    # 200 /tf messages a second, so it waits on stamps, not on its clock)
+    stop = time.time()
+
+    def settled() -> bool:
+        s = tf.stamps("bucket_link")
+        if not s or s[-1] < stop + 1.0 or len(tip_truth) < 2 or s[-1] - s[0] < 0.5:
+            return False
+        now, before = (tf.lookup("base_link", "bucket_end_link", at=t) for t in (s[-1], s[-1] - 0.5))
+        p = [np.array([m.point.x, m.point.y, m.point.z]) for m in tip_truth]
+        old = [m for m in tip_truth if _seconds(m.header) <= _seconds(tip_truth[-1].header) - 0.5]
+        return (old and np.linalg.norm(np.subtract(now.translation, before.translation)) < 1e-3
+                and np.linalg.norm(p[-1] - [old[-1].point.x, old[-1].point.y, old[-1].point.z]) < 1e-3)
+
+    assert _spin_until(ros_node, settled, 60), "the arm did not come to rest on /tf and in the plant"
 
     # every joint_states stamp the tf node turned into transforms: the /tf chain against the kinematics
     stamps = sorted(joints)[first:]
@@ -143,7 +167,25 @@ def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(proc
     assert len(errors) > 50, f"only {len(errors)} of {len(stamps)} joint_states stamps found on /tf"
     travel = float(np.linalg.norm(tips[-1] - tips[0]))
     assert travel > 1.0, f"the bucket tip moved only {travel:.2f} m: the arm did not move"
+    print(f"/tf chain map -> bucket_end_link vs kinematics: max {max(errors) * 1000:.3f} mm over {len(errors)} stamps, "
+          f"tip travel {travel:.2f} m")
     assert max(errors) < TIP_TOL_M, f"/tf chain vs kinematics: max {max(errors) * 1000:.1f} mm over {len(errors)} stamps"
+
+    # at rest, the /tf tip is where the plant has it: relative to the base within 1 cm (joints over CAN), in map
+    # within the plant's RTK noise on the ZX200's position (config/sim/plant.yaml: 1 cm horizontal, 2 cm
+    # vertical, 1 sigma; 5 sigma here)
+    tip = tf.lookup("map", "bucket_end_link")
+    plant_tip = np.array([tip_truth[-1].point.x, tip_truth[-1].point.y, tip_truth[-1].point.z])
+    bp = truth["zx200"].pose
+    plant_base = Transform((bp.position.x, bp.position.y, bp.position.z),
+                           (bp.orientation.x, bp.orientation.y, bp.orientation.z, bp.orientation.w))
+    relative = np.linalg.norm(np.array(tf.lookup("base_link", "bucket_end_link").translation)
+                              - plant_base.inverse().apply(plant_tip))
+    off = np.array(tip.translation) - plant_tip
+    print(f"at rest: /tf tip vs the plant's: {relative * 1000:.1f} mm relative to the base, "
+          f"{np.linalg.norm(off[:2]) * 1000:.1f} mm horizontal / {abs(off[2]) * 1000:.1f} mm vertical in map")
+    assert relative < TIP_TOL_M, (tip.translation, plant_tip, plant_base)
+    assert np.linalg.norm(off[:2]) < 0.05 and abs(off[2]) < 0.10, (tip.translation, plant_tip)
 
     # the bases where the plant has them (the ZX200 from RTK GNSS, the IC120 through odometry + EKF)
     for machine, frame, tol in (("zx200", "base_link", 0.05), ("ic120", ic_base, 0.3)):
