@@ -24,6 +24,6 @@ cmake -S tms_msg -B "$BUILD" \
   > "$BUILD/configure.log" 2>&1 || { tail -40 "$BUILD/configure.log"; echo "tms_msg: CMake configure failed, full log: $BUILD/configure.log" >&2; exit 1; }
 cmake --build "$BUILD" -j"$(nproc)" > "$BUILD/build.log" 2>&1 || { tail -40 "$BUILD/build.log"; echo "tms_msg: build failed, full log: $BUILD/build.log" >&2; exit 1; }
 cmake --install "$BUILD" > "$BUILD/install.log" 2>&1 || { tail -20 "$BUILD/install.log"; exit 1; }
-"$VENV/bin/python" -c 'from tms_msg.action import Subtask; from tms_msg.msg import JointCmd' \
+"$VENV/bin/python" -c 'from tms_msg.msg import SubtaskOutcome, JointCmd' \
   || { echo "tms_msg: installed but cannot be imported from $VENV" >&2; exit 1; }
 echo "tms_msg: built and installed into $VENV"
