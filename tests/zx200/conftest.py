@@ -8,14 +8,13 @@ The returned :class:`ArmStack` sends planning goals and reads the plant's truth 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import os
 import random
 import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 

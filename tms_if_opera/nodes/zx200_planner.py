@@ -48,10 +48,6 @@ from tms_common.action_client import RaceFreeActionClient
 from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import run_node
 from tms_common.ticker import Ticker
-from tms_model.excavator import codes
-from tms_model.excavator.codes import PlanningError
-from tms_model.excavator.kinematics import JOINTS, load_kinematics
-from tms_model.excavator.targets import JointTarget
 from tms_if_opera.interface import (
     CHANGE_POSE,
     CHANGE_POSE_OPTIONS,
@@ -60,6 +56,10 @@ from tms_if_opera.interface import (
     PLANNING_OUTCOME,
     RELEASE_SIMPLE,
 )
+from tms_model.excavator import codes
+from tms_model.excavator.codes import PlanningError
+from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.excavator.targets import JointTarget
 from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
