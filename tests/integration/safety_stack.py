@@ -65,8 +65,9 @@ def _literal(value: object) -> str:
     return str(value)
 
 
-def start_stack(procs, domain: int, tmp: Path, speed: float) -> dict:  # noqa: ANN001
-    """Seed the DB (paper seed + tasks 91/92) and start every node; returns ``{label: Proc}``."""
+def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | None = None) -> dict:  # noqa: ANN001
+    """Seed the DB (paper seed + tasks 91/92) and start every node; returns ``{label: Proc}``.
+    ``overrides`` maps a node name of the launch file to parameters replacing its own."""
     db = tmp / "db"
     db.mkdir()
     env = {"TMS_DB_PATH": str(db)}
@@ -92,7 +93,7 @@ def start_stack(procs, domain: int, tmp: Path, speed: float) -> dict:  # noqa: A
         exe = node["executable"]
         if exe in SKIP:
             continue
-        params = {**common, **node.get("parameters", {})}
+        params = {**common, **node.get("parameters", {}), **(overrides or {}).get(node["name"], {})}
         if exe == "sim_plant":
             params["speed"] = speed
             params["config"] = str(ROOT / params["config"])

@@ -17,6 +17,7 @@ import time
 import pytest
 
 from tests.integration.safety_stack import REST_JOINT, Probe, max_speed, rest_time, start_stack, wait_servers
+from tms_common.config import config_path, load_yaml
 
 pytestmark = pytest.mark.integration
 
@@ -32,7 +33,9 @@ def test_leaf_node_base_client_cancels_an_excavation_and_the_stop_is_confirmed(p
 
     from tms_msg_ts.action import LeafNodeBase  # the peer's type, nothing else of ours
 
-    stack = start_stack(procs, domain, tmp_path, 1.0)
+    # the subtask waits for planning's stop confirmation longer than its default 5 s wall: without the lock the
+    # arm decelerates through the command path, and a loaded host runs the 1x plant slower than wall time
+    stack = start_stack(procs, domain, tmp_path, 1.0, overrides={"subtasks_zx200": {"stop_timeout_s": 20.0}})
     tail = lambda: "\n".join(f"--- {k}\n" + "\n".join(p.output.splitlines()[-12:]) for k, p in stack.items())  # noqa: E731
     missing = wait_servers(ros_node, 150.0)
     assert not missing, f"action servers not up: {missing}\n{tail()}"
@@ -57,7 +60,9 @@ def test_leaf_node_base_client_cancels_an_excavation_and_the_stop_is_confirmed(p
         assert probe.wait(cancel.done, 10.0) and len(cancel.result().goals_canceling) == 1, "cancel not accepted"
         assert probe.wait(result.done, 60.0), f"no result after the cancel (feedback {feedback[-3:]})\n{tail()}"
         t_result, wall_result = probe.clock, time.monotonic()
-        assert result.result().status == GoalStatus.STATUS_CANCELED, (result.result(), feedback[-3:])
+        assert result.result().status == GoalStatus.STATUS_CANCELED, (
+            f"{result.result()} {t_result - t_cancel:.2f} s simulated / {wall_result - wall_cancel:.2f} s wall after "
+            f"the cancel: {feedback[-3:]}\n{tail()}")
         assert result.result().result.result is False  # the original's bool: true only for SUCCEEDED
         t_end = t_result + QUIET_S
         assert probe.wait(lambda: probe.clock >= t_end + 0.2, 60.0), "simulated time stopped"
@@ -71,8 +76,11 @@ def test_leaf_node_base_client_cancels_an_excavation_and_the_stop_is_confirmed(p
               f"result {after['zx_joint']:.4f} rad/s; last status {feedback[-1] if feedback else None!r}")
         assert before["zx_joint"] > REST_JOINT, before  # it was moving
         assert rest is not None and rest <= REST_WITHIN_S, f"arm at rest {rest} s after the cancel\n{tail()}"
-        # confirmed: reported CANCELED only with the arm (practically) stopped, and nothing moves afterwards
-        assert after["zx_joint"] < REST_JOINT, after
+        # confirmed: reported CANCELED only once the arm is at rest by the controller's own criterion (its
+        # rest_speed on the measured joints), and from the truth's rest on nothing moves
+        rest_speed = load_yaml(config_path("tms_rc", "zx200_arm_controller.yaml"))[0]["rest_speed"]
+        assert after["zx_joint"] < rest_speed, (after, rest_speed)
+        assert max_speed(series, t_cancel + rest, t_end)["zx_joint"] < REST_JOINT
         assert any(f.startswith("CANCELED: canceled; planning /zx200/tms_rp_zx200_excavate_simple confirmed stop")
                    for f in feedback), feedback[-3:]
     finally:
