@@ -45,15 +45,28 @@ def test_silent_site_latches_emg_stop_while_commands_keep_coming() -> None:
 def test_a_heartbeat_handled_between_the_two_checks_prevents_the_latch() -> None:
     core = zx(0.3)
     core.site_heartbeat(0.0)
+    core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=0.45)
     core.site_check(0.5)  # the executor was starved: the check runs before the queued heartbeats
     core.site_heartbeat(0.5)
     assert core.site_check(0.52) == [] and not core.emg_latched
+    core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=0.85)
     assert core.site_check(0.9) == [] and core.site_check(0.95) != [] and core.emg_latched
+
+
+def test_silence_while_idle_does_not_latch_a_command_during_it_does() -> None:
+    core = zx(0.3)
+    core.site_heartbeat(0.0)
+    core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=0.0)
+    core.tick(0.6)  # the command watchdog: the channel went neutral, the machine is idle
+    assert core.site_check(1.0) == [] and core.site_check(1.02) == [] and not core.emg_latched
+    core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=1.03)  # a controller starts while the site is silent
+    assert velocity_frame(core.site_check(1.04)) == NEUTRAL_VELOCITY_CMD_1 and core.emg_latched
 
 
 def test_heartbeat_return_does_not_clear_only_emg_stop_false_does() -> None:
     core = zx(0.3)
     core.site_heartbeat(0.0)
+    core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=0.4)
     core.site_check(0.5)
     core.site_check(0.52)
     assert core.emg_latched
