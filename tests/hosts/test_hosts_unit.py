@@ -60,6 +60,7 @@ def test_every_paper_node_has_one_host_and_converters_sit_on_their_machine_pc() 
     assert [n["executable"] for n in parts["plant"]] == ["sim_plant"]
     assert Path(parts["plant"][0]["parameters"]["config"]).is_absolute()
     assert {"tms_ts_manager", "tms_ts_subtasks"} <= {n["executable"] for n in parts["site_server"]}
+    assert {n.get("nice") for n in parts["site_server"] if n["executable"] == "tms_ts_subtasks"} == {-10}
 
 
 def test_host_launch_files_parse_and_overrides_apply(tmp_path: Path) -> None:
