@@ -17,7 +17,7 @@ it with plain numbers and an injected clock. It is the same for every machine ty
 * Site watchdog (``site_timeout_s`` > 0, off by default): on a machine PC cut off from the site the
   controller may keep commanding, so command freshness says nothing; the node feeds the site's heartbeat to
   :meth:`BridgeCore.site_heartbeat` and calls :meth:`BridgeCore.site_check` periodically; once a heartbeat
-  was seen, ``site_timeout_s`` without one while commands flow latches emg_stop (same latch, same clearing:
+  was seen, ``site_timeout_s`` without one while the machine is driven latches emg_stop (same latch, same clearing:
   an explicit ``False``).
 * :meth:`BridgeCore.tick` returns the frames due now (scheduler), with the alive counter in
   ``Machine_Setting_Cmd`` advanced on every send.
@@ -447,7 +447,7 @@ class BridgeCore:
 
     def site_check(self, now: float) -> list[Tx]:
         """Site watchdog: emg_stop latched (neutral frames returned) once the site heartbeat is ``site_timeout_s`` old
-        while the machine is being commanded (a channel not timed out).
+        while the machine is being driven (a channel not timed out whose command is not neutral).
 
         Call it from the thread that delivers the heartbeats (the node's executor): an expiry seen at one call
         latches only if it still holds at the next, so heartbeats that arrived while that thread was starved
@@ -461,8 +461,10 @@ class BridgeCore:
             if not self._site_suspect:
                 self._site_suspect = True
                 return []
-            if not any(ch.last_cmd is not None and not ch.timed_out for ch in self._channels.values()):
-                return []  # idle: nothing to stop (a busy start-up is no cut); a command now latches at the next check
+            if not any(ch.last_cmd is not None and not ch.timed_out
+                       and any(self._values[f] != self.codec.neutral(f) for f in ch.frames)
+                       for ch in self._channels.values()):
+                return []  # not driven (no command, or a neutral one): nothing to stop; a motion command latches next check
             silent, self._site_seen, self._site_suspect = now - self._site_seen, None, False  # re-armed by a heartbeat
             self.counters["site_lost"] += 1
             if self._emg:

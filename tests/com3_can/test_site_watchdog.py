@@ -59,6 +59,8 @@ def test_silence_while_idle_does_not_latch_a_command_during_it_does() -> None:
     core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=0.0)
     core.tick(0.6)  # the command watchdog: the channel went neutral, the machine is idle
     assert core.site_check(1.0) == [] and core.site_check(1.02) == [] and not core.emg_latched
+    core.front_cmd(["arm_joint"], VELOCITY, [0.0], [], now=1.025)  # a controller holding still: not driven
+    assert core.site_check(1.026) == [] and not core.emg_latched
     core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=1.03)  # a controller starts while the site is silent
     assert velocity_frame(core.site_check(1.04)) == NEUTRAL_VELOCITY_CMD_1 and core.emg_latched
 
