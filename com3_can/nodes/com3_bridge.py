@@ -15,7 +15,8 @@ a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thr
 Site watchdog (a machine PC cut off from the site, docs/deployment.md): ``site_heartbeat_topic`` (std_msgs/String,
 e.g. the subtask servers' ``/tms_ts/subtask_heartbeat``; heartbeats whose data is this ``machine``) and
 ``site_timeout_s`` (> 0 with a topic): after the first heartbeat, none for ``site_timeout_s`` [s wall] while
-the machine is driven (a non-neutral command) latches emg_stop and engages the pilot cut-off, as a received emg_stop does; an explicit emg_stop ``false`` clears it.
+the machine is driven (a non-neutral command) latches emg_stop and engages the pilot cut-off, as a received
+emg_stop does; an explicit emg_stop ``false`` clears it.
 Default: no topic, no site watchdog.
 
 Pilot cut-off (:mod:`com3_can.pilot_cutoff`): ``lock`` (std_msgs/Bool, reliable) true engages the
@@ -35,8 +36,8 @@ import can
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
 from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus
 from std_msgs.msg import Bool, Float64, String
