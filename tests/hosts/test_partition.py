@@ -68,6 +68,7 @@ def site_node(domain: int):  # noqa: ANN201
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
+    before = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
     os.environ.setdefault("AMENT_PREFIX_PATH", str(VENV))
     context = Context()
@@ -80,7 +81,10 @@ def site_node(domain: int):  # noqa: ANN201
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown(context=context)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    if before is None:
+        os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+    else:
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = before
 
 
 def seed_db(db: Path) -> None:
