@@ -98,6 +98,19 @@ def test_a_leaf_node_base_client_gets_a_failure_as_false_and_its_reason_as_statu
     client = ActionClient(ros_node, LeafNodeBase, ACTION)
     _spin_until(ros_node, client.server_is_ready, 30, f"the subtask server {ACTION}", peer_stack)
     feedback: list[str] = []
+    # a record asking for pass_through: its options go to the planner by goal id, then the original's goal
+    sent = client.send_goal_async(LeafNodeBase.Goal(model_name="zx200", record_name="carry"),
+                                  feedback_callback=lambda msg: feedback.append(msg.feedback.status))
+    _spin_until(ros_node, sent.done, 10, "the goal response", peer_stack)
+    _spin_until(ros_node, lambda: "OPTIONS pass_through=True theta_w_tolerance=0" in stub.output, 20,
+                "the change_pose options at the planner", peer_stack)
+    _spin_until(ros_node, lambda: stub.output.count("GOAL /zx200/tms_rp_zx200_change_pose") == 1, 20,
+                "the planning goal", peer_stack)
+    cancel = sent.result().cancel_goal_async()
+    result = sent.result().get_result_async()
+    _spin_until(ros_node, lambda: cancel.done() and result.done(), 20, "the canceled carry", peer_stack)
+    # a record that does not exist: ABORTED, result false, the reason as the last feedback status (sent after
+    # a goal that ran, so this client's feedback subscription is matched: feedback is not kept for late joiners)
     sent = client.send_goal_async(LeafNodeBase.Goal(model_name="zx200", record_name="no_such_record"),
                                   feedback_callback=lambda msg: feedback.append(msg.feedback.status))
     _spin_until(ros_node, sent.done, 10, "the goal response", peer_stack)
@@ -106,12 +119,3 @@ def test_a_leaf_node_base_client_gets_a_failure_as_false_and_its_reason_as_statu
     assert result.result().status == GoalStatus.STATUS_ABORTED and result.result().result.result is False
     _spin_until(ros_node, lambda: any(f.startswith("RECORD_INVALID: ") and "no_such_record" in f for f in feedback),
                 5, "the reason in the last feedback", peer_stack)
-    # a record asking for pass_through: its options go to the planner by goal id, then the original's goal
-    sent = client.send_goal_async(LeafNodeBase.Goal(model_name="zx200", record_name="carry"))
-    _spin_until(ros_node, sent.done, 10, "the goal response", peer_stack)
-    _spin_until(ros_node, lambda: "OPTIONS pass_through=True theta_w_tolerance=0" in stub.output, 20,
-                "the change_pose options at the planner", peer_stack)
-    _spin_until(ros_node, lambda: stub.output.count("GOAL /zx200/tms_rp_zx200_change_pose") == 1, 20,
-                "the planning goal", peer_stack)
-    cancel = sent.result().cancel_goal_async()
-    _spin_until(ros_node, cancel.done, 10, "the cancel response", peer_stack)
