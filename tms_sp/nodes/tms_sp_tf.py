@@ -28,8 +28,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from tf2_msgs.msg import TFMessage
 
+from tf2_msgs.msg import TFMessage
 from tms_common.node import run_node
 from tms_common.params import declare_startup
 from tms_model.site import load_site
