@@ -49,8 +49,9 @@ def dump(store: Store, directory: str | Path) -> dict[str, int]:
     return counts
 
 
-def read_collection_file(path: Path, problems: list[str]) -> Iterator[dict]:
-    """Documents of one dump file (.json lines or array, or .bson).
+def read_collection_file(path: Path, problems: list[str]) -> Iterator[tuple[str, dict]]:
+    """(where, document) for each document of one dump file (.json lines or array, or .bson); ``where``
+    is ``line N`` (JSON lines), ``element N`` (JSON array) or ``document N`` (BSON), counted from 1.
 
     A line or element that is not a document is reported in ``problems`` by file and line (element)
     and skipped; a BSON stream cannot be resynchronised after a corrupt document, so reading stops
@@ -62,9 +63,9 @@ def read_collection_file(path: Path, problems: list[str]) -> Iterator[dict]:
             with path.open("rb") as fh:
                 for doc in bson.decode_file_iter(fh, codec_options=bson.CodecOptions(tz_aware=True)):
                     n += 1
-                    yield doc
+                    yield f"document {n}", doc
         except bson.errors.BSONError as exc:
-            problems.append(f"{path}: document {n}: not BSON ({exc}); the rest of the file is not read")
+            problems.append(f"{path}: document {n + 1}: not BSON ({exc}); the rest of the file is not read")
         return
     text = path.read_text(encoding="utf-8")
     if text.lstrip().startswith("["):
@@ -72,9 +73,9 @@ def read_collection_file(path: Path, problems: list[str]) -> Iterator[dict]:
             docs = json_util.loads(text, json_options=_OPTS)
         except ValueError as exc:
             raise StoreError(f"{path}: malformed JSON array: {exc}") from None
-        for i, doc in enumerate(docs):
+        for i, doc in enumerate(docs, 1):
             if isinstance(doc, dict):
-                yield doc
+                yield f"element {i}", doc
             else:
                 problems.append(f"{path}: element {i} is not a document")
         return
@@ -87,7 +88,7 @@ def read_collection_file(path: Path, problems: list[str]) -> Iterator[dict]:
             problems.append(f"{path}:{lineno}: malformed Extended JSON: {exc}")
             continue
         if isinstance(doc, dict):
-            yield doc
+            yield f"line {lineno}", doc
         else:
             problems.append(f"{path}:{lineno}: not a document")
 
@@ -114,8 +115,11 @@ def restore(store: Store, directory: str | Path, *, drop: bool = False) -> Resto
         raise StoreError(f"{directory}: no <collection>.json or .bson files (looked in {base})")
     result = RestoreResult()
     for path in files:
-        docs = list(read_collection_file(path, result.rejected))
+        where, docs = [], []
+        for at, doc in read_collection_file(path, result.rejected):
+            where.append(at)
+            docs.append(doc)
         imported = store.import_documents(path.stem, docs, drop=drop)
         result.counts[path.stem] = imported.loaded
-        result.rejected += [f"{path}: collection {path.stem!r}: {r}" for r in imported.rejected]
+        result.rejected += [f"{path}: {where[r.index]} ({r.label}): {r.reason}" for r in imported.rejected]
     return result

@@ -110,8 +110,9 @@ def check_import_document(collection: str, doc: Any) -> None:
     """The minimum a document needs to be found again: ValidationError naming the field otherwise.
 
     Imports store documents as they are (like ``mongoimport``): shapes are checked on the next write,
-    not here, so the original's records load unchanged. A task needs its integer ``task_id`` and its
-    XML text; a parameter record its ``record_name`` (and a string ``model_name`` when it has one).
+    not here, so the original's records load unchanged (parameter documents without ``record_name``
+    included: its older ones are keyed by ``parameter_id``). A task needs its integer ``task_id`` and its
+    XML text, or no look-up finds it.
     """
     if not isinstance(doc, Mapping):
         raise ValidationError(f"not a document ({type(doc).__name__})")
@@ -121,11 +122,6 @@ def check_import_document(collection: str, doc: Any) -> None:
             raise ValidationError(f"field 'task_id' must be a positive integer, got {tid!r}")
         if not isinstance(doc.get("task_sequence"), str):
             raise ValidationError(f"field 'task_sequence' must be a string, got {type(doc.get('task_sequence')).__name__}")
-    elif collection == "parameter":
-        check_record_name(doc.get("record_name"))
-        model = doc.get("model_name")
-        if model is not None and not isinstance(model, str):
-            raise ValidationError(f"field 'model_name' must be a string, got {model!r}")
 
 
 class Store(abc.ABC):

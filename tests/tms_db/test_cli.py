@@ -87,7 +87,7 @@ def test_restore_reports_bad_lines_and_documents_and_loads_the_rest(tmp_path) ->
         assert result.counts == {"parameter": 2}
         assert len(result.rejected) == 2
         assert "parameter.json:2: malformed Extended JSON" in result.rejected[0]
-        assert re.search(r"parameter.json: collection 'parameter': document 2 \(record_name 'a'\): duplicate", result.rejected[1])
+        assert re.search(r"parameter.json: line 3 \(record_name 'a'\): duplicate", result.rejected[1])
         assert [d["record_name"] for d in store.list_parameters()] == ["a", "b"]
 
 

@@ -46,6 +46,19 @@ def test_binary_fields_and_any_type_through_the_store_api(store) -> None:
     assert after["uuid"] == Binary(b"\x01" * 16, 4) and after["uuid"].subtype == 4
 
 
+def test_import_stores_what_it_can_and_names_the_rest(store) -> None:
+    docs = [collision_record("66f0c0ffee00000000000111", "a"),
+            {"_id": ObjectId("66f0c0ffee00000000000112"), "record_name": "bad", "when": {1, 2}},
+            {"_id": ObjectId("66f0c0ffee00000000000113"), "model_name": "zx120", "type": "parameter", "parameter_id": 5},
+            {**collision_record("66f0c0ffee00000000000114", "a")}]  # same key as the first
+    result = store.import_documents("parameter", docs)
+    assert result.loaded == 2
+    assert [(r.index, r.label) for r in result.rejected] == [(1, "_id 66f0c0ffee00000000000112"),
+                                                              (3, "_id 66f0c0ffee00000000000114")]
+    assert "set" in result.rejected[0].reason
+    assert [d["_id"] for d in store.export_collection("parameter")] == [docs[0]["_id"], docs[2]["_id"]]
+
+
 def test_original_records_restore_dump_and_restore_unchanged(tmp_path) -> None:
     records = [
         collision_record("66f0c0ffee00000000000201", "mound"),
@@ -73,12 +86,11 @@ def test_original_records_restore_dump_and_restore_unchanged(tmp_path) -> None:
 def test_a_bad_document_is_reported_by_its_id_and_the_rest_loads(tmp_path) -> None:
     good = [collision_record("66f0c0ffee00000000000301", "a"), collision_record("66f0c0ffee00000000000302", "b")]
     duplicate = {**good[0], "_id": ObjectId("66f0c0ffee00000000000303")}  # same (record_name, model_name)
-    nameless = {"_id": ObjectId("66f0c0ffee00000000000304"), "model_name": "zx200", "x": 1.0}
     string_id = {**collision_record("66f0c0ffee00000000000305", "c"), "_id": "mesh-c"}
     src = tmp_path / "d" / "rostmsdb"
     src.mkdir(parents=True)
     (src / "parameter.json").write_text(
-        "".join(dumps_doc(d) + "\n" for d in (good[0], duplicate, nameless, string_id, good[1])))
+        "".join(dumps_doc(d) + "\n" for d in (good[0], duplicate, string_id, good[1])))
     tasks = [{"_id": ObjectId("66f0c0ffee00000000000311"), "task_id": 1, "type": "task", "model_name": "zx200",
               "description": "", "task_sequence": "<root><BehaviorTree/></root>"},
              {"_id": ObjectId("66f0c0ffee00000000000312"), "task_id": "two", "type": "task", "task_sequence": "<root/>"}]
@@ -87,11 +99,10 @@ def test_a_bad_document_is_reported_by_its_id_and_the_rest_loads(tmp_path) -> No
         result = restore(store, tmp_path / "d")
         assert result.counts == {"parameter": 2, "task": 1}
         text = "\n".join(result.rejected)
-        assert len(result.rejected) == 4, text
-        assert "document 1 (_id 66f0c0ffee00000000000303): duplicate _id or record 'collision_object_a' of model 'zx200'" in text
-        assert "document 2 (_id 66f0c0ffee00000000000304): record_name None: must be a non-empty string" in text
-        assert "document 3 (_id mesh-c): _id 'mesh-c' is not an ObjectId" in text
-        assert "task.json: collection 'task': document 1 (_id 66f0c0ffee00000000000312): field 'task_id'" in text
+        assert len(result.rejected) == 3, text
+        assert "parameter.json: line 2 (_id 66f0c0ffee00000000000303): duplicate _id or record 'collision_object_a' of model 'zx200'" in text
+        assert "parameter.json: line 3 (_id mesh-c): _id 'mesh-c' is not an ObjectId" in text
+        assert "task.json: line 2 (_id 66f0c0ffee00000000000312): field 'task_id'" in text
         assert [d["record_name"] for d in store.list_parameters()] == ["collision_object_a", "collision_object_b"]
         assert store.get_parameter("zx200", "collision_object_b")["data"] == stl_mesh()
         assert store.get_task(1)["task_sequence"] == "<root><BehaviorTree/></root>"
