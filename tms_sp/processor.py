@@ -30,7 +30,6 @@ import numpy as np
 from tms_model.geometry import Pose2D
 from tms_sp.arrival import ArrivalDetector
 from tms_sp.config import SensingConfig
-from tms_sp.errors import SensingError
 from tms_sp.heightgrid import rasterize
 from tms_sp.ingest import SensingWriter
 from tms_sp.mound import MoundAssessment, assess_mound
