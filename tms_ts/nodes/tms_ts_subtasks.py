@@ -17,7 +17,7 @@ whose result type carries no code.
 
 Goals run as coroutines on one executor thread (:class:`tms_common.ticker.Ticker` paces their checks).
 Heartbeat: a thread publishes the model name on ``/tms_ts/subtask_heartbeat`` (std_msgs/String) every
-0.2 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
+0.05 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
 waiting for DDS discovery to drop it (~20 s with the default lease).
 ZX200 change_pose / excavate_simple set the record's ``LOCK_FLG`` false when a result arrives (so
 sensing may update the excavation target again), as the original subtasks did.
