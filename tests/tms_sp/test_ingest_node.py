@@ -46,7 +46,8 @@ def test_sensing_msgs_publishers_set_flags_and_targets(procs, ros_node, tmp_path
                                      keep_val_flgs=["SENSING_LOADED_FLG"]))
     _wait_db(db, lambda s: s.get_record("GLOBAL_BLACKBOARD_EARTHWORK")["SENSING_ARRIVAL_FLG"] is True, 30,
              "SENSING_ARRIVAL_FLG true", ingest)
-    doc = open_store(path=db).get_record("GLOBAL_BLACKBOARD_EARTHWORK")
+    with open_store(path=db) as store:
+        doc = store.get_record("GLOBAL_BLACKBOARD_EARTHWORK")
     assert doc["SENSING_LOADED_FLG"] is False and doc["CONTINUE_FLG"] is True  # kept; carried unchanged
     assert ingest.wait_for("/tms_sp_change_pose: dropped: record (zx200, missing_pose) not in the DB", 10), ingest.output
 
