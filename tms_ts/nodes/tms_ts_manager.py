@@ -203,6 +203,8 @@ class TaskManager(Node):
         self.status_pub.publish(msg)
 
     def destroy_node(self) -> None:
+        if any(not r.done for r in self.runs.values()):
+            self.ros.wait_for_lock_listeners(timeout_s=1.0)  # the locks below must reach the converters
         for run in self.runs.values():
             if not run.done:
                 run.cancel("manager shutting down")
