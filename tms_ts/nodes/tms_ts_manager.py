@@ -229,6 +229,8 @@ class TaskManager(Node):
         self.status_pub.publish(msg)
 
     def destroy_node(self) -> None:
+        if any(not r.done for r in self.runs.values()):
+            self.ros.wait_for_lock_listeners(timeout_s=1.0)  # the locks below must reach the converters
         for run in self.runs.values():
             if not run.done:
                 run.cancel("manager shutting down")
@@ -237,5 +239,7 @@ class TaskManager(Node):
 
 
 def main() -> int:
-    # stop_in_context: on SIGINT/SIGTERM destroy_node still cancels running tasks and engages their machines' locks
-    return run_node(TaskManager, executor="single", stop_in_context=True)
+    # stop_in_context: on SIGINT/SIGTERM destroy_node still cancels running tasks and engages their machines' locks.
+    # events: the tick timer and the action clients' responses cost a fraction of the SingleThreadedExecutor's
+    # wake (docs/performance.md, "Scheduler: 10 tasks at 50 Hz").
+    return run_node(TaskManager, executor="events", stop_in_context=True)
