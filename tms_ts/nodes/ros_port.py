@@ -203,6 +203,14 @@ class ManagerRosPort:
         pub.publish(Bool(data=True))
         self.node.get_logger().error(f"emergency stop /{model_name}/emg_stop: {reason}")
 
+    def wait_for_lock_listeners(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` [s wall] until every ``/<model>/lock`` publisher made so far has a matched
+        subscriber: one created at a goal sent a moment before a stop may not be discovered yet, and its lock
+        would be dropped. A machine without a listener (its converter is down) costs the whole wait, once."""
+        end = time.monotonic() + timeout_s
+        while any(p.get_subscription_count() == 0 for p in self._lock_pubs.values()) and time.monotonic() < end:
+            time.sleep(0.01)
+
     def lock(self, model_name: str, engaged: bool, reason: str) -> None:
         """Engage / release ``/<model_name>/lock`` (the converter's pilot cut-off); a release is sent only
         when this manager engaged the lock."""
