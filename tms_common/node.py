@@ -9,9 +9,11 @@ executor's wait set (:mod:`tms_common.qos_events`: 0.58-0.68 of the executor CPU
 ``python -m tests.bench executor_wake``). A node on simulated time gets its ``/clock`` from a helper thread
 (:mod:`tms_common.sim_clock`), so its executor wakes for its timers and messages, not for every clock tick.
 
-Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``). The EventsExecutor used about a
-third of the CPU of the SingleThreadedExecutor for a 100 Hz timer; nodes
-with high-rate timers may opt in with ``executor="events"``.
+Executor choice: ``TMS_EXECUTOR=events|single|multi`` (default ``single``), or ``executor=`` of
+:func:`run_node`. ``events`` is rclpy's EventsExecutor with the defects of rclpy 7.1.6 worked around
+(:class:`tms_common.rclpy_compat.SlicedEventsExecutor`: its unbounded waits delivered nothing and ignored
+SIGINT); it ignores callback groups, so a node on it keeps its QoS event handlers and its ``/clock``
+subscription (the executor only runs a handler when its event happens).
 """
 
 from __future__ import annotations
@@ -25,27 +27,43 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # pragma: no cover
     from rclpy.node import Node
 
-__all__ = ["run_node", "make_executor"]
+__all__ = ["run_node", "make_executor", "uses_wait_set", "EXECUTORS"]
+
+EXECUTORS = ("single", "multi", "events")
 
 
-def make_executor(kind: str | None = None, *, threads: int = 8):  # noqa: ANN201 - no public base type hint
-    """Build an rclpy executor by name: ``single`` (default), ``multi`` or ``events``.
+def make_executor(kind: str | None = None, *, threads: int = 8, context=None):  # noqa: ANN001, ANN201
+    """Build an executor by name: ``single``, ``multi`` or ``events``; ``None``: ``$TMS_EXECUTOR``, else ``single``.
 
     ``multi`` gets ``threads`` threads (not rclpy's default of one per CPU: with 2 CPUs, two action goals
-    waiting on downstream goals would take every thread and no cancel could be served).
+    waiting on downstream goals would take every thread and no cancel could be served). ``events`` is
+    :class:`tms_common.rclpy_compat.SlicedEventsExecutor` (rclpy's EventsExecutor, usable): no guard
+    conditions on its nodes (``call_soon`` instead), callback groups ignored (:func:`uses_wait_set` is False).
+    ``context``: the rclpy context (default: rclpy's default context).
     """
     import rclpy.executors
 
+    named = kind
     kind = kind or os.environ.get("TMS_EXECUTOR", "single")
     if kind == "single":
-        return rclpy.executors.SingleThreadedExecutor()
+        return rclpy.executors.SingleThreadedExecutor(context=context)
     if kind == "multi":
-        return rclpy.executors.MultiThreadedExecutor(num_threads=threads)
+        return rclpy.executors.MultiThreadedExecutor(num_threads=threads, context=context)
     if kind == "events":
-        from rclpy.experimental import EventsExecutor
+        from tms_common.rclpy_compat import SlicedEventsExecutor
 
-        return EventsExecutor()
-    raise ValueError(f"unknown executor {kind!r}: expected one of single, multi, events")
+        return SlicedEventsExecutor(context=context)
+    source = "" if named else " (from $TMS_EXECUTOR)"
+    raise ValueError(f"unknown executor {kind!r}{source}: expected one of {', '.join(EXECUTORS)}")
+
+
+def uses_wait_set(executor) -> bool:  # noqa: ANN001
+    """True for rclpy's wait-set executors (single, multi): they honour callback groups, so
+    :func:`tms_common.rclpy_compat.park` keeps an entity out of them (QoS event polling, the ``/clock``
+    relay) and guard conditions work; False for ``events``."""
+    from tms_common.rclpy_compat import SlicedEventsExecutor
+
+    return not isinstance(executor, SlicedEventsExecutor)
 
 
 def run_node(
@@ -94,11 +112,12 @@ def run_node(
     signals = contextlib.ExitStack()
     try:
         node = factory()
-        if stop_in_context:
-            signals.enter_context(_stop_on_signals(node))
-        defer_qos_incompatibility_events(node)
-        relay = relay_clock(node)
         spinner = make_executor(executor, threads=threads)
+        if stop_in_context:
+            signals.enter_context(_stop_on_signals(node, spinner))
+        if uses_wait_set(spinner):  # parking takes nothing out of an events executor: nothing to gain there
+            defer_qos_incompatibility_events(node)
+            relay = relay_clock(node)
         spinner.add_node(node)
         spinner.spin()
     except (KeyboardInterrupt, ExternalShutdownException, _StopRequested):
@@ -147,12 +166,13 @@ class _StopRequested(Exception):  # noqa: N818 - a request, not an error
 
 
 @contextlib.contextmanager
-def _stop_on_signals(node):  # noqa: ANN001, ANN202
-    """SIGINT/SIGTERM end ``node``'s spin between two callbacks, with its context still valid.
+def _stop_on_signals(node, spinner):  # noqa: ANN001, ANN202
+    """SIGINT/SIGTERM end ``node``'s spin on ``spinner`` between two callbacks, with its context still valid.
 
     A Python signal handler runs only when the main thread is back in Python, not while it waits in
     ``rcl_wait``; so the signal is also written to a wake-up fd, and a thread reading it triggers a guard
-    condition whose callback raises :class:`_StopRequested` in the executor. No callback is cut in half.
+    condition whose callback raises :class:`_StopRequested` in the executor (on ``events``, which has no guard
+    conditions: ``call_soon`` runs it and ``request_stop`` ends the spin). No callback is cut in half.
     """
     import signal
     import threading
@@ -163,25 +183,31 @@ def _stop_on_signals(node):  # noqa: ANN001, ANN202
 
     def stop() -> None:
         if winding_down is not None and winding_down():
-            threading.Timer(0.05, guard.trigger).start()  # ask again in 50 ms; the spin goes on meanwhile
+            threading.Timer(0.05, trigger).start()  # ask again in 50 ms; the spin goes on meanwhile
             return
         if not settled.is_set():
             # One more short spin: what the last callbacks left queued (an action server's result and status
             # after its execute callback returned, a client's result response) is handled before the executor
             # stops, instead of being dropped ("coroutine ... was never awaited") or run on destroyed handles.
             settled.set()
-            threading.Timer(_SETTLE_S, guard.trigger).start()
+            threading.Timer(_SETTLE_S, trigger).start()
             return
-        raise _StopRequested
+        if uses_wait_set(spinner):
+            raise _StopRequested
+        spinner.request_stop()
 
-    guard = node.create_guard_condition(stop)
+    if uses_wait_set(spinner):
+        trigger = node.create_guard_condition(stop).trigger
+    else:
+        def trigger() -> None:
+            spinner.call_soon(stop)
     read_fd, write_fd = os.pipe()
     os.set_blocking(write_fd, False)
 
     def relay() -> None:
         try:
             while os.read(read_fd, 16):
-                guard.trigger()
+                trigger()
         except Exception:  # noqa: BLE001, S110 - the guard is gone (node destroyed): nothing left to stop
             pass
         finally:

@@ -26,7 +26,8 @@ from typing import Any
 from rclpy.callback_groups import CallbackGroup
 
 __all__ = ["TESTED_RCLPY", "RCLPY_VERSION", "INTERNALS", "use_internals", "park", "poll_ready",
-           "SubscriptionWaiter", "SubscriptionDestroyed", "executor_thread_pool", "installed_rclpy_version"]
+           "SubscriptionWaiter", "SubscriptionDestroyed", "executor_thread_pool", "installed_rclpy_version",
+           "SlicedEventsExecutor", "EVENTS_SLICE_S"]
 
 TESTED_RCLPY = "7.1.6"  # the ros-jazzy-rclpy version pinned in constraints.txt
 
@@ -185,3 +186,185 @@ def executor_thread_pool(executor: Any) -> Any | None:
         return None
     pool = getattr(executor, "_executor", None)
     return pool if isinstance(pool, ThreadPoolExecutor) else None
+
+
+# -- the EventsExecutor ------------------------------------------------------------------------------
+
+#: [s] longest wait of one :class:`SlicedEventsExecutor` slice: how late a context shut down from outside
+#: (``rclpy.shutdown`` in another thread) is noticed; signals and :meth:`SlicedEventsExecutor.request_stop`
+#: end a slice at once.
+EVENTS_SLICE_S = 1.0
+
+
+class SlicedEventsExecutor:
+    """rclpy's ``EventsExecutor`` (``rclpy.experimental``) with the three defects of rclpy 7.1.6 worked around.
+
+    1. ``spin()`` and every wait without a timeout busy-wait and deliver nothing. The wait is
+       ``std::condition_variable::wait_until(steady_clock::time_point::max())``; the wheels are built against
+       an old glibc (no ``pthread_cond_clockwait``), so libstdc++ converts that deadline to the system clock,
+       the sum overflows into the past and every wait returns at once. The waiting thread then holds the
+       event queue's mutex almost all the time; the threads that enqueue events (timers, DDS listeners, the
+       SIGINT callback) starve on it: no timer fires, no message is delivered, SIGINT is not taken.
+       Here every wait is bounded (``spin_until_future_complete(future, EVENTS_SLICE_S)``, a real timed
+       wait), and :meth:`spin` repeats it until the context is shut down or :meth:`request_stop`.
+    2. An exception that escapes a task (a coroutine, a future's done-callback, anything given to
+       ``create_task``) kills the process with SIGSEGV. Tasks created through this object are guarded:
+       the exception ends the spin and is raised from :meth:`spin` in the spinning thread, as the
+       SingleThreadedExecutor does. The nodes' ``executor`` is pointed at this object
+       (:func:`_point_node_at`), so rclpy's own tasks (action goals, action client responses) are guarded too;
+       done-callbacks of client futures completed by the C++ side are not (they get the inner executor).
+    3. Guard conditions are not supported (``RuntimeError: Guard conditions not supported`` from inside the
+       spin). :meth:`add_node` refuses a node that has one, naming it; :meth:`call_soon` (any thread) is what
+       a guard condition's trigger was used for.
+
+    Two limits stay: callback groups are ignored (everything runs on the spinning thread, and
+    :func:`park` does not keep an entity out: ``tms_common.node.run_node`` neither parks QoS event handlers
+    nor relays ``/clock`` on this executor), and the coroutine callbacks of subscriptions and services are
+    not awaited (rclpy 7.1.11 handles them).
+    """
+
+    def __init__(self, context: Any = None) -> None:
+        import rclpy
+        from rclpy.experimental import EventsExecutor
+
+        self._context = context or rclpy.get_default_context()
+        self._inner = EventsExecutor(context=self._context)
+        self._stop = threading.Event()
+        self._slice_lock = threading.Lock()
+        self._slice_future: Any = None
+        self._error: BaseException | None = None
+
+    # the rclpy Executor API used by nodes and the runners ------------------------------------------
+    @property
+    def context(self) -> Any:
+        return self._context
+
+    def add_node(self, node: Any) -> bool:
+        guards = list(getattr(node, "guards", []))
+        if guards:
+            raise ValueError(f"node {node.get_name()!r} has {len(guards)} guard condition(s): the EventsExecutor of "
+                             f"rclpy {RCLPY_VERSION} cannot wait on them (use executor 'single', or call_soon)")
+        added = self._inner.add_node(node)
+        _point_node_at(node, self)
+        return added
+
+    def remove_node(self, node: Any) -> None:
+        self._inner.remove_node(node)
+
+    def get_nodes(self) -> list[Any]:
+        return list(self._inner.get_nodes())
+
+    def wake(self) -> None:
+        self._inner.wake()
+
+    def create_task(self, callback: Any, *args: Any, **kwargs: Any) -> Any:
+        return self._inner.create_task(self._guarded(callback), *args, **kwargs)
+
+    def create_future(self) -> Any:
+        from rclpy.task import Future
+
+        return Future(executor=self)
+
+    def call_soon(self, callback: Any) -> None:
+        """Run ``callback()`` on the spinning thread between two callbacks; callable from any thread."""
+        self.create_task(callback)
+
+    def request_stop(self) -> None:
+        """End :meth:`spin` (from any thread or a callback): it returns normally; a request made while not
+        spinning ends the next :meth:`spin` at once."""
+        self._stop.set()
+        self._end_slice()
+
+    def spin(self) -> None:
+        while self._context.ok() and not self._stop.is_set():
+            self._spin_slice(EVENTS_SLICE_S)
+        self._stop.clear()  # the request is consumed
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        """At most one callback; ``None`` waits at most :data:`EVENTS_SLICE_S` (an unbounded wait is defect 1)."""
+        self._inner.spin_once(timeout_sec=EVENTS_SLICE_S if timeout_sec is None else max(0.0, timeout_sec))
+        self._raise_pending()
+
+    def spin_until_future_complete(self, future: Any, timeout_sec: float | None = None) -> None:
+        import time
+
+        end = None if timeout_sec is None else time.monotonic() + timeout_sec
+        while self._context.ok() and not future.done():
+            left = EVENTS_SLICE_S if end is None else min(EVENTS_SLICE_S, end - time.monotonic())
+            if left <= 0:
+                return
+            self._spin_slice(left, future)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        self.request_stop()
+        return self._inner.shutdown(timeout_sec=timeout_sec)
+
+    # internals ---------------------------------------------------------------------------------------
+    def _spin_slice(self, seconds: float, future: Any = None) -> None:
+        from rclpy.task import Future
+
+        end_on = Future()
+        with self._slice_lock:
+            self._slice_future = end_on
+        if future is not None:
+            future.add_done_callback(lambda _f: end_on.done() or end_on.set_result(None))
+        self._inner.spin_until_future_complete(end_on, timeout_sec=seconds)
+        with self._slice_lock:
+            self._slice_future = None
+        self._raise_pending()
+
+    def _end_slice(self) -> None:
+        with self._slice_lock:
+            end_on = self._slice_future
+        if end_on is not None and not end_on.done():
+            end_on.set_result(None)  # no executor set on it: its done-callback (the queue's Stop) runs here
+
+    def _raise_pending(self) -> None:
+        error, self._error = self._error, None
+        if error is not None:
+            raise error
+
+    def _failed(self, exc: BaseException) -> None:
+        if self._error is None:
+            self._error = exc
+        self._end_slice()
+
+    def _guarded(self, callback: Any) -> Any:
+        import functools
+        import inspect
+
+        if inspect.iscoroutine(callback):
+            coro = callback
+
+            async def run_coroutine() -> Any:
+                try:
+                    return await coro
+                except Exception as exc:  # noqa: BLE001 - re-raised from spin(), not in the C++ task (SIGSEGV)
+                    self._failed(exc)
+            return run_coroutine()
+        if inspect.iscoroutinefunction(callback):
+            @functools.wraps(callback)
+            async def run_async(*args: Any, **kwargs: Any) -> Any:
+                try:
+                    return await callback(*args, **kwargs)
+                except Exception as exc:  # noqa: BLE001
+                    self._failed(exc)
+            return run_async
+
+        @functools.wraps(callback)
+        def run(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return callback(*args, **kwargs)
+            except Exception as exc:  # noqa: BLE001
+                self._failed(exc)
+        return run
+
+
+def _point_node_at(node: Any, executor: Any) -> None:
+    """Make ``node.executor`` return ``executor`` (rclpy 7.1.6: the name-mangled ``_Node__executor_weakref``):
+    the inner EventsExecutor's ``add_node`` points it at itself, and rclpy schedules action goals and
+    responses on ``node.executor``."""
+    import weakref
+
+    if use_internals("guarding EventsExecutor tasks against the SIGSEGV of a raising task"):
+        node._Node__executor_weakref = weakref.ref(executor)  # noqa: SLF001

@@ -14,7 +14,8 @@
 
 The store is chosen as in :func:`tms_db.open_store`: ``--uri`` (default ``$TMS_DB_URI``) for MongoDB,
 else the embedded store at ``--path`` (default ``$TMS_DB_PATH`` else ``~/.local/share/tms/db``).
-Exit codes: 0 done, 1 store or input error (message names file / record / field), 2 usage.
+Exit codes: 0 done, 1 store or input error (message names file / record / field; a restore that left out
+bad documents, each named by file and _id, after loading the others), 2 usage.
 """
 
 from __future__ import annotations
@@ -199,8 +200,13 @@ def _run(args: argparse.Namespace) -> int:
             counts = dumpfmt.dump(store, args.dir)
             print(", ".join(f"{k}: {v}" for k, v in counts.items()) or "nothing to dump", f"-> {args.dir}")
         elif args.cmd == "restore":
-            counts = dumpfmt.restore(store, args.dir, drop=args.drop)
-            print(", ".join(f"{k}: {v}" for k, v in counts.items()), "restored")
+            result = dumpfmt.restore(store, args.dir, drop=args.drop)
+            print(", ".join(f"{k}: {v}" for k, v in result.counts.items()), "restored")
+            for line in result.rejected:
+                print(f"tms-db: left out: {line}", file=sys.stderr)
+            if result.rejected:
+                print(f"tms-db: {len(result.rejected)} document(s) left out; the others are restored", file=sys.stderr)
+                return 1
         elif args.cmd == "seed":
             seed_file = Path(args.file) if args.file else repo_root() / PAPER_SEED
             if not args.file and not seed_file.is_file():

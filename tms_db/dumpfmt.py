@@ -4,21 +4,24 @@ Layout: ``DIR/<database>/<collection>.json`` (``mongoimport --db rostmsdb --coll
 --file DIR/rostmsdb/task.json``). Canonical mode keeps every type exact across tools: ``{"$numberInt"}``,
 ``{"$numberLong"}``, ``{"$numberDouble"}``, ``{"$date"}``, ``{"$oid"}``, plain ``true``/``false``.
 ``restore`` also reads JSON arrays (``mongoexport --jsonArray``) and ``mongodump`` BSON files
-(``DIR/rostmsdb/<collection>.bson``), so the original's seed dumps load unchanged.
+(``DIR/rostmsdb/<collection>.bson``), so the original's seed dumps load unchanged, binary fields
+included. A bad document is reported (file, ``_id`` or line, reason) and the others load.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import bson
+import bson.errors
 from bson import json_util
 
 from tms_db.errors import StoreError
 from tms_db.store import DATABASE, Store
 
-__all__ = ["dump", "restore", "read_collection_file", "dumps_doc"]
+__all__ = ["dump", "restore", "RestoreResult", "read_collection_file", "dumps_doc"]
 
 _OPTS = json_util.JSONOptions(json_mode=json_util.JSONMode.CANONICAL, tz_aware=True, tzinfo=bson.tz_util.utc)
 
@@ -46,14 +49,23 @@ def dump(store: Store, directory: str | Path) -> dict[str, int]:
     return counts
 
 
-def read_collection_file(path: Path) -> Iterator[dict]:
-    """Documents of one dump file (.json lines or array, or .bson); errors name the file and line."""
+def read_collection_file(path: Path, problems: list[str]) -> Iterator[tuple[str, dict]]:
+    """(where, document) for each document of one dump file (.json lines or array, or .bson); ``where``
+    is ``line N`` (JSON lines), ``element N`` (JSON array) or ``document N`` (BSON), counted from 1.
+
+    A line or element that is not a document is reported in ``problems`` by file and line (element)
+    and skipped; a BSON stream cannot be resynchronised after a corrupt document, so reading stops
+    there, reported by the file and the number of documents read before it.
+    """
     if path.suffix == ".bson":
+        n = 0
         try:
             with path.open("rb") as fh:
-                yield from bson.decode_file_iter(fh, codec_options=bson.CodecOptions(tz_aware=True))
+                for doc in bson.decode_file_iter(fh, codec_options=bson.CodecOptions(tz_aware=True)):
+                    n += 1
+                    yield f"document {n}", doc
         except bson.errors.BSONError as exc:
-            raise StoreError(f"{path}: not a BSON dump: {exc}") from None
+            problems.append(f"{path}: document {n + 1}: not BSON ({exc}); the rest of the file is not read")
         return
     text = path.read_text(encoding="utf-8")
     if text.lstrip().startswith("["):
@@ -61,10 +73,11 @@ def read_collection_file(path: Path) -> Iterator[dict]:
             docs = json_util.loads(text, json_options=_OPTS)
         except ValueError as exc:
             raise StoreError(f"{path}: malformed JSON array: {exc}") from None
-        for i, doc in enumerate(docs):
-            if not isinstance(doc, dict):
-                raise StoreError(f"{path}: element {i} is not a document")
-            yield doc
+        for i, doc in enumerate(docs, 1):
+            if isinstance(doc, dict):
+                yield f"element {i}", doc
+            else:
+                problems.append(f"{path}: element {i} is not a document")
         return
     for lineno, line in enumerate(text.splitlines(), 1):
         if not line.strip():
@@ -72,14 +85,27 @@ def read_collection_file(path: Path) -> Iterator[dict]:
         try:
             doc = json_util.loads(line, json_options=_OPTS)
         except ValueError as exc:
-            raise StoreError(f"{path}:{lineno}: malformed Extended JSON: {exc}") from None
-        if not isinstance(doc, dict):
-            raise StoreError(f"{path}:{lineno}: not a document")
-        yield doc
+            problems.append(f"{path}:{lineno}: malformed Extended JSON: {exc}")
+            continue
+        if isinstance(doc, dict):
+            yield f"line {lineno}", doc
+        else:
+            problems.append(f"{path}:{lineno}: not a document")
 
 
-def restore(store: Store, directory: str | Path, *, drop: bool = False) -> dict[str, int]:
-    """Load ``directory/<database>/*.json|*.bson`` (or ``directory/*.json|*.bson``) into the store."""
+@dataclass
+class RestoreResult:
+    """Documents stored per collection, and every document left out, named by file and ``_id`` (or line)."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+    rejected: list[str] = field(default_factory=list)
+
+
+def restore(store: Store, directory: str | Path, *, drop: bool = False) -> RestoreResult:
+    """Load ``directory/<database>/*.json|*.bson`` (or ``directory/*.json|*.bson``) into the store.
+
+    A bad document is reported and left out; the rest of its collection loads.
+    """
     directory = Path(directory)
     base = directory / (store.database or DATABASE)
     if not base.is_dir():
@@ -87,11 +113,13 @@ def restore(store: Store, directory: str | Path, *, drop: bool = False) -> dict[
     files = sorted(p for p in base.glob("*") if p.suffix in (".json", ".bson") and not p.name.endswith(".metadata.json"))
     if not files:
         raise StoreError(f"{directory}: no <collection>.json or .bson files (looked in {base})")
-    counts = {}
+    result = RestoreResult()
     for path in files:
-        docs = list(read_collection_file(path))
-        try:
-            counts[path.stem] = store.import_documents(path.stem, docs, drop=drop)
-        except StoreError as exc:
-            raise type(exc)(f"{path}: {exc}") from None
-    return counts
+        where, docs = [], []
+        for at, doc in read_collection_file(path, result.rejected):
+            where.append(at)
+            docs.append(doc)
+        imported = store.import_documents(path.stem, docs, drop=drop)
+        result.counts[path.stem] = imported.loaded
+        result.rejected += [f"{path}: {where[r.index]} ({r.label}): {r.reason}" for r in imported.rejected]
+    return result

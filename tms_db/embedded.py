@@ -12,12 +12,16 @@ always see a whole committed document (a row is replaced atomically, so no torn 
 pass ``synchronous="FULL"`` to also survive power loss at some cost in write rate.
 
 Values keep their types through JSON: bool, int (any size), float, str, null, arrays, sub-documents;
-datetimes are stored as ``{"$date": "<ISO-8601 UTC>"}`` (MongoDB Extended JSON) and read back as
-timezone-aware UTC datetimes; ``_id`` is a ``bson.ObjectId`` kept in its own column.
+the BSON types JSON lacks are stored in their MongoDB Extended JSON form and read back as the same
+Python values pymongo gives: datetimes as ``{"$date": "<ISO-8601 UTC>"}`` (timezone-aware UTC),
+binary data as ``{"$binary": {"base64", "subType"}}`` (``bytes`` for subtype 0, as the original's
+collision meshes, else ``bson.Binary``), ``Decimal128`` as ``{"$numberDecimal"}``; ``_id`` is a
+``bson.ObjectId`` kept in its own column.
 """
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import datetime as _dt
 import fcntl
@@ -29,17 +33,21 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from bson import ObjectId
+from bson import Binary, Decimal128, ObjectId
 
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
 from tms_db.schema import is_number, validate_fields, validate_parameter
 from tms_db.store import (
     _MISSING,
+    ImportResult,
+    Rejected,
     Store,
     build_task_doc,
+    check_import_document,
     check_record_name,
     check_task_id,
     choose_task_id,
+    document_label,
     now_utc,
     param_filter_text,
     values_equal,
@@ -80,7 +88,18 @@ def _default(value: Any) -> Any:
         return {"$oid": str(value)}
     if isinstance(value, tuple):
         return list(value)
+    if isinstance(value, bytes | bytearray):  # bson.Binary is a bytes subclass that carries its subtype
+        subtype = value.subtype if isinstance(value, Binary) else 0
+        return {"$binary": {"base64": base64.b64encode(value).decode("ascii"), "subType": f"{subtype:02x}"}}
+    if isinstance(value, Decimal128):
+        return {"$numberDecimal": str(value)}
     raise TypeError(f"unsupported value type {type(value).__name__}")
+
+
+def _binary(spec: Any) -> Any:
+    data = base64.b64decode(spec["base64"])
+    subtype = int(spec["subType"], 16)
+    return data if subtype == 0 else Binary(data, subtype)  # pymongo also gives bytes for subtype 0
 
 
 def _hook(obj: dict) -> Any:
@@ -89,6 +108,10 @@ def _hook(obj: dict) -> Any:
             return _dt.datetime.strptime(obj["$date"], "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=_dt.UTC)
         if "$oid" in obj and isinstance(obj["$oid"], str):
             return ObjectId(obj["$oid"])
+        if "$binary" in obj and isinstance(obj["$binary"], dict):
+            return _binary(obj["$binary"])
+        if "$numberDecimal" in obj and isinstance(obj["$numberDecimal"], str):
+            return Decimal128(obj["$numberDecimal"])
     return obj
 
 
@@ -380,30 +403,34 @@ class EmbeddedStore(Store):
         for row in self._query("SELECT oid, body FROM documents WHERE collection=? ORDER BY seq", (name,)):
             yield decode_body(*row)
 
-    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> int:
+    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> ImportResult:
         if not isinstance(name, str) or not name or name.startswith("$"):
             raise ValidationError(f"collection name {name!r}: must be a non-empty string")
-        docs = [dict(d) for d in docs]
-        for i, doc in enumerate(docs):
-            if not isinstance(doc, dict):
-                raise ValidationError(f"collection {name!r}: document {i} is not an object")
+        docs = list(docs)
 
-        def put(conn: sqlite3.Connection) -> int:
+        def put(conn: sqlite3.Connection) -> ImportResult:
             if drop:
                 conn.execute("DELETE FROM documents WHERE collection=?", (name,))
+            result = ImportResult()
             for i, doc in enumerate(docs):
-                tid, model, record = _key_columns(name, doc)
-                oid = str(doc.get("_id") or ObjectId())
+                label = document_label(doc)
                 try:
-                    body = encode_body(doc)
+                    check_import_document(name, doc)
+                    oid = doc.get("_id") or ObjectId()
+                    if not isinstance(oid, ObjectId):
+                        raise ValidationError(f"_id {oid!r} is not an ObjectId (the embedded store keys documents by ObjectId)")
+                    tid, model, record = _key_columns(name, doc)
+                    # A failed INSERT undoes only itself (SQLite's ABORT): the documents before and after stay.
                     conn.execute("INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
-                                 "VALUES (?, ?, ?, ?, ?, ?)", (name, oid, tid, model, record, body))
+                                 "VALUES (?, ?, ?, ?, ?, ?)", (name, str(oid), tid, model, record, encode_body(doc)))
                 except (TypeError, ValueError) as exc:
-                    raise ValidationError(f"collection {name!r}: document {i} (_id {oid}): {exc}") from None
+                    result.rejected.append(Rejected(i, label, str(exc)))
                 except sqlite3.IntegrityError:
                     key = f"task_id {tid}" if name == "task" else f"record {record!r} of model {model!r}"
-                    raise StoreError(f"collection {name!r}: document {i} (_id {oid}): duplicate _id or {key}") from None
-            return len(docs)
+                    result.rejected.append(Rejected(i, label, f"duplicate _id or {key}"))
+                else:
+                    result.loaded += 1
+            return result
 
         return self._transaction(put)
 

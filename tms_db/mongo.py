@@ -11,15 +11,22 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
+import bson
+import bson.errors
+
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
 from tms_db.schema import is_number, validate_fields, validate_parameter
 from tms_db.store import (
     DATABASE,
+    ImportResult,
+    Rejected,
     Store,
     build_task_doc,
+    check_import_document,
     check_record_name,
     check_task_id,
     choose_task_id,
+    document_label,
     now_utc,
     param_filter_text,
 )
@@ -211,16 +218,30 @@ class MongoStore(Store):
     def export_collection(self, name: str) -> Iterator[dict]:
         yield from self._db[name].find({}).sort("_id", 1)
 
-    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> int:
-        docs = [dict(d) for d in docs]
+    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> ImportResult:
+        result = ImportResult()
+        good: list[tuple[int, dict]] = []
+        for i, doc in enumerate(docs):
+            try:
+                check_import_document(name, doc)
+                bson.encode(doc)  # one unencodable document would otherwise fail the whole batch
+            except (ValidationError, bson.errors.BSONError, TypeError) as exc:
+                result.rejected.append(Rejected(i, document_label(doc), str(exc)))
+                continue
+            good.append((i, dict(doc)))
         if drop:
             self._db[name].delete_many({})
-        if docs:
+        if good:
             try:
-                self._db[name].insert_many(docs, ordered=True)
+                # unordered: MongoDB stores every document it can and reports the others by position
+                self._db[name].insert_many([d for _, d in good], ordered=False)
             except self._errors.BulkWriteError as exc:
-                raise StoreError(f"collection {name!r}: import failed: {exc.details.get('writeErrors', exc)}") from None
-        return len(docs)
+                for err in exc.details.get("writeErrors", []):
+                    i, doc = good[err["index"]]
+                    result.rejected.append(Rejected(i, document_label(doc), err.get("errmsg", "write error")))
+        result.loaded = len(good) - sum(1 for r in result.rejected if r.index in {i for i, _ in good})
+        result.rejected.sort(key=lambda r: r.index)
+        return result
 
     def check(self) -> list[str]:
         problems = []

@@ -11,8 +11,11 @@ Payload families checked here:
   array, every payload field must be an array of numbers, all of the same length (the original's
   C++ getter crashes on a scalar there; we refuse the document instead).
 
-Anything else (global-blackboard groups) may hold any JSON/BSON value: bool, int, float, string,
-null, arrays, sub-documents, datetimes.
+Anything else (global-blackboard groups, the original's collision-object records) may hold any
+JSON/BSON value: bool, int, float, string, null, arrays, sub-documents, datetimes, binary data
+(``bytes``, ``bson.Binary``: the original stores collision-object meshes so). ``type`` is any string:
+``static`` / ``dynamic`` / ``parameter`` are the ones the stack reads, the original also writes others
+(a collision object's ``type`` is whatever its writer was given).
 """
 
 from __future__ import annotations
@@ -43,7 +46,6 @@ __all__ = [
 META_FIELDS = frozenset({"_id", "model_name", "type", "record_name", "description", "timestamps"})
 #: Keys whose values are poses (scalar family) or waypoint arrays (array family).
 POSE_KEYS = ("x", "y", "z", "qx", "qy", "qz", "qw", "yaw", "theta_w")
-PARAMETER_TYPES = frozenset({"static", "dynamic", "parameter"})
 _FAMILIES = {
     "trajectory": ("swing_joint", "boom_joint", "arm_joint", "bucket_joint"),
     "pose": ("x", "y", "z", "qx", "qy", "qz", "qw"),
@@ -77,7 +79,7 @@ def validate_field_name(record: str, name: Any) -> None:
 
 
 def _check_value(where: str, field: str, value: Any, depth: int = 0) -> None:
-    if value is None or isinstance(value, bool | int | str | _dt.datetime):
+    if value is None or isinstance(value, bool | int | str | bytes | _dt.datetime):
         return
     if isinstance(value, float):
         if not math.isfinite(value):
@@ -112,8 +114,8 @@ def validate_parameter(doc: Mapping[str, Any]) -> None:
     if model is not None and not isinstance(model, str):
         raise ValidationError(f"{where}: field 'model_name' must be a string, got {model!r}")
     kind = doc.get("type")
-    if kind is not None and kind not in PARAMETER_TYPES:
-        raise ValidationError(f"{where}: field 'type' must be one of {sorted(PARAMETER_TYPES)}, got {kind!r}")
+    if kind is not None and not isinstance(kind, str):
+        raise ValidationError(f"{where}: field 'type' must be a string, got {kind!r}")
     if "description" in doc and not isinstance(doc["description"], str):
         raise ValidationError(f"{where}: field 'description' must be a string, got {doc['description']!r}")
     for name, value in doc.items():

@@ -19,13 +19,17 @@ import abc
 import datetime as _dt
 import os
 from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from tms_db.errors import StoreError, ValidationError
 from tms_db.schema import is_number
 
-__all__ = ["Store", "open_store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS"]
+__all__ = [
+    "Store", "open_store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS",
+    "ImportResult", "Rejected", "check_import_document", "document_label",
+]
 
 DATABASE = "rostmsdb"
 COLLECTIONS = ("task", "parameter")
@@ -70,6 +74,54 @@ def check_record_name(record_name: Any) -> str:
     if not isinstance(record_name, str) or not record_name:
         raise ValidationError(f"record_name {record_name!r}: must be a non-empty string")
     return record_name
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """One document an import refused: its position in the input, its label (``_id``), and why."""
+
+    index: int
+    label: str
+    reason: str
+
+    def __str__(self) -> str:
+        return f"document {self.index} ({self.label}): {self.reason}"
+
+
+@dataclass
+class ImportResult:
+    """What :meth:`Store.import_documents` did: documents stored, and each refused one by its id."""
+
+    loaded: int = 0
+    rejected: list[Rejected] = field(default_factory=list)
+
+
+def document_label(doc: Any) -> str:
+    """How a report names a document: its ``_id``, else its key fields."""
+    if not isinstance(doc, Mapping):
+        return f"a {type(doc).__name__}, not a document"
+    if "_id" in doc:
+        return f"_id {doc['_id']}"
+    keys = [f"{k} {doc[k]!r}" for k in ("task_id", "model_name", "record_name") if k in doc]
+    return ", ".join(keys) or "no _id"
+
+
+def check_import_document(collection: str, doc: Any) -> None:
+    """The minimum a document needs to be found again: ValidationError naming the field otherwise.
+
+    Imports store documents as they are (like ``mongoimport``): shapes are checked on the next write,
+    not here, so the original's records load unchanged (parameter documents without ``record_name``
+    included: its older ones are keyed by ``parameter_id``). A task needs its integer ``task_id`` and its
+    XML text, or no look-up finds it.
+    """
+    if not isinstance(doc, Mapping):
+        raise ValidationError(f"not a document ({type(doc).__name__})")
+    if collection == "task":
+        tid = doc.get("task_id")
+        if isinstance(tid, bool) or not isinstance(tid, int) or tid <= 0:
+            raise ValidationError(f"field 'task_id' must be a positive integer, got {tid!r}")
+        if not isinstance(doc.get("task_sequence"), str):
+            raise ValidationError(f"field 'task_sequence' must be a string, got {type(doc.get('task_sequence')).__name__}")
 
 
 class Store(abc.ABC):
@@ -160,8 +212,13 @@ class Store(abc.ABC):
         """Every document of a collection, unchanged (with ``_id``)."""
 
     @abc.abstractmethod
-    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> int:
-        """Insert documents as they are (like ``mongoimport``); ``drop`` empties the collection first."""
+    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> ImportResult:
+        """Insert documents as they are (like ``mongoimport``); ``drop`` empties the collection first.
+
+        One bad document (a duplicate key, a value the backend cannot store, a task without its id:
+        :func:`check_import_document`) is refused and reported by its ``_id`` in the result; the others
+        are stored.
+        """
 
     @abc.abstractmethod
     def check(self) -> list[str]:

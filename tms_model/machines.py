@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -161,7 +162,12 @@ class Machine:
     pump_flow: float | None = None  # [L/min] shared by the joints with flow_at_limit > 0
     bucket: Bucket | None = None
     vessel: Vessel | None = None
+    tf_prefix: str = ""  # frames of this machine on /tf are "<tf_prefix>/<link>" ("" = bare link names)
     source: str = field(default="", compare=False)
+
+    def frame(self, link: str) -> str:
+        """The /tf frame id of ``link`` of this machine (OPERA's ``${tf_prefix}/<link>`` convention)."""
+        return f"{self.tf_prefix}/{link}" if self.tf_prefix else link
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -254,6 +260,15 @@ def _cutoff(top: Reader) -> PilotCutoff | None:
     )
 
 
+def _tf_prefix(top: Reader) -> str:
+    if not top.has("tf_prefix"):
+        return ""
+    prefix = top.string("tf_prefix")
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", prefix):
+        raise top.key_error("tf_prefix", f"expected a frame name prefix such as ic120_tf (no leading or trailing '/'), got {prefix!r}")
+    return prefix
+
+
 def _masses(top: Reader) -> Mapping[str, float]:
     m = top.sub("masses")
     return MappingProxyType({name: m.number(name, lo=0.0) for name in m.keys()})
@@ -305,6 +320,7 @@ def _excavator(top: Reader, kind: str, source: str) -> Machine:
         pilot_cutoff=_cutoff(top),
         pump_flow=hyd.number("pump_flow_lpm", lo=1.0),
         bucket=bucket,
+        tf_prefix=_tf_prefix(top),
         source=source,
     )
 
@@ -357,6 +373,7 @@ def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
         track_drive=_track_drive(hyd),
         pilot_cutoff=_cutoff(top),
         vessel=vessel,
+        tf_prefix=_tf_prefix(top),
         source=source,
     )
 

@@ -12,8 +12,10 @@ changed through a tms_db store (``open_store``), as the original tms_sp updaters
 * the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> the global-blackboard
   record, written on the first assessment and then on every change.
 
-Only ``type: dynamic`` records are written (as the original updaters): :meth:`SiteSensing.check_records`
-raises :class:`SensingError` naming a record that is missing or static.
+Every write goes through :class:`tms_sp.ingest.SensingWriter`, the rule by which the original's updaters
+(and our ``tms_sp_ingest`` node, for an external sensing PC) write: only ``type: dynamic`` records, only
+fields the seeded record has. :meth:`SiteSensing.check_records` raises :class:`SensingError` naming a
+record that is missing or static.
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ import numpy as np
 from tms_model.geometry import Pose2D
 from tms_sp.arrival import ArrivalDetector
 from tms_sp.config import SensingConfig
-from tms_sp.errors import SensingError
 from tms_sp.heightgrid import rasterize
+from tms_sp.ingest import SensingWriter
 from tms_sp.mound import MoundAssessment, assess_mound
 from tms_sp.vessel import VesselAssessment, assess_vessel, release_in_zx200
 
@@ -57,9 +59,11 @@ class SiteSensing:
     _last_release: tuple[float, float, float] | None = None
     _release_spot: tuple[float, float] | None = None  # vessel frame x, y of the written release target
     _arrival: ArrivalDetector | None = None
+    _writer: SensingWriter | None = None
 
     def __post_init__(self) -> None:
         self._arrival = ArrivalDetector(self.cfg.points[self.cfg.arrival_point], self.cfg.arrival)
+        self._writer = SensingWriter(self.store)
 
     # ---- setup ------------------------------------------------------------------------------------
     def check_records(self) -> None:
@@ -72,14 +76,7 @@ class SiteSensing:
             (self.cfg.vessel_model, self.cfg.angle_record),
         ]
         for model, record in wanted:
-            try:
-                doc = self.store.get_record(record) if model is None else self.store.get_parameter(model, record)
-            except KeyError as exc:
-                raise SensingError(f"record ({model or '*'}, {record}) not in the DB: seed it first ({exc})") from None
-            if doc.get("type") != "dynamic":
-                raise SensingError(
-                    f"record ({model or '*'}, {record}) has type {doc.get('type')!r}: sensing only writes 'dynamic' records"
-                )
+            self._writer.record(record, model)
 
     # ---- inputs -----------------------------------------------------------------------------------
     def on_ic120_pose(self, t: float, pose: Pose2D) -> bool:
@@ -108,13 +105,15 @@ class SiteSensing:
             fields = a.target.record_fields(self.base)
             xyz = (fields["x"], fields["y"], fields["z"])
             if self._moved(self._last_target, xyz, self.cfg.excavation_update_threshold):
-                doc = self.store.get_parameter(self.cfg.excavation_model, self.cfg.excavation_record)
+                doc = self._writer.record(self.cfg.excavation_record, self.cfg.excavation_model)
                 if doc.get("LOCK_FLG") is True:
                     log.debug("excavation target locked (LOCK_FLG): not updated")
                 else:
-                    self.store.set_fields(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model)
+                    self._writer.write(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model,
+                                       strict=True)
                     approach = a.target.approach_record_fields(self.base, self.cfg.approach_height)
-                    self.store.set_fields(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model)
+                    self._writer.write(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model,
+                                       strict=True)
                     self.writes += 1
                     self._last_target = xyz
                     self._last_target_xy = (a.target.x, a.target.y)
@@ -135,8 +134,8 @@ class SiteSensing:
             )
             xyz = (pose["x"], pose["y"], pose["z"])
             if self._moved(self._last_release, xyz, self.cfg.vessel_update_threshold):
-                self.store.set_fields(self.cfg.release_record, pose, model_name=self.cfg.vessel_model)
-                self.store.set_fields(self.cfg.angle_record, angle, model_name=self.cfg.vessel_model)
+                self._writer.write(self.cfg.release_record, pose, model_name=self.cfg.vessel_model, strict=True)
+                self._writer.write(self.cfg.angle_record, angle, model_name=self.cfg.vessel_model, strict=True)
                 self.writes += 2
                 self._last_release = xyz
                 self._release_spot = (v.release_xyz[0], v.release_xyz[1])
@@ -157,7 +156,7 @@ class SiteSensing:
         self.flags[name] = value
         if self._written_flags.get(name) is value:
             return
-        self.store.set_fields(self.cfg.blackboard_record, {name: bool(value)})
+        self._writer.write(self.cfg.blackboard_record, {name: bool(value)}, strict=True)
         self.writes += 1
         self._written_flags[name] = value
         log.info("%s -> %s", name, value)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from tms_common.errors import TmsError
 
-__all__ = ["TsError", "TreeLoadError", "TreeRuntimeError", "SubtaskRecordError", "ExpressionError"]
+__all__ = ["TsError", "TreeLoadError", "TreeRuntimeError", "SubtaskRecordError", "ExpressionError", "TaskSequenceError"]
 
 
 class TsError(TmsError):
@@ -39,3 +39,7 @@ class SubtaskRecordError(TsError, ValueError):
         self.field = field
         where = f"record '{record_name}'" + (f" field '{field}'" if field else "")
         super().__init__(f"{where}: {problem}")
+
+
+class TaskSequenceError(TsError, ValueError):
+    """A ``/task_sequence`` message cannot start a task (not XML, malformed JSON, task id absent); names it."""

@@ -52,11 +52,11 @@ def main() -> None:
         wsum, _r, acks, _s = run_hammer(tmp / "c" / "db", tmp / "c", writers=1, readers=0,
                                         seconds=min(seconds, 5.0), mode="flags")
         print(f"flag writes, 1 writer process alone: {wsum[0]['flag'] / wsum[0]['seconds']:.0f} writes/s")
-        print(f"GetParameter service round trip to a tms_db_reader process: {service_latency(tmp / 'b' / 'db')}")
+        print(f"TmsdbGetParameter service round trip to a tms_db_reader process: {service_latency(tmp / 'b' / 'db')}")
 
 
 def service_latency(db: Path, calls: int = 500) -> str:
-    """Round trip of ``/tms_db_reader/get_parameter`` from this process to a reader node process."""
+    """Round trip of ``/tms_db_reader_parameter`` from this process to a reader node process."""
     import time
 
     import rclpy
@@ -64,7 +64,7 @@ def service_latency(db: Path, calls: int = 500) -> str:
     from rclpy.executors import SingleThreadedExecutor
 
     from tests.rosproc import Proc, executable, isolated_domain, ros_env
-    from tms_msg.srv import GetParameter
+    from tms_msg_db.srv import TmsdbGetParameter
 
     with isolated_domain() as domain:
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -76,17 +76,17 @@ def service_latency(db: Path, calls: int = 500) -> str:
             node = rclpy.create_node("bench_tms_db", context=context)
             executor = SingleThreadedExecutor(context=context)
             executor.add_node(node)
-            client = node.create_client(GetParameter, "/tms_db_reader/get_parameter")
+            client = node.create_client(TmsdbGetParameter, "/tms_db_reader_parameter")
             if not client.wait_for_service(timeout_sec=30):
                 raise RuntimeError(f"tms_db_reader did not come up:\n{node_proc.output}")
-            request = GetParameter.Request(model_name="ic120", record_name="LOAD_PATH")
+            request = TmsdbGetParameter.Request(model_name="ic120", record_name="LOAD_PATH")
             durations = []
             for i in range(calls + 20):
                 t = time.perf_counter()
                 future = client.call_async(request)
                 executor.spin_until_future_complete(future, timeout_sec=10)
-                if not future.done() or not future.result().found:
-                    raise RuntimeError("GetParameter call failed")
+                if not future.done() or not future.result().keys:
+                    raise RuntimeError("TmsdbGetParameter call failed")
                 if i >= 20:  # warm-up excluded
                     durations.append(time.perf_counter() - t)
             return summary_ms(durations)

@@ -3,17 +3,21 @@
 1. A 200-node tree (ReactiveSequence over groups of AlwaysSuccess / SetLocalBlackboard /
    ConditionalExpression, ending in a RUNNING KeepRunningUntilFailure) ticks all 200 nodes per tick;
    time per tick / 200 = overhead per node (goal < 20 us).
-2. LeafNode round trip: this process sends Subtask goals exactly as the manager does (ManagerRosPort)
+2. LeafNode round trip: this process sends LeafNodeBase goals exactly as the manager does (ManagerRosPort)
    to a ``tms_ts_subtasks`` process, which reads the DB record and calls a planning stub process that
    succeeds at once; goal sent -> SUCCEEDED seen.
 3. A ``tms_ts_manager`` at 50 Hz running 10 tasks (endless loops of a LeafNode, a DB read, a DB write
    and an expression) against subtask servers and planning stubs; its ``/tms_ts/tick_stats`` gives
    ticks, missed ticks and tick durations.
+4. The executor's share: the same manager node in this process, the same 10 tasks, ``TS_EXEC_S`` seconds
+   on the SingleThreadedExecutor and then on ``events`` (tms_common.node.make_executor): ticks, missed
+   ticks, goals completed and the process's CPU (rusage) per second and per tick.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import tempfile
 import time
@@ -23,6 +27,7 @@ from tests.rosproc import ROOT, Proc, executable, isolated_domain, ros_env
 
 N_GOALS = 100
 LOAD_SECONDS = 30.0
+EXEC_SECONDS = float(os.environ.get("TS_EXEC_S", "20"))
 
 
 def _tree_200(mixed: bool = True) -> str:
@@ -198,6 +203,68 @@ def _ten_tasks(domain: int, db: str) -> str:
             f"after /emergency_signal {canceled}/10 CANCELED")
 
 
+def _manager_on(kind: str, domain: int, db: str) -> str:
+    import resource
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+    from rclpy.task import Future
+
+    from tms_common.node import make_executor
+    from tms_ts.leaf import SUCCEEDED
+    from tms_ts.nodes.tms_ts_manager import TaskManager
+
+    procs = _start_servers(domain, db, 0.2)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = TaskManager(context=ctx, parameter_overrides=[
+        Parameter("db_path", value=db), Parameter("tick_rate_hz", value=50.0), Parameter("server_wait_s", value=30.0)])
+    ex = make_executor(kind, context=ctx)
+    ex.add_node(node)
+    done = [0]
+    sent = node.ros.send_subtask_goal
+
+    def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202 - count the goals that end SUCCEEDED
+        goal = sent(*args, **kwargs)
+        on_result = goal._on_result  # noqa: SLF001
+
+        def on_result_counted(future):  # noqa: ANN001, ANN202
+            on_result(future)
+            done[0] += goal.state == SUCCEEDED
+        goal._on_result = on_result_counted  # noqa: SLF001
+        return goal
+    node.ros.send_subtask_goal = counted
+
+    def spin_for(seconds: float) -> None:
+        if kind == "events":
+            ex.spin_until_future_complete(Future(), timeout_sec=seconds)
+            return
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.1)
+
+    try:
+        for task_id in range(100, 110):
+            node.start_task(task_id)
+        spin_for(10.0)  # servers found, every task looping
+        s0, d0, r0, w0 = dict(node._stats), done[0], resource.getrusage(resource.RUSAGE_SELF), time.monotonic()  # noqa: SLF001
+        spin_for(EXEC_SECONDS)
+        s1, r1, wall = node._stats, resource.getrusage(resource.RUSAGE_SELF), time.monotonic() - w0  # noqa: SLF001
+        running = sum(1 for r in node.runs.values() if not r.done)
+    finally:
+        ex.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        for p in procs:
+            p.kill()
+    cpu = r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
+    ticks, missed = s1["ticks"] - s0["ticks"], s1["missed"] - s0["missed"]
+    return (f"manager on {kind:6s}: {ticks} ticks of {wall * 50:.0f} in {wall:.1f} s, missed {missed}, "
+            f"{done[0] - d0} goals succeeded, {running}/10 tasks running; process CPU {cpu / wall * 100:.1f} % of a "
+            f"core, {cpu / max(1, ticks) * 1e3:.2f} ms per tick period served")
+
+
 def main() -> None:
     for line in _tick_overhead():
         print(line, flush=True)
@@ -206,6 +273,8 @@ def main() -> None:
         _seed(db)
         print(_round_trip(domain, db), flush=True)
         print(_ten_tasks(domain, db), flush=True)
+        for kind in ("single", "events"):
+            print(_manager_on(kind, domain, db), flush=True)
 
 
 if __name__ == "__main__":

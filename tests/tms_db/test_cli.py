@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from bson import ObjectId
 
 from tests.rosproc import ROOT
@@ -47,7 +47,7 @@ def test_original_shapes_round_trip_through_restore_and_dump(tmp_path) -> None:
     (src / "task.json").write_text(dumps_doc(ORIGINAL_TASK) + "\n")
     (src / "parameter.json").write_text("".join(dumps_doc(d) + "\n" for d in ORIGINAL_PARAMS))
     with open_store(path=tmp_path / "db") as store:
-        assert restore(store, tmp_path / "in") == {"parameter": 5, "task": 1}
+        assert restore(store, tmp_path / "in").counts == {"parameter": 5, "task": 1}
         assert store.get_task(9) == ORIGINAL_TASK
         got = list(store.export_collection("parameter"))
         assert got == ORIGINAL_PARAMS
@@ -73,21 +73,21 @@ def test_restore_reads_mongodump_bson(tmp_path) -> None:
     (src / "parameter.bson").write_bytes(b"".join(bson.encode(d) for d in ORIGINAL_PARAMS))
     (src / "parameter.metadata.json").write_text("{}")
     with open_store(path=tmp_path / "db") as store:
-        assert restore(store, tmp_path / "dump") == {"parameter": 5}
+        assert restore(store, tmp_path / "dump").counts == {"parameter": 5}
         assert list(store.export_collection("parameter")) == ORIGINAL_PARAMS
 
 
-def test_restore_errors_name_file_and_line(tmp_path) -> None:
+def test_restore_reports_bad_lines_and_documents_and_loads_the_rest(tmp_path) -> None:
     src = tmp_path / "d" / "rostmsdb"
     src.mkdir(parents=True)
-    (src / "parameter.json").write_text('{"record_name": "a"}\n{"record_name": \n')
+    (src / "parameter.json").write_text('{"record_name": "a"}\n{"record_name": \n{"record_name": "a"}\n{"record_name": "b"}\n')
     with open_store(path=tmp_path / "db") as store:
-        with pytest.raises(Exception, match=r"parameter.json:2: malformed Extended JSON"):
-            restore(store, tmp_path / "d")
-        (src / "parameter.json").write_text('{"record_name": "a"}\n{"record_name": "a"}\n')
-        with pytest.raises(Exception, match=r"parameter.json: collection 'parameter': document 1 .*duplicate"):
-            restore(store, tmp_path / "d")
-        assert store.list_parameters() == []  # all or nothing
+        result = restore(store, tmp_path / "d")
+        assert result.counts == {"parameter": 2}
+        assert len(result.rejected) == 2
+        assert "parameter.json:2: malformed Extended JSON" in result.rejected[0]
+        assert re.search(r"parameter.json: line 3 \(record_name 'a'\): duplicate", result.rejected[1])
+        assert [d["record_name"] for d in store.list_parameters()] == ["a", "b"]
 
 
 def test_cli_task_and_param_commands(tmp_path) -> None:

@@ -25,8 +25,13 @@ def _call(node, client, request, timeout: float = 30.0):  # noqa: ANN001, ANN202
 
 
 def test_reader_and_writer_nodes(procs, ros_node, tmp_path) -> None:
+    """The reader's clients are built on the original's types only (tms_msg_db), as its GUI and subtasks are."""
     from tms_msg.msg import ParameterUpdate
-    from tms_msg.srv import GetParameter, GetTask, SetParameter
+    from tms_msg.srv import SetParameter
+    from tms_msg_db.srv import TmsdbGetParameter, TmsdbGetTask
+
+    # the original's clients set task_id; the stored TmsdbGetTask.srv names the field id: the type says which
+    id_field = "task_id" if "task_id" in TmsdbGetTask.Request.get_fields_and_field_types() else "id"
 
     db = tmp_path / "db"
     with open_store(path=db) as store:
@@ -35,31 +40,37 @@ def test_reader_and_writer_nodes(procs, ros_node, tmp_path) -> None:
         store.upsert_parameter(BLACKBOARD)
     reader = procs([executable("tms_db", "tms_db_reader"), "--ros-args", "-p", f"db_path:={db}"])
     writer = procs([executable("tms_db", "tms_db_writer"), "--ros-args", "-p", f"db_path:={db}"])
-    get_task = ros_node.create_client(GetTask, "/tms_db_reader/get_task")
-    get_param = ros_node.create_client(GetParameter, "/tms_db_reader/get_parameter")
+    get_task = ros_node.create_client(TmsdbGetTask, "/tms_db_reader_task")
+    get_param = ros_node.create_client(TmsdbGetParameter, "/tms_db_reader_parameter")
     set_param = ros_node.create_client(SetParameter, "/tms_db_writer/set_parameter")
 
-    reply = _call(ros_node, get_task, GetTask.Request(task_id=5))
-    assert reply.found and 'record_name="initial_pose"' in reply.task, reader.output
-    reply = _call(ros_node, get_task, GetTask.Request(task_id=6))
-    assert not reply.found and reply.task == "" and "task_id 6" in reply.message
 
-    reply = _call(ros_node, get_param, GetParameter.Request(model_name="ic120", record_name="LOAD_PATH"))
-    assert reply.found
-    assert list(reply.keys).count("x") == 3 and reply.values[list(reply.keys).index("x")] == "1.0"
-    assert json.loads(reply.document_json)["qw"] == [1.0, 1.0, 1.0]
-    reply = _call(ros_node, get_param, GetParameter.Request(model_name="zx200", record_name="LOAD_PATH"))
-    assert not reply.found and "record 'LOAD_PATH' of model 'zx200' not found" in reply.message
+    reply = _call(ros_node, get_task, TmsdbGetTask.Request(**{id_field: 5}))
+    assert 'record_name="initial_pose"' in reply.task and reply.task.startswith("<root"), reader.output
+    reply = _call(ros_node, get_task, TmsdbGetTask.Request(**{id_field: 6}))
+    assert reply.task == ""  # the original's answer for an unknown id
+    assert reader.wait_for("task_id 6: no such task", timeout=10), reader.output
+
+    reply = _call(ros_node, get_param, TmsdbGetParameter.Request(model_name="ic120", record_name="LOAD_PATH"))
+    keys = list(reply.keys)
+    assert keys.count("x") == 3 and reply.values[keys.index("x")] == "1.0"
+    assert [v for k, v in zip(keys, reply.values, strict=True) if k == "qw"] == ["1.0", "1.0", "1.0"]
+    assert not {"_id", "model_name", "type", "record_name"} & set(keys)
+    reply = _call(ros_node, get_param, TmsdbGetParameter.Request(model_name="zx200", record_name="LOAD_PATH"))
+    assert list(reply.keys) == [] and list(reply.values) == []
+    assert reader.wait_for("record 'LOAD_PATH' of model 'zx200' not found", timeout=10), reader.output
 
     # service write -> visible through the reader process, types kept
     fields = json.dumps({"sample_flg": True, "sample_val_int": 7, "sample_val_double": 2.0})
     reply = _call(ros_node, set_param, SetParameter.Request(record_name="SAMPLE_GLOBAL_BLACKBOARD", fields_json=fields))
     assert reply.success, reply.message
-    reply = _call(ros_node, get_param, GetParameter.Request(record_name="SAMPLE_GLOBAL_BLACKBOARD"))
-    doc = json.loads(reply.document_json)
-    assert doc["sample_flg"] is True and doc["sample_val_int"] == 7 and "$date" in doc["timestamps"]
-    assert reply.values[list(reply.keys).index("sample_flg")] == "true"
-    assert reply.values[list(reply.keys).index("sample_val_double")] == "2.0"
+    reply = _call(ros_node, get_param, TmsdbGetParameter.Request(record_name="SAMPLE_GLOBAL_BLACKBOARD"))
+    values = dict(zip(reply.keys, reply.values, strict=True))
+    assert values["sample_flg"] == "True" and values["sample_val_int"] == "7" and values["sample_val_double"] == "2.0"
+    assert values["timestamps"].startswith("20")  # str() of the write's UTC datetime
+    with open_store(path=db) as store:
+        doc = store.get_record("SAMPLE_GLOBAL_BLACKBOARD")
+    assert doc["sample_flg"] is True and type(doc["sample_val_int"]) is int
 
     # bad writes are refused naming record and field; nothing changes
     reply = _call(ros_node, set_param, SetParameter.Request(model_name="ic120", record_name="LOAD_PATH",

@@ -50,7 +50,8 @@ class TsSystem:
 
 @pytest.fixture
 def ts_system(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
-    """``start(stub_duration_s=..., ignore_cancel=False, server_wait_s=...)`` -> TsSystem (seed the DB first)."""
+    """``start(stub_duration_s=..., ignore_cancel=False, server_wait_s=..., manager_args=("-p", "k:=v"))`` -> TsSystem
+    (seed the DB first)."""
     from std_msgs.msg import Bool, Int32, String
 
     from tms_db import open_store
@@ -68,7 +69,7 @@ def ts_system(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
     }
 
     def start(stub_duration_s: float = 0.3, ignore_cancel: bool = False, server_wait_s: float = 20.0,
-              halt_timeout_s: float = 5.0, stop_timeout_s: float = 5.0) -> TsSystem:
+              halt_timeout_s: float = 5.0, stop_timeout_s: float = 5.0, manager_args: tuple[str, ...] = ()) -> TsSystem:
         system.procs["stub"] = procs(
             [sys.executable, "-m", "tests.tms_ts.planning_stub", "--ros-args", "-p", f"duration_s:={stub_duration_s}",
              "-p", f"ignore_cancel:={'true' if ignore_cancel else 'false'}"], name="stub", PYTHONPATH=str(ROOT))
@@ -79,7 +80,7 @@ def ts_system(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
         system.procs["manager"] = procs(
             [executable("tms_ts", "tms_ts_manager"), "--ros-args", "-p", f"db_path:={db}",
              "-p", f"server_wait_s:={server_wait_s}", "-p", f"halt_timeout_s:={halt_timeout_s}",
-             "-p", "tick_rate_hz:=20.0", "-p", "status_rate_hz:=4.0"], name="manager")
+             "-p", "tick_rate_hz:=20.0", "-p", "status_rate_hz:=4.0", *manager_args], name="manager")
         for name, text in (("stub", "planning stub ready"), ("zx200", "subtask servers"),
                            ("ic120", "subtask servers"), ("manager", "tms_ts_manager ready")):
             assert system.procs[name].wait_for(text, 60), f"{name} did not start:\n{system.procs[name].output}"

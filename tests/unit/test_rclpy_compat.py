@@ -7,6 +7,7 @@ workaround relies on, the test of that workaround fails here, naming it, before 
 from __future__ import annotations
 
 import re
+import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -148,3 +149,90 @@ def test_executor_thread_pool_of_a_multi_threaded_executor(context):
     finally:
         multi.shutdown()
         single.shutdown()
+
+
+# -- the EventsExecutor of rclpy 7.1.6 (SlicedEventsExecutor) ------------------------------------------
+
+def test_events_executor_delivers_a_timer_driven_publisher_and_stops_on_sigint(procs):
+    """Defect 1 (unbounded waits deliver nothing, SIGINT ignored) and defect 3 (no guard conditions: the
+    stop-in-context path goes through call_soon): two run_node processes on ``events``."""
+    import signal
+
+    listener = procs([sys.executable, "-m", "tests.unit.events_nodes", "listener"])
+    talker = procs([sys.executable, "-m", "tests.unit.events_nodes", "talker"])
+    assert listener.wait_for("heard 10", 60), listener.output
+    talker.signal(signal.SIGINT)
+    assert talker.wait(20) == 0, talker.output
+    listener.signal(signal.SIGINT)
+    assert listener.wait(20) == 0, listener.output
+    out = listener.output
+    assert "stop requested (2)" in out and "listener: destroyed with context ok" in out, out
+    assert "Traceback" not in out + talker.output, out + talker.output
+
+
+def test_events_executor_raises_a_failing_tasks_exception_from_spin_instead_of_crashing(domain):
+    """Defect 2: an exception escaping a task of the raw EventsExecutor kills the process (SIGSEGV); through
+    SlicedEventsExecutor it ends the spin and is raised in the spinning thread. In a subprocess: a
+    regression would take pytest down with it."""
+    import subprocess
+
+    from tests.rosproc import ros_env
+
+    script = """
+import rclpy
+from tms_common.rclpy_compat import SlicedEventsExecutor
+rclpy.init()
+node = rclpy.create_node("raising", start_parameter_services=False, enable_rosout=False)
+ex = SlicedEventsExecutor()
+ex.add_node(node)
+assert node.executor is ex
+class Boom(Exception):
+    pass
+async def coroutine():
+    raise Boom("from a coroutine")
+def plain():
+    raise Boom("from a task")
+for task in (plain, coroutine):
+    node.executor.create_task(task)
+    try:
+        ex.spin()
+    except Boom as exc:
+        print("raised:", exc, flush=True)
+ex.shutdown()
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                          env=ros_env(domain), cwd=ROOT)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "raised: from a task" in done.stdout and "raised: from a coroutine" in done.stdout, done.stdout
+
+
+def test_events_executor_refuses_a_node_with_a_guard_condition_naming_it(context):
+    ex = rclpy_compat.SlicedEventsExecutor(context=context)
+    node = _node(context, "guarded")
+    node.create_guard_condition(lambda: None)
+    try:
+        with pytest.raises(ValueError, match="'guarded' has 1 guard condition"):
+            ex.add_node(node)
+    finally:
+        ex.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+
+
+def test_events_executor_spin_runs_timers_and_ends_on_request_stop_from_a_thread(context):
+    import threading
+
+    ex = rclpy_compat.SlicedEventsExecutor(context=context)
+    node = _node(context, "stopped")
+    fired: list[float] = []
+    node.create_timer(0.02, lambda: fired.append(time.monotonic()))
+    ex.add_node(node)
+    threading.Timer(1.0, ex.request_stop).start()
+    start = time.monotonic()
+    try:
+        ex.spin()
+        took = time.monotonic() - start
+    finally:
+        ex.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+    assert 0.9 < took < 0.9 + rclpy_compat.EVENTS_SLICE_S, took  # the slice ends at the request, not its end
+    assert len(fired) >= 10, len(fired)

@@ -1,8 +1,17 @@
-"""``tms_db_reader``: services ``~/get_task`` (tms_msg/srv/GetTask) and ``~/get_parameter`` (GetParameter).
+"""``tms_db_reader``: the original's DB reader services, on the original's names and types.
 
-With the default node name these are ``/tms_db_reader/get_task`` and ``/tms_db_reader/get_parameter``.
-A missing task or record is not an error of the service: the reply has ``found: false`` and a
-``message`` naming the task id / record. Parameters: ``db_uri``, ``db_path``.
+* ``/tms_db_reader_task`` (tms_msg_db/srv/TmsdbGetTask): the task's ``task_sequence`` (the BehaviorTree
+  XML); ``""`` when the task does not exist, as the original's ``tms_db_reader_task`` answers (its GUI
+  button reads an empty task as "invalid task id").
+* ``/tms_db_reader_parameter`` (tms_msg_db/srv/TmsdbGetParameter): one parameter record as parallel
+  ``keys`` / ``values`` strings, as the original's ``tms_db_reader_parameter``: every field but ``_id``,
+  ``model_name``, ``type`` and ``record_name``, an array field once per element under its key, each
+  value as Python's ``str`` gives it (``True``, ``1.5``). An empty ``model_name`` looks the record up by
+  ``record_name`` alone (a global-blackboard group). A missing record answers empty lists.
+
+Both names are absolute, as the original's nodes (``tms_db_reader_task``, ``tms_db_reader_parameter``)
+serve them from their own names. What is not found is logged naming the task id / record. Parameters:
+``db_uri``, ``db_path``.
 """
 
 from __future__ import annotations
@@ -14,10 +23,31 @@ from rclpy.node import Node
 
 from tms_common.node import run_node
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open, document_json, flatten
-from tms_msg.srv import GetParameter, GetTask
+from tms_db.nodes.common import declare_and_open
+from tms_msg_db.srv import TmsdbGetParameter, TmsdbGetTask
 
-__all__ = ["main", "TmsDbReader"]
+__all__ = ["main", "TmsDbReader", "TASK_SERVICE", "TASK_ID_FIELD", "PARAMETER_SERVICE", "parameter_pairs"]
+
+TASK_SERVICE = "/tms_db_reader_task"
+#: The request field holding the task id. The original's clients (its GUI button) and its reader set
+#: ``task_id``; the stored tms_msg_db/srv/TmsdbGetTask.srv names it ``id``: whichever the built type has.
+TASK_ID_FIELD = "task_id" if "task_id" in TmsdbGetTask.Request.get_fields_and_field_types() else "id"
+PARAMETER_SERVICE = "/tms_db_reader_parameter"
+#: Fields the original's parameter reader leaves out of its answer.
+_NOT_ANSWERED = frozenset({"_id", "model_name", "type", "record_name"})
+
+
+def parameter_pairs(doc: dict) -> tuple[list[str], list[str]]:
+    """``keys`` / ``values`` of TmsdbGetParameter for a record (see the module docstring)."""
+    keys: list[str] = []
+    values: list[str] = []
+    for key, value in doc.items():
+        if key in _NOT_ANSWERED:
+            continue
+        items = value if isinstance(value, list | tuple) else (value,)
+        keys.extend(key for _ in items)
+        values.extend(str(item) for item in items)
+    return keys, values
 
 
 class TmsDbReader(Node):
@@ -26,28 +56,25 @@ class TmsDbReader(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_db_reader", **kwargs)
         self.store = declare_and_open(self)
-        self.create_service(GetTask, "~/get_task", self._get_task)
-        self.create_service(GetParameter, "~/get_parameter", self._get_parameter)
-        self.get_logger().info("tms_db_reader ready")
+        self.create_service(TmsdbGetTask, TASK_SERVICE, self._get_task)
+        self.create_service(TmsdbGetParameter, PARAMETER_SERVICE, self._get_parameter)
+        self.get_logger().info(f"tms_db_reader ready: {TASK_SERVICE}, {PARAMETER_SERVICE}")
 
     def _get_task(self, request, response):  # noqa: ANN001, ANN202
         try:
-            doc = self.store.get_task(request.task_id)
+            response.task = str(self.store.get_task(getattr(request, TASK_ID_FIELD)).get("task_sequence", ""))
         except StoreError as exc:
-            response.found, response.task, response.message = False, "", str(exc)
-            return response
-        response.found, response.task = True, doc.get("task_sequence", "")
+            self.get_logger().warning(f"{TASK_SERVICE}: {exc}")
+            response.task = ""
         return response
 
     def _get_parameter(self, request, response):  # noqa: ANN001, ANN202
         try:
             doc = self.store.get_parameter(request.model_name or None, request.record_name)
         except StoreError as exc:
-            response.found, response.message = False, str(exc)
+            self.get_logger().warning(f"{PARAMETER_SERVICE}: {exc}")
             return response
-        response.keys, response.values = flatten(doc)
-        response.document_json = document_json(doc)
-        response.found = True
+        response.keys, response.values = parameter_pairs(doc)
         return response
 
     def destroy_node(self) -> None:

@@ -5,9 +5,10 @@ Subscribes ``odom_pose`` (nav_msgs/Odometry, frame odom), ``gnss/fix`` (sensor_m
 (sensor_msgs/Imu, orientation yaw = azimuth, ENU). Publishes ``odometry/global`` (nav_msgs/Odometry,
 frame ``map``, child ``base_link``, pose covariance of x, y, yaw; twist copied from odometry; stamped with
 the odometry message's stamp) on every odometry message once a GNSS fix arrived, and ``map_to_odom`` (geometry_msgs/TransformStamped, the REP-105
-map -> odom correction; tf2_msgs is not in these wheels, so no /tf). Parameters: ``nav_config`` (YAML,
+map -> odom correction, which ``tms_sp_tf`` puts on /tf). Parameters: ``nav_config`` (YAML,
 default config/nav/ic120_nav.yaml), ``site_config`` (default config/site.yaml), ``use_azimuth`` (true),
-``base_frame`` / ``odom_frame`` / ``map_frame``.
+``base_frame`` / ``odom_frame`` (default: the IC120's /tf frames, ``ic120_tf/base_link`` / ``ic120_tf/odom``)
+/ ``map_frame``.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from sensor_msgs.msg import Imu, NavSatFix
 from tms_common.node import run_node
 from tms_common.params import declare_startup
 from tms_model.geometry import yaw_from_quaternion
+from tms_model.machines import load_machine
 from tms_model.site import Projector, load_site
 from tms_rp.ic120.config import load_nav_config
 from tms_rp.ic120.ekf import Ic120Ekf
@@ -36,8 +38,9 @@ class Ic120Localization(Node):
         nav_config = str(declare_startup(self, "nav_config", "").value)
         site_config = str(declare_startup(self, "site_config", "").value)
         self.use_azimuth = bool(declare_startup(self, "use_azimuth", True).value)
-        self.base_frame = str(declare_startup(self, "base_frame", "base_link").value)
-        self.odom_frame = str(declare_startup(self, "odom_frame", "odom").value)
+        machine = load_machine("ic120")
+        self.base_frame = str(declare_startup(self, "base_frame", machine.frame("base_link")).value)
+        self.odom_frame = str(declare_startup(self, "odom_frame", machine.frame("odom")).value)
         self.map_frame = str(declare_startup(self, "map_frame", "map").value)
         cfg = load_nav_config(nav_config or None)
         site = load_site(site_config or None)

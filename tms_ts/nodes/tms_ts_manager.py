@@ -11,11 +11,16 @@ topic                      type                   meaning
 ``/tms_ts/status``         tms_msg/TaskStatus     every task: state, running leaves, message, tree
 ``/tms_ts/tick_stats``     std_msgs/String        JSON: ticks, missed ticks, tick durations (1 Hz)
 ``/tms_ts/confirm``        std_msgs/String        WaitForClick answers (see tms_ts.nodes.ros_port)
+``/task_sequence``         std_msgs/String        the original's start path: a tree XML, or its GUI's
+                                                  JSON ``{"tasks": [{task_id, task_sequence}]}``
 =========================  =====================  =================================================
 
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
 ``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
-``db_path`` ("" = tms_db default); all read-only (read at start-up).
+``db_path`` ("" = tms_db default); all read-only (read at start-up). ``task_id`` (-1), the original's:
+which entry of a ``/task_sequence`` JSON to run (-1: every entry), and the id an XML runs under (-1: the
+stored task with that tree, else an ad-hoc negative id); read on every message, as the original does
+(:mod:`tms_ts.task_sequence`).
 A task is ticked at the fixed rate; a tick that starts more than half a period late counts as missed.
 
 Lost-server policy: when a task ends FAILURE because a subtask or planning server was lost mid-goal (its
@@ -34,6 +39,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Int32, String
 
+from tms_common.errors import TmsError
 from tms_common.node import run_node
 from tms_msg.msg import TaskIds, TaskState, TaskStatus
 from tms_ts.bt.core import TreeContext
@@ -41,6 +47,7 @@ from tms_ts.errors import TsError
 from tms_ts.loader import load_tree
 from tms_ts.nodes.ros_port import ManagerRosPort
 from tms_ts.task import CANCELED, FAILED, SUCCEEDED, TaskRun
+from tms_ts.task_sequence import NO_TASK_ID, TASK_SEQUENCE_TOPIC, parse_task_sequence, stored_task_id
 
 __all__ = ["TaskManager", "main"]
 
@@ -75,6 +82,9 @@ class TaskManager(Node):
         self.finished: dict[int, TaskState] = {}
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(TaskIds, "/tms_ts/start", self._on_start, reliable)
+        # the original's start path; its task_id is read per message, so it stays writable
+        self.declare_parameter("task_id", NO_TASK_ID)
+        self.create_subscription(String, TASK_SEQUENCE_TOPIC, self._on_task_sequence, reliable)
         self.create_subscription(Int32, "/tms_ts/cancel", self._on_cancel, reliable)
         self.create_subscription(Bool, "/emergency_signal", self._on_emergency, reliable)
         self.status_pub = self.create_publisher(TaskStatus, "/tms_ts/status", reliable)
@@ -93,14 +103,30 @@ class TaskManager(Node):
             self.start_task(int(task_id))
         self._publish_status()
 
-    def start_task(self, task_id: int) -> None:
+    def _on_task_sequence(self, msg: String) -> None:
+        try:
+            wanted = parse_task_sequence(msg.data, int(self.get_parameter("task_id").value))
+            for task in wanted:
+                task_id = task.task_id
+                if task_id is None:
+                    task_id = stored_task_id(task.xml, self.store.list_tasks())
+                if task_id is None:  # a tree the DB does not hold: an id no stored task can have
+                    task_id = min([NO_TASK_ID + 1, *self.runs, *self.finished]) - 1
+                    self.get_logger().info(f"/task_sequence: tree not in the database, run as ad-hoc task {task_id}")
+                self.start_task(task_id, task.xml)
+        except TmsError as exc:  # TaskSequenceError, or the store failing to list the tasks
+            self.get_logger().error(str(exc))
+        self._publish_status()
+
+    def start_task(self, task_id: int, xml: str | None = None) -> None:
+        """Start ``task_id`` with its tree from the DB, or with ``xml`` when given (``/task_sequence``)."""
         run = self.runs.get(task_id)
         if run is not None and not run.done:
             self.get_logger().warning(f"task {task_id} is already running; start ignored")
             return
         try:
-            doc = self.store.get_task(task_id)
-            xml = doc.get("task_sequence", "")
+            if xml is None:
+                xml = self.store.get_task(task_id).get("task_sequence", "")
             # Delay / Timeout / Sleep run on the node's clock (simulated time under use_sim_time)
             ctx = TreeContext(store=self.store, ros=self.ros, task_id=task_id,
                               task_clock=lambda: self.get_clock().now().nanoseconds * 1e-9,
@@ -203,6 +229,8 @@ class TaskManager(Node):
         self.status_pub.publish(msg)
 
     def destroy_node(self) -> None:
+        if any(not r.done for r in self.runs.values()):
+            self.ros.wait_for_lock_listeners(timeout_s=1.0)  # the locks below must reach the converters
         for run in self.runs.values():
             if not run.done:
                 run.cancel("manager shutting down")
@@ -211,5 +239,7 @@ class TaskManager(Node):
 
 
 def main() -> int:
-    # stop_in_context: on SIGINT/SIGTERM destroy_node still cancels running tasks and engages their machines' locks
-    return run_node(TaskManager, executor="single", stop_in_context=True)
+    # stop_in_context: on SIGINT/SIGTERM destroy_node still cancels running tasks and engages their machines' locks.
+    # events: the tick timer and the action clients' responses cost a fraction of the SingleThreadedExecutor's
+    # wake (docs/performance.md, "Scheduler: 10 tasks at 50 Hz").
+    return run_node(TaskManager, executor="events", stop_in_context=True)
