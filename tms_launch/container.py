@@ -31,6 +31,7 @@ The CAN links of the machines whose plant and converter share this process are i
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import importlib
 import inspect
 import json
@@ -251,10 +252,18 @@ def main(argv: list[str] | None = None) -> int:
         print("usage: python -m tms_launch.container <name> <json list of nodes>", file=sys.stderr)
         return 2
     name, payload = args
+    # `kill -USR1 <pid>` prints every thread's stack: what a container that does not stop is waiting for
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     members = [_Member(name=n["name"], package=n["package"], executable=n["executable"],
                        on_exit=n.get("on_exit", "error"), ros_args=list(n["ros_args"])) for n in json.loads(payload)]
     return run_container(name, members)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_code = main()
+    # Every node is destroyed and the context shut down; what is left is interpreter teardown, where the garbage
+    # collection of rclpy's remaining handles was seen to hang (a stopped ic120_pc container sat "Garbage-collecting"
+    # until SIGTERM). Nothing needs finalising, so leave at once.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(exit_code)

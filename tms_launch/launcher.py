@@ -42,7 +42,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tms_common.errors import ConfigError
-from tms_launch.launch_file import LAYOUT_ENV, LAYOUTS, LaunchFile, NodeSpec, ProcessSpec, parse_launch_file, processes
+from tms_launch.launch_file import (
+    LAYOUT_ENV,
+    LAYOUTS,
+    LaunchFile,
+    NodeSpec,
+    ProcessSpec,
+    parse_launch_file,
+    processes,
+)
 
 SIGTERM_GRACE_S = 1.5
 _PR_SET_PDEATHSIG = 1

@@ -51,6 +51,8 @@ def _launch(tmp: Path) -> Path:
             params["config"] = str(sensing)
         elif node["executable"] == "tms_ur_experiment":
             params.update(cycles=1, runs_dir=str(tmp / "runs"), timeout_s=3000.0)
+            # the report of a stopped run (matplotlib) took over 40 s on a 2-core machine under other tests' load
+            node["stop_grace_s"] = 180
     path = tmp / "paper_composed.yaml"
     path.write_text(yaml.safe_dump(launch, sort_keys=False))
     return path
