@@ -235,7 +235,7 @@ class Launcher:
             key = f"{run.spec.name} ({len(run.spec.nodes)} nodes)" if run.spec.container else run.spec.nodes[0].fqn
             rows[key] = rows.get(key, 0.0) + run.cpu_s
         wall = time.monotonic() - self._began
-        self.log(f"CPU time per process, {self.layout} layout (user + system, all threads):\n"
+        self.log(f"CPU time per process ({self.layout} layout; user + system, all threads):\n"
                  + "\n".join(cpu_table(list(rows.items()), wall)))
 
     def _stop_group(self, alive: list[Running]) -> None:
@@ -306,8 +306,8 @@ class Launcher:
                 self.log(f"running {len(up)}/{len(nodes)}: {', '.join(up)}")
             if not error and not self._stop.is_set():
                 count = sum(len(p.nodes) for p in nodes)
-                self.log(f"all {count} node(s) of {self.launch.name!r} are up in {len(nodes)} process(es), "
-                         f"{self.layout} layout; Ctrl-C stops them")
+                self.log(f"all {count} node(s) of {self.launch.name!r} are up; Ctrl-C stops them "
+                         f"({len(nodes)} process(es), {self.layout} layout)")
             while not error and not self._stop.is_set():
                 done = next((r for r in self.running if r.proc.poll() is not None and self._finished_job(r)), None)
                 if done is not None:

@@ -71,7 +71,8 @@ def _start(procs, tmp_path):  # noqa: ANN001, ANN202
 
 
 def _check_composed(out: str) -> None:
-    assert "all 13 node(s) of 'paper_experiment' are up in 4 process(es), composed layout" in out, out[-3000:]
+    assert "all 13 node(s) of 'paper_experiment' are up; Ctrl-C stops them (4 process(es), composed layout)" in out, \
+        out[-3000:]
     for container in ("plant", "zx200_pc", "ic120_pc", "site_server"):
         assert re.search(rf"^\[{container}\] container of \d+ node\(s\) in process \d+", out, re.M), container
     # both CAN links chosen in-process by com3_can.bus.link_config, at both ends

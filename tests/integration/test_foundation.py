@@ -121,7 +121,7 @@ def test_launcher_starts_three_nodes_visible_to_a_client_and_ctrl_c_stops_them(p
     assert time.monotonic() - started < 5.0
     assert not [p for p in pids if _alive(p)], "node processes outlived the launcher"
     # The stop prints each node's CPU time: every one of them spent some (rclpy import and init alone do).
-    table = launcher.output.split("CPU time per node", 1)[-1]
+    table = launcher.output.split("CPU time per process", 1)[-1]
     for fqn in ("/t3/talker", "/t3/listener", "/t3/subtask_server"):
         match = re.search(rf"^\s+{re.escape(fqn)}\s+([0-9.]+) s\s+([0-9.]+) % of a core$", table, re.M)
         assert match and float(match[1]) > 0.05, f"{fqn} missing or 0 s in the CPU table:\n{launcher.output}"
