@@ -46,6 +46,8 @@ def _launch_file(tmp: Path, layout: str, domain: int) -> Path:
     ports = dict(zip(("zx200", "ic120"), free_can_ports(domain, 2, rng), strict=True))
     groups = {m: f"239.75.{rng.randrange(1, 250)}.{rng.randrange(1, 250)}" for m in ports}
     for node in launch["nodes"]:
+        # 13 processes importing at once on 2 shared cores took over the default 90 s to come up
+        node["ready_timeout"] = 300
         params = node.setdefault("parameters", {})
         exe = node["executable"]
         if exe == "sim_plant":
