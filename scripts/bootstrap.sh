@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Creates .venv, installs ROS 2 Jazzy from PyPI wheels, builds tms_msg with rosidl + CMake into the
-# venv prefix, installs this project editable and registers its nodes in the ament index.
+# Creates .venv, installs ROS 2 Jazzy from PyPI wheels, builds the interface packages (tms_msg and the
+# peers' packages; scripts/build_interfaces.sh) with rosidl + CMake into the venv prefix, installs this
+# project editable and registers its nodes in the ament index.
 # Each step leaves a stamp in .venv/.stamps so a second run with nothing changed does nothing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -43,11 +44,17 @@ if ! fresh "$STAMPS/cmake-fix" "$STAMPS/deps" scripts/fix_ros_cmake.py; then
   touch "$STAMPS/cmake-fix"
 fi
 
-if ! fresh "$STAMPS/tms_msg" tms_msg "$STAMPS/cmake-fix"; then
-  say "building tms_msg (rosidl + CMake) into $VENV"
-  bash scripts/build_tms_msg.sh
-  touch "$STAMPS/tms_msg"
-fi
+# Interface packages in dependency order, each with its own stamp: a package is rebuilt when its files,
+# the build script or any package before it in the list changed (a later package may use an earlier one).
+PREV_STAMP="$STAMPS/cmake-fix"
+for PKG in $(bash scripts/build_interfaces.sh --list); do
+  if ! fresh "$STAMPS/iface-$PKG" "$PKG" scripts/build_interfaces.sh "$PREV_STAMP"; then
+    say "building $PKG (rosidl + CMake) into $VENV"
+    bash scripts/build_interfaces.sh "$PKG"
+    touch "$STAMPS/iface-$PKG"
+  fi
+  PREV_STAMP="$STAMPS/iface-$PKG"
+done
 
 # The editable install maps the top-level packages it found at install time: a new package needs a reinstall.
 PACKAGES=$(find . -maxdepth 2 -name __init__.py -path './*/__init__.py' -not -path './.venv/*' | sort | tr '\n' ' ')
