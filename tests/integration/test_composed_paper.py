@@ -93,7 +93,7 @@ def test_composed_paper_cycle(procs, tmp_path):
     assert m["cycles"] == 1 and m["soil_moved_m3"] > 0.04, m
     assert m["real_time_factor"] > 0, m
     # the CPU table has one row per container
-    assert re.search(r"^\s+site_server \(5 nodes\)\s+[0-9.]+ s", out, re.M), tail
+    assert re.search(r"^\s+site_server \(3 nodes\)\s+[0-9.]+ s", out, re.M), tail
 
 
 def test_composed_stop_mid_task(procs, tmp_path):

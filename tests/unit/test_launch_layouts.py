@@ -104,10 +104,9 @@ def test_paper_experiment_composes_into_the_real_systems_computers():
     composed = {p.name: [n.fqn for n in p.nodes] for p in processes(launch, "composed")}
     assert composed == {
         "plant": ["/sim_plant", "/zx200/com3_bridge", "/ic120/com3_bridge"],
-        "zx200_pc": ["/zx200/zx200_arm_controller", "/zx200/zx200_planner"],
-        "ic120_pc": ["/ic120/ic120_localization", "/ic120/ic120_navigator", "/ic120/ic120_vessel"],
-        "site_server": ["/subtasks_zx200", "/subtasks_ic120", "/tms_sp_sensing", "/tms_ts_manager",
-                        "/tms_ur_experiment"],
+        "zx200_pc": ["/zx200/zx200_arm_controller", "/zx200/zx200_planner", "/subtasks_zx200"],
+        "ic120_pc": ["/ic120/ic120_localization", "/ic120/ic120_navigator", "/ic120/ic120_vessel", "/subtasks_ic120"],
+        "site_server": ["/tms_sp_sensing", "/tms_ts_manager", "/tms_ur_experiment"],
     }
     assert len(processes(launch, "per-node")) == 13
     by_name = {p.name: p for p in processes(launch, "composed")}
@@ -116,7 +115,7 @@ def test_paper_experiment_composes_into_the_real_systems_computers():
     assert by_name["plant"].env["RMW_FASTRTPS_PUBLICATION_MODE"] == "ASYNCHRONOUS"
     assert all(IN_PROCESS_ENV not in p.env for n, p in by_name.items() if n != "plant")
     assert by_name["plant"].nice is None and by_name["zx200_pc"].nice == -10 and by_name["site_server"].nice is None
-    assert by_name["site_server"].on_exit == "shutdown" and by_name["site_server"].stop_grace_s == 30 + 4 * 2.5
+    assert by_name["site_server"].on_exit == "shutdown" and by_name["site_server"].stop_grace_s == 30 + 2 * 2.5
     for proc in processes(launch, "per-node"):
         assert IN_PROCESS_ENV not in proc.env
 
@@ -142,7 +141,8 @@ def test_cli_list_shows_each_layouts_processes_and_rejects_unknown_containers(ca
     assert [line.split("\t")[0] for line in lines] == ["plant", "zx200_pc", "ic120_pc", "site_server"]
     assert main(["--list", "--layout", "per-node", "--containers", "zx200_pc", str(PAPER)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines == ["zx200_arm_controller\tnode\t/zx200/zx200_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner"]
+    assert lines == ["zx200_arm_controller\tnode\t/zx200/zx200_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner",
+                     "subtasks_zx200\tnode\t/subtasks_zx200"]
     assert main(["--list", "--containers", "nowhere", str(PAPER)]) == 2
     assert "no container(s) ['nowhere']" in capsys.readouterr().err
 
