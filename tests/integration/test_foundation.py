@@ -238,7 +238,7 @@ def test_launcher_reverse_shutdown_stops_the_last_started_node_first_and_alone(p
     assert launcher.wait(20) == 0, launcher.output
     assert time.monotonic() - started > 1.9, "one node at a time: 1 s each"
     lines = launcher.output.splitlines()
-    assert "stopping 2 node(s) (last started first, one at a time): second, first" in launcher.output
+    assert "stopping 2 process(es) (last started first, one at a time): second, first" in launcher.output
     assert lines.index("[second] talker: shut down") < lines.index("[first] talker: shut down"), launcher.output
 
 
