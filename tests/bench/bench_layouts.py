@@ -2,7 +2,7 @@
 
 ``config/launch/paper_experiment.yaml`` runs through ``tms-launch --layout per-node`` (13 processes, COM3 CAN
 over udp_multicast between the plant and the converters) and then ``tms-launch --layout composed`` (the
-containers plant, zx200_pc, ic120_pc, site_server: 4 processes, the plant and both converters linked by
+containers plant, zx200_pc, ic120_pc, sensing_pc, site_server: 5 processes, the plant and both converters linked by
 in-process python-can virtual buses), each on a fresh embedded DB seeded with ``config/seeds/paper.yaml``, its
 own ROS domain, one haul cycle (``cycles: 1``), the plant at ``LAYOUTS_SPEED`` x real time (default: the paper
 launch's own speed parameter). Nothing else differs.

@@ -1,4 +1,4 @@
-"""The paper launch in the composed layout: 13 nodes in 4 container processes, the plant and both converters
+"""The paper launch in the composed layout: 13 nodes in 5 container processes, the plant and both converters
 linked by in-process python-can virtual buses.
 
 * ``test_composed_paper_cycle``: one load-haul-dump cycle (vessel target fill small, as
@@ -71,9 +71,9 @@ def _start(procs, tmp_path):  # noqa: ANN001, ANN202
 
 
 def _check_composed(out: str) -> None:
-    assert "all 13 node(s) of 'paper_experiment' are up; Ctrl-C stops them (4 process(es), composed layout)" in out, \
+    assert "all 13 node(s) of 'paper_experiment' are up; Ctrl-C stops them (5 process(es), composed layout)" in out, \
         out[-3000:]
-    for container in ("plant", "zx200_pc", "ic120_pc", "site_server"):
+    for container in ("plant", "zx200_pc", "ic120_pc", "sensing_pc", "site_server"):
         assert re.search(rf"^\[{container}\] container of \d+ node\(s\) in process \d+", out, re.M), container
     # both CAN links chosen in-process by com3_can.bus.link_config, at both ends
     for machine in ("zx200", "ic120"):
@@ -93,7 +93,7 @@ def test_composed_paper_cycle(procs, tmp_path):
     assert m["cycles"] == 1 and m["soil_moved_m3"] > 0.04, m
     assert m["real_time_factor"] > 0, m
     # the CPU table has one row per container
-    assert re.search(r"^\s+site_server \(3 nodes\)\s+[0-9.]+ s", out, re.M), tail
+    assert re.search(r"^\s+site_server \(2 nodes\)\s+[0-9.]+ s", out, re.M), tail
 
 
 def test_composed_stop_mid_task(procs, tmp_path):
@@ -113,8 +113,8 @@ def test_composed_stop_mid_task(procs, tmp_path):
     tail = "\n".join(out.splitlines()[-60:])
     assert code == 0, tail
     _check_composed(out)
-    stopping = out.index("stopping 4 process(es) (last started first, one at a time): site_server, ic120_pc, "
-                         "zx200_pc, plant")
+    stopping = out.index("stopping 5 process(es) (last started first, one at a time): site_server, sensing_pc, "
+                         "ic120_pc, zx200_pc, plant")
     assert "[experiment] STOPPED before the end" in out[stopping:], tail
     m = json.loads(sorted((tmp_path / "runs").glob("*/metrics.json"))[-1].read_text())
     assert m["ended"] == "stopped", m
