@@ -14,6 +14,11 @@ it with plain numbers and an injected clock. It is the same for every machine ty
   only an explicit ``False`` clears it (and the cleared channels stay neutral until new commands).
 * Watchdog per channel (front, travel, vessel): no accepted command for ``watchdog_s`` -> the channel
   goes neutral at once and the diagnostic says which topic went silent and for how long.
+* Site watchdog (``site_timeout_s`` > 0, off by default): on a machine PC cut off from the site the
+  controller may keep commanding, so command freshness says nothing; the node feeds the site's heartbeat to
+  :meth:`BridgeCore.site_heartbeat` and calls :meth:`BridgeCore.site_check` periodically; once a heartbeat
+  was seen, ``site_timeout_s`` without one while the machine is driven latches emg_stop (same latch, same clearing:
+  an explicit ``False``).
 * :meth:`BridgeCore.tick` returns the frames due now (scheduler), with the alive counter in
   ``Machine_Setting_Cmd`` advanced on every send.
 * :meth:`BridgeCore.on_frame` decodes a received frame into outputs (:class:`JointStateOut`,
@@ -147,6 +152,8 @@ class BridgeConfig:
     map_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     crs: str = "EPSG:6677"
     machine_type: str = ""
+    #: no site heartbeat for this long (after a first one) -> emg_stop latched; 0 = no site watchdog
+    site_timeout_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.machine_type:
@@ -154,6 +161,8 @@ class BridgeConfig:
         PROFILES.get(self.machine_type)  # unknown type -> ConfigError naming the known ones
         if not (math.isfinite(self.watchdog_s) and self.watchdog_s > 0):
             raise ConfigError(f"com3_bridge: watchdog_s must be > 0 s, got {self.watchdog_s}")
+        if not (math.isfinite(self.site_timeout_s) and self.site_timeout_s >= 0):
+            raise ConfigError(f"com3_bridge: site_timeout_s must be >= 0 s (0 = off), got {self.site_timeout_s}")
         if not self.track_gauge > 0:
             raise ConfigError(f"com3_bridge: track gauge must be > 0 m, got {self.track_gauge}")
 
@@ -234,6 +243,9 @@ class BridgeCore:
         self._command_ids = frozenset(self.codec.frame_id(f) for f in self.codec.command_frames)
         self._scheduler = FrameScheduler({f: self.codec.cycle_ms(f) / 1000.0 for f in self.codec.command_frames}, now)
         self._emg = False
+        self._emg_reason = ""
+        self._site_seen: float | None = None  # last site heartbeat; None = not (re-)armed
+        self._site_suspect = False  # site_check saw the heartbeat expired once
         self.counters: Counter[str] = Counter()
         self._last_reject = ""
         self._last_rx_error = ""
@@ -404,6 +416,7 @@ class BridgeCore:
             if self._emg:
                 _log.warning("%s: emg_stop cleared: motion frames stay neutral until new commands", self.machine)
                 self._emg = False
+                self._emg_reason = ""
                 for ch in self._channels.values():
                     ch.last_cmd, ch.timed_out = None, False
             return []
@@ -421,6 +434,45 @@ class BridgeCore:
                 out.append(self._encode(frame))
                 self._scheduler.sent(frame, now)
         return out
+
+    def site_heartbeat(self, now: float) -> None:
+        """A heartbeat of the site arrived (arms the site watchdog)."""
+        with self._lock:
+            self._site_seen = now
+
+    @property
+    def emg_reason(self) -> str:
+        """Why emg_stop latched when the converter latched it itself (site watchdog); else empty."""
+        return self._emg_reason
+
+    def site_check(self, now: float) -> list[Tx]:
+        """Site watchdog: emg_stop latched (neutral frames returned) once the site heartbeat is ``site_timeout_s`` old
+        while the machine is being driven (a channel not timed out whose command is not neutral).
+
+        Call it from the thread that delivers the heartbeats (the node's executor): an expiry seen at one call
+        latches only if it still holds at the next, so heartbeats that arrived while that thread was starved
+        are handled first and a busy CPU is not taken for a cut link.
+        """
+        with self._lock:
+            timeout = self.config.site_timeout_s
+            if timeout <= 0 or self._site_seen is None or now - self._site_seen <= timeout:
+                self._site_suspect = False
+                return []
+            if not self._site_suspect:
+                self._site_suspect = True
+                return []
+            if not any(ch.last_cmd is not None and not ch.timed_out
+                       and any(self._values[f] != self.codec.neutral(f) for f in ch.frames)
+                       for ch in self._channels.values()):
+                return []  # not driven (no command, or a neutral one): nothing to stop; a motion command latches next check
+            silent, self._site_seen, self._site_suspect = now - self._site_seen, None, False  # re-armed by a heartbeat
+            self.counters["site_lost"] += 1
+            if self._emg:
+                return []
+            self._emg_reason = f"site link lost: no site heartbeat for {silent:.2f} s (> {timeout:g} s)"
+            _log.warning("%s: %s -> emg_stop latched", self.machine, self._emg_reason)
+            self._emg = True
+            return self._neutralise(self._channels.values(), now)
 
     # ------------------------------------------------------------------ cyclic
     def tick(self, now: float) -> list[Tx]:
@@ -515,6 +567,8 @@ class BridgeCore:
             waiting = all(ch.last_cmd is None for ch in self._channels.values())
             if self._emg:
                 level, message = DIAG_ERROR, "emg_stop latched: neutral motion frames (publish false on emg_stop to clear)"
+                if self._emg_reason:
+                    message = f"{self._emg_reason}: {message}"
             elif timed:
                 level = DIAG_WARN
                 message = "; ".join(

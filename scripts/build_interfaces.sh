@@ -22,7 +22,7 @@ probe() {
     tms_msg_rp) echo 'from tms_msg_rp.action import TmsRpZx200ChangePose' ;;
     tms_msg_db) echo 'from tms_msg_db.srv import TmsdbGetTask' ;;
     sensing_msgs) echo 'from sensing_msgs.msg import Flgs' ;;
-    tms_msg) echo 'from tms_msg.action import Subtask' ;;
+    tms_msg) echo 'from tms_msg.msg import SubtaskOutcome' ;;
     *) echo "build_interfaces: no import probe for $1" >&2; return 1 ;;
   esac
 }

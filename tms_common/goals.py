@@ -4,6 +4,9 @@ A server stopped in context (``run_node(stop_in_context=True)``) cancels what it
 keeps spinning until they have ended. :class:`RunningGoals` holds what that takes: a count of running goals
 (``with goals.running():`` around each execute callback), the ``stopping`` event the goals' waits look at,
 and the deadline after which the node stops anyway.
+
+:data:`OUTCOME_QOS` is the profile of the topics where our servers publish each goal's typed outcome beside
+a peer's poorer result type (``/<model>/subtask_outcome``, ``/<model>/tms_rp_zx200_outcome``).
 """
 
 from __future__ import annotations
@@ -13,7 +16,13 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 
-__all__ = ["RunningGoals"]
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+__all__ = ["RunningGoals", "OUTCOME_QOS"]
+
+#: reliable, and kept for a subscriber matched late: the first goal after start-up may end before discovery
+#: has matched the client's subscription (publisher and subscriber must both use it: durability must match)
+OUTCOME_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class RunningGoals:

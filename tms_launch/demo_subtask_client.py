@@ -1,4 +1,4 @@
-"""``demo_subtask_client``: sends one demonstration ``tms_msg/Subtask`` goal (a command-line tool, not a node class)."""
+"""``demo_subtask_client``: sends one demonstration ``tms_msg_ts/LeafNodeBase`` goal (a command-line tool, not a node class)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def main() -> int:
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
 
-    from tms_msg.action import Subtask
+    from tms_msg_ts.action import LeafNodeBase
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--action", default="demo_subtask")
@@ -32,12 +32,12 @@ def main() -> int:
     rclpy.init(args=[sys.argv[0], *ros_args])
     node = rclpy.create_node("demo_subtask_client")
     try:
-        client = ActionClient(node, Subtask, opts.action)
+        client = ActionClient(node, LeafNodeBase, opts.action)
         if not client.wait_for_server(timeout_sec=opts.timeout):
             print(f"no action server {opts.action!r}", flush=True)
             return 2
-        goal = Subtask.Goal(model_name="demo", record_name=opts.record)
-        fut = client.send_goal_async(goal, feedback_callback=lambda fb: print(f"feedback {fb.feedback.state}", flush=True))
+        goal = LeafNodeBase.Goal(model_name="demo", record_name=opts.record)
+        fut = client.send_goal_async(goal, feedback_callback=lambda fb: print(f"feedback {fb.feedback.status}", flush=True))
         rclpy.spin_until_future_complete(node, fut, timeout_sec=opts.timeout)
         handle = fut.result()
         if handle is None or not handle.accepted:
@@ -59,7 +59,7 @@ def main() -> int:
             print("no result", flush=True)
             return 4
         names = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_ABORTED: "ABORTED"}
-        print(f"status {names.get(res.status, res.status)} error_code={res.result.error_code} error_msg={res.result.error_msg!r}", flush=True)
+        print(f"status {names.get(res.status, res.status)} result={res.result.result}", flush=True)
         expected = GoalStatus.STATUS_CANCELED if opts.cancel_after is not None else GoalStatus.STATUS_SUCCEEDED
         return 0 if res.status == expected else 5
     finally:

@@ -2,15 +2,16 @@
 
 ``<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose"
 record_name="{pose}"/>`` sends ``{model_name, record_name}`` to ``/<model_name>/<subtask_name>``
-(tms_msg/action/Subtask). Every ``LeafNode*`` id (LeafNodeIc120, LeafNodeZx200, LeafNodeMst2200, ...)
+(the original's tms_msg_ts/action/LeafNodeBase). Every ``LeafNode*`` id (LeafNodeIc120, LeafNodeZx200, LeafNodeMst2200, ...)
 is this one class; ``model_name`` and ``subtask_name`` must be literals (read once, as the original
 constructor did), ``record_name`` may be a ``{key}`` resolved at each start.
 
 Protocol (reference §4.2, made non-blocking): first tick sends the goal -> RUNNING; not accepted
 within ``ctx.accept_timeout_s`` -> cancel, FAILURE; rejected (the server is stopping) -> FAILURE naming
-the action and the record; SUCCEEDED -> SUCCESS; ABORTED/CANCELED -> FAILURE. Logic reads only the goal's
-status, its typed ``error_code`` (tms_msg/action/Subtask constants) and what the leaf observes itself; the
-server's ``message`` (or, for a result without one, its last feedback) only goes into the FAILURE text.
+the action and the record; SUCCEEDED -> SUCCESS; ABORTED/CANCELED -> FAILURE (as the original's leaf reads
+the goal status). Logic reads only the goal's status, its typed ``error_code`` (tms_msg/SubtaskOutcome, which
+our subtask servers publish beside the original's bool result) and what the leaf observes itself; the
+outcome's ``error_msg`` (or, without one, the goal's last feedback) only goes into the FAILURE text.
 
 Halt never blocks the tick: it requests the cancel and registers a :class:`PendingStop` in
 ``ctx.stops``. :func:`poll_stops` (called by the manager every tick) resolves it when the goal ends

@@ -3,8 +3,10 @@
 ``SUBTASKS`` maps a subtask action name (served at ``/<model_name>/<name>``) to a :class:`SubtaskSpec`,
 the one place a subtask is defined: its machine family, its planning action (relative to the machine
 namespace) and that action's type, ``build(doc, record_name) -> dict`` that validates the record and
-returns the planning goal as plain data, ``goal(plan) -> <action>.Goal`` and ``check(result) -> (ok,
-detail)`` that reads the planning result's own typed code. A missing or malformed field raises
+returns the planning goal as plain data, ``goal(plan) -> <action>.Goal``, ``options(plan)`` for what a goal
+needs beyond the planning type (ZX200 change_pose: tms_msg/srv/Zx200ChangePoseOptions) and ``check(result)
+-> (ok, detail)`` that reads the planning result's own typed code. The ZX200 rows speak the original's
+tms_msg_rp actions (:mod:`tms_if_opera.interface`). A missing or malformed field raises
 :class:`SubtaskRecordError` naming the record and the field. Adding a subtask is adding a row.
 
 Planning goal data (``kind`` -> keys):
@@ -30,19 +32,14 @@ from typing import Any
 from geometry_msgs.msg import Point, Pose, PoseStamped
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from tms_msg.action import (
-    FollowWaypoints,
-    NavigateThroughPoses,
-    NavigateToPose,
-    SetDumpAngle,
-    Zx200ChangePose,
-    Zx200ExcavateSimple,
-    Zx200ReleaseSimple,
-)
-from tms_msg.msg import ErrorCodes, Zx200PositionWithAngle
+from tms_if_opera.interface import CHANGE_POSE, EXCAVATE_SIMPLE, RELEASE_SIMPLE
+from tms_msg.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose, SetDumpAngle
+from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
+from tms_msg_rp.msg import TmsRpErrorCodes, TmsRpZx200PositionWithAngle
 from tms_ts.errors import SubtaskRecordError
 
-__all__ = ["SubtaskSpec", "SUBTASKS", "subtasks_for", "ZX200_JOINTS", "change_pose_goal", "zx200_ok", "nav2_ok", "dump_ok"]
+__all__ = ["SubtaskSpec", "SUBTASKS", "subtasks_for", "ZX200_JOINTS", "change_pose_goal", "change_pose_options",
+           "zx200_ok", "nav2_ok", "dump_ok"]
 
 ZX200_JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 _QUAT = ("qx", "qy", "qz", "qw")
@@ -193,13 +190,14 @@ def _stamped(p: dict) -> PoseStamped:
     return msg
 
 
-def _pwa(d: dict) -> Zx200PositionWithAngle:
-    return Zx200PositionWithAngle(position=Point(x=d["x"], y=d["y"], z=d["z"]), theta_w=d["theta_w"],
-                                  offset=d.get("offset", 0.0))
+def _pwa(d: dict) -> TmsRpZx200PositionWithAngle:
+    return TmsRpZx200PositionWithAngle(position=Point(x=d["x"], y=d["y"], z=d["z"]), theta_w=d["theta_w"],
+                                       offset=d.get("offset", 0.0))
 
 
-def change_pose_goal(plan: dict) -> Zx200ChangePose.Goal:
-    goal = Zx200ChangePose.Goal()
+def change_pose_goal(plan: dict) -> TmsRpZx200ChangePose.Goal:
+    """The original's goal: exactly one of trajectory / pose_sequence / position_with_angle_sequence."""
+    goal = TmsRpZx200ChangePose.Goal()
     if plan["mode"] == "joints":
         goal.trajectory = JointTrajectory(joint_names=list(plan["joints"]))
         goal.trajectory.points = [JointTrajectoryPoint(positions=list(plan["joints"].values()))]
@@ -207,9 +205,15 @@ def change_pose_goal(plan: dict) -> Zx200ChangePose.Goal:
         goal.pose_sequence = [_pose(plan["pose"])]
     else:
         goal.position_with_angle_sequence = [_pwa(plan["pwa"])]
-    goal.pass_through = bool(plan.get("pass_through", False))
-    goal.theta_w_tolerance = float(plan.get("theta_w_tolerance", 0.0))
     return goal
+
+
+def change_pose_options(plan: dict) -> dict | None:
+    """What the goal needs beyond the original's type (tms_msg/srv/Zx200ChangePoseOptions fields), or None
+    when it needs nothing beyond it (then no options are sent and a planner without them serves it too)."""
+    options = {"pass_through": bool(plan.get("pass_through", False)),
+               "theta_w_tolerance": float(plan.get("theta_w_tolerance", 0.0))}
+    return options if options["pass_through"] or options["theta_w_tolerance"] > 0 else None
 
 
 def _poses_goal(action_type):  # noqa: ANN001, ANN202
@@ -217,9 +221,9 @@ def _poses_goal(action_type):  # noqa: ANN001, ANN202
 
 
 # planning results -> (ok, detail for people) ---------------------------------------------------------
-def zx200_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a Zx200* action result
-    """tms_msg/ErrorCodes (the original's TmsRpErrorCodes): SUCCESS or a failure code."""
-    return result.error_code.val == ErrorCodes.SUCCESS, f"error_code {result.error_code.val}: {result.message}"
+def zx200_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a TmsRpZx200* action result
+    """tms_msg_rp/TmsRpErrorCodes: SUCCESS or a failure code (the text comes from the planning outcome topic)."""
+    return result.error_code.val == TmsRpErrorCodes.SUCCESS, f"error_code {result.error_code.val}"
 
 
 def nav2_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a Nav2-shaped action result
@@ -239,16 +243,20 @@ class SubtaskSpec:
     name: str
     machine: str
     planning_action: str  # relative to /<model_name>
-    action_type: Any  # the planning action's type, e.g. tms_msg.action.Zx200ChangePose
+    action_type: Any  # the planning action's type, e.g. tms_msg_rp.action.TmsRpZx200ChangePose
     build: Callable[[dict, str], dict]
     goal: Callable[[dict], Any]
     check: Callable[[Any], tuple[bool, str]]
     #: the original non-plan ZX200 change_pose / excavate_simple set LOCK_FLG=false when a result arrives
     clears_lock_flg: bool = False
+    #: plan -> the goal's options beyond the planning type (None: none needed), sent to ``<planning>/options``
+    options: Callable[[dict], dict | None] | None = None
+    #: the planning server publishes each goal's outcome text on /<model_name>/tms_rp_zx200_outcome
+    zx200_planning: bool = False
 
 
-def _excavate_goal(plan: dict) -> Zx200ExcavateSimple.Goal:
-    return Zx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
+def _excavate_goal(plan: dict) -> TmsRpZx200ExcavateSimple.Goal:
+    return TmsRpZx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
 
 
 def _nav_pose_goal(plan: dict) -> NavigateToPose.Goal:
@@ -257,12 +265,14 @@ def _nav_pose_goal(plan: dict) -> NavigateToPose.Goal:
 
 _FW, _NTP = _poses_goal(FollowWaypoints), _poses_goal(NavigateThroughPoses)
 _SPECS = [
-    SubtaskSpec("subtask_zx200_change_pose", "zx200", "tms_rp_zx200_change_pose", Zx200ChangePose,
-                build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True),
-    SubtaskSpec("subtask_zx200_excavate_simple", "zx200", "tms_rp_zx200_excavate_simple", Zx200ExcavateSimple,
-                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True),
-    SubtaskSpec("subtask_zx200_release_simple", "zx200", "tms_rp_zx200_release_simple", Zx200ReleaseSimple,
-                build_release, lambda plan: Zx200ReleaseSimple.Goal(target_angle=plan["target_angle"]), zx200_ok),
+    SubtaskSpec("subtask_zx200_change_pose", "zx200", CHANGE_POSE, TmsRpZx200ChangePose,
+                build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
+                zx200_planning=True),
+    SubtaskSpec("subtask_zx200_excavate_simple", "zx200", EXCAVATE_SIMPLE, TmsRpZx200ExcavateSimple,
+                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, zx200_planning=True),
+    SubtaskSpec("subtask_zx200_release_simple", "zx200", RELEASE_SIMPLE, TmsRpZx200ReleaseSimple,
+                build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan["target_angle"]), zx200_ok,
+                zx200_planning=True),
     SubtaskSpec("st_ic120_follow_waypoints", "ic120", "follow_waypoints", FollowWaypoints,
                 build_poses("follow_waypoints", False), _FW, nav2_ok),
     SubtaskSpec("st_ic120_follow_waypoints_deg", "ic120", "follow_waypoints", FollowWaypoints,

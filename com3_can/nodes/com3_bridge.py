@@ -13,6 +13,13 @@ a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thr
 ``joint_states``, ``odom_pose``, ``imu``, ``gnss/fix``). ``diagnostic`` is published every
 ``diagnostic_period_s`` and at once when its level or message changes.
 
+Site watchdog (a machine PC cut off from the site, docs/deployment.md): ``site_heartbeat_topic`` (std_msgs/String,
+e.g. the subtask servers' ``/tms_ts/subtask_heartbeat``; heartbeats whose data is this ``machine``) and
+``site_timeout_s`` (> 0 with a topic): after the first heartbeat, none for ``site_timeout_s`` [s wall] while
+the machine is driven (a non-neutral command) latches emg_stop and engages the pilot cut-off, as a received
+emg_stop does; an explicit emg_stop ``false`` clears it.
+Default: no topic, no site watchdog.
+
 Pilot cut-off (:mod:`com3_can.pilot_cutoff`): ``lock`` (std_msgs/Bool, reliable) true engages the
 hydraulic lock (``Pilot_Cutoff_Cmd`` = 1 at once, then every 100 ms), false releases it; a latched
 ``emg_stop`` engages it too. Motion commands are still accepted while locked (the machine ignores
@@ -30,10 +37,11 @@ import can
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus
-from std_msgs.msg import Bool, Float64
+from std_msgs.msg import Bool, Float64, String
 
 from com3_can.bridge_core import BridgeConfig, BridgeCore, FixOut, ImuOut, JointStateOut, OdomOut, Tx
 from com3_can.bus import link_config, load_bus_config, open_bus
@@ -46,6 +54,8 @@ from tms_common.params import declare_startup
 from tms_msg.msg import CrawlerCarrierMachineSetting, ExcavatorMachineSetting, JointCmd
 
 __all__ = ["main", "Com3Bridge"]
+
+SITE_CHECK_S = 0.02  # [s wall] site watchdog check period (with a site heartbeat topic only)
 
 
 def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -67,6 +77,11 @@ class Com3Bridge(Node):
         channel = str(declare_startup(self, "can_channel", "").value)
         port = int(declare_startup(self, "can_port", 0).value)
         watchdog = float(declare_startup(self, "watchdog_s", 0.5).value)
+        site_topic = str(declare_startup(self, "site_heartbeat_topic", "").value)
+        site_timeout = float(declare_startup(self, "site_timeout_s", 0.0).value)
+        if bool(site_topic) != (site_timeout > 0):
+            raise ConfigError(f"com3_bridge: site_heartbeat_topic {site_topic!r} and site_timeout_s {site_timeout:g} "
+                              "go together: both set (a topic and > 0 s) or neither")
         # joint_states at most once per this period [s of the node clock] per joint set; 0 = every
         # state frame (100 Hz for the ZX200 front). Every subscriber pays per message.
         self._js_period = float(declare_startup(self, "joint_states_period_s", 0.0).value)
@@ -77,7 +92,7 @@ class Com3Bridge(Node):
             raise ConfigError(f"com3_bridge: odom_period_s must be >= 0, got {self._odom_period}")
         self._last_published: dict[Any, float] = {}
         cfg = load_bus_config(machine, can_config or None)
-        self.config = BridgeConfig.load(machine, cfg, watchdog_s=watchdog)
+        self.config = BridgeConfig.load(machine, cfg, watchdog_s=watchdog, site_timeout_s=site_timeout)
         bus_cfg = link_config(machine, cfg, interface=interface, channel=channel, port=port)
         self.core = BridgeCore(self.config, time.monotonic())
         self.bus = open_bus(bus_cfg)
@@ -99,6 +114,11 @@ class Com3Bridge(Node):
         self.cutoff = CutoffSender()
         self._cutoff_lock = threading.Lock()
         self.create_subscription(Bool, "lock", self._on_lock, reliable)
+        if site_topic:
+            # best effort: a lost datagram must not hold the following heartbeats back for a reliable repair;
+            # the check runs on this executor (BridgeCore.site_check) and on wall time: a cut-off PC gets no /clock
+            self.create_subscription(String, site_topic, self._on_site_heartbeat, qos_profile_sensor_data)
+            self.create_timer(SITE_CHECK_S, self._site_check, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_subscription(JointCmd, "tracks_cmd", self._on_tracks, depth)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, depth)
         if "front_cmd" in self.core.topics:  # the machine type's profile says which commands it takes
@@ -270,6 +290,17 @@ class Com3Bridge(Node):
 
     def _on_lock(self, msg: Any) -> None:
         self._set_cutoff("lock", bool(msg.data))
+
+    def _on_site_heartbeat(self, msg: Any) -> None:
+        if msg.data == self.config.machine:
+            self.core.site_heartbeat(time.monotonic())
+
+    def _site_check(self) -> None:
+        self._send(self.core.site_check(time.monotonic()))
+        if self.core.emg_latched and not self.cutoff.sources.get("emg_stop"):  # the site watchdog latched it
+            self._log.error(f"{self.core.emg_reason}: emg_stop latched, neutral frames, pilot cut-off")
+            self._set_cutoff("emg_stop", True)
+            self._diag_timer(force=True)
 
     def _on_emg(self, msg: Any) -> None:
         was = self.core.emg_latched

@@ -55,7 +55,7 @@ def _action(domain: int) -> str:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
-    from tms_msg.action import Subtask
+    from tms_msg_ts.action import LeafNodeBase
 
     server = Proc(
         [str(executable("tms_launch", "demo_subtask_server")), "--ros-args", "-p", "duration_s:=0.0"], ros_env(domain)
@@ -65,19 +65,19 @@ def _action(domain: int) -> str:
     node = rclpy.create_node("bench_client", context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    client = ActionClient(node, Subtask, "demo_subtask")
+    client = ActionClient(node, LeafNodeBase, "demo_subtask")
     rtts: list[float] = []
     try:
         if not client.wait_for_server(timeout_sec=30):
             raise RuntimeError("demo_subtask server did not come up")
         for i in range(N_GOALS + 5):
             start = time.perf_counter()
-            fut = client.send_goal_async(Subtask.Goal(model_name="bench", record_name=f"r{i}"))
+            fut = client.send_goal_async(LeafNodeBase.Goal(model_name="bench", record_name=f"r{i}"))
             ex.spin_until_future_complete(fut, timeout_sec=10)
             res_fut = fut.result().get_result_async()
             ex.spin_until_future_complete(res_fut, timeout_sec=10)
-            if res_fut.result().result.error_code != Subtask.Result.NONE:
-                raise RuntimeError(f"goal {i} failed: {res_fut.result().result.error_msg}")
+            if not res_fut.result().result.result:
+                raise RuntimeError(f"goal {i} failed (status {res_fut.result().status})")
             rtts.append(time.perf_counter() - start)
     finally:
         server.kill()
@@ -85,7 +85,7 @@ def _action(domain: int) -> str:
         ex.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=ctx)
-    return f"action goal->result round trip (tms_msg/Subtask, 0 s work) across processes: {summary_ms(rtts[5:])}"
+    return f"action goal->result round trip (tms_msg_ts/LeafNodeBase, 0 s work) across processes: {summary_ms(rtts[5:])}"
 
 
 def main() -> None:

@@ -3,7 +3,7 @@
 1. A 200-node tree (ReactiveSequence over groups of AlwaysSuccess / SetLocalBlackboard /
    ConditionalExpression, ending in a RUNNING KeepRunningUntilFailure) ticks all 200 nodes per tick;
    time per tick / 200 = overhead per node (goal < 20 us).
-2. LeafNode round trip: this process sends Subtask goals exactly as the manager does (ManagerRosPort)
+2. LeafNode round trip: this process sends LeafNodeBase goals exactly as the manager does (ManagerRosPort)
    to a ``tms_ts_subtasks`` process, which reads the DB record and calls a planning stub process that
    succeeds at once; goal sent -> SUCCEEDED seen.
 3. A ``tms_ts_manager`` at 50 Hz running 10 tasks (endless loops of a LeafNode, a DB read, a DB write

@@ -51,11 +51,11 @@ REST_JOINT = 0.005
 REST_BASE = 0.01
 #: Action servers the tasks need, waited for before a task is started.
 SERVERS = {
-    "/zx200/subtask_zx200_excavate_simple": "Subtask",
-    "/ic120/st_ic120_follow_waypoints": "Subtask",
-    "/zx200/tms_rp_zx200_excavate_simple": "Zx200ExcavateSimple",
-    "/zx200/arm_controller/move": "Zx200ArmMove",
-    "/ic120/follow_waypoints": "FollowWaypoints",
+    "/zx200/subtask_zx200_excavate_simple": "tms_msg_ts.action:LeafNodeBase",
+    "/ic120/st_ic120_follow_waypoints": "tms_msg_ts.action:LeafNodeBase",
+    "/zx200/tms_rp_zx200_excavate_simple": "tms_msg_rp.action:TmsRpZx200ExcavateSimple",
+    "/zx200/arm_controller/move": "tms_msg.action:Zx200ArmMove",
+    "/ic120/follow_waypoints": "tms_msg.action:FollowWaypoints",
 }
 
 
@@ -65,8 +65,9 @@ def _literal(value: object) -> str:
     return str(value)
 
 
-def start_stack(procs, domain: int, tmp: Path, speed: float) -> dict:  # noqa: ANN001
-    """Seed the DB (paper seed + tasks 91/92) and start every node; returns ``{label: Proc}``."""
+def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | None = None) -> dict:  # noqa: ANN001
+    """Seed the DB (paper seed + tasks 91/92) and start every node; returns ``{label: Proc}``.
+    ``overrides`` maps a node name of the launch file to parameters replacing its own."""
     db = tmp / "db"
     db.mkdir()
     env = {"TMS_DB_PATH": str(db)}
@@ -92,7 +93,7 @@ def start_stack(procs, domain: int, tmp: Path, speed: float) -> dict:  # noqa: A
         exe = node["executable"]
         if exe in SKIP:
             continue
-        params = {**common, **node.get("parameters", {})}
+        params = {**common, **node.get("parameters", {}), **(overrides or {}).get(node["name"], {})}
         if exe == "sim_plant":
             params["speed"] = speed
             params["config"] = str(ROOT / params["config"])
@@ -255,11 +256,15 @@ class Probe:
 
 def wait_servers(node, timeout: float) -> list[str]:  # noqa: ANN001
     """Wait until every action server of :data:`SERVERS` is available; returns the missing ones."""
+    import importlib
+
     from rclpy.action import ActionClient
 
-    import tms_msg.action as actions
+    def action_type(spec: str):  # noqa: ANN202 - "package.action:Type"
+        module, name = spec.split(":")
+        return getattr(importlib.import_module(module), name)
 
-    clients = {name: ActionClient(node, getattr(actions, t), name) for name, t in SERVERS.items()}
+    clients = {name: ActionClient(node, action_type(t), name) for name, t in SERVERS.items()}
     end = time.monotonic() + timeout
     missing = list(clients)
     while time.monotonic() < end:

@@ -395,14 +395,14 @@ def test_planning_server_killed_mid_task_fails_it_stops_both_machines(procs, dom
 
 
 def test_planning_server_loss_counts_as_lost_by_its_code_or_by_what_the_leaf_sees() -> None:
-    from tms_msg.action import Subtask
+    from tms_msg.msg import SubtaskOutcome
 
     # the subtask server's typed code; the text is for people only (any words do)
     port, clock = _Port(), [0.0]
     run = _run_task(port, clock)
     run.step()
     run.step()
-    port.goals[-1].state, port.goals[-1].error_code = "aborted", Subtask.Result.SERVER_LOST
+    port.goals[-1].state, port.goals[-1].error_code = "aborted", SubtaskOutcome.SERVER_LOST
     port.goals[-1].message = "whatever the server says"
     run.step()
     assert run.state == "failure" and "SERVER_LOST: whatever the server says" in run.message, run.message
@@ -429,7 +429,7 @@ def test_planning_server_loss_counts_as_lost_by_its_code_or_by_what_the_leaf_see
     run2.step()
     port2.goals[-1].state = "accepted"
     run2.step()
-    port2.goals[-1].state, port2.goals[-1].error_code = "aborted", Subtask.Result.PLANNING_FAILED
+    port2.goals[-1].state, port2.goals[-1].error_code = "aborted", SubtaskOutcome.PLANNING_FAILED
     port2.goals[-1].message = "planning server /zx200/tms_rp_zx200_excavate_simple lost while running"
     run2.step()
     assert run2.state == "failure" and run2.ctx.lost_servers == []

@@ -16,21 +16,17 @@ from rclpy.action import ActionServer, CancelResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
-from tms_msg.action import (
-    FollowWaypoints,
-    NavigateThroughPoses,
-    NavigateToPose,
-    SetDumpAngle,
-    Zx200ChangePose,
-    Zx200ExcavateSimple,
-    Zx200ReleaseSimple,
-)
-from tms_msg.msg import ErrorCodes
+from tms_if_opera.interface import CHANGE_POSE, CHANGE_POSE_OPTIONS, EXCAVATE_SIMPLE, RELEASE_SIMPLE
+from tms_msg.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose, SetDumpAngle
+from tms_msg.msg import Zx200PlanningOutcome
+from tms_msg.srv import Zx200ChangePoseOptions
+from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
+from tms_msg_rp.msg import TmsRpErrorCodes
 
 ACTIONS = {
-    "tms_rp_zx200_change_pose": Zx200ChangePose,
-    "tms_rp_zx200_excavate_simple": Zx200ExcavateSimple,
-    "tms_rp_zx200_release_simple": Zx200ReleaseSimple,
+    CHANGE_POSE: TmsRpZx200ChangePose,
+    EXCAVATE_SIMPLE: TmsRpZx200ExcavateSimple,
+    RELEASE_SIMPLE: TmsRpZx200ReleaseSimple,
     "navigate_to_pose": NavigateToPose,
     "navigate_through_poses": NavigateThroughPoses,
     "follow_waypoints": FollowWaypoints,
@@ -51,7 +47,7 @@ def _say(line: str) -> None:
 def _result(action_type, ok: bool):  # noqa: ANN001, ANN202
     res = action_type.Result()
     if hasattr(res, "error_code") and hasattr(res.error_code, "val"):
-        res.error_code.val = ErrorCodes.SUCCESS if ok else ErrorCodes.CANCELED
+        res.error_code.val = TmsRpErrorCodes.SUCCESS if ok else Zx200PlanningOutcome.CANCELED
     elif hasattr(res, "error_code"):
         res.error_code = 0 if ok else 9006
     else:
@@ -72,7 +68,17 @@ class PlanningStub(Node):
             for m in models
             for name, t in ACTIONS.items()
         ]
+        # a change_pose's pass_through / theta_w_tolerance come by goal id before the goal: accepted, printed
+        self.option_services = [
+            self.create_service(Zx200ChangePoseOptions, f"/{m}/{CHANGE_POSE_OPTIONS}", self._on_options, callback_group=group)
+            for m in models
+        ]
         _say(f"planning stub ready {models}")
+
+    def _on_options(self, request, response):  # noqa: ANN001, ANN202
+        _say(f"OPTIONS pass_through={request.pass_through} theta_w_tolerance={request.theta_w_tolerance:g}")
+        response.accepted = True
+        return response
 
     def _run(self, gh, name: str, action_type):  # noqa: ANN001, ANN202
         _say(f"GOAL {name}")

@@ -32,7 +32,8 @@ def _sample(spec) -> dict:  # noqa: ANN001
 
 
 def test_every_row_builds_its_own_actions_goal_and_reads_its_result() -> None:
-    from tms_msg.msg import ErrorCodes
+    from tms_msg.msg import Zx200PlanningOutcome
+    from tms_msg_rp.msg import TmsRpErrorCodes
     from tms_ts.subtask_specs import SUBTASKS
 
     assert len(SUBTASKS) == 10
@@ -43,7 +44,7 @@ def test_every_row_builds_its_own_actions_goal_and_reads_its_result() -> None:
         if hasattr(ok_result, "success"):
             ok_result.success = True
         elif hasattr(ok_result.error_code, "val"):
-            ok_result.error_code.val, failed_result.error_code.val = ErrorCodes.SUCCESS, ErrorCodes.OUT_OF_REACH
+            ok_result.error_code.val, failed_result.error_code.val = TmsRpErrorCodes.SUCCESS, Zx200PlanningOutcome.OUT_OF_REACH
         else:
             failed_result.error_code = 9004
         assert spec.check(ok_result)[0] is True, spec.name
@@ -52,12 +53,29 @@ def test_every_row_builds_its_own_actions_goal_and_reads_its_result() -> None:
     assert deg.goal(deg.build(ROWS_SAMPLES["navigate_to_pose"], "r")).pose.pose.orientation.z == pytest.approx(2**-0.5)
 
 
+def test_zx200_rows_speak_the_originals_planning_actions_and_send_options_only_when_needed() -> None:
+    from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
+    from tms_ts.subtask_specs import SUBTASKS
+
+    rows = {s.planning_action: s for s in SUBTASKS.values() if s.machine == "zx200"}
+    assert {name: s.action_type for name, s in rows.items()} == {
+        "tms_rp_zx200_change_pose": TmsRpZx200ChangePose, "tms_rp_zx200_excavate_simple": TmsRpZx200ExcavateSimple,
+        "tms_rp_zx200_release_simple": TmsRpZx200ReleaseSimple}
+    change = rows["tms_rp_zx200_change_pose"]
+    pwa = {"position_with_angle": 1, "x": 5.0, "y": 0.0, "z": 1.0, "theta_w": 1.2}
+    plain = change.build(pwa, "r")
+    assert change.options(plain) is None  # nothing beyond the original's goal: no options call
+    assert change.options(change.build({**pwa, "pass_through": 1, "theta_w_tolerance": 0.3}, "r")) == {
+        "pass_through": True, "theta_w_tolerance": 0.3}
+    assert change.goal(plain).position_with_angle_sequence[0].theta_w == 1.2
+
+
 def test_codes_have_names_and_the_leaf_constant_is_the_interfaces() -> None:
-    from tms_msg.action import Subtask
+    from tms_msg.msg import SubtaskOutcome
     from tms_ts.outcomes import CODE_NAMES, SERVER_LOST, code_name
 
-    assert SERVER_LOST == Subtask.Result.SERVER_LOST
-    assert code_name(Subtask.Result.RECORD_INVALID) == "RECORD_INVALID"
+    assert SERVER_LOST == SubtaskOutcome.SERVER_LOST
+    assert code_name(SubtaskOutcome.RECORD_INVALID) == "RECORD_INVALID"
     assert code_name(4321) == "code 4321"
     assert len(CODE_NAMES) == 10 and CODE_NAMES[0] == "NONE"
 
@@ -100,27 +118,38 @@ def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_w
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
 
-    from tms_msg.action import Subtask
+    from tms_common.goals import OUTCOME_QOS
+    from tms_msg.msg import SubtaskOutcome
+    from tms_msg_ts.action import LeafNodeBase
 
-    client = ActionClient(ros_node, Subtask, "/zx200/subtask_zx200_change_pose")
+    client = ActionClient(ros_node, LeafNodeBase, "/zx200/subtask_zx200_change_pose")
+    outcomes: dict[bytes, SubtaskOutcome] = {}
+    ros_node.create_subscription(SubtaskOutcome, "/zx200/subtask_outcome",
+                                 lambda m: outcomes.__setitem__(bytes(m.goal_id.uuid), m), OUTCOME_QOS)
     _spin_until(ros_node, client.server_is_ready, 30, "the subtask server")
     feedback: list[str] = []
 
     def send(record: str):  # noqa: ANN202
-        future = client.send_goal_async(Subtask.Goal(model_name="zx200", record_name=record),
-                                        feedback_callback=lambda msg: feedback.append(msg.feedback.state))
+        future = client.send_goal_async(LeafNodeBase.Goal(model_name="zx200", record_name=record),
+                                        feedback_callback=lambda msg: feedback.append(msg.feedback.status))
         _spin_until(ros_node, future.done, 10, "the goal response")
         return future.result()
+
+    def outcome(handle) -> SubtaskOutcome:  # noqa: ANN001 - the typed outcome beside the bool result
+        key = bytes(handle.goal_id.uuid)
+        _spin_until(ros_node, lambda: key in outcomes, 5, "the goal's SubtaskOutcome")
+        return outcomes[key]
 
     # a record that does not exist: accepted (not rejected), then aborted RECORD_INVALID naming the record
     handle = send("no_such_pose")
     assert handle.accepted
     result = handle.get_result_async()
     _spin_until(ros_node, result.done, 10, "the RECORD_INVALID result")
-    assert result.result().status == GoalStatus.STATUS_ABORTED
-    assert result.result().result.error_code == Subtask.Result.RECORD_INVALID
-    assert "'no_such_pose'" in result.result().result.error_msg
-    # the reason is also the last feedback, for a client whose result carries no code
+    assert result.result().status == GoalStatus.STATUS_ABORTED and result.result().result.result is False
+    assert outcome(handle).error_code == SubtaskOutcome.RECORD_INVALID
+    assert "'no_such_pose'" in outcome(handle).error_msg
+    assert outcome(handle).action == "/zx200/subtask_zx200_change_pose" and outcome(handle).record_name == "no_such_pose"
+    # the reason is also the last feedback, for a client that reads only the original's type
     _spin_until(ros_node, lambda: any(f.startswith("RECORD_INVALID: ") for f in feedback), 5, "the reason in feedback")
 
     # a valid record: the goal waits for the planning server (30 s); a cancel ends it at once
@@ -132,9 +161,9 @@ def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_w
     cancel = handle.cancel_goal_async()
     _spin_until(ros_node, result.done, 5, "the CANCELED result")
     took = time.monotonic() - asked
-    assert result.result().status == GoalStatus.STATUS_CANCELED, result.result()
-    assert result.result().result.error_code == Subtask.Result.CANCELED
-    assert "nothing was sent" in result.result().result.error_msg
+    assert result.result().status == GoalStatus.STATUS_CANCELED and result.result().result.result is False
+    assert outcome(handle).error_code == SubtaskOutcome.CANCELED
+    assert "nothing was sent" in outcome(handle).error_msg
     assert took < 1.0, f"cancel took {took:.2f} s"
     assert cancel.done()
 

@@ -14,6 +14,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +67,15 @@ def _zx_bus(domain: int) -> dict[str, Any]:
             "port": free_can_ports(domain, 1, rng)[0]}
 
 
+@dataclass
+class PlanningResult:
+    """A planning goal's end as a client sees it: the result's ``error_code`` (tms_msg_rp/TmsRpErrorCodes) and
+    the planner's ``message`` from ``/zx200/tms_rp_zx200_outcome`` (tms_msg/Zx200PlanningOutcome)."""
+
+    error_code: Any
+    message: str
+
+
 class ArmStack:
     """The test process's view of the running stack: action clients and truth subscribers."""
 
@@ -75,7 +85,10 @@ class ArmStack:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        from tms_msg.action import Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
+        from tms_common.goals import OUTCOME_QOS
+        from tms_msg.msg import Zx200PlanningOutcome
+        from tms_msg.srv import Zx200ChangePoseOptions
+        from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 
         self.node = node
         self.tip: list[float] | None = None
@@ -87,12 +100,17 @@ class ArmStack:
                                  lambda m: setattr(self, "tip", [m.point.x, m.point.y, m.point.z]), 10)
         node.create_subscription(Float64MultiArray, "/sim/truth/soil", lambda m: setattr(self, "soil", list(m.data)), 10)
         node.create_subscription(JointState, "/zx200/joint_states", self._on_js, 50)
+        self.outcomes: dict[bytes, Any] = {}
+        node.create_subscription(Zx200PlanningOutcome, "/zx200/tms_rp_zx200_outcome",
+                                 lambda m: self.outcomes.__setitem__(bytes(m.goal_id.uuid), m), OUTCOME_QOS)
+        self.options = node.create_client(Zx200ChangePoseOptions, "/zx200/tms_rp_zx200_change_pose/options")
         self.clients = {
-            "change_pose": ActionClient(node, Zx200ChangePose, "/zx200/tms_rp_zx200_change_pose"),
-            "excavate": ActionClient(node, Zx200ExcavateSimple, "/zx200/tms_rp_zx200_excavate_simple"),
-            "release": ActionClient(node, Zx200ReleaseSimple, "/zx200/tms_rp_zx200_release_simple"),
+            "change_pose": ActionClient(node, TmsRpZx200ChangePose, "/zx200/tms_rp_zx200_change_pose"),
+            "excavate": ActionClient(node, TmsRpZx200ExcavateSimple, "/zx200/tms_rp_zx200_excavate_simple"),
+            "release": ActionClient(node, TmsRpZx200ReleaseSimple, "/zx200/tms_rp_zx200_release_simple"),
         }
-        self.types = {"change_pose": Zx200ChangePose, "excavate": Zx200ExcavateSimple, "release": Zx200ReleaseSimple}
+        self.types = {"change_pose": TmsRpZx200ChangePose, "excavate": TmsRpZx200ExcavateSimple,
+                      "release": TmsRpZx200ReleaseSimple}
         self._lock = threading.Lock()
 
     def _on_js(self, msg: Any) -> None:
@@ -112,27 +130,43 @@ class ArmStack:
             self.node.executor_for_test.spin_once(timeout_sec=0.02)
         return pred()
 
-    def send(self, kind: str, goal: Any, timeout: float = 10.0) -> Any:
-        """Send ``goal``; returns the goal handle (accepted or not)."""
+    def send(self, kind: str, goal: Any, timeout: float = 10.0, **options: Any) -> Any:
+        """Send ``goal``; returns the goal handle (accepted or not). ``options`` (pass_through,
+        theta_w_tolerance) go first to the change_pose options service under the goal's id."""
+        import uuid
+
+        from unique_identifier_msgs.msg import UUID
+
+        from tms_msg.srv import Zx200ChangePoseOptions
+
         client = self.clients[kind]
         assert client.wait_for_server(timeout_sec=timeout), f"{kind} action server not available"
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        if options:
+            assert self.spin_until(self.options.service_is_ready, timeout), "change_pose options service not available"
+            reply = self.options.call_async(Zx200ChangePoseOptions.Request(goal_id=goal_id, **options))
+            assert self.spin_until(reply.done, timeout) and reply.result().accepted, f"options {options} refused"
 
         def on_fb(fb: Any) -> None:
             self.feedback.append(fb.feedback.state)
 
-        fut = client.send_goal_async(goal, feedback_callback=on_fb)
+        fut = client.send_goal_async(goal, feedback_callback=on_fb, goal_uuid=goal_id)
         assert self.spin_until(fut.done, timeout), f"{kind}: no goal response"
         return fut.result()
 
-    def result(self, handle: Any, timeout: float) -> tuple[int, Any]:
-        """(GoalStatus, result) of an accepted goal, spinning until it ends."""
+    def result(self, handle: Any, timeout: float) -> tuple[int, PlanningResult]:
+        """(GoalStatus, result with the planner's message) of an accepted goal, spinning until it ends."""
         fut = handle.get_result_async()
         assert self.spin_until(fut.done, timeout), f"goal did not end within {timeout} s (feedback {self.feedback[-3:]})"
         res = fut.result()
-        return res.status, res.result
+        key = bytes(handle.goal_id.uuid)
+        assert self.spin_until(lambda: key in self.outcomes, 5.0), "no Zx200PlanningOutcome for the goal"
+        outcome = self.outcomes.pop(key)
+        assert outcome.error_code == res.result.error_code.val, (outcome, res.result)
+        return res.status, PlanningResult(res.result.error_code, outcome.message)
 
-    def run(self, kind: str, goal: Any, timeout: float = 90.0) -> tuple[int, Any]:
-        handle = self.send(kind, goal)
+    def run(self, kind: str, goal: Any, timeout: float = 90.0, **options: Any) -> tuple[int, PlanningResult]:
+        handle = self.send(kind, goal, **options)
         assert handle.accepted, f"{kind} goal not accepted"
         return self.result(handle, timeout)
 

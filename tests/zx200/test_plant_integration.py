@@ -28,20 +28,20 @@ KIN = load_kinematics()
 def joint_goal(q):  # noqa: ANN001, ANN201
     from trajectory_msgs.msg import JointTrajectoryPoint
 
-    from tms_msg.action import Zx200ChangePose
+    from tms_msg_rp.action import TmsRpZx200ChangePose
 
-    g = Zx200ChangePose.Goal()
+    g = TmsRpZx200ChangePose.Goal()
     g.trajectory.joint_names = list(JOINTS)
     g.trajectory.points = [JointTrajectoryPoint(positions=[float(v) for v in q])]
     return g
 
 
 def pwa_goal(p, theta_w):  # noqa: ANN001, ANN201
-    from tms_msg.action import Zx200ChangePose
-    from tms_msg.msg import Zx200PositionWithAngle
+    from tms_msg_rp.action import TmsRpZx200ChangePose
+    from tms_msg_rp.msg import TmsRpZx200PositionWithAngle
 
-    g = Zx200ChangePose.Goal()
-    pwa = Zx200PositionWithAngle()
+    g = TmsRpZx200ChangePose.Goal()
+    pwa = TmsRpZx200PositionWithAngle()
     pwa.position.x, pwa.position.y, pwa.position.z = (float(v) for v in p)
     pwa.theta_w = float(theta_w)
     g.position_with_angle_sequence = [pwa]
@@ -51,11 +51,11 @@ def pwa_goal(p, theta_w):  # noqa: ANN001, ANN201
 def pose_goal(q):  # noqa: ANN001, ANN201
     from geometry_msgs.msg import Pose
 
-    from tms_msg.action import Zx200ChangePose
+    from tms_msg_rp.action import TmsRpZx200ChangePose
 
     m = KIN.tip_pose(np.asarray(q, dtype=float))
     x, y, z, w = (float(v) for v in __import__("pinocchio").Quaternion(m.rotation).coeffs())
-    g = Zx200ChangePose.Goal()
+    g = TmsRpZx200ChangePose.Goal()
     pose = Pose()
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in m.translation)
     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = x, y, z, w
@@ -106,9 +106,9 @@ def test_change_pose_reaches_rejects_and_cancels_in_the_plant(arm_stack) -> None
     assert status == ABORTED and res.error_code.val == codes.JOINT_LIMIT and "boom_joint" in res.message, res.message
     status, res = stack.run("change_pose", pwa_goal([6.0, float("nan"), 2.0], 1.4), timeout=20)
     assert status == ABORTED and res.error_code.val == codes.INVALID_GOAL and "NaN" in res.message, res.message
-    from tms_msg.action import Zx200ChangePose
+    from tms_msg_rp.action import TmsRpZx200ChangePose
 
-    status, res = stack.run("change_pose", Zx200ChangePose.Goal(), timeout=20)
+    status, res = stack.run("change_pose", TmsRpZx200ChangePose.Goal(), timeout=20)
     assert status == ABORTED and res.error_code.val == codes.INVALID_GOAL and "empty" in res.message, res.message
     stack.spin(1.0)
     assert np.linalg.norm(np.array(stack.tip) - before) < 0.01, "a rejected goal moved the arm"
@@ -134,7 +134,7 @@ def test_change_pose_reaches_rejects_and_cancels_in_the_plant(arm_stack) -> None
 
 
 def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) -> None:
-    from tms_msg.action import Zx200ExcavateSimple, Zx200ReleaseSimple
+    from tms_msg_rp.action import TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 
     site = load_site()
     base = site.point("zx200_base")
@@ -148,7 +148,7 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     r = abs(x - cx)
     surface = mound.ground_z + mound.height * (1.0 if r <= mound.top_radius else
                                                (mound.base_radius - r) / (mound.base_radius - mound.top_radius))
-    g = Zx200ExcavateSimple.Goal()
+    g = TmsRpZx200ExcavateSimple.Goal()
     g.position_with_angle.position.x, g.position_with_angle.position.y = x, mound.cy
     g.position_with_angle.position.z = surface - 0.35
     g.position_with_angle.theta_w = math.radians(45.0)
@@ -170,17 +170,16 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     # pass_through as the seed's record asks: the carry ends once the commands sent bring the arm there
     assert rel.get("pass_through") == 1, rel
     carry = pwa_goal([rel["x"], rel["y"], rel["z"]], rel["theta_w"])
-    carry.pass_through = True
-    status, res = stack.run("change_pose", carry, timeout=120)
+    status, res = stack.run("change_pose", carry, timeout=120, pass_through=True)
     assert status == SUCCEEDED, res.message
     carry_end_speed = max(abs(v) for v in stack.dq_log[-1][2])
     stack.feedback.clear()
-    status, res = stack.run("release", Zx200ReleaseSimple.Goal(target_angle=swing), timeout=120)
+    status, res = stack.run("release", TmsRpZx200ReleaseSimple.Goal(target_angle=swing), timeout=120)
     assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
     assert carry_end_speed > 0.02, f"the pass-through carry waited for rest (joint speed {carry_end_speed:.3f} rad/s)"
     # planned from where the carry goes, not from the lagging joint_states: over the vessel already, so
     # the release opens at once (release_swing_in_open), with no swing back
-    assert stack.procs["planner"].wait_for("Zx200ReleaseSimple: planned from the previous goal's pass-through end", 5), \
+    assert stack.procs["planner"].wait_for("TmsRpZx200ReleaseSimple: planned from the previous goal's pass-through end", 5), \
         stack.procs["planner"].output[-2000:]
     assert "open" in set(stack.feedback) and "swing" not in set(stack.feedback), stack.feedback
     stack.spin(3.0)

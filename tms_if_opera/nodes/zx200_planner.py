@@ -1,10 +1,15 @@
-"""``zx200_planner``: the ZX200 planning actions of contract [D], in the ``/zx200`` namespace.
+"""``zx200_planner``: the ZX200 planning actions, in the ``/zx200`` namespace, as the original names and types them.
 
-Serves ``tms_rp_zx200_change_pose`` (Zx200ChangePose), ``tms_rp_zx200_excavate_simple``
-(Zx200ExcavateSimple) and ``tms_rp_zx200_release_simple`` (Zx200ReleaseSimple). Each goal is planned
+Serves ``tms_rp_zx200_change_pose`` (tms_msg_rp/action/TmsRpZx200ChangePose), ``tms_rp_zx200_excavate_simple``
+(TmsRpZx200ExcavateSimple) and ``tms_rp_zx200_release_simple`` (TmsRpZx200ReleaseSimple); names in
+:mod:`tms_if_opera.interface`. Beside them, ours: ``tms_rp_zx200_change_pose/options``
+(tms_msg/srv/Zx200ChangePoseOptions: a change_pose goal's ``pass_through`` and ``theta_w_tolerance``, by goal
+id, before the goal; a goal without options runs with the defaults) and ``tms_rp_zx200_outcome``
+(tms_msg/msg/Zx200PlanningOutcome: every goal's code and its text for people, published just before the
+goal ends; the original's result carries only ``error_code``). Each goal is planned
 and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
-goal ends at once (no motion) with ``error_code`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT and a
-``message`` naming the joint or distance. A valid goal's phases go to the arm controller's action
+goal ends at once (no motion) with ``error_code.val`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT
+(Zx200PlanningOutcome classes) and an outcome ``message`` naming the joint or distance. A valid goal's phases go to the arm controller's action
 ``arm_controller/move`` (node ``zx200_arm_controller``, tms_msg/action/Zx200ArmMove) as one goal of
 segments, so the arm passes the via phases without stopping; feedback ``state`` is the running phase
 (approach, penetrate, drag, curl, lift / swing, open / ...), forwarded from the controller. Cancel is
@@ -25,6 +30,7 @@ Parameters (read-only, read at start-up): ``machine_config``, ``planner_config``
 from __future__ import annotations
 
 import functools
+import math
 import time
 import uuid
 
@@ -39,15 +45,25 @@ from sensor_msgs.msg import JointState
 from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
-from tms_common.goals import RunningGoals
+from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import run_node
 from tms_common.ticker import Ticker
+from tms_if_opera.interface import (
+    CHANGE_POSE,
+    CHANGE_POSE_OPTIONS,
+    EXCAVATE_SIMPLE,
+    OPTIONS_TTL_S,
+    PLANNING_OUTCOME,
+    RELEASE_SIMPLE,
+)
 from tms_model.excavator import codes
 from tms_model.excavator.codes import PlanningError
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.excavator.targets import JointTarget
-from tms_msg.action import Zx200ArmMove, Zx200ChangePose, Zx200ExcavateSimple, Zx200ReleaseSimple
-from tms_msg.msg import Zx200ArmSegment
+from tms_msg.action import Zx200ArmMove
+from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
+from tms_msg.srv import Zx200ChangePoseOptions
+from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_rc.zx200.controller import load_controller_config
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
@@ -84,15 +100,22 @@ class Zx200PlannerNode(Node):
         self._pass_through_end: np.ndarray | None = None
         self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=self._group)
         self._goals = RunningGoals()  # SIGINT/SIGTERM: running goals cancel their controller goal, then abort
+        self._action_names = {TmsRpZx200ChangePose: CHANGE_POSE, TmsRpZx200ExcavateSimple: EXCAVATE_SIMPLE,
+                              TmsRpZx200ReleaseSimple: RELEASE_SIMPLE}
         self._servers = [
             ActionServer(self, action_type, name, execute_callback=functools.partial(self._execute, execute),
                          goal_callback=self._on_goal, cancel_callback=self._on_cancel, callback_group=self._group)
             for action_type, name, execute in (
-                (Zx200ChangePose, "tms_rp_zx200_change_pose", self._change_pose),
-                (Zx200ExcavateSimple, "tms_rp_zx200_excavate_simple", self._excavate),
-                (Zx200ReleaseSimple, "tms_rp_zx200_release_simple", self._release),
+                (TmsRpZx200ChangePose, CHANGE_POSE, self._change_pose),
+                (TmsRpZx200ExcavateSimple, EXCAVATE_SIMPLE, self._excavate),
+                (TmsRpZx200ReleaseSimple, RELEASE_SIMPLE, self._release),
             )
         ]
+        #: goal id bytes -> (pass_through, theta_w_tolerance, expiry [monotonic s]) given before the goal
+        self._options: dict[bytes, tuple[bool, float, float]] = {}
+        self._options_srv = self.create_service(Zx200ChangePoseOptions, CHANGE_POSE_OPTIONS, self._on_options,
+                                                callback_group=self._group)
+        self._outcome_pub = self.create_publisher(Zx200PlanningOutcome, PLANNING_OUTCOME, OUTCOME_QOS)
         self.get_logger().info("zx200_planner ready")
 
     # -------------------------------------------------------------- joint_states, read when a goal needs them
@@ -143,9 +166,41 @@ class Zx200PlannerNode(Node):
         return self._goals.wind_down(STOP_TIMEOUT_S, lambda n: self.get_logger().warning(
             f"stopping: canceling {n} running goal(s) at the controller"))
 
+    # -------------------------------------------------------------- change_pose options (ours, beside the action)
+    def _on_options(self, request, response):  # noqa: ANN001, ANN202
+        tol = float(request.theta_w_tolerance)
+        if not math.isfinite(tol) or tol < 0:
+            response.accepted = False
+            response.message = f"theta_w_tolerance must be a finite number >= 0 rad, got {tol}"
+            return response
+        now = time.monotonic()
+        self._options = {k: v for k, v in self._options.items() if v[2] > now}  # unclaimed ones expire
+        self._options[bytes(request.goal_id.uuid)] = (bool(request.pass_through), tol, now + OPTIONS_TTL_S)
+        response.accepted = True
+        return response
+
+    def _take_options(self, handle) -> tuple[bool, float]:  # noqa: ANN001
+        """The options given for this goal's id (pass_through, theta_w_tolerance); the defaults without."""
+        pass_through, tol, _ = self._options.pop(bytes(handle.goal_id.uuid), (False, 0.0, 0.0))
+        return pass_through, tol
+
     # -------------------------------------------------------------- common execution
-    async def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
+    def _end(self, handle, action_type, code: int, message: str) -> object:  # noqa: ANN001
+        """Publish the goal's outcome (code and text), then end it: SUCCEEDED, CANCELED or ABORTED by ``code``."""
+        self._outcome_pub.publish(Zx200PlanningOutcome(
+            action=f"{self.get_namespace().rstrip('/')}/{self._action_names[action_type]}", goal_id=handle.goal_id,
+            error_code=int(code), message=message))
         result = action_type.Result()
+        result.error_code.val = int(code)
+        if code == codes.SUCCESS:
+            handle.succeed()
+        elif code == codes.CANCELED and handle.is_cancel_requested:
+            handle.canceled()
+        else:
+            handle.abort()
+        return result
+
+    async def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
         t0 = time.monotonic()
         pass_through_end, self._pass_through_end = self._pass_through_end, None
         try:
@@ -159,17 +214,12 @@ class Zx200PlannerNode(Node):
             targets = plan(q_plan)
         except PlanningError as exc:
             self.get_logger().warning(f"goal rejected before motion: {exc}")
-            result.error_code.val = exc.code
-            result.message = str(exc)
-            handle.abort()
-            return result
+            return self._end(handle, action_type, exc.code, str(exc))
         deadline = time.monotonic() + 5.0
         while not self._ctl.server_is_ready():
             if time.monotonic() > deadline:
-                result.error_code.val = codes.NO_VALID_CONTROL
-                result.message = "arm controller action arm_controller/move is not available"
-                handle.abort()
-                return result
+                return self._end(handle, action_type, codes.NO_VALID_CONTROL,
+                                 "arm controller action arm_controller/move is not available")
             await self._ticker.next()
         t_plan = time.monotonic()
         code, message = await self._move(handle, action_type, targets, lambda: self.get_logger().info(
@@ -177,22 +227,11 @@ class Zx200PlannerNode(Node):
             f"plan {1e3 * (t_plan - t_state):.0f} ms, controller accepted {1e3 * (time.monotonic() - t_plan):.0f} ms "
             "later (wall)"))
         if code != codes.SUCCESS:
-            result.error_code.val = code
-            result.message = message
             if self._goals.stopping.is_set() and not handle.is_cancel_requested:  # ended by our stop
-                result.error_code.val = codes.FAILURE
-                result.message = f"zx200_planner stopping (SIGINT/SIGTERM): {message}"
-                handle.abort()
-            elif code == codes.CANCELED:
-                handle.canceled()
-            else:
-                handle.abort()
-            return result
+                return self._end(handle, action_type, codes.FAILURE, f"zx200_planner stopping (SIGINT/SIGTERM): {message}")
+            return self._end(handle, action_type, code, message)
         self._pass_through_end = self.planner.pass_through_end(targets)
-        result.error_code.val = codes.SUCCESS
-        result.message = "done"
-        handle.succeed()
-        return result
+        return self._end(handle, action_type, codes.SUCCESS, "done")
 
     @staticmethod
     def _segments(targets) -> list:  # noqa: ANN001
@@ -292,6 +331,7 @@ class Zx200PlannerNode(Node):
     # -------------------------------------------------------------- the three actions
     async def _change_pose(self, handle):  # noqa: ANN001, ANN202
         g = handle.request
+        pass_through, theta_w_tolerance = self._take_options(handle)
 
         def plan(q_plan):  # noqa: ANN001, ANN202
             return self.planner.change_pose(
@@ -302,15 +342,15 @@ class Zx200PlannerNode(Node):
                 positions_with_angle=[([p.position.x, p.position.y, p.position.z], p.theta_w)
                                       for p in g.position_with_angle_sequence],
                 current_q=q_plan,
-                pass_through=bool(g.pass_through),
-                theta_w_tolerance=float(g.theta_w_tolerance),
+                pass_through=pass_through,
+                theta_w_tolerance=theta_w_tolerance,
             )
 
-        return await self._run(handle, Zx200ChangePose, plan)
+        return await self._run(handle, TmsRpZx200ChangePose, plan)
 
     async def _excavate(self, handle):  # noqa: ANN001, ANN202
         p = handle.request.position_with_angle
-        return await self._run(handle, Zx200ExcavateSimple, lambda _q_plan: self.planner.excavate(
+        return await self._run(handle, TmsRpZx200ExcavateSimple, lambda _q_plan: self.planner.excavate(
             [p.position.x, p.position.y, p.position.z], p.theta_w, p.offset), needs_q=False)
 
     async def _release(self, handle):  # noqa: ANN001, ANN202
@@ -319,7 +359,7 @@ class Zx200PlannerNode(Node):
                 raise PlanningError(f"no joint_states received within {JOINT_STATES_WAIT_S:g} s")
             return self.planner.release(handle.request.target_angle, q_plan)
 
-        return await self._run(handle, Zx200ReleaseSimple, plan)
+        return await self._run(handle, TmsRpZx200ReleaseSimple, plan)
 
 
 def main() -> int:

@@ -1,4 +1,4 @@
-"""``demo_subtask_server``: a demonstration ``tms_msg/Subtask`` action server (foundation tests)."""
+"""``demo_subtask_server``: a demonstration subtask action server (``tms_msg_ts/LeafNodeBase``; foundation tests)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ from rclpy.node import Node
 
 from tms_common.node import run_node
 from tms_common.params import declare_startup
-from tms_msg.action import Subtask
+from tms_msg_ts.action import LeafNodeBase
 
 
 class DemoSubtaskServer(Node):
-    """Serves ``tms_msg/Subtask`` on ``action_name``: runs ``duration_s``, publishing feedback.
+    """Serves ``tms_msg_ts/LeafNodeBase`` on ``action_name``: runs ``duration_s``, publishing feedback ``status``.
 
     Goals whose ``record_name`` is empty are rejected. Cancel is accepted and acknowledged: the
-    goal ends CANCELED with ``error_code`` CANCELED.
+    goal ends CANCELED with ``result`` false (true only for SUCCEEDED, as the original's subtasks answer).
     """
 
     def __init__(self, **kwargs: Any) -> None:
@@ -27,7 +27,7 @@ class DemoSubtaskServer(Node):
         self._duration = float(declare_startup(self, "duration_s", 1.0).value)
         self._server = ActionServer(
             self,
-            Subtask,
+            LeafNodeBase,
             name,
             execute_callback=self._execute,
             goal_callback=self._on_goal,
@@ -35,29 +35,26 @@ class DemoSubtaskServer(Node):
             callback_group=ReentrantCallbackGroup(),
         )
 
-    def _on_goal(self, goal: Subtask.Goal) -> GoalResponse:
+    def _on_goal(self, goal: LeafNodeBase.Goal) -> GoalResponse:
         return GoalResponse.ACCEPT if goal.record_name else GoalResponse.REJECT
 
     def _execute(self, handle):  # noqa: ANN001, ANN202
-        result = Subtask.Result()
         end = time.monotonic() + self._duration
         step = 0
         while True:
             if handle.is_cancel_requested:
+                handle.publish_feedback(LeafNodeBase.Feedback(status=f"canceled at step {step}"))
                 handle.canceled()
-                result.error_code = Subtask.Result.CANCELED
-                result.error_msg = f"canceled at step {step}"
-                return result
+                return LeafNodeBase.Result(result=False)
             if time.monotonic() >= end:
                 break
-            feedback = Subtask.Feedback()
-            feedback.state = f"step {step}"
-            handle.publish_feedback(feedback)
+            handle.publish_feedback(LeafNodeBase.Feedback(status=f"step {step}"))
             step += 1
             time.sleep(min(0.05, max(0.0, end - time.monotonic())))
+        handle.publish_feedback(LeafNodeBase.Feedback(
+            status=f"{handle.request.model_name}/{handle.request.record_name} done after {step} steps"))
         handle.succeed()
-        result.error_msg = f"{handle.request.model_name}/{handle.request.record_name} done after {step} steps"
-        return result
+        return LeafNodeBase.Result(result=True)
 
 
 def main() -> int:

@@ -1,5 +1,5 @@
-"""Result codes and errors of excavator arm motion: each error carries the ``tms_msg/ErrorCodes`` value an
-action result reports.
+"""Result codes and errors of excavator arm motion: each error carries the value an action result reports in
+its ``error_code.val`` (tms_msg_rp/TmsRpErrorCodes).
 
 A goal is rejected *before* motion with one of these; the message names the culprit (which joint and
 its limit, which distance and the reachable range, which field is NaN or empty).
@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from tms_common.errors import TmsError
 
-# Mirrors tms_msg/msg/ErrorCodes.msg (kept as plain ints so the pure core needs no rclpy).
+# SUCCESS / FAILURE are tms_msg_rp/TmsRpErrorCodes' (the original's); the others mirror the finer classes of
+# tms_msg/msg/Zx200PlanningOutcome.msg (plain ints so the pure core needs no rclpy).
 SUCCESS = 1
 FAILURE = 99999
 INVALID_GOAL = 2
@@ -21,7 +22,7 @@ NO_VALID_CONTROL = 7
 
 
 class PlanningError(TmsError):
-    """A goal cannot be planned; ``code`` is the ErrorCodes value for the action result."""
+    """A goal cannot be planned; ``code`` is the value for the action result's ``error_code.val``."""
 
     code = FAILURE
 

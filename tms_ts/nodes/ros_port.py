@@ -3,6 +3,11 @@
 Everything is asynchronous (futures with done-callbacks) so the manager's single-threaded executor
 keeps ticking while goals are accepted, run and cancelled.
 
+Leaf -> subtask is the original's ``tms_msg_ts/action/LeafNodeBase`` at ``/<model_name>/<subtask_name>``;
+a goal's typed code and text come from ``/<model_name>/subtask_outcome`` (tms_msg/SubtaskOutcome, by goal
+id), read when the result is not a success (waiting up to ``OUTCOME_GRACE_S`` for it; without it the code is
+UNKNOWN and the text the goal's last feedback - a subtask server of the original publishes none).
+
 Topics: ``/tms_ts/confirm`` (std_msgs/String; WaitForClick answers, "yes" / "no" / "<task_id>:yes"),
 ``/tms_ts/subtask_heartbeat`` (std_msgs/String, model name of each living tms_ts_subtasks process),
 ``/<model_name>/emg_stop`` (std_msgs/Bool true, the escalation when a halted subtask never confirms
@@ -22,8 +27,11 @@ from std_msgs.msg import Bool, String
 from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
-from tms_msg.action import Subtask
+from tms_common.goals import OUTCOME_QOS
+from tms_msg.msg import SubtaskOutcome
+from tms_msg_ts.action import LeafNodeBase
 from tms_ts.leaf import ABORTED, ACCEPTED, CANCELED, PENDING, REJECTED, SUCCEEDED
+from tms_ts.outcomes import OUTCOME_GRACE_S, SUBTASK_OUTCOME_TOPIC
 from tms_ts.subtask_specs import SUBTASKS
 
 __all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "HEARTBEAT_TOPIC"]
@@ -31,17 +39,22 @@ __all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "HEARTBEAT_TOPIC"]
 CONFIRM_TOPIC = "/tms_ts/confirm"
 #: std_msgs/String(model_name) from every tms_ts_subtasks process every HEARTBEAT_PERIOD_S (wall time)
 HEARTBEAT_TOPIC = "/tms_ts/subtask_heartbeat"
-HEARTBEAT_PERIOD_S = 0.2
+#: 0.05 s: a machine PC's converter takes 0.25 s of silence (5 periods) as a cut site link and must still bring
+#: its machine to rest within 0.5 s (docs/deployment.md, site watchdog)
+HEARTBEAT_PERIOD_S = 0.05
 #: a heartbeat older than this [s wall] counts as silent (the leaf then waits server_lost_s more)
 HEARTBEAT_STALE_S = 0.6
 _STATUS = {GoalStatus.STATUS_SUCCEEDED: SUCCEEDED, GoalStatus.STATUS_CANCELED: CANCELED, GoalStatus.STATUS_ABORTED: ABORTED}
 
 
 class RosGoal:
-    """One Subtask goal: ``state`` follows the action protocol through future callbacks."""
+    """One LeafNodeBase goal: ``state`` follows the action protocol through future callbacks; a result that
+    is not a success becomes the state once its outcome (``outcomes``, by goal id) is in or the grace ran out."""
 
-    def __init__(self, client: RaceFreeActionClient, goal: Subtask.Goal) -> None:
-        self.state = PENDING
+    def __init__(self, client: RaceFreeActionClient, goal: LeafNodeBase.Goal, outcomes: dict | None = None) -> None:
+        self._state = PENDING
+        self._ended: tuple[str, float] | None = None  # (state, monotonic time) of a result not yet resolved
+        self._outcomes = outcomes if outcomes is not None else {}
         self.error_code = 0
         self.message = ""
         self.feedback = ""
@@ -55,31 +68,53 @@ class RosGoal:
         future = client.send_goal_async(goal, feedback_callback=self._on_feedback, goal_uuid=self.goal_id)
         future.add_done_callback(self._on_response)
 
+    @property
+    def state(self) -> str:
+        if self._ended is not None:
+            ended, at = self._ended
+            outcome = self._outcomes.pop(bytes(self.goal_id.uuid), None)
+            if outcome is not None:
+                self.error_code, self.message = outcome.error_code, outcome.error_msg
+            elif time.monotonic() - at < OUTCOME_GRACE_S:
+                return ACCEPTED  # the result is in; its outcome may trail it
+            else:
+                self.error_code, self.message = SubtaskOutcome.UNKNOWN, ""
+            self._ended = None
+            self._state = ended
+        return self._state
+
+    @state.setter
+    def state(self, value: str) -> None:
+        self._state = value
+
     def _on_feedback(self, msg) -> None:  # noqa: ANN001
-        self.feedback = msg.feedback.state
+        self.feedback = msg.feedback.status
 
     def _on_response(self, future) -> None:  # noqa: ANN001
         handle = future.result()
         if handle is None or not handle.accepted:
-            self.state = REJECTED
+            self._state = REJECTED
             return
         self._handle = handle
-        self.state = ACCEPTED
+        self._state = ACCEPTED
         handle.get_result_async().add_done_callback(self._on_result)
         if self._cancel_wanted:
             handle.cancel_goal_async()
 
     def _on_result(self, future) -> None:  # noqa: ANN001
         res = future.result()
-        self.error_code = res.result.error_code
-        self.message = res.result.error_msg
-        self.state = _STATUS.get(res.status, ABORTED)
+        state = _STATUS.get(res.status, ABORTED)
+        if state == SUCCEEDED:  # the goal status decides, as the original's leaf reads it (not the bool)
+            self._outcomes.pop(bytes(self.goal_id.uuid), None)
+            self._state = SUCCEEDED
+        else:  # resolved by ``state`` once the typed outcome is in (or its grace ran out)
+            self._ended = (state, time.monotonic())
 
     def cancel(self) -> None:
         self._cancel_wanted = True
-        if self._handle is not None and self.state == ACCEPTED:
+        if self._handle is not None and self._state == ACCEPTED and self._ended is None:
             self._handle.cancel_goal_async()
-        elif self.state == PENDING and not self.cancelled_unanswered:
+        elif self._state == PENDING and not self.cancelled_unanswered:
             # No response yet (e.g. the accept timeout): the server may have accepted the goal and its reply
             # been dropped (config/dds/fastdds_profiles.xml) - cancel by id so it cannot run on unseen.
             self.cancelled_unanswered = True
@@ -102,13 +137,24 @@ class ManagerRosPort:
         node.create_subscription(String, CONFIRM_TOPIC, self._on_confirm, reliable)
         self._beats: dict[str, float] = {}
         node.create_subscription(String, HEARTBEAT_TOPIC, self._on_beat, 50)
+        #: goal id bytes -> SubtaskOutcome not yet claimed by its goal (bounded: the newest 200)
+        self._outcomes: dict[bytes, SubtaskOutcome] = {}
+        self._outcome_subs: dict[str, object] = {}
 
     def _client(self, model_name: str, subtask_name: str) -> RaceFreeActionClient:
         name = f"/{model_name}/{subtask_name}"
         client = self._clients.get(name)
         if client is None:
-            client = self._clients[name] = RaceFreeActionClient(self.node, Subtask, name)
+            client = self._clients[name] = RaceFreeActionClient(self.node, LeafNodeBase, name)
+        if model_name not in self._outcome_subs:
+            self._outcome_subs[model_name] = self.node.create_subscription(
+                SubtaskOutcome, f"/{model_name}/{SUBTASK_OUTCOME_TOPIC}", self._on_outcome, OUTCOME_QOS)
         return client
+
+    def _on_outcome(self, msg: SubtaskOutcome) -> None:
+        self._outcomes[bytes(msg.goal_id.uuid)] = msg
+        if len(self._outcomes) > 200:
+            del self._outcomes[next(iter(self._outcomes))]
 
     # RosPort -----------------------------------------------------------------------------------
     def subtask_server_ready(self, model_name: str, subtask_name: str) -> bool:
@@ -139,8 +185,8 @@ class ManagerRosPort:
             self._beats[msg.data] = time.monotonic()
 
     def send_subtask_goal(self, model_name: str, subtask_name: str, record_name: str) -> RosGoal:
-        goal = Subtask.Goal(model_name=model_name, record_name=record_name)
-        return RosGoal(self._client(model_name, subtask_name), goal)
+        goal = LeafNodeBase.Goal(model_name=model_name, record_name=record_name)
+        return RosGoal(self._client(model_name, subtask_name), goal, self._outcomes)
 
     def _machine_pubs(self, model_name: str) -> tuple:
         """``/<model>/lock`` and ``/<model>/emg_stop`` publishers, created at the first goal to that machine

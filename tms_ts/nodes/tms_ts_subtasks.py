@@ -1,23 +1,29 @@
 """``tms_ts_subtasks``: the subtask action servers of one machine.
 
 For ``machine`` zx200 or ic120 it serves every subtask of :mod:`tms_ts.subtask_specs` at
-``/<model_name>/<subtask_name>`` (tms_msg/action/Subtask). Every goal is accepted (unless the server is
-stopping); a goal that cannot run ends ABORTED with its ``error_code`` (Subtask.Result constants) and an
-``error_msg`` for people. On a goal it reads the DB record (model_name, record_name) *at that moment*: a
+``/<model_name>/<subtask_name>`` as the original's subtask nodes do: ``tms_msg_ts/action/LeafNodeBase``,
+goal ``{model_name, record_name}``, result ``result`` true only when SUCCEEDED (false with ABORTED or
+CANCELED), feedback ``status``. Every goal is accepted (unless the server is stopping); a goal that cannot
+run ends ABORTED. Its typed outcome goes beside the original's bool: a ``tms_msg/SubtaskOutcome`` (goal id,
+``error_code``, ``error_msg`` for people) on ``/<model_name>/subtask_outcome``, published just before the
+goal ends, for every goal. On a goal it reads the DB record (model_name, record_name) *at that moment*: a
 missing or malformed record ends RECORD_INVALID naming the record and field. A valid goal goes to the
-planning action ``/<model_name>/<planning>`` of its row, whose feedback is mirrored as ``state`` and whose
-result the row's check reads (PLANNING_FAILED when it reports a failure). A cancel is honoured at once while
+planning action ``/<model_name>/<planning>`` of its row (ZX200: the original's tms_msg_rp actions; a
+change_pose that needs ``pass_through`` / ``theta_w_tolerance`` first gives them by goal id to
+``<planning>/options``, tms_msg/srv/Zx200ChangePoseOptions), whose feedback is mirrored as ``status`` and
+whose result the row's check reads (PLANNING_FAILED when it reports a failure; the ZX200 planner's text
+for it comes from ``/<model_name>/tms_rp_zx200_outcome``). A cancel is honoured at once while
 the goal still waits for its planning server (nothing was sent); later it is forwarded to planning, which
 brings the machine to rest, and the subtask reports CANCELED only after planning confirmed. If planning does
 not confirm within ``stop_timeout_s`` the node latches ``/<model_name>/emg_stop`` and aborts STOP_TIMEOUT.
 If the planning server disappears while a goal runs (its process died) for ``server_lost_s``, the node
 latches ``/<model_name>/emg_stop`` (nothing may keep driving the machine blind) and aborts SERVER_LOST.
-The last feedback of a failed goal is ``<CODE>: <error_msg>``, so the reason stays readable for a client
-whose result type carries no code.
+The last feedback ``status`` of a failed goal is ``<CODE>: <error_msg>``, so the reason stays readable for
+a client that reads only the original's type.
 
 Goals run as coroutines on one executor thread (:class:`tms_common.ticker.Ticker` paces their checks).
 Heartbeat: a thread publishes the model name on ``/tms_ts/subtask_heartbeat`` (std_msgs/String) every
-0.2 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
+0.05 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
 waiting for DDS discovery to drop it (~20 s with the default lease).
 ZX200 change_pose / excavate_simple set the record's ``LOCK_FLG`` false when a result arrives (so
 sensing may update the excavation target again), as the original subtasks did.
@@ -34,6 +40,8 @@ import functools
 import sys
 import threading
 import time
+import uuid
+from collections import OrderedDict
 from collections.abc import Sequence
 
 from action_msgs.msg import GoalStatus
@@ -42,20 +50,25 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from std_msgs.msg import Bool, String
+from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
-from tms_common.goals import RunningGoals
+from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import run_node
 from tms_common.ticker import Ticker
-from tms_msg.action import Subtask
+from tms_if_opera.interface import OUTCOME_GRACE_S as PLANNING_OUTCOME_GRACE_S
+from tms_if_opera.interface import PLANNING_OUTCOME
+from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
+from tms_msg.srv import Zx200ChangePoseOptions
+from tms_msg_ts.action import LeafNodeBase
 from tms_ts.errors import SubtaskRecordError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
-from tms_ts.outcomes import code_name
+from tms_ts.outcomes import SUBTASK_OUTCOME_TOPIC, code_name
 from tms_ts.subtask_specs import SubtaskSpec, subtasks_for
 
 __all__ = ["SubtaskServers", "main", "node_name_from_args"]
 
-R = Subtask.Result
+R = SubtaskOutcome
 TICK_S = 0.05  # [s wall] how often a running goal looks at cancel, stop, deadlines
 SERVER_CHECK_S = 0.2  # [s wall] how often a running goal looks for its planning server on the graph
 _READ_ONLY = ParameterDescriptor(read_only=True)
@@ -74,6 +87,10 @@ def node_name_from_args(argv: Sequence[str]) -> str:
             if machine.isidentifier():
                 return f"{machine}_subtasks"
     return "tms_ts_subtasks"
+
+
+def _uuid_key(goal_id) -> bytes:  # noqa: ANN001 - unique_identifier_msgs/UUID
+    return bytes(goal_id.uuid)
 
 
 def _feedback_text(fb) -> str:  # noqa: ANN001
@@ -106,14 +123,24 @@ class SubtaskServers(Node):
         group = ReentrantCallbackGroup()
         self._ticker = Ticker(self, TICK_S, callback_group=group)
         self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
+        self.outcomes = self.create_publisher(SubtaskOutcome, f"/{self.model_name}/{SUBTASK_OUTCOME_TOPIC}", OUTCOME_QOS)
         self.planners: dict[str, RaceFreeActionClient] = {}
+        self.options_clients: dict[str, object] = {}
+        #: planning goal id -> Zx200PlanningOutcome (the ZX200 planner's text for its code), newest last
+        self.planning_outcomes: OrderedDict[bytes, Zx200PlanningOutcome] = OrderedDict()
+        if any(spec.zx200_planning for spec in specs):
+            self.create_subscription(Zx200PlanningOutcome, f"/{self.model_name}/{PLANNING_OUTCOME}",
+                                     self._on_planning_outcome, OUTCOME_QOS, callback_group=group)
         self.action_servers = []
         for spec in specs:
             planning = f"/{self.model_name}/{spec.planning_action}"
             if planning not in self.planners:
                 self.planners[planning] = RaceFreeActionClient(self, spec.action_type, planning, callback_group=group)
+            if spec.options is not None and planning not in self.options_clients:
+                self.options_clients[planning] = self.create_client(
+                    Zx200ChangePoseOptions, f"{planning}/options", callback_group=group)
             self.action_servers.append(ActionServer(
-                self, Subtask, f"/{self.model_name}/{spec.name}",
+                self, LeafNodeBase, f"/{self.model_name}/{spec.name}",
                 execute_callback=functools.partial(self._execute, spec),  # a partial stays a coroutine function
                 goal_callback=lambda _goal, s=spec: self._on_goal(s),
                 cancel_callback=self._on_cancel,
@@ -133,7 +160,13 @@ class SubtaskServers(Node):
             except Exception:  # noqa: BLE001 - context shut down at exit
                 return
 
-    def _plan(self, goal: Subtask.Goal, spec: SubtaskSpec) -> dict:
+    def _on_planning_outcome(self, msg: Zx200PlanningOutcome) -> None:
+        self.planning_outcomes[_uuid_key(msg.goal_id)] = msg
+        while len(self.planning_outcomes) > 100:
+            self.planning_outcomes.popitem(last=False)
+        self._ticker.wake()
+
+    def _plan(self, goal: LeafNodeBase.Goal, spec: SubtaskSpec) -> dict:
         from tms_db.errors import RecordNotFound
 
         model = goal.model_name or self.model_name
@@ -153,7 +186,7 @@ class SubtaskServers(Node):
         self._ticker.wake()  # the goal looks at its cancel request now, not at the next tick
         return CancelResponse.ACCEPT
 
-    def _finish(self, gh, spec: SubtaskSpec, code: int, message: str) -> Subtask.Result:  # noqa: ANN001
+    def _finish(self, gh, spec: SubtaskSpec, code: int, message: str) -> LeafNodeBase.Result:  # noqa: ANN001
         record = gh.request.record_name
         if spec.clears_lock_flg and code != R.RECORD_INVALID:
             try:
@@ -161,29 +194,60 @@ class SubtaskServers(Node):
             except Exception as exc:  # noqa: BLE001 - a bookkeeping write must not hide the result
                 self.get_logger().warning(f"LOCK_FLG of '{record}' not cleared: {exc}")
         action = f"/{self.model_name}/{spec.name}"
+        # the typed outcome first: a client that has the result then finds it already (or within its grace)
+        self.outcomes.publish(SubtaskOutcome(action=action, goal_id=gh.goal_id, record_name=record,
+                                             error_code=code, error_msg=message))
         if code == R.NONE:
             gh.succeed()
             self.get_logger().info(f"{action} '{record}' succeeded: {message}")
         else:
-            # the reason for people, also where a client whose result carries no code can show it
-            gh.publish_feedback(Subtask.Feedback(state=f"{code_name(code)}: {message}"))
+            # the reason for people, also where a client reading only the original's type can show it
+            gh.publish_feedback(LeafNodeBase.Feedback(status=f"{code_name(code)}: {message}"))
             if code == R.CANCELED:
                 gh.canceled()
             else:
                 gh.abort()
             self.get_logger().warning(f"{action} '{record}' {code_name(code)}: {message}")
-        return Subtask.Result(error_code=code, error_msg=message)
+        return LeafNodeBase.Result(result=code == R.NONE)
 
     def on_stop_requested(self) -> bool:
         """run_node's stop hook: cancel the running goals downstream; True while any is still running."""
         return self._goals.wind_down(self.stop_timeout_s + 1.0, lambda n: self.get_logger().warning(
             f"stopping: canceling {n} running goal(s) downstream"))
 
-    async def _execute(self, spec: SubtaskSpec, gh) -> Subtask.Result:  # noqa: ANN001
+    async def _execute(self, spec: SubtaskSpec, gh) -> LeafNodeBase.Result:  # noqa: ANN001
         with self._goals.running():
             return await self._execute_goal(gh, spec)
 
-    async def _execute_goal(self, gh, spec: SubtaskSpec) -> Subtask.Result:  # noqa: ANN001
+    async def _send_options(self, gh, planning: str, options: dict, goal_id: UUID,  # noqa: ANN001
+                            deadline: float) -> tuple[int, str] | None:
+        """Give the goal's options to ``<planning>/options`` by goal id; (code, reason) when that fails."""
+        client = self.options_clients[planning]
+        while not client.service_is_ready():
+            if gh.is_cancel_requested:
+                return R.CANCELED, f"canceled while waiting for {planning}/options (nothing was sent)"
+            if self._goals.stopping.is_set():
+                return R.SERVER_STOPPING, f"subtask server stopping while waiting for {planning}/options"
+            if time.monotonic() > deadline:
+                return R.PLANNING_UNAVAILABLE, (f"planning server offers no {planning}/options within "
+                                                f"{self.planning_wait_s:g} s (the goal needs {options})")
+            await self._ticker.next()
+        reply = await self._ticker.wake_on(client.call_async(Zx200ChangePoseOptions.Request(goal_id=goal_id, **options)))
+        if reply is None or not reply.accepted:
+            why = reply.message if reply is not None else "no reply"
+            return R.PLANNING_REJECTED, f"{planning}/options rejected {options}: {why}"
+        return None
+
+    async def _planning_text(self, goal_id: UUID) -> str:
+        """The ZX200 planner's text for a failed goal (waits briefly: it may trail the result)."""
+        key = _uuid_key(goal_id)
+        deadline = time.monotonic() + PLANNING_OUTCOME_GRACE_S
+        while key not in self.planning_outcomes and time.monotonic() < deadline:
+            await self._ticker.next()
+        outcome = self.planning_outcomes.pop(key, None)
+        return outcome.message if outcome is not None else "(no outcome text from the planner)"
+
+    async def _execute_goal(self, gh, spec: SubtaskSpec) -> LeafNodeBase.Result:  # noqa: ANN001
         record = gh.request.record_name
         try:
             plan = self._plan(gh.request, spec)
@@ -204,11 +268,19 @@ class SubtaskServers(Node):
                                     f"planning server {planning} not available within {self.planning_wait_s:g} s")
             await self._ticker.next()
 
+        # our own goal id: options go to the planner under it before the goal, its outcome text comes back under it
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        options = spec.options(plan) if spec.options is not None else None
+        if options is not None:
+            failed = await self._send_options(gh, planning, options, goal_id, deadline)
+            if failed is not None:
+                return self._finish(gh, spec, *failed)
+
         def on_feedback(msg) -> None:  # noqa: ANN001
-            gh.publish_feedback(Subtask.Feedback(state=_feedback_text(msg.feedback)))
+            gh.publish_feedback(LeafNodeBase.Feedback(status=_feedback_text(msg.feedback)))
 
         # the goal response is awaited even when a cancel comes meanwhile: its handle is what cancels planning
-        handle = await client.send_goal_async(spec.goal(plan), feedback_callback=on_feedback)
+        handle = await client.send_goal_async(spec.goal(plan), feedback_callback=on_feedback, goal_uuid=goal_id)
         if handle is None or not handle.accepted:
             return self._finish(gh, spec, R.PLANNING_REJECTED, f"planning {planning} rejected the goal for record "
                                 f"'{record}'")
@@ -250,6 +322,8 @@ class SubtaskServers(Node):
                                 f"{planning} canceled ({status})")
         if res.status == GoalStatus.STATUS_SUCCEEDED and ok:
             return self._finish(gh, spec, R.NONE, f"{spec.name} '{record}' done")
+        if spec.zx200_planning:
+            detail = f"{detail}: {await self._planning_text(goal_id)}"
         return self._finish(gh, spec, R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
 
     def destroy_node(self) -> None:
