@@ -40,7 +40,7 @@ for debugging; the same file serves both. What a node's keys mean for a containe
   own ``--ros-args``);
 * ``env``: per process; the container's environment is the union of its nodes' (a key given two values is
   an error);
-* ``nice``: per process; the nodes of a container give one value or none (different values are an error);
+* ``nice``: per process; the container runs at the lowest (most favoured) ``nice`` of its nodes;
 * ``required``: the container is required when one of its nodes is; ``on_exit: shutdown``: the node's
   ``SystemExit(0)`` ends the container with 0, which ends the launch;
 * ``stop_grace_s``: the container's is the sum of its nodes' (they are stopped one after another, last
@@ -207,17 +207,13 @@ def _container(launch: LaunchFile, name: str, nodes: tuple[NodeSpec, ...]) -> Pr
     machines = in_process_can_links(nodes)
     if machines:
         env[IN_PROCESS_ENV] = ",".join(machines)
-    nices = {n.nice for n in nodes}
-    if len(nices) > 1:
-        given = ", ".join(f"{n.name}: {n.nice if n.nice is not None else 'unset'}" for n in nodes)
-        raise ConfigError(f"{launch.file}: container {name!r}: its nodes ask for different nice values ({given}); "
-                          "nice is per process, so give them one value (or none)")
+    nices = [n.nice for n in nodes if n.nice is not None]
     payload = json.dumps([{"name": n.name, "package": n.package, "executable": n.executable,
                            "on_exit": n.on_exit, "ros_args": n.ros_args()} for n in nodes])
     return ProcessSpec(
         name=name, nodes=nodes, container=name,
         command=(sys.executable, "-m", "tms_launch.container", name, payload),
-        env=env, nice=nices.pop(), required=any(n.required for n in nodes),
+        env=env, nice=min(nices) if nices else None, required=any(n.required for n in nodes),
         on_exit="shutdown" if any(n.on_exit == "shutdown" for n in nodes) else "error",
         stop_grace_s=sum(n.stop_grace_s for n in nodes), ready_timeout=max(n.ready_timeout for n in nodes),
     )

@@ -29,7 +29,7 @@ def _write(tmp_path: Path, text: str) -> Path:
 TWO_CONTAINERS = """\
 name: t
 nodes:
-  - {name: a, package: tms_launch, executable: demo_talker, container: one, nice: 2, env: {X: "1"}}
+  - {name: a, package: tms_launch, executable: demo_talker, container: one, nice: 5, env: {X: "1"}}
   - {name: b, package: tms_launch, executable: demo_listener, container: two}
   - {name: c, package: tms_launch, executable: demo_listener, container: one, nice: 2, required: false,
      stop_grace_s: 10, on_exit: shutdown, ready_timeout: 20}
@@ -44,7 +44,7 @@ def test_composed_groups_a_containers_nodes_in_one_process_in_first_appearance_o
     assert [(p.name, p.container, [n.name for n in p.nodes]) for p in procs] == [
         ("one", "one", ["a", "c"]), ("two", "two", ["b"]), ("d", None, ["d"])]
     one = procs[0]
-    # per process: the one nice, the union of env, the sum of the stop graces (stopped one after another),
+    # per process: the lowest nice, the union of env, the sum of the stop graces (stopped one after another),
     # required when one node is, a job when one node is, the longest ready timeout
     assert one.nice == 2 and one.env == {"X": "1"} and one.stop_grace_s == 2.5 + 10
     assert one.required is True and one.on_exit == "shutdown" and one.ready_timeout == 90.0
@@ -81,10 +81,6 @@ def test_containers_selects_only_those_containers_nodes_in_either_layout(tmp_pat
      "container 'one': env 'X' is '1' for node 'a' and '2' for node 'e'"),
     ("  - {name: e, package: tms_launch, executable: demo_talker, container: one, arguments: [--x]}\n",
      "node 'e' of container 'one' has 'arguments'"),
-    ("  - {name: e, package: tms_launch, executable: demo_talker, container: one, nice: 3}\n",
-     r"container 'one': its nodes ask for different nice values \(a: 2, c: 2, e: 3\)"),
-    ("  - {name: e, package: tms_launch, executable: demo_talker, container: one}\n",
-     r"different nice values \(a: 2, c: 2, e: unset\)"),
 ])
 def test_nodes_that_cannot_share_a_process_are_refused_naming_them(tmp_path, extra, message):
     launch = parse_launch_file(_write(tmp_path, TWO_CONTAINERS + extra))
