@@ -93,7 +93,7 @@ def test_composed_paper_cycle(procs, tmp_path):
     assert m["cycles"] == 1 and m["soil_moved_m3"] > 0.04, m
     assert m["real_time_factor"] > 0, m
     # the CPU table has one row per container
-    assert re.search(r"^\s+site_server \(2 nodes\)\s+[0-9.]+ s", out, re.M), tail
+    assert re.search(r"^\s+site_server \(4 nodes\)\s+[0-9.]+ s", out, re.M), tail
 
 
 def test_composed_stop_mid_task(procs, tmp_path):
@@ -113,7 +113,7 @@ def test_composed_stop_mid_task(procs, tmp_path):
     tail = "\n".join(out.splitlines()[-60:])
     assert code == 0, tail
     _check_composed(out)
-    stopping = out.index("stopping 5 process(es) (last started first, one at a time): site_server, sensing_pc, "
+    stopping = out.index("stopping 5 process(es) (last started first, one at a time): sensing_pc, site_server, "
                          "ic120_pc, zx200_pc, plant")
     assert "[experiment] STOPPED before the end" in out[stopping:], tail
     m = json.loads(sorted((tmp_path / "runs").glob("*/metrics.json"))[-1].read_text())

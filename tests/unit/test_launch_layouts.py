@@ -100,10 +100,10 @@ def test_paper_experiment_composes_into_the_real_systems_computers():
     composed = {p.name: [n.fqn for n in p.nodes] for p in processes(launch, "composed")}
     assert composed == {
         "plant": ["/sim_plant", "/zx200/com3_bridge", "/ic120/com3_bridge"],
-        "zx200_pc": ["/zx200/zx200_arm_controller", "/zx200/zx200_planner", "/subtasks_zx200"],
-        "ic120_pc": ["/ic120/ic120_localization", "/ic120/ic120_navigator", "/ic120/ic120_vessel", "/subtasks_ic120"],
+        "zx200_pc": ["/zx200/zx200_arm_controller", "/zx200/zx200_planner"],
+        "ic120_pc": ["/ic120/ic120_localization", "/ic120/ic120_navigator", "/ic120/ic120_vessel"],
+        "site_server": ["/subtasks_zx200", "/subtasks_ic120", "/tms_ts_manager", "/tms_ur_experiment"],
         "sensing_pc": ["/tms_sp_sensing"],
-        "site_server": ["/tms_ts_manager", "/tms_ur_experiment"],
     }
     assert len(processes(launch, "per-node")) == 13
     by_name = {p.name: p for p in processes(launch, "composed")}
@@ -112,7 +112,7 @@ def test_paper_experiment_composes_into_the_real_systems_computers():
     assert by_name["plant"].env["RMW_FASTRTPS_PUBLICATION_MODE"] == "ASYNCHRONOUS"
     assert all(IN_PROCESS_ENV not in p.env for n, p in by_name.items() if n != "plant")
     assert by_name["plant"].nice is None and by_name["zx200_pc"].nice == -10 and by_name["site_server"].nice is None
-    assert by_name["site_server"].on_exit == "shutdown" and by_name["site_server"].stop_grace_s == 30 + 2.5
+    assert by_name["site_server"].on_exit == "shutdown" and by_name["site_server"].stop_grace_s == 30 + 3 * 2.5
     for proc in processes(launch, "per-node"):
         assert IN_PROCESS_ENV not in proc.env
 
@@ -135,11 +135,10 @@ def test_the_can_link_is_in_process_only_for_the_named_machines_and_explicit_ove
 def test_cli_list_shows_each_layouts_processes_and_rejects_unknown_containers(capsys):
     assert main(["--list", "--layout", "composed", str(PAPER)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert [line.split("\t")[0] for line in lines] == ["plant", "zx200_pc", "ic120_pc", "sensing_pc", "site_server"]
+    assert [line.split("\t")[0] for line in lines] == ["plant", "zx200_pc", "ic120_pc", "site_server", "sensing_pc"]
     assert main(["--list", "--layout", "per-node", "--containers", "zx200_pc", str(PAPER)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines == ["zx200_arm_controller\tnode\t/zx200/zx200_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner",
-                     "subtasks_zx200\tnode\t/subtasks_zx200"]
+    assert lines == ["zx200_arm_controller\tnode\t/zx200/zx200_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner"]
     assert main(["--list", "--containers", "nowhere", str(PAPER)]) == 2
     assert "no container(s) ['nowhere']" in capsys.readouterr().err
 
