@@ -9,6 +9,7 @@ available in this kernel" or that ``vcan0`` does not exist.
 from __future__ import annotations
 
 import logging
+import os
 import socket
 from collections.abc import Mapping
 from pathlib import Path
@@ -20,7 +21,8 @@ from com3_can.errors import Com3BusError
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 
-__all__ = ["BACKENDS", "open_bus", "socketcan_available", "load_bus_config"]
+__all__ = ["BACKENDS", "IN_PROCESS_ENV", "open_bus", "socketcan_available", "load_bus_config", "link_config",
+           "in_process_machines"]
 
 _log = logging.getLogger(__name__)
 
@@ -31,7 +33,10 @@ BACKENDS: Mapping[str, frozenset[str]] = {
     "virtual": frozenset({"receive_own_messages"}),
 }
 #: keys of a config/can/<machine>.yaml that are not bus options
-_IGNORED_KEYS = frozenset({"bridge"})
+_IGNORED_KEYS = frozenset({"bridge", "in_process"})
+#: machines (comma-separated) whose plant and COM3 converter run in this process: their link is in-process.
+#: tms-launch sets it for a container that holds the plant and those converters (tms_launch.launch_file).
+IN_PROCESS_ENV = "TMS_CAN_IN_PROCESS"
 
 
 def socketcan_available() -> bool:
@@ -82,6 +87,45 @@ def open_bus(cfg: Mapping[str, Any]) -> can.BusABC:
         raise Com3BusError(f"cannot open CAN {interface} channel {channel!r}: {exc}") from exc
     _log.info("opened CAN bus interface=%s channel=%s options=%s", interface, channel, extras)
     return bus
+
+
+def in_process_machines() -> frozenset[str]:
+    """The machines :data:`IN_PROCESS_ENV` names (empty when unset)."""
+    return frozenset(m.strip() for m in os.environ.get(IN_PROCESS_ENV, "").split(",") if m.strip())
+
+
+def link_config(machine: str, cfg: Mapping[str, Any], *, interface: str = "", channel: str = "",
+                port: int = 0) -> dict[str, Any]:
+    """The bus options of ``machine``'s COM3 link, for either end (plant or converter): the one place that
+    chooses the interface.
+
+    1. Any override given (a node's ``can_interface`` / ``can_channel`` / ``can_port`` parameters) applies
+       over the file's top level: explicit wins.
+    2. Else, when the plant and this machine's converter run in one process (:data:`IN_PROCESS_ENV` names
+       the machine), the file's ``in_process`` section: python-can's ``virtual`` interface, which hands a
+       frame to the other buses of its channel in this process and not back to its sender.
+    3. Else the file's top level: ``udp_multicast`` between processes of one host, ``socketcan`` on a
+       machine's own CAN bus.
+
+    Raises:
+        ConfigError: the machine is named in-process but its file has no ``in_process`` mapping.
+    """
+    if not (interface or channel or port) and machine in in_process_machines():
+        local = cfg.get("in_process")
+        if not isinstance(local, Mapping):
+            raise ConfigError(f"CAN link of {machine!r}: {IN_PROCESS_ENV} names it but its bus config has no "
+                              "'in_process' mapping (e.g. in_process: {interface: virtual, channel: com3_<machine>})")
+        return dict(local)
+    out = {k: v for k, v in cfg.items() if k not in _IGNORED_KEYS}
+    if interface:
+        out["interface"] = interface
+    if channel:
+        out["channel"] = channel
+    if port:
+        out["port"] = port
+    if out.get("interface") != "udp_multicast":
+        out.pop("port", None)
+    return out
 
 
 def load_bus_config(machine: str, path: str | Path | None = None) -> dict[str, Any]:

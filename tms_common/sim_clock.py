@@ -39,7 +39,7 @@ class ClockRelay:
     """
 
     def __init__(self, node: Node, subscription: Any) -> None:
-        self._clock = node.get_clock()
+        self._clocks = [node.get_clock()]
         self._logger = node.get_logger()
         self._context = node.context
         self.subscription = subscription
@@ -54,19 +54,39 @@ class ClockRelay:
     def _run(self) -> None:
         from rclpy.time import Time
 
-        waiter, clock = self._waiter, self._clock
+        waiter, clocks = self._waiter, self._clocks
         try:
             while not self._stop.is_set():
                 msg = waiter.wait_take(_WAIT_NS)
                 if msg is not None:
                     self.received += 1
-                    clock.set_ros_time_override(Time.from_msg(msg.clock))
+                    now = Time.from_msg(msg.clock)
+                    for clock in tuple(clocks):
+                        clock.set_ros_time_override(now)
         except rclpy_compat.SubscriptionDestroyed:
             pass  # the node is being destroyed, or use_sim_time was set false (the clock ignores overrides then)
         except Exception as exc:  # the context or the subscription went away under us (shutdown): stop relaying
             if not self._stop.is_set() and self._context.ok():
                 self._logger.error(f"clock relay failed, simulated time no longer advances: {type(exc).__name__}: {exc}")
                 raise
+
+    def follow(self, node: Node) -> bool:
+        """Also set ``node``'s clock (another node of this process on simulated time) and park its own ``/clock``
+        subscription: one relay and one ``/clock`` subscription per process, however many nodes it hosts.
+        False (nothing changed) when ``node`` is on wall time."""
+        from rclpy.time_source import CLOCK_TOPIC
+
+        own = [s for s in node.subscriptions if s.topic_name == CLOCK_TOPIC]
+        if not own:
+            return False
+        rclpy_compat.park(own[0])
+        self._clocks.append(node.get_clock())
+        return True
+
+    def unfollow(self, node: Node) -> None:
+        """Stop setting ``node``'s clock (before it is destroyed)."""
+        clock = node.get_clock()
+        self._clocks[:] = [c for c in self._clocks if c is not clock]
 
     def _wake_up(self) -> None:
         self._stop.set()

@@ -28,6 +28,26 @@ A launch file::
         stop_grace_s: 30             # seconds between SIGINT and SIGTERM when the launch stops (default
                                      # 2.5): a node that writes results on its way out (the experiment
                                      # supervisor's report) gets the time to finish; SIGKILL 1.5 s later
+        container: site_server       # optional: the nodes that name one container run in one process on
+                                     # one executor (the composed layout, :func:`processes`); without it a
+                                     # node is its own process in every layout
+
+Layouts (:func:`processes`): ``composed`` (the default) runs each container as one process
+(``python -m tms_launch.container``), ``per-node`` runs every node as its own process from its executable,
+for debugging; the same file serves both. What a node's keys mean for a container process:
+
+* ``parameters``, ``param_files``, ``namespace``, ``use_sim_time``: per node, as before (each node gets its
+  own ``--ros-args``);
+* ``env``: per process; the container's environment is the union of its nodes' (a key given two values is
+  an error);
+* ``nice``: per process; the container runs at the lowest (most favoured) ``nice`` of its nodes;
+* ``required``: the container is required when one of its nodes is; ``on_exit: shutdown``: the node's
+  ``SystemExit(0)`` ends the container with 0, which ends the launch;
+* ``stop_grace_s``: the container's is the sum of its nodes' (they are stopped one after another, last
+  started first, each with its stop hooks run and then destroyed: the supervisor writes its report and the
+  manager cancels before the servers, controllers and plant of the same process go);
+* ``ready_timeout``: the container's is the longest of its nodes'; ``arguments`` are not allowed (a node
+  class in a container gets ROS arguments only).
 
 Every problem (malformed YAML, unknown key, unknown executable, duplicate name) is a
 :class:`~tms_common.errors.ConfigError` naming the file and line; nothing is started.
@@ -42,6 +62,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from com3_can.bus import IN_PROCESS_ENV
 from tms_common.config import Where, load_yaml, repo_root
 from tms_common.errors import ConfigError
 
@@ -59,11 +80,14 @@ NODE_KEYS = {
     "on_exit",
     "nice",
     "stop_grace_s",
+    "container",
 }
 TOP_KEYS = {"name", "nodes", "env", "parameters", "startup", "shutdown"}
 STARTUP = {"sequential", "parallel"}
 SHUTDOWN = {"parallel", "reverse"}
 ON_EXIT = {"error", "shutdown"}
+LAYOUTS = ("composed", "per-node")
+LAYOUT_ENV = "TMS_LAYOUT"  # the layout when tms-launch is not given --layout
 DEFAULT_STOP_GRACE_S = 2.5  # SIGINT -> SIGTERM when a node has no stop_grace_s
 
 
@@ -85,6 +109,7 @@ class NodeSpec:
     on_exit: str = "error"
     nice: int | None = None
     stop_grace_s: float = DEFAULT_STOP_GRACE_S
+    container: str | None = None
 
     @property
     def fqn(self) -> str:
@@ -93,7 +118,11 @@ class NodeSpec:
 
     def command(self) -> list[str]:
         """The command line that starts this node, as ``ros2 run`` would plus our remaps."""
-        cmd = [str(self.path), *self.arguments, "--ros-args", "-r", f"__node:={self.name}"]
+        return [str(self.path), *self.arguments, *self.ros_args()]
+
+    def ros_args(self) -> list[str]:
+        """``--ros-args`` and what follows: name, namespace, parameters (a process's or one node's ``cli_args``)."""
+        cmd = ["--ros-args", "-r", f"__node:={self.name}"]
         if self.namespace != "/":
             cmd += ["-r", f"__ns:={self.namespace}"]
         for key, value in self.parameters.items():
@@ -113,6 +142,112 @@ class LaunchFile:
     env: dict[str, str]
     startup: str = "sequential"
     shutdown: str = "parallel"
+
+    @property
+    def containers(self) -> tuple[str, ...]:
+        """The container names of the file, in the order their first node appears."""
+        return tuple(dict.fromkeys(n.container for n in self.nodes if n.container))
+
+
+@dataclass(frozen=True)
+class ProcessSpec:
+    """One process of a launch in a layout: a node run from its executable, or a container of nodes.
+
+    ``name`` is the node's name or the container's; the other fields are what the launcher needs per process
+    (the rules for a container are in the module docstring).
+    """
+
+    name: str
+    nodes: tuple[NodeSpec, ...]
+    command: tuple[str, ...]
+    container: str | None = None
+    env: dict[str, str] = field(default_factory=dict)
+    nice: int | None = None
+    required: bool = True
+    on_exit: str = "error"
+    stop_grace_s: float = DEFAULT_STOP_GRACE_S
+    ready_timeout: float = 90.0
+
+    @property
+    def what(self) -> str:
+        """What the progress lines show: ``package/executable``, or ``container of n1, n2``."""
+        if self.container is None:
+            return f"{self.nodes[0].package}/{self.nodes[0].executable}"
+        return "container of " + ", ".join(n.name for n in self.nodes)
+
+
+def _single(spec: NodeSpec) -> ProcessSpec:
+    return ProcessSpec(name=spec.name, nodes=(spec,), command=tuple(spec.command()), env=dict(spec.env),
+                       nice=spec.nice, required=spec.required, on_exit=spec.on_exit,
+                       stop_grace_s=spec.stop_grace_s, ready_timeout=spec.ready_timeout)
+
+
+def in_process_can_links(nodes: tuple[NodeSpec, ...]) -> list[str]:
+    """The machines whose plant (``sim_plant``) and COM3 converter (``com3_bridge`` with ``machine`` set) are among
+    ``nodes``: in one process their CAN link is in-process (:func:`com3_can.bus.link_config`)."""
+    if not any((n.package, n.executable) == ("sim_bridge", "sim_plant") for n in nodes):
+        return []
+    return sorted({str(n.parameters["machine"]) for n in nodes
+                   if (n.package, n.executable) == ("com3_can", "com3_bridge") and "machine" in n.parameters})
+
+
+def _container(launch: LaunchFile, name: str, nodes: tuple[NodeSpec, ...]) -> ProcessSpec:
+    env: dict[str, str] = {}
+    for node in nodes:
+        for key, value in node.env.items():
+            if key in env and env[key] != value:
+                owner = next(n.name for n in nodes if n.env.get(key) == env[key])
+                raise ConfigError(f"{launch.file}: container {name!r}: env {key!r} is {env[key]!r} for node "
+                                  f"{owner!r} and {value!r} for node {node.name!r} (one process, one environment)")
+            env[key] = value
+    for node in nodes:
+        if node.arguments:
+            raise ConfigError(f"{launch.file}: node {node.name!r} of container {name!r} has 'arguments': a node in a "
+                              "container gets ROS arguments only (remove them or the container key)")
+    machines = in_process_can_links(nodes)
+    if machines:
+        env[IN_PROCESS_ENV] = ",".join(machines)
+    nices = [n.nice for n in nodes if n.nice is not None]
+    payload = json.dumps([{"name": n.name, "package": n.package, "executable": n.executable,
+                           "on_exit": n.on_exit, "ros_args": n.ros_args()} for n in nodes])
+    return ProcessSpec(
+        name=name, nodes=nodes, container=name,
+        command=(sys.executable, "-m", "tms_launch.container", name, payload),
+        env=env, nice=min(nices) if nices else None, required=any(n.required for n in nodes),
+        on_exit="shutdown" if any(n.on_exit == "shutdown" for n in nodes) else "error",
+        stop_grace_s=sum(n.stop_grace_s for n in nodes), ready_timeout=max(n.ready_timeout for n in nodes),
+    )
+
+
+def processes(launch: LaunchFile, layout: str = "composed", containers: list[str] | None = None) -> tuple[ProcessSpec, ...]:
+    """The processes that run ``launch`` in ``layout``, in start order.
+
+    ``layout``: ``composed`` (each container one process, other nodes one each) or ``per-node`` (every node
+    its own process). ``containers``: only the nodes of these containers (a host's part of a site).
+
+    Raises:
+        ConfigError: unknown layout or container name, or a container whose nodes cannot share a process.
+    """
+    if layout not in LAYOUTS:
+        raise ConfigError(f"unknown layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
+    nodes = launch.nodes
+    if containers is not None:
+        unknown = [c for c in containers if c not in launch.containers]
+        if unknown or not containers:
+            raise ConfigError(f"{launch.file}: no container(s) {unknown or containers!r}; the file has "
+                              f"{', '.join(launch.containers) or 'none'}")
+        nodes = tuple(n for n in nodes if n.container in containers)
+    if layout == "per-node":
+        return tuple(_single(n) for n in nodes)
+    out: list[ProcessSpec] = []
+    done: set[str] = set()
+    for node in nodes:
+        if node.container is None:
+            out.append(_single(node))
+        elif node.container not in done:
+            done.add(node.container)
+            out.append(_container(launch, node.container, tuple(n for n in nodes if n.container == node.container)))
+    return tuple(out)
 
 
 def _param_literal(value: Any) -> str:
@@ -221,6 +356,11 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
                         f"node {name!r}: 'stop_grace_s'")
         if isinstance(grace, bool) or not 0 < grace <= 600:
             raise where.error(at + ("stop_grace_s",), f"node {name!r}: stop_grace_s must be within (0, 600] s, got {grace}")
+        container = raw.get("container")
+        if container is not None:
+            _expect(where, at + ("container",), container, str, f"node {name!r}: 'container'")
+            if not container.isidentifier():
+                raise where.error(at + ("container",), f"node {name!r}: container name {container!r} must be an identifier")
         nodes.append(
             NodeSpec(
                 name=name,
@@ -237,6 +377,7 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
                 on_exit=on_exit,
                 nice=nice,
                 stop_grace_s=float(grace),
+                container=container,
             )
         )
     title = data.get("name") or Path(path).stem
@@ -249,4 +390,5 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
     return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env, startup=startup, shutdown=shutdown)
 
 
-__all__ = ["NodeSpec", "LaunchFile", "parse_launch_file", "resolve_executable", "ConfigError"]
+__all__ = ["NodeSpec", "LaunchFile", "ProcessSpec", "LAYOUTS", "LAYOUT_ENV", "processes", "parse_launch_file",
+           "resolve_executable", "ConfigError"]

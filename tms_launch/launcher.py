@@ -1,8 +1,13 @@
-"""``tms-launch``: run the nodes of a YAML launch file as separate processes.
+"""``tms-launch``: run the nodes of a YAML launch file, composed in containers or one process per node.
 
-* Starts nodes in file order, each in its own process group, with stdout and stderr merged and
-  every line prefixed ``[node_name]``.
-* Waits until each node is visible on the ROS graph (its name and namespace) before starting the
+* Layouts (``--layout``, else ``$TMS_LAYOUT``, else ``composed``): ``composed`` runs the nodes that share a
+  ``container`` key in one process with one executor (``python -m tms_launch.container``), as ROS 2
+  component containers do, and every other node as its own process; ``per-node`` runs every node as its own
+  process from its executable (debugging: one node's stack, CPU and log apart). ``--containers a,b`` starts
+  only the nodes of those containers (one host's part of a site split over several computers).
+* Starts processes in file order (a container where its first node is), each in its own process group,
+  with stdout and stderr merged and every line prefixed ``[node_name]`` or ``[container_name]``.
+* Waits until each process's nodes are visible on the ROS graph (name and namespace) before starting the
   next one (``startup: sequential``, the default) or starts all at once and then waits for each
   (``startup: parallel``, quicker for big launches), and prints progress lines
   ``[tms-launch] starting 2/3: listener`` / ``running 3/3``.
@@ -11,9 +16,10 @@
   ``shutdown: reverse`` one node at a time, last started first, each gone before the next is signalled.
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
   except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
-* ``--list`` prints the nodes of the file and exits.
+* ``--list`` prints the nodes of the file and exits; with ``--layout`` or ``--containers`` it prints the
+  processes of that layout and their nodes.
 * SIGUSR1 prints the stack of every thread of the launcher (to see what a launcher that does not stop waits for).
-* When the launch stops it prints the CPU time (user + system, all threads) each node used and the total,
+* When the launch stops it prints the CPU time (user + system, all threads) each process used and the total,
   in seconds and in cores over the launch's wall time (``/proc/<pid>/stat``, read once a second while a
   node runs, so a node that exits on its own is counted up to its last second). With a simulated-time
   report's real-time factor this gives the core-seconds the stack needs per simulated second.
@@ -36,7 +42,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tms_common.errors import ConfigError
-from tms_launch.launch_file import LaunchFile, NodeSpec, parse_launch_file
+from tms_launch.launch_file import (
+    LAYOUT_ENV,
+    LAYOUTS,
+    LaunchFile,
+    NodeSpec,
+    ProcessSpec,
+    parse_launch_file,
+    processes,
+)
 
 SIGTERM_GRACE_S = 1.5
 _PR_SET_PDEATHSIG = 1
@@ -71,7 +85,7 @@ def _child_setup(nice: int | None):  # noqa: ANN202 - a preexec_fn
 
 @dataclass
 class Running:
-    spec: NodeSpec
+    spec: ProcessSpec
     proc: subprocess.Popen[bytes]
     reader: threading.Thread
     ready: bool = False
@@ -103,8 +117,11 @@ def cpu_table(rows: list[tuple[str, float]], wall_s: float) -> list[str]:
 class Launcher:
     """Starts, watches and stops the processes of one launch file."""
 
-    def __init__(self, launch: LaunchFile, *, out=None) -> None:  # noqa: ANN001
+    def __init__(self, launch: LaunchFile, *, out=None, layout: str = "composed",  # noqa: ANN001
+                 containers: list[str] | None = None) -> None:
         self.launch = launch
+        self.processes = processes(launch, layout, containers)
+        self.layout = layout
         self.out = out or sys.stdout
         self.running: list[Running] = []
         self._stop = threading.Event()
@@ -144,15 +161,17 @@ class Launcher:
                                                  enable_rosout=False)
         return self._graph_node
 
-    def visible(self, spec: NodeSpec) -> bool:
-        """True when the node is on the ROS graph under its name and namespace."""
-        return (spec.name, spec.namespace) in self._graph().get_node_names_and_namespaces()
+    def visible(self, spec: NodeSpec | ProcessSpec) -> bool:
+        """True when the node (every node of the process) is on the ROS graph under its name and namespace."""
+        graph = set(self._graph().get_node_names_and_namespaces())
+        nodes = spec.nodes if isinstance(spec, ProcessSpec) else (spec,)
+        return all((n.name, n.namespace) in graph for n in nodes)
 
     # -- lifecycle ------------------------------------------------------------------------------
-    def start(self, spec: NodeSpec) -> Running:
+    def start(self, spec: ProcessSpec) -> Running:
         env = {**os.environ, **self.launch.env, **spec.env, "PYTHONUNBUFFERED": "1"}
         proc = subprocess.Popen(
-            spec.command(),
+            list(spec.command),
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
@@ -182,17 +201,24 @@ class Launcher:
             if run.proc.poll() is not None:
                 if self._finished_job(run):
                     return None
-                return f"node {run.spec.name!r} exited with code {run.proc.returncode} before it came up"
+                return f"{self._kind(run)} {run.spec.name!r} exited with code {run.proc.returncode} before it came up"
             dead = self._dead_required()
             if dead is not None:
-                return f"required node {dead.spec.name!r} exited with code {dead.proc.returncode}"
+                return f"required {self._kind(dead)} {dead.spec.name!r} exited with code {dead.proc.returncode}"
             if self.visible(run.spec):
                 run.ready = True
                 return None
             time.sleep(0.05)
         if self._stop.is_set():
             return None
-        return f"node {run.spec.name!r} did not appear on the ROS graph within {run.spec.ready_timeout:g} s"
+        missing = [n.name for n in run.spec.nodes if not self.visible(n)] if run.spec.container else []
+        what = f" (missing: {', '.join(missing)})" if missing else ""
+        return (f"{self._kind(run)} {run.spec.name!r} did not appear on the ROS graph within "
+                f"{run.spec.ready_timeout:g} s{what}")
+
+    @staticmethod
+    def _kind(run: Running) -> str:
+        return "container" if run.spec.container else "node"
 
     def read_cpu(self) -> None:
         """Record each live node's CPU time so far (a node that exits keeps its last reading)."""
@@ -206,10 +232,11 @@ class Launcher:
             return
         rows: dict[str, float] = {}
         for run in self.running:
-            key = run.spec.fqn
+            key = f"{run.spec.name} ({len(run.spec.nodes)} nodes)" if run.spec.container else run.spec.nodes[0].fqn
             rows[key] = rows.get(key, 0.0) + run.cpu_s
         wall = time.monotonic() - self._began
-        self.log("CPU time per node (user + system, all threads):\n" + "\n".join(cpu_table(list(rows.items()), wall)))
+        self.log(f"CPU time per process ({self.layout} layout; user + system, all threads):\n"
+                 + "\n".join(cpu_table(list(rows.items()), wall)))
 
     def _stop_group(self, alive: list[Running]) -> None:
         """Stop these nodes together: SIGINT, SIGTERM after each one's stop_grace_s, SIGKILL 1.5 s later."""
@@ -243,7 +270,7 @@ class Launcher:
             alive.reverse()
         if alive:
             order = " (last started first, one at a time)" if one_at_a_time else ""
-            self.log(f"stopping {len(alive)} node(s){order}: {', '.join(r.spec.name for r in alive)}")
+            self.log(f"stopping {len(alive)} process(es){order}: {', '.join(r.spec.name for r in alive)}")
         for group in ([r] for r in alive) if one_at_a_time else [alive]:
             self._stop_group(group)
         for r in self.running:
@@ -251,13 +278,13 @@ class Launcher:
 
     def run(self) -> int:
         """Start every node, then supervise until a stop signal or a required node dies."""
-        nodes = self.launch.nodes
+        nodes = self.processes
         error: str | None = None
         try:
             if self.launch.startup == "parallel":
                 began = time.monotonic()
                 for index, spec in enumerate(nodes, 1):
-                    self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.package}/{spec.executable})")
+                    self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.what})")
                     self.start(spec)
                 for run in list(self.running):
                     if self._stop.is_set():
@@ -270,7 +297,7 @@ class Launcher:
             for index, spec in enumerate(nodes if self.launch.startup == "sequential" else (), 1):
                 if self._stop.is_set():
                     break
-                self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.package}/{spec.executable})")
+                self.log(f"starting {index}/{len(nodes)}: {spec.name} ({spec.what})")
                 run = self.start(spec)
                 error = self._wait_ready(run)
                 if error:
@@ -278,7 +305,9 @@ class Launcher:
                 up = [r.spec.name for r in self.running if r.ready]
                 self.log(f"running {len(up)}/{len(nodes)}: {', '.join(up)}")
             if not error and not self._stop.is_set():
-                self.log(f"all {len(nodes)} node(s) of {self.launch.name!r} are up; Ctrl-C stops them")
+                count = sum(len(p.nodes) for p in nodes)
+                self.log(f"all {count} node(s) of {self.launch.name!r} are up; Ctrl-C stops them "
+                         f"({len(nodes)} process(es), {self.layout} layout)")
             while not error and not self._stop.is_set():
                 done = next((r for r in self.running if r.proc.poll() is not None and self._finished_job(r)), None)
                 if done is not None:
@@ -286,11 +315,11 @@ class Launcher:
                     break
                 dead = self._dead_required()
                 if dead is not None:
-                    error = f"required node {dead.spec.name!r} exited with code {dead.proc.returncode}"
+                    error = f"required {self._kind(dead)} {dead.spec.name!r} exited with code {dead.proc.returncode}"
                     break
                 for r in self.running:
                     if not r.spec.required and r.proc.poll() is not None and r.ready:
-                        self.log(f"optional node {r.spec.name!r} exited with code {r.proc.returncode}")
+                        self.log(f"optional {self._kind(r)} {r.spec.name!r} exited with code {r.proc.returncode}")
                         r.ready = False
                 if time.monotonic() >= self._next_cpu_read:
                     self._next_cpu_read = time.monotonic() + 1.0
@@ -317,19 +346,31 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="tms-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("launch_file", help="YAML launch file, e.g. config/launch/demo_three.yaml")
     parser.add_argument("--list", action="store_true", help="print the nodes of the file and exit")
+    parser.add_argument("--layout", choices=LAYOUTS, default=None,
+                        help=f"composed: a container's nodes in one process; per-node: every node its own process "
+                             f"(default: ${LAYOUT_ENV}, else composed)")
+    parser.add_argument("--containers", default=None, metavar="A,B",
+                        help="start only the nodes of these containers (comma-separated)")
     opts = parser.parse_args(argv)
     path = Path(opts.launch_file)
+    layout = opts.layout or os.environ.get(LAYOUT_ENV) or "composed"
+    containers = [c.strip() for c in opts.containers.split(",") if c.strip()] if opts.containers is not None else None
     try:
         launch = parse_launch_file(path)
+        launcher = Launcher(launch, layout=layout, containers=containers)
     except ConfigError as exc:
         print(f"tms-launch: {exc}", file=sys.stderr, flush=True)
         return 2
     if opts.list:
-        for spec in launch.nodes:
-            flag = "required" if spec.required else "optional"
-            print(f"{spec.fqn}\t{spec.package}/{spec.executable}\t{flag}")
+        if opts.layout is None and containers is None:
+            for spec in launch.nodes:
+                flag = "required" if spec.required else "optional"
+                print(f"{spec.fqn}\t{spec.package}/{spec.executable}\t{flag}\t{spec.container or '-'}")
+            return 0
+        for proc in launcher.processes:
+            print(f"{proc.name}\t{'container' if proc.container else 'node'}\t"
+                  + " ".join(n.fqn for n in proc.nodes))
         return 0
-    launcher = Launcher(launch)
     # `kill -USR1 <pid>` prints every thread's stack: what a launcher that does not stop is waiting for
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     signal.signal(signal.SIGINT, launcher.request_stop)

@@ -2,7 +2,8 @@
 
 Run in the machine namespace, e.g. ``com3_bridge --ros-args -r __ns:=/zx200 -p machine:=zx200``.
 Parameters: ``machine`` (a config/machines/<machine>.yaml: zx200, zx120, ic120), ``can_config`` (YAML, default config/can/<machine>.yaml),
-``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep), ``watchdog_s``,
+``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep; the link is chosen by
+:func:`com3_can.bus.link_config`, in-process when the plant shares this process), ``watchdog_s``,
 ``joint_states_period_s`` and ``odom_period_s`` (publish ``joint_states`` / ``odom_pose`` at most once per
 this period of the node clock; 0 = on every state frame, 100 Hz; the odometry is integrated on every frame
 either way, so a longer period drops samples, not accuracy).
@@ -49,7 +50,7 @@ from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus
 from std_msgs.msg import Bool, String
 
 from com3_can.bridge_core import BridgeConfig, BridgeCore, FixOut, ImuOut, JointStateOut, OdomOut, Tx
-from com3_can.bus import load_bus_config, open_bus
+from com3_can.bus import link_config, load_bus_config, open_bus
 from com3_can.errors import Com3CommandError
 from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
 from com3_can.pilot_cutoff import CutoffSender
@@ -98,15 +99,7 @@ class Com3Bridge(Node):
         self._last_published: dict[Any, float] = {}
         cfg = load_bus_config(machine, can_config or None)
         self.config = BridgeConfig.load(machine, cfg, watchdog_s=watchdog, site_timeout_s=site_timeout)
-        bus_cfg = {k: v for k, v in cfg.items() if k != "bridge"}
-        if interface:
-            bus_cfg["interface"] = interface
-        if channel:
-            bus_cfg["channel"] = channel
-        if port:
-            bus_cfg["port"] = port
-        if bus_cfg.get("interface") != "udp_multicast":
-            bus_cfg.pop("port", None)
+        bus_cfg = link_config(machine, cfg, interface=interface, channel=channel, port=port)
         self.core = BridgeCore(self.config, time.monotonic())
         self.bus = open_bus(bus_cfg)
         self._log = self.get_logger()

@@ -214,6 +214,11 @@ UNCONTAINED_HOST = {
 }
 
 
+#: containers of the launch file that run on another container's host, as a process of their own there (the
+#: site's sensing computer on the site server: sensing's long scan callbacks must not delay the manager's)
+CONTAINER_HOST = {"sensing_pc": "site_server"}
+
+
 def host_of(node: Mapping[str, Any]) -> str:
     """The host of a launch-file node: a COM3 converter on its machine's PC, any other node on its container."""
     if (node.get("package"), node.get("executable")) == ("com3_can", "com3_bridge"):
@@ -223,6 +228,7 @@ def host_of(node: Mapping[str, Any]) -> str:
                              f"host (known: {', '.join(MACHINE_PC)})")
         return MACHINE_PC[machine]
     container = node.get("container", UNCONTAINED_HOST.get(str(node.get("executable"))))
+    container = CONTAINER_HOST.get(container, container)
     if container not in HOSTS:
         raise HostsError(f"node {node['name']!r}: container {container!r} is not a host ({', '.join(HOSTS)}); "
                          "every node of a launch file run over hosts names one")
@@ -248,7 +254,7 @@ def host_launch(host: str, launch: Path = PAPER_LAUNCH, skip: Iterable[str] = ()
             continue
         node = dict(node)
         if composable:
-            node["container"] = host
+            node["container"] = node["container"] if node.get("container") in CONTAINER_HOST else host
         else:
             node.pop("container", None)
         params = dict(node.get("parameters") or {})

@@ -3,7 +3,8 @@
 The plant loop runs in its own thread (paced to ``speed`` x real time, or free-running with
 ``speed:=0``); the executor only serves parameters. Control goes *only* through the CAN buses of
 ``config/can/<machine>.yaml`` (overridable per machine: ``<m>_can_interface``, ``<m>_can_channel``,
-``<m>_can_port``). Published (simulated time stamps, frame ``map``):
+``<m>_can_port``; in the composed layout's plant container the in-process link of
+:func:`com3_can.bus.link_config`). Published (simulated time stamps, frame ``map``):
 
 * ``/clock`` (rosgraph_msgs/Clock) every step,
 * ``/sim/truth/<machine>/pose`` (geometry_msgs/PoseStamped), ``/sim/truth/<machine>/joint_states``
@@ -50,7 +51,7 @@ class SimPlantNode(Node):
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-        from com3_can.bus import load_bus_config, open_bus
+        from com3_can.bus import link_config, load_bus_config, open_bus
         from sim_bridge.can_io import PlantCanIO
 
         self._Time, self._Clock = Time, Clock
@@ -74,18 +75,9 @@ class SimPlantNode(Node):
         self.plant = Plant(spec)
         buses = {}
         for machine in self.plant.machines:
-            cfg = {k: v for k, v in load_bus_config(machine).items() if k != "bridge"}
-            iface = str(p(f"{machine}_can_interface", "").value)
-            channel = str(p(f"{machine}_can_channel", "").value)
-            port = int(p(f"{machine}_can_port", 0).value)
-            if iface:
-                cfg["interface"] = iface
-                if iface != "udp_multicast":
-                    cfg.pop("port", None)
-            if channel:
-                cfg["channel"] = channel
-            if port:
-                cfg["port"] = port
+            cfg = link_config(machine, load_bus_config(machine), interface=str(p(f"{machine}_can_interface", "").value),
+                              channel=str(p(f"{machine}_can_channel", "").value),
+                              port=int(p(f"{machine}_can_port", 0).value))
             buses[machine] = open_bus(cfg)
             self.get_logger().info(f"{machine}: CAN {cfg}")
         self.buses = buses

@@ -122,7 +122,7 @@ def test_launcher_starts_three_nodes_visible_to_a_client_and_ctrl_c_stops_them(p
     assert time.monotonic() - started < 5.0
     assert not [p for p in pids if _alive(p)], "node processes outlived the launcher"
     # The stop prints each node's CPU time: every one of them spent some (rclpy import and init alone do).
-    table = launcher.output.split("CPU time per node", 1)[-1]
+    table = launcher.output.split("CPU time per process", 1)[-1]
     for fqn in ("/t3/talker", "/t3/listener", "/t3/subtask_server"):
         match = re.search(rf"^\s+{re.escape(fqn)}\s+([0-9.]+) s\s+([0-9.]+) % of a core$", table, re.M)
         assert match and float(match[1]) > 0.05, f"{fqn} missing or 0 s in the CPU table:\n{launcher.output}"
@@ -239,7 +239,7 @@ def test_launcher_reverse_shutdown_stops_the_last_started_node_first_and_alone(p
     assert launcher.wait(20) == 0, launcher.output
     assert time.monotonic() - started > 1.9, "one node at a time: 1 s each"
     lines = launcher.output.splitlines()
-    assert "stopping 2 node(s) (last started first, one at a time): second, first" in launcher.output
+    assert "stopping 2 process(es) (last started first, one at a time): second, first" in launcher.output
     assert lines.index("[second] talker: shut down") < lines.index("[first] talker: shut down"), launcher.output
 
 
