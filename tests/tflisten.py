@@ -29,6 +29,7 @@ class TfListener:
 
     def __init__(self, node: Any, history: int = 2000) -> None:
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
         from tf2_msgs.msg import TFMessage
 
         self.history = history
