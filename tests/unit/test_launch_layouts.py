@@ -103,9 +103,9 @@ def test_paper_experiment_composes_into_the_real_systems_computers():
         "zx200_pc": ["/zx200/zx200_arm_controller", "/zx200/zx200_planner"],
         "ic120_pc": ["/ic120/ic120_localization", "/ic120/ic120_navigator", "/ic120/ic120_vessel"],
         "site_server": ["/subtasks_zx200", "/subtasks_ic120", "/tms_ts_manager", "/tms_ur_experiment"],
-        "sensing_pc": ["/tms_sp_sensing"],
+        "sensing_pc": ["/tms_sp_sensing", "/tms_sp_tf"],
     }
-    assert len(processes(launch, "per-node")) == 13
+    assert len(processes(launch, "per-node")) == 14
     by_name = {p.name: p for p in processes(launch, "composed")}
     # the plant container holds both converters: both CAN links are in-process; no other process gets that
     assert by_name["plant"].env[IN_PROCESS_ENV] == "ic120,zx200"

@@ -283,7 +283,8 @@ class Ic120Navigator(Node):
             fb.number_of_recoveries = int(self.core.replans)
             if act.kind == "navigate_through_poses":
                 fb.number_of_poses_remaining = int(len(act.poses) - step.current_index)
-        fb.distance_remaining = float(step.distance_remaining)
+            # Nav2's FollowWaypoints feedback carries only the waypoint index
+            fb.distance_remaining = float(step.distance_remaining)
         act.handle.publish_feedback(fb)
 
 
