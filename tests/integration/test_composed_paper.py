@@ -71,7 +71,7 @@ def _start(procs, tmp_path):  # noqa: ANN001, ANN202
 
 
 def _check_composed(out: str) -> None:
-    assert "all 13 node(s) of 'paper_experiment' are up; Ctrl-C stops them (5 process(es), composed layout)" in out, \
+    assert "all 14 node(s) of 'paper_experiment' are up; Ctrl-C stops them (5 process(es), composed layout)" in out, \
         out[-3000:]
     for container in ("plant", "zx200_pc", "ic120_pc", "sensing_pc", "site_server"):
         assert re.search(rf"^\[{container}\] container of \d+ node\(s\) in process \d+", out, re.M), container
