@@ -174,7 +174,6 @@ def _stop_on_signals(node, spinner):  # noqa: ANN001, ANN202
     condition whose callback raises :class:`_StopRequested` in the executor (on ``events``, which has no guard
     conditions: ``call_soon`` runs it and ``request_stop`` ends the spin). No callback is cut in half.
     """
-    import signal
     import threading
 
     winding_down = getattr(node, "on_stop_requested", None)
@@ -201,6 +200,17 @@ def _stop_on_signals(node, spinner):  # noqa: ANN001, ANN202
     else:
         def trigger() -> None:
             spinner.call_soon(stop)
+    with signals_to(trigger, "tms-stop-relay"):
+        yield
+
+
+@contextlib.contextmanager
+def signals_to(trigger: Callable[[], None], thread_name: str):  # noqa: ANN201
+    """SIGINT/SIGTERM call ``trigger`` from a relay thread, through a wake-up fd: a Python signal handler
+    does not run while the main thread waits in ``rcl_wait``. Handlers are restored on exit."""
+    import signal
+    import threading
+
     read_fd, write_fd = os.pipe()
     os.set_blocking(write_fd, False)
 
@@ -215,7 +225,7 @@ def _stop_on_signals(node, spinner):  # noqa: ANN001, ANN202
 
     previous = {sig: signal.signal(sig, lambda *_: None) for sig in (signal.SIGINT, signal.SIGTERM)}
     previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
-    threading.Thread(target=relay, name="tms-stop-relay", daemon=True).start()
+    threading.Thread(target=relay, name=thread_name, daemon=True).start()
     try:
         yield
     finally:

@@ -30,7 +30,6 @@ The CAN links of the machines whose plant and converter share this process are i
 
 from __future__ import annotations
 
-import contextlib
 import faulthandler
 import importlib
 import inspect
@@ -39,7 +38,6 @@ import logging
 import os
 import signal
 import sys
-import threading
 import time
 import traceback
 from dataclasses import dataclass
@@ -109,33 +107,14 @@ def _spin_for(executor: Any, seconds: float) -> None:
         executor.spin_once(timeout_sec=min(left, _HOOK_PERIOD_S))
 
 
-@contextlib.contextmanager
 def _signals_to(guard_holder: list[Any]):  # noqa: ANN202
-    """SIGINT/SIGTERM trigger the stop guard condition (through a wake-up fd: a Python signal handler does not
-    run while the main thread waits in ``rcl_wait``). No callback is cut in half."""
-    read_fd, write_fd = os.pipe()
-    os.set_blocking(write_fd, False)
+    """SIGINT/SIGTERM trigger the stop guard condition once it exists. No callback is cut in half."""
+    from tms_common.node import signals_to
 
-    def relay() -> None:
-        try:
-            while os.read(read_fd, 16):
-                if guard_holder:
-                    guard_holder[0].trigger()
-        except Exception:  # noqa: BLE001, S110 - the guard is gone (node destroyed): nothing left to stop
-            pass
-        finally:
-            os.close(read_fd)
-
-    previous = {sig: signal.signal(sig, lambda *_: None) for sig in (signal.SIGINT, signal.SIGTERM)}
-    previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
-    threading.Thread(target=relay, name="tms-container-stop", daemon=True).start()
-    try:
-        yield
-    finally:
-        signal.set_wakeup_fd(previous_fd)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        os.close(write_fd)
+    def trigger() -> None:
+        if guard_holder:
+            guard_holder[0].trigger()
+    return signals_to(trigger, "tms-container-stop")
 
 
 def _say(name: str, text: str) -> None:
