@@ -68,10 +68,10 @@ DEFAULT_PREFIX = "tms-"
 HOST_PROFILES = ROOT / "config" / "dds" / "fastdds_hosts.xml"
 PAPER_LAUNCH = ROOT / "config" / "launch" / "paper_experiment.yaml"
 #: [s wall] a machine PC's converter latches emg_stop after this long without its site heartbeat (sent every
-#: 0.05 s by the machine's subtask server: four may be lost or late). The machine must be at rest within 0.5 s
-#: of a cut: the latch comes 0.2-0.27 s after it, the pilot cut-off then stops the front in ~0.17 s
-#: (solenoid 0.04 s, spools to < 0.005 rad/s; config/machines/zx200.yaml). With 0.3 s it came 0.52 s after.
-SITE_TIMEOUT_S = 0.25
+#: 0.05 s by the machine's subtask server: three may be lost or late). The machine must be at rest within 0.5 s
+#: of a cut: the latch comes 0.22-0.23 s after it, the pilot cut-off then needs about 0.2 s to bring the front to
+#: rest (docs/deployment.md: 0.40-0.44 s in five runs; with 0.25 s, 0.46 and 0.53 s).
+SITE_TIMEOUT_S = 0.2
 #: niceness of the site heartbeat's senders (the subtask servers) in the hosts layout, as the paper launch gives
 #: the ZX200's control path
 SITE_SENDER_NICE = -10

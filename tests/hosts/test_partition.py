@@ -16,10 +16,17 @@ Mid-excavation the ZX200's PC is unplugged from the site network (its switch por
 * the link restored, the converter still holds its latch and says why (a machine never moves again by
   itself); the operator clears it (``/zx200/emg_stop`` false, docs/deployment.md) and new tasks run on both
   machines.
+
+The scenario runs in a process of its own (``python -m tests.hosts.test_partition DIR``, which the test starts):
+Fast DDS reads a process's network interfaces when the process's first participant is created, so a test
+process that had made any ROS node before the site network existed (every earlier test of ``make test``) never
+discovered a host (measured: the probe saw no node in 120 s; the same probe as the first participant of its
+process saw the hosts within 0.5 s).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -39,7 +46,8 @@ from tests.integration.safety_stack import (
     speeds,
     wait_servers,
 )
-from tests.rosproc import VENV, Proc
+from tests.rosproc import VENV, Proc, isolated_domain
+from tms_common.dds import use_platform_profiles
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts" / "hosts"))
@@ -53,22 +61,13 @@ _REASON = site_hosts.unavailable()
 pytestmark = pytest.mark.skipif(_REASON is not None, reason=f"site hosts: {_REASON}")
 
 
-@pytest.fixture
-def site():  # noqa: ANN201
-    s = site_hosts.Site(prefix=f"tp{os.getpid()}-")
-    s.up()
-    yield s
-    s.down()
-
-
-@pytest.fixture
+@contextlib.contextmanager
 def site_node(domain: int):  # noqa: ANN201
-    """An rclpy node of the test process on the site network (discovery beyond localhost)."""
+    """An rclpy node of this process on the site network (discovery beyond localhost)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
-    before = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
     os.environ.setdefault("AMENT_PREFIX_PATH", str(VENV))
     context = Context()
@@ -77,14 +76,12 @@ def site_node(domain: int):  # noqa: ANN201
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     node.executor_for_test = executor
-    yield node
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-    if before is None:
-        os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
-    else:
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = before
+    try:
+        yield node
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
 
 
 def seed_db(db: Path) -> None:
@@ -110,9 +107,7 @@ def start_hosts(site, tmp: Path, domain: int, db: Path) -> dict[str, Proc]:  # n
     for host in site_hosts.HOSTS:
         # the plant at 1x: the stop chain runs on wall time, so the 0.5 s criterion is not flattered
         file = site_hosts.write_host_launch(host, tmp, skip=SKIP_NODES, overrides={"sim_plant": {"speed": 1.0}})
-        # one process per node: with a host's nodes composed into one participant, the site node had not
-        # discovered five of the action servers across the namespaces after 120 s (one run); not yet understood
-        procs[host] = Proc(site.exec_cmd(host, [str(VENV / "bin" / "tms-launch"), "--layout", "per-node", str(file)]),
+        procs[host] = Proc(site.exec_cmd(host, [str(VENV / "bin" / "tms-launch"), "--layout", "composed", str(file)]),
                            env, name=host)
     return procs
 
@@ -137,8 +132,27 @@ def ic_speed(probe: Probe) -> float:
     return speeds(s[-2], s[-1])["ic_base"] if len(s) >= 2 else 0.0
 
 
-def test_a_machine_pc_cut_off_mid_task_stops_its_machine_fails_its_task_and_recovers(
-        site, site_node, domain: int, tmp_path: Path) -> None:  # noqa: ANN001
+def test_a_machine_pc_cut_off_mid_task_stops_its_machine_fails_its_task_and_recovers(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "tests.hosts.test_partition", str(tmp_path)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=1500)
+    print(proc.stdout[-4000:])
+    assert proc.returncode == 0, f"the partition scenario failed ({proc.returncode}):\n{proc.stdout[-30000:]}\n" \
+                                 f"{proc.stderr[-30000:]}"
+    assert "ZX200 at rest" in proc.stdout and "new tasks run on both machines" in proc.stdout, proc.stdout[-4000:]
+
+
+def scenario(tmp_path: Path) -> None:
+    """The partition scenario; an AssertionError says what failed and each host's last lines."""
+    with isolated_domain() as domain, contextlib.ExitStack() as stack:
+        site = site_hosts.Site(prefix=f"tp{os.getpid()}-")
+        site.up()
+        stack.callback(site.down)
+        # the site network exists before this process's first participant (module docstring)
+        node = stack.enter_context(site_node(domain))
+        run(site, node, domain, tmp_path)
+
+
+def run(site, site_node, domain: int, tmp_path: Path) -> None:  # noqa: ANN001
     from diagnostic_msgs.msg import DiagnosticArray
 
     db = tmp_path / "db"
@@ -187,6 +201,7 @@ def test_a_machine_pc_cut_off_mid_task_stops_its_machine_fails_its_task_and_reco
         site.restore("zx200_pc")
         assert probe.wait(lambda: any(m.startswith("site link lost") for m in diag), 60), \
             f"/zx200/diagnostic never said why: {diag[-3:]}\n{dump()}"
+        print(f"converter: {next(m for m in diag if m.startswith('site link lost'))}", flush=True)
         t_back = probe.clock
         assert probe.wait(lambda: probe.clock > t_back + 2.0, 30)
         assert zx_rest_time(probe.series(), t_back, t_back + 2.0) is not None, "the ZX200 moved by itself"
@@ -196,7 +211,16 @@ def test_a_machine_pc_cut_off_mid_task_stops_its_machine_fails_its_task_and_reco
         assert probe.wait(lambda: zx_speed(probe) > 0.05 and ic_speed(probe) > 0.05, 180), \
             f"new tasks did not run both machines: {probe.tasks}\n{dump()}"
         assert probe.task(ZX200_TASK)[0] == RUNNING and probe.task(IC120_TASK)[0] == RUNNING
+        print("new tasks run on both machines after the operator cleared the latch", flush=True)
     finally:
         probe.close()
         for proc in procs.values():
             proc.kill()
+
+
+if __name__ == "__main__":
+    reason = site_hosts.unavailable()
+    if reason:
+        raise SystemExit(f"site hosts: {reason}")
+    use_platform_profiles()
+    scenario(Path(sys.argv[1]))

@@ -39,7 +39,7 @@ __all__ = ["RosGoal", "ManagerRosPort", "CONFIRM_TOPIC", "HEARTBEAT_TOPIC"]
 CONFIRM_TOPIC = "/tms_ts/confirm"
 #: std_msgs/String(model_name) from every tms_ts_subtasks process every HEARTBEAT_PERIOD_S (wall time)
 HEARTBEAT_TOPIC = "/tms_ts/subtask_heartbeat"
-#: 0.05 s: a machine PC's converter takes 0.25 s of silence (5 periods) as a cut site link and must still bring
+#: 0.05 s: a machine PC's converter takes 0.2 s of silence (4 periods) as a cut site link and must still bring
 #: its machine to rest within 0.5 s (docs/deployment.md, site watchdog)
 HEARTBEAT_PERIOD_S = 0.05
 #: a heartbeat older than this [s wall] counts as silent (the leaf then waits server_lost_s more)
