@@ -27,9 +27,15 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # pragma: no cover
     from rclpy.node import Node
 
-__all__ = ["run_node", "make_executor", "uses_wait_set", "EXECUTORS"]
+__all__ = ["run_node", "make_executor", "uses_wait_set", "EXECUTORS", "ACTION_RESULT_TIMEOUT_S"]
 
 EXECUTORS = ("single", "multi", "events")
+#: [s] every action server of the platform keeps a finished goal (its status entry and its result) this long;
+#: rclpy's default is 900 s. Every status message carries the whole array and every client converts it to
+#: Python: at 10 goals a second the arrays grew by thousands of entries and the manager's 50 Hz tick lost most
+#: of its periods. Our clients ask for a result as soon as a goal is accepted, and ask again at most 3 s after
+#: its status said it ended (zx200_planner RESULT_GRACE_S), so a result is never fetched later than this.
+ACTION_RESULT_TIMEOUT_S = 5.0
 
 
 def make_executor(kind: str | None = None, *, threads: int = 8, context=None):  # noqa: ANN001, ANN201

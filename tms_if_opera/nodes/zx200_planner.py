@@ -46,7 +46,7 @@ from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
 from tms_common.goals import OUTCOME_QOS, RunningGoals
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.ticker import Ticker
 from tms_if_opera.interface import (
     CHANGE_POSE,
@@ -104,7 +104,8 @@ class Zx200PlannerNode(Node):
                               TmsRpZx200ReleaseSimple: RELEASE_SIMPLE}
         self._servers = [
             ActionServer(self, action_type, name, execute_callback=functools.partial(self._execute, execute),
-                         goal_callback=self._on_goal, cancel_callback=self._on_cancel, callback_group=self._group)
+                         goal_callback=self._on_goal, cancel_callback=self._on_cancel, callback_group=self._group,
+                         result_timeout=ACTION_RESULT_TIMEOUT_S)
             for action_type, name, execute in (
                 (TmsRpZx200ChangePose, CHANGE_POSE, self._change_pose),
                 (TmsRpZx200ExcavateSimple, EXCAVATE_SIMPLE, self._excavate),

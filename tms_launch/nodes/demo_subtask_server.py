@@ -9,7 +9,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_msg_ts.action import LeafNodeBase
 
@@ -33,6 +33,7 @@ class DemoSubtaskServer(Node):
             goal_callback=self._on_goal,
             cancel_callback=lambda _goal: CancelResponse.ACCEPT,
             callback_group=ReentrantCallbackGroup(),
+            result_timeout=ACTION_RESULT_TIMEOUT_S,
         )
 
     def _on_goal(self, goal: LeafNodeBase.Goal) -> GoalResponse:

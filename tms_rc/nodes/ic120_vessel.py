@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 from com3_msgs.action import SetDumpAngle
 from com3_msgs.msg import JointCmd
 from tms_common.config import config_path, load_yaml
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_model.com3 import CARRIER_DUMP_JOINT, POSITION
 from tms_model.machines import CRAWLER_DUMP, load_machine
@@ -48,7 +48,8 @@ class Ic120Vessel(Node):
         self.create_subscription(JointState, "joint_states", self._on_joints, 20)
         self._server = ActionServer(self, SetDumpAngle, "set_dump_angle", execute_callback=self._execute,
                                     goal_callback=lambda _g: GoalResponse.ACCEPT,
-                                    cancel_callback=lambda _h: CancelResponse.ACCEPT)
+                                    cancel_callback=lambda _h: CancelResponse.ACCEPT,
+                                    result_timeout=ACTION_RESULT_TIMEOUT_S)
         self.create_timer(1.0 / rate, self._tick)
         self.get_logger().info(f"set_dump_angle ready (max {self.ctl.params.max_angle:.3f} rad)")
 

@@ -32,7 +32,7 @@ from sensor_msgs.msg import JointState
 
 from com3_msgs.msg import JointCmd
 from tms_common.errors import ConfigError
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_model.com3 import VELOCITY
 from tms_model.excavator import codes
@@ -82,7 +82,7 @@ class ArmControllerNode(Node):
         self._server = ActionServer(
             self, Zx200ArmMove, "arm_controller/move", execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=lambda _h: CancelResponse.ACCEPT,
-            callback_group=ReentrantCallbackGroup(),
+            callback_group=ReentrantCallbackGroup(), result_timeout=ACTION_RESULT_TIMEOUT_S,
         )
         self.get_logger().info(f"zx200_arm_controller ready at {self.cfg.rate_hz} Hz")
 

@@ -35,7 +35,7 @@ from rclpy.task import Future
 
 from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
 from nav2_msgs.msg import MissedWaypoint
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_model.geometry import yaw_from_quaternion
 from tms_rp.ic120 import errors
@@ -92,7 +92,7 @@ class Ic120Navigator(Node):
         self._servers = [
             ActionServer(self, action, name, execute_callback=self._executor_for(name),
                          goal_callback=lambda _g: GoalResponse.ACCEPT,
-                         cancel_callback=lambda _h: CancelResponse.ACCEPT)
+                         cancel_callback=lambda _h: CancelResponse.ACCEPT, result_timeout=ACTION_RESULT_TIMEOUT_S)
             for name, action in kinds.items()
         ]
         self.create_timer(self.dt, self._tick)

@@ -54,7 +54,7 @@ from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
 from tms_common.goals import OUTCOME_QOS, RunningGoals
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.ticker import Ticker
 from tms_if_opera.interface import OUTCOME_GRACE_S as PLANNING_OUTCOME_GRACE_S
 from tms_if_opera.interface import PLANNING_OUTCOME
@@ -70,11 +70,6 @@ __all__ = ["SubtaskServers", "main", "node_name_from_args"]
 
 R = SubtaskOutcome
 TICK_S = 0.05  # [s wall] how often a running goal looks at cancel, stop, deadlines
-#: [s] a finished goal stays in the server's status array this long (rclpy's default: 900 s). Every status
-#: message carries the whole array and every manager's action client converts it to Python: at 10 goals a
-#: second the arrays grew by thousands of entries and the manager's 50 Hz tick lost most of its periods.
-#: The manager asks for a goal's result as soon as it is accepted, so a result is never fetched later.
-RESULT_TIMEOUT_S = 5.0
 SERVER_CHECK_S = 0.2  # [s wall] how often a running goal looks for its planning server on the graph
 _READ_ONLY = ParameterDescriptor(read_only=True)
 
@@ -150,7 +145,7 @@ class SubtaskServers(Node):
                 goal_callback=lambda _goal, s=spec: self._on_goal(s),
                 cancel_callback=self._on_cancel,
                 callback_group=group,
-                result_timeout=RESULT_TIMEOUT_S,
+                result_timeout=ACTION_RESULT_TIMEOUT_S,
             ))
         self.heartbeat = self.create_publisher(String, HEARTBEAT_TOPIC, 10)
         self._goals = RunningGoals()  # SIGINT/SIGTERM: every running goal cancels downstream, then aborts
