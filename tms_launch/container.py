@@ -10,11 +10,13 @@ Each node is the module-level ``class X(Node)`` of the module its executable's c
 would have been given on its command line. The process then does what :func:`tms_common.node.run_node`
 does for one node, for all of them:
 
-* one executor (:func:`tms_common.node.make_executor`: the process-wide executor choice) spins every node;
-* the QoS-incompatibility events of every node are polled off the executor
-  (:func:`tms_common.qos_events.defer_qos_incompatibility_events`);
-* one ``/clock`` relay thread sets the clock of every node on simulated time
-  (:class:`tms_common.sim_clock.ClockRelay`): one ``/clock`` subscription per process, not per node;
+* one executor spins every node: :data:`CONTAINER_EXECUTOR` (``events``: rclpy's EventsExecutor, through
+  :func:`tms_common.node.make_executor`), or ``$TMS_EXECUTOR`` (``single`` for debugging);
+* on ``single`` only (EventsExecutor ignores callback groups, so nothing can be kept off it): the
+  QoS-incompatibility events of every node are polled off the executor
+  (:func:`tms_common.qos_events.defer_qos_incompatibility_events`), and one ``/clock`` relay thread sets the
+  clock of every node on simulated time (:class:`tms_common.sim_clock.ClockRelay`); on ``events`` each node
+  keeps its own, as under :func:`tms_common.node.run_node`;
 * SIGINT/SIGTERM stop the nodes one at a time, last in the file first, with the context still valid: a
   node's ``on_stop_requested`` hook runs (the spin goes on while it returns True), a short settle spin
   handles what its last callbacks left queued, then it leaves the executor and ``destroy_node`` runs while
@@ -47,6 +49,11 @@ from typing import Any
 __all__ = ["node_class", "main"]
 
 _SETTLE_S = 0.2  # [s] spin left to the container after a node's stop hook, before the node is destroyed
+#: a container's executor unless ``$TMS_EXECUTOR`` says otherwise: rclpy's EventsExecutor (usable through
+#: tms_common.rclpy_compat) ran one paper cycle composed at 0.94 core-s per simulated s against 1.36 on the
+#: SingleThreadedExecutor, whose per-wake cost grows with every node's entities in its one wait set
+#: (docs/performance.md, "containers on events")
+CONTAINER_EXECUTOR = "events"
 _HOOK_PERIOD_S = 0.05  # [s] how often a node's on_stop_requested is asked again while it winds down
 
 
@@ -107,6 +114,16 @@ def _spin_for(executor: Any, seconds: float) -> None:
         executor.spin_once(timeout_sec=min(left, _HOOK_PERIOD_S))
 
 
+class _CallSoon:
+    """The stop trigger on an executor without guard conditions: ``trigger()`` queues ``callback`` on it."""
+
+    def __init__(self, executor: Any, callback: Any) -> None:
+        self._executor, self._callback = executor, callback
+
+    def trigger(self) -> None:
+        self._executor.call_soon(self._callback)
+
+
 def _signals_to(guard_holder: list[Any]):  # noqa: ANN202
     """SIGINT/SIGTERM trigger the stop guard condition once it exists. No callback is cut in half."""
     from tms_common.node import signals_to
@@ -130,7 +147,7 @@ def run_container(name: str, members: list[_Member]) -> int:
 
     from tms_common.dds import use_platform_profiles
     from tms_common.errors import TmsError
-    from tms_common.node import make_executor
+    from tms_common.node import make_executor, uses_wait_set
     from tms_common.qos_events import defer_qos_incompatibility_events
     from tms_common.sim_clock import relay_clock
 
@@ -146,11 +163,17 @@ def run_container(name: str, members: list[_Member]) -> int:
     code = 0
     with _signals_to(guard):
         try:
+            executor = make_executor(os.environ.get("TMS_EXECUTOR") or CONTAINER_EXECUTOR)
+            # rclpy's EventsExecutor ignores callback groups: parked QoS handlers and a relayed /clock would
+            # still be served by it, so on ``events`` every node keeps its own (as run_node does)
+            wait_set = uses_wait_set(executor)
             for member in members:
                 current = member
                 cls = node_class(member.package, member.executable)
                 member.node = cls(cli_args=member.ros_args)
                 built.append(member)
+                if not wait_set:
+                    continue
                 defer_qos_incompatibility_events(member.node)
                 if relay is None:
                     relay = relay_clock(member.node)
@@ -163,11 +186,15 @@ def run_container(name: str, members: list[_Member]) -> int:
             def stop() -> None:
                 if not stopping:  # a second signal while the nodes stop one by one changes nothing
                     stopping.append(True)
+                    if not wait_set:
+                        executor.request_stop()  # spin() returns; the nodes stop as after the exception
+                        return
                     raise _StopRequested
 
-            # on the first node: destroyed last, so a signal is taken until the end
-            guard.append(built[0].node.create_guard_condition(stop))
-            executor = make_executor()
+            if wait_set:  # on the first node: destroyed last, so a signal is taken until the end
+                guard.append(built[0].node.create_guard_condition(stop))
+            else:  # no guard conditions on events: the relay thread queues the stop on the spinning thread
+                guard.append(_CallSoon(executor, stop))
             for member in built:
                 executor.add_node(member.node)
             print(f"container of {len(built)} node(s) in process {os.getpid()}: "
