@@ -33,6 +33,7 @@ The CAN links of the machines whose plant and converter share this process are i
 from __future__ import annotations
 
 import faulthandler
+import functools
 import importlib
 import inspect
 import json
@@ -196,6 +197,8 @@ def run_container(name: str, members: list[_Member]) -> int:
             else:  # no guard conditions on events: the relay thread queues the stop on the spinning thread
                 guard.append(_CallSoon(executor, stop))
             for member in built:
+                if not wait_set:
+                    _exit_through_executor(member.node, executor)
                 executor.add_node(member.node)
             print(f"container of {len(built)} node(s) in process {os.getpid()}: "
                   f"{', '.join(m.node.get_fully_qualified_name() for m in built)}", flush=True)
@@ -226,8 +229,31 @@ def run_container(name: str, members: list[_Member]) -> int:
     return code
 
 
+def _exit_through_executor(node: Any, executor: Any) -> None:
+    """On the events executor, a ``SystemExit`` raised in one of ``node``'s timer callbacks (a job that has
+    finished, e.g. the supervisor) is re-raised from the spin through ``call_soon``: rclpy's EventsExecutor would
+    log it as a FATAL "Exception in 'timers' callback" first. The SingleThreadedExecutor raises it as it is."""
+
+    def reraise(exc: SystemExit) -> None:
+        raise exc
+
+    for timer in node.timers:
+        callback = timer.callback
+
+        def guarded(callback: Any = callback) -> Any:
+            try:
+                return callback()
+            except SystemExit as exc:
+                executor.call_soon(functools.partial(reraise, exc))
+                return None
+        timer.callback = guarded
+
+
 def _stop_members(built: list[_Member], executor: Any, relay: Any, relay_owner: _Member | None) -> None:
     """Stop the nodes last-built first: stop hook (spinning), settle, leave the executor, destroy."""
+    from tms_common.node import uses_wait_set
+
+    events = executor is not None and not uses_wait_set(executor)
     for member in reversed(built):
         node = member.node
         try:
@@ -237,7 +263,16 @@ def _stop_members(built: list[_Member], executor: Any, relay: Any, relay_owner: 
                 while hook is not None and hook() and time.monotonic() - began < 60.0:
                     _spin_for(executor, _HOOK_PERIOD_S)
                 _spin_for(executor, _SETTLE_S)
+                if events:
+                    for timer in node.timers:
+                        timer.cancel()
                 executor.remove_node(node)
+                if events:
+                    # rclpy's EventsExecutor runs what it queued for a node after remove_node: a timer of the
+                    # IC120 vessel and a subscription of the /tf node ran after destroy_node and raised
+                    # InvalidHandle in the next node's stop. Their timers are cancelled, and what is queued runs
+                    # now, while the node still exists.
+                    _spin_for(executor, _HOOK_PERIOD_S)
             if relay is not None and member is not relay_owner:
                 relay.unfollow(node)
         except BaseException as exc:  # noqa: BLE001 - one node's failing stop must not keep the others running

@@ -94,6 +94,10 @@ def test_composed_paper_cycle(procs, tmp_path):
     assert m["real_time_factor"] > 0, m
     # the CPU table has one row per container
     assert re.search(r"^\s+site_server \(4 nodes\)\s+[0-9.]+ s", out, re.M), tail
+    # the supervisor's end and every node's stop are clean (on the events executor: no FATAL callback log,
+    # no timer of a destroyed node)
+    unclean = [ln for ln in out.splitlines() if any(w in ln for w in ("[FATAL]", "while stopping", "Destroyable"))]
+    assert not unclean, "\n".join(unclean[:20])
 
 
 def test_composed_stop_mid_task(procs, tmp_path):

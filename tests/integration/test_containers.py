@@ -49,6 +49,8 @@ def test_composed_nodes_share_a_process_and_talk_inside_it(procs, tmp_path):
     _stop(launcher)
     assert time.monotonic() - started < 10.0
     assert not [p for p in pids if _alive(p)]
+    unclean = [ln for ln in launcher.output.splitlines() if any(w in ln for w in ("[FATAL]", "while stopping", "Destroyable"))]
+    assert not unclean, unclean
     assert re.search(r"^\s+pair \(2 nodes\)\s+[0-9.]+ s\s+[0-9.]+ % of a core$", launcher.output, re.M), launcher.output
 
 
