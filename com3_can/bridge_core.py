@@ -39,16 +39,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from com3_can.bus import load_bus_config
 from com3_can.codec import AliveCounter, Com3Codec
 from com3_can.errors import Com3CommandError, Com3DecodeError, Com3EncodeError
 from com3_can.profiles import PROFILES, ConverterProfile
 from com3_can.registry import machine_type
 from com3_can.scheduler import FrameScheduler
 from com3_can.signal_map import PILOT_MAX_MPA
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_model.com3 import CONTROL_NAMES, EFFORT, POSITION, VELOCITY
-from tms_model.machines import load_machine
+from tms_model.fleet import load_named
 from tms_model.site import Projector, load_site
 
 __all__ = [
@@ -168,16 +168,17 @@ class BridgeConfig:
 
     @classmethod
     def load(cls, machine: str, can_config: Mapping[str, Any] | None = None, **overrides: Any) -> BridgeConfig:
-        """Build from ``config/can/<machine>.yaml``, the machine description and the site; ``overrides`` win."""
-        description = load_machine(machine)
+        """Build for the machine called ``machine`` from its kind's ``config/can/<kind>.yaml`` (as the site
+        changes it for this machine), the machine description and the site; ``overrides`` win."""
+        description = load_named(machine)
         profile = PROFILES.get(description.type)
         if can_config is None:
-            can_config, _ = load_yaml(config_path("can", f"{machine}.yaml"))
+            can_config = load_bus_config(machine)
         bridge = dict((can_config or {}).get("bridge") or {})
         known = {"watchdog_s", "diagnostic_period_s", "default_setting", "effort_dead_zone"}
         unknown = sorted(set(bridge) - known)
         if unknown:
-            raise ConfigError(f"config/can/{machine}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
+            raise ConfigError(f"config/can/{description.kind}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
         kwargs: dict[str, Any] = {"machine": machine, "machine_type": description.type, **bridge}
         kwargs.update(profile(machine).config_from_machine(description))
         site = load_site()

@@ -53,7 +53,8 @@ class Registry(Generic[T]):
 
 
 def machine_type(model: str) -> str:
-    """The type (profile name) of machine model ``model``: ``type`` of its description (:mod:`tms_model.machines`)."""
-    from tms_model.machines import load_machine
+    """The type (profile name) of the machine called ``model``: ``type`` of its kind's description
+    (:func:`tms_model.fleet.load_named`)."""
+    from tms_model.fleet import load_named
 
-    return load_machine(model).type
+    return load_named(model).type

@@ -353,7 +353,14 @@ def load_plant(
     specs: dict[str, Any] = {}
     types: dict[str, str] = {}
     for name, mpath in machine_paths.items():
-        kind = _description(mpath).type
+        description = _description(mpath)
+        entry = site_model.machines.get(name)
+        if entry is None:
+            raise m.key_error(name, f"no machine {name!r} on the site {site_path} (known: {sorted(site_model.machines)})")
+        if entry.kind != description.kind:
+            raise m.key_error(name, f"{mpath} describes a {description.kind}, but {name!r} is a {entry.kind} on the "
+                              f"site {site_path}")
+        kind = description.type
         try:
             profile = PLANT_PROFILES.get(kind)
         except ConfigError as exc:

@@ -14,6 +14,7 @@ back to a default).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import re
@@ -164,6 +165,21 @@ class Machine:
     vessel: Vessel | None = None
     tf_prefix: str = ""  # frames of this machine on /tf are "<tf_prefix>/<link>" ("" = bare link names)
     source: str = field(default="", compare=False)
+    #: the machine's name on the site (its namespace; :func:`tms_model.fleet.load_named`); "" = the kind itself
+    name: str = ""
+
+    @property
+    def model_name(self) -> str:
+        """The name of this machine on the site (the original's ``model_name``): its own name, else its kind."""
+        return self.name or self.kind
+
+    def named(self, name: str) -> Machine:
+        """This kind as the machine called ``name``. A ``tf_prefix`` that begins with the kind is the
+        namespace's (ic120_ros2 launches ``<namespace>_tf``), so the name replaces the kind in it."""
+        prefix = self.tf_prefix
+        if prefix.startswith(self.kind):
+            prefix = name + prefix[len(self.kind):]
+        return dataclasses.replace(self, name=name, tf_prefix=prefix)
 
     def frame(self, link: str) -> str:
         """The /tf frame id of ``link`` of this machine (OPERA's ``${tf_prefix}/<link>`` convention)."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +24,10 @@ from tms_common.config import config_path, load_yaml
 from tms_model.geometry import Pose2D
 from tms_model.reader import Reader
 
-__all__ = ["Mound", "Projector", "Site", "Zone", "load_site"]
+__all__ = ["Mound", "Projector", "Site", "SiteMachine", "Zone", "load_site"]
+
+#: a machine name is a ROS namespace segment (the original's model_name: zx200, ic120_1, d37pxi_24)
+MACHINE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 
 
 @dataclass(frozen=True)
@@ -114,6 +118,17 @@ class Projector:
 
 
 @dataclass(frozen=True)
+class SiteMachine:
+    """A machine on the site: its name (the original's ``model_name``, the namespace of its nodes), its kind
+    (``config/machines/<kind>.yaml``) and what its CAN link changes from its kind's bus settings
+    (``config/can/<kind>.yaml``): two machines of one kind need links of their own."""
+
+    name: str
+    kind: str
+    can: Mapping[str, object] = field(default_factory=lambda: MappingProxyType({}))
+
+
+@dataclass(frozen=True)
 class Site:
     """``config/site.yaml``: CRS, map origin, named poses, zones and the mound."""
 
@@ -123,7 +138,15 @@ class Site:
     points: Mapping[str, Pose2D]
     zones: Mapping[str, Zone]
     mound: Mound
+    machines: Mapping[str, SiteMachine] = field(default_factory=lambda: MappingProxyType({}))
     source: str = field(default="", compare=False)
+
+    def machine(self, name: str) -> SiteMachine:
+        """The machine called ``name``; KeyError lists the site's machines."""
+        try:
+            return self.machines[name]
+        except KeyError:
+            raise KeyError(f"{self.source}: no machine {name!r} in machines (known: {sorted(self.machines)})") from None
 
     def point(self, name: str) -> Pose2D:
         """The named pose; KeyError lists the known names."""
@@ -186,6 +209,7 @@ def _parse(path: Path) -> Site:
         raise m.key_error("height", f"must be > 0, got {height}")
     mound = Mound(shape, c.number("x"), c.number("y"), base, top_r, height, m.number("ground_z", default=0.0))
     return Site(
+        machines=_machines(top),
         crs=crs,
         origin_plane=origin,
         origin_geodetic=geodetic,
@@ -194,6 +218,29 @@ def _parse(path: Path) -> Site:
         mound=mound,
         source=str(path),
     )
+
+
+_CAN_KEYS = {"interface", "channel", "port"}
+
+
+def _machines(top: Reader) -> Mapping[str, SiteMachine]:
+    if not top.has("machines"):
+        return MappingProxyType({})
+    r = top.sub("machines")
+    out: dict[str, SiteMachine] = {}
+    for name in r.keys():
+        if not MACHINE_NAME.fullmatch(str(name)):
+            raise r.key_error(name, "a machine name is a ROS namespace segment: a letter, then letters, digits or _")
+        m = r.sub(name)
+        m.only({"kind", "can"})
+        kind = m.string("kind")
+        can: dict[str, object] = {}
+        if m.has("can"):
+            c = m.sub("can")
+            c.only(_CAN_KEYS)
+            can = {k: (int(c.number(k, lo=1, hi=65535)) if k == "port" else c.string(k)) for k in c.keys()}
+        out[name] = SiteMachine(name, kind, MappingProxyType(can))
+    return MappingProxyType(out)
 
 
 @functools.lru_cache(maxsize=8)

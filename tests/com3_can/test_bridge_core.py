@@ -268,7 +268,7 @@ def test_machine_setting_and_bad_config() -> None:
 
     with pytest.raises(ConfigError, match="watchdog_s must be > 0"):
         BridgeConfig.load("zx200", watchdog_s=0.0)
-    with pytest.raises(ConfigError, match=r"d61.yaml: no such machine description .*known kinds: .*ic120.*zx200"):
+    with pytest.raises(ConfigError, match=r"site.yaml: no machine 'd61' in machines \(known: .*ic120.*zx200"):
         BridgeConfig.load("d61")
     with pytest.raises(ConfigError, match=r"default_setting.turbo"):
         BridgeCore(BridgeConfig.load("zx200", default_setting={"turbo": 1}), 0.0)

@@ -28,7 +28,8 @@ waiting for DDS discovery to drop it (~20 s with the default lease).
 ZX200 change_pose / excavate_simple set the record's ``LOCK_FLG`` false when a result arrives (so
 sensing may update the excavation target again), as the original subtasks did.
 
-Parameters (read-only, read at start-up): ``machine`` (required), ``model_name`` (default = machine),
+Parameters (read-only, read at start-up): ``machine`` (the kind whose subtasks are served; default the kind of
+``model_name`` on the site, config/site.yaml ``machines``), ``model_name`` (the namespace; default = machine),
 ``planning_wait_s`` (5.0), ``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri``, ``db_path``.
 The node is named ``<machine>_subtasks`` when ``-p machine:=<m>`` is on the command line, so the two
 machines' servers started by hand do not share a name.
@@ -111,6 +112,10 @@ class SubtaskServers(Node):
 
         machine = str(param("machine", ""))
         self.model_name = str(param("model_name", machine)) or machine
+        if not machine and self.model_name:  # ic120_1 serves its kind's subtasks
+            from tms_model.fleet import machine_kind
+
+            machine = machine_kind(self.model_name)
         self.planning_wait_s = float(param("planning_wait_s", 5.0))
         self.stop_timeout_s = float(param("stop_timeout_s", 5.0))
         self.server_lost_s = float(param("server_lost_s", 3.0))
