@@ -26,7 +26,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
 
-from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine, load_machine
+from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
 from tms_model.transform import Transform, quaternion_from_axis_angle, quaternion_multiply
 
 __all__ = ["MachineTree", "TreeJoint", "Visual", "load_tree", "machine_tree"]
@@ -211,6 +211,8 @@ def machine_tree(machine: Machine) -> MachineTree:
     return _BUILDERS[machine.type](machine)
 
 
-def load_tree(kind: str) -> MachineTree:
-    """``machine_tree(load_machine(kind))``."""
-    return machine_tree(load_machine(kind))
+def load_tree(name: str) -> MachineTree:
+    """The tree of the machine called ``name`` on the site (its kind's, with its own /tf prefix)."""
+    from tms_model.fleet import load_named
+
+    return machine_tree(load_named(name))

@@ -77,3 +77,11 @@ def test_malformed_machine_entries_name_file_and_key(tmp_path: Path, entry: str,
     path = _site_with(tmp_path, entry)
     with pytest.raises(ConfigError, match=rf"site.yaml:\d+: machines.*{problem}"):
         load_site(path)
+
+
+def test_tree_of_a_named_machine_uses_its_prefix() -> None:
+    from tms_model.urdf import load_tree
+
+    one, kind = load_tree("ic120_1"), load_tree("ic120")
+    assert one.machine.frame("vessel_link") == "ic120_1_tf/vessel_link"
+    assert [j.name for j in one.joints] == [j.name for j in kind.joints]

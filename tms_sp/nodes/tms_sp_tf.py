@@ -13,7 +13,8 @@ the site in one node (the tree and its names: :mod:`tms_sp.site_tf`, :mod:`tms_m
   ``map -> odom``; each stamped with its message's stamp.
 
 Parameters (read at start-up): ``machines`` (string array, default ``[zx200, ic120]``; each machine's topics
-are under ``/<machine>/``, its kind's description is ``config/machines/<machine>.yaml``), ``site``
+are under ``/<machine>/``; names of config/site.yaml ``machines``, each with its kind's description and its own
+/tf prefix), ``site``
 (site YAML, default config/site.yaml). A malformed message is logged naming the machine and field and
 publishes nothing.
 """
