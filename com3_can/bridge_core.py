@@ -5,14 +5,15 @@ it with plain numbers and an injected clock. It is the same for every machine ty
 (its channels, how a command becomes frames, how a state frame becomes outputs) is its profile,
 :mod:`com3_can.profiles`, chosen by the ``type`` of the machine description.
 
-* Commands (``front_cmd``, ``tracks_cmd`` / ``track_cmd``, ``cmd_vel``, ``rot_dump_cmd``, ``machine_setting``) are
+* Commands (``front_cmd``, ``tracks_cmd`` / ``track_cmd``, ``cmd_vel``, ``rot_dump_cmd``, ``blade_cmd``,
+  ``machine_setting``) are
   validated as a whole (unknown joint, NaN, array length, value outside the COM3 range ...). A bad
   command raises :class:`Com3CommandError` naming topic, joint/field and value, and changes nothing:
   values are never clipped or wrapped. A good one updates the frame and returns it for an immediate
   send (event-triggered, then cyclic at the DBC period).
 * ``emg_stop`` is a latch: while set, every motion frame is neutral and motion commands are refused;
   only an explicit ``False`` clears it (and the cleared channels stay neutral until new commands).
-* Watchdog per channel (front, travel, vessel): no accepted command for ``watchdog_s`` -> the channel
+* Watchdog per channel (front, travel, vessel, swing, blade): no accepted command for ``watchdog_s`` -> the channel
   goes neutral at once and the diagnostic says which topic went silent and for how long.
 * Site watchdog (``site_timeout_s`` > 0, off by default): on a machine PC cut off from the site the
   controller may keep commanding, so command freshness says nothing; the node feeds the site's heartbeat to
@@ -40,7 +41,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from com3_can.bus import load_bus_config
-from com3_can.codec import AliveCounter, Com3Codec
+from com3_can.codec import AliveCounter, Com3Codec, codec_for
 from com3_can.errors import Com3CommandError, Com3DecodeError, Com3EncodeError
 from com3_can.profiles import PROFILES, ConverterProfile
 from com3_can.registry import machine_type
@@ -148,6 +149,13 @@ class BridgeConfig:
     effort_dead_zone: Mapping[str, float] = field(default_factory=dict)
     track_gauge: float = 2.0
     vessel_max_angle: float = 1.134464
+    #: a carrier's swing (rotate_joint) command range [rad]; None = no rotating upper body
+    swing_range: tuple[float, float] | None = None
+    #: a dozer's blade lift (lift_joint) command range [rad] and rate limit [rad/s]
+    blade_range: tuple[float, float] = (0.0, 0.0)
+    blade_velocity: float = 0.0
+    #: DBC file of the machine's bus (com3_can/dbc); "" = the type's default
+    dbc: str = ""
     #: site map origin in the plane-rectangular CRS (excavator swing-centre -> map) and the CRS itself
     map_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     crs: str = "EPSG:6677"
@@ -179,7 +187,10 @@ class BridgeConfig:
         unknown = sorted(set(bridge) - known)
         if unknown:
             raise ConfigError(f"config/can/{description.kind}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
-        kwargs: dict[str, Any] = {"machine": machine, "machine_type": description.type, **bridge}
+        from com3_can.codec import dbc_file
+
+        kwargs: dict[str, Any] = {"machine": machine, "machine_type": description.type,
+                                  "dbc": dbc_file(description.kind), **bridge}
         kwargs.update(profile(machine).config_from_machine(description))
         site = load_site()
         kwargs["map_origin"] = site.origin_plane
@@ -223,7 +234,7 @@ class BridgeCore:
         self.machine = config.machine
         #: what this machine type does (channels, command and state handlers), see com3_can.profiles
         self.profile: ConverterProfile = PROFILES.get(config.machine_type)(config.machine)
-        self.codec = codec or self.profile.codec()
+        self.codec = codec or (codec_for(config.dbc, config.machine) if config.dbc else self.profile.codec())
         self._lock = threading.RLock()
         self._alive = AliveCounter()
         self._values: dict[str, dict[str, float]] = {f: self.codec.neutral(f) for f in self.codec.command_frames}
@@ -372,8 +383,14 @@ class BridgeCore:
 
     def rot_dump_cmd(self, names: Sequence[str], control_type: int, position: Sequence[float], now: float) -> list[Tx]:
         """``rot_dump_cmd`` (JointCmd, com3_ros crawler carrier): POSITION of ``dump_joint`` = target vessel angle
-        [rad], 0 = lowered, + = raised (the crawler-carrier profile)."""
+        [rad], 0 = lowered, + = raised, and of ``rotate_joint`` = target swing angle where the carrier has a swing
+        (the crawler-carrier profile)."""
         return self._command("rot_dump_cmd", self.profile.rot_dump_cmd, names, control_type, position, now)
+
+    def blade_cmd(self, names: Sequence[str], control_type: int, position: Sequence[float], velocity: Sequence[float],
+                  now: float) -> list[Tx]:
+        """``blade_cmd`` (JointCmd, ours): POSITION or VELOCITY of a dozer's ``lift_joint`` (+ = down)."""
+        return self._command("blade_cmd", self.profile.blade_cmd, names, control_type, position, velocity, now)
 
     def machine_setting(self, fields: Mapping[str, float], now: float) -> list[Tx]:
         """``machine_setting``: signal name -> value of Machine_Setting_Cmd (the node maps the ROS message).

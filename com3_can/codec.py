@@ -1,8 +1,10 @@
 """DBC-driven COM3 codecs (cantools) with strict range checks, neutral commands and the alive counter.
 
-:func:`load_codec` returns an immutable :class:`Com3Codec` for ``"zx200"`` (the published COM3 excavator
-frames, ``dbc/excavator_com3.dbc``) or ``"ic120"`` (our crawler-carrier extension,
-``dbc/crawler_carrier_com3.dbc``). Encoding refuses any value outside the signal's DBC range (or its raw
+:func:`load_codec` returns an immutable :class:`Com3Codec` for a machine KIND (``zx200``, ``ic120``, ``mst110cr``,
+``d37pxi``, ...): the DBC its machine description names (``can: {dbc: ...}`` of ``config/machines/<kind>.yaml``,
+e.g. the published COM3 excavator frames ``dbc/excavator_com3.dbc``, our crawler-carrier extension
+``dbc/crawler_carrier_com3.dbc`` or our dozer extension ``dbc/dozer_com3.dbc``), else its type's default DBC (the
+converter profile's ``dbc``). Encoding refuses any value outside the signal's DBC range (or its raw
 bit range where the DBC says ``[0|0]``, i.e. unspecified) instead of clipping or wrapping; decoding
 refuses unknown ids, wrong DLCs and values outside the DBC range. The tables are built once from the
 parsed DBC, so the per-frame cost is one cantools call plus one range loop.
@@ -21,19 +23,19 @@ import cantools
 import cantools.database
 
 from com3_can.errors import Com3DecodeError, Com3EncodeError
+from tms_common.errors import ConfigError
 
 __all__ = [
-    "MACHINES",
     "SignalSpec",
     "Com3Codec",
     "AliveCounter",
     "load_codec",
     "load_codec_from_string",
+    "codec_for",
+    "dbc_file",
+    "dbc_files",
     "dbc_text",
 ]
-
-#: machine name -> DBC file in com3_can/dbc
-MACHINES: Mapping[str, str] = MappingProxyType({"zx200": "excavator_com3.dbc", "ic120": "crawler_carrier_com3.dbc"})
 
 #: Neutral (safe, "do nothing") physical values of command signals whose neutral is not 0 physical.
 #: Everything else is neutral at physical 0 (0 rad/s, 0 m/s, 0 MPa pilot, mode "none").
@@ -280,13 +282,32 @@ class AliveCounter:
         return current == (previous + 1) % modulo
 
 
+def dbc_files() -> tuple[str, ...]:
+    """The DBC files shipped in ``com3_can/dbc``."""
+    return tuple(sorted(p.name for p in resources.files("com3_can").joinpath("dbc").iterdir() if p.name.endswith(".dbc")))
+
+
+def dbc_file(kind: str) -> str:
+    """The DBC file (in ``com3_can/dbc``) of machine kind ``kind``: its description's ``can.dbc``, else the default of
+    its type (the converter profile's ``dbc``).
+
+    Raises:
+        ConfigError: unknown kind (naming the known ones), or a DBC named that is not shipped (naming the file).
+    """
+    from com3_can.profiles import PROFILES
+    from tms_model.machines import load_machine
+
+    description = load_machine(kind)
+    name = description.dbc or PROFILES.get(description.type).dbc
+    if name not in dbc_files():
+        raise ConfigError(f"{description.source}: can.dbc: no DBC file {name!r} in com3_can/dbc "
+                          f"(shipped: {', '.join(dbc_files())})")
+    return name
+
+
 def dbc_text(machine: str) -> str:
-    """The DBC text shipped for ``machine``."""
-    try:
-        fname = MACHINES[machine]
-    except KeyError:
-        raise Com3EncodeError(f"unknown machine {machine!r}; expected one of {', '.join(MACHINES)}") from None
-    return resources.files("com3_can").joinpath("dbc", fname).read_text()
+    """The DBC text of machine kind ``machine`` (see :func:`dbc_file`)."""
+    return resources.files("com3_can").joinpath("dbc", dbc_file(machine)).read_text()
 
 
 def load_codec_from_string(text: str, machine: str) -> Com3Codec:
@@ -296,6 +317,13 @@ def load_codec_from_string(text: str, machine: str) -> Com3Codec:
 
 
 @cache
+def codec_for(dbc: str, machine: str) -> Com3Codec:
+    """The (cached) codec of DBC file ``dbc`` (in ``com3_can/dbc``), named ``machine`` in its messages."""
+    text = resources.files("com3_can").joinpath("dbc", dbc).read_text()
+    return load_codec_from_string(text, machine)
+
+
+@cache
 def load_codec(machine: str) -> Com3Codec:
-    """The (cached, immutable) codec of ``machine``: ``zx200`` or ``ic120``."""
-    return load_codec_from_string(dbc_text(machine), machine)
+    """The (cached, immutable) codec of machine kind ``machine``, found through its machine description."""
+    return codec_for(dbc_file(machine), machine)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 from tms_model.com3 import CARRIER_DUMP_JOINT, CARRIER_ROTATE_JOINT
+from tms_model.machines import LIFT_JOINT
 
 __all__ = [
     "JointSignals",
@@ -23,6 +24,9 @@ __all__ = [
     "EXCAVATOR_TRACKS",
     "CARRIER_FRAMES",
     "CARRIER_VESSEL",
+    "CARRIER_SWING",
+    "DOZER_FRAMES",
+    "DOZER_BLADE",
     "TRACKS",
     "PILOT_MAX_MPA",
 ]
@@ -111,6 +115,17 @@ CARRIER_FRAMES: Mapping[str, str] = MappingProxyType({
     "setting": "Machine_Setting_Cmd",
     "track_velocity": "Track_Velocity",
     "vessel_angle": "Vessel_Angle",
+    "swing": "Swing_Cmd",
+    "swing_angle": "Swing_Angle",
+})
+
+#: Frame roles of the dozer DBC (``dbc/dozer_com3.dbc``).
+DOZER_FRAMES: Mapping[str, str] = MappingProxyType({
+    "travel_velocity": "Velocity_Cmd",
+    "blade": "Blade_Cmd",
+    "setting": "Machine_Setting_Cmd",
+    "track_velocity": "Track_Velocity",
+    "blade_angle": "Blade_Angle",
 })
 
 
@@ -129,3 +144,34 @@ class VesselSignals:
 
 
 CARRIER_VESSEL = VesselSignals()
+
+
+@dataclass(frozen=True)
+class SwingSignals:
+    """A carrier's rotating upper body (MSTs): ``rotate_joint`` of ``rot_dump_cmd`` and ``joint_states``."""
+
+    joint: str = CARRIER_ROTATE_JOINT
+    target_angle_cmd: str = "target_swing_angle"
+    enable_cmd: str = "swing_control_enable"
+    angle: str = "swing_angle"
+    angular_velocity: str = "swing_angular_velocity"
+    mode_setting: str = "swing_mode"  # Machine_Setting_Cmd: 0 angle control, 1 lever input
+
+
+CARRIER_SWING = SwingSignals()
+
+
+@dataclass(frozen=True)
+class BladeSignals:
+    """A dozer's blade lift (``lift_joint``, URDF sign: + = down) on ``blade_cmd`` and ``joint_states``."""
+
+    joint: str = LIFT_JOINT
+    target_angle_cmd: str = "target_blade_lift_angle"
+    target_velocity_cmd: str = "target_blade_lift_velocity"
+    mode_cmd: str = "blade_control_mode"  # 0 hold, 1 angle, 2 velocity
+    angle: str = "blade_lift_angle"
+    angular_velocity: str = "blade_lift_angular_velocity"
+
+
+DOZER_BLADE = BladeSignals()
+BLADE_HOLD, BLADE_ANGLE, BLADE_VELOCITY = 0, 1, 2

@@ -33,7 +33,7 @@ from typing import Any
 
 import can
 
-from com3_can.codec import Com3Codec
+from com3_can.codec import Com3Codec, codec_for
 from com3_can.errors import Com3DecodeError
 from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
 from com3_can.pilot_cutoff import cutoff_codec
@@ -88,7 +88,7 @@ class PlantCanIO:
         buses: machine name -> bus, e.g. ``{"zx200": bus, "ic120": bus}`` (any python-can bus; a machine of
             the plant may be omitted).
         watchdog_s: command-loss timeout in simulated seconds.
-        codecs: override the codecs (default :func:`com3_can.codec.load_codec`).
+        codecs: override the codecs (default: the DBC each machine's description names, ``PlantSpec.dbcs``).
     """
 
     def __init__(
@@ -104,7 +104,8 @@ class PlantCanIO:
         self.sides: dict[str, Side] = {}
         for m, bus in buses.items():
             profile = PLANT_PROFILES.get(plant.spec.types[m])
-            codec = (codecs or {}).get(m) or profile.codec(m)
+            dbc = plant.spec.dbcs.get(m)  # the DBC its machine description names
+            codec = (codecs or {}).get(m) or (codec_for(dbc, m) if dbc else profile.codec(m))
             self.sides[m] = Side(m, plant.machines[m], profile, bus, codec, plant.time)
         self.gnss = Gnss(plant.spec.site)
         self.noise = Noise(plant.spec.sensors)

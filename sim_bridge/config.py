@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +20,12 @@ from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_model.machines import (
     CRAWLER_DUMP,
+    DOZER,
     EXCAVATOR,
+    LIFT_JOINT,
+    ROTATE_JOINT,
+    VESSEL_JOINT,
+    Blade,
     Joint,
     JointDrive,
     Machine,
@@ -35,6 +40,7 @@ __all__ = [
     "TrackSpec",
     "ExcavatorSpec",
     "CarrierSpec",
+    "DozerSpec",
     "Zx200Spec",
     "Ic120Spec",
     "SoilSpec",
@@ -43,6 +49,7 @@ __all__ = [
     "CutoffSpec",
     "load_excavator",
     "load_carrier",
+    "load_dozer",
     "load_zx200",
     "load_ic120",
     "load_plant",
@@ -106,7 +113,11 @@ class ExcavatorSpec:
 
 @dataclass(frozen=True)
 class CarrierSpec:
-    """A crawler carrier (IC120): tracks and the vessel on its rear hinge."""
+    """A crawler carrier (IC120; the MSTs with a rotating upper body): tracks and the vessel on its rear hinge.
+
+    ``hinge_xyz`` is in base_link at swing 0; with a ``swing`` the vessel turns with the upper body about the
+    vertical axis through ``swing.origin_xyz``.
+    """
 
     tracks: TrackSpec
     hinge_xyz: tuple[float, float, float]
@@ -122,6 +133,26 @@ class CarrierSpec:
     dump_distance: float  # [m] behind the hinge where the dumped pile is centred
     source: str
     pilot_cutoff: CutoffSpec | None = None  # None: no pilot cut-off modelled (section absent)
+    swing: Joint | None = None  # rotate_joint of the upper body (None: the vessel does not swing)
+    swing_angle_gain: float = 0.0  # [1/s] P gain of the machine's own swing angle controller
+
+    @property
+    def joints(self) -> tuple[Joint, ...]:
+        """The machine's joints in bus order (rotate_joint first, as com3_ros's rot_dump_cmd)."""
+        return (self.vessel,) if self.swing is None else (self.swing, self.vessel)
+
+
+@dataclass(frozen=True)
+class DozerSpec:
+    """A dozer (D37PXi): tracks and the blade on its lift arm (``lift``: lift_joint, + = down)."""
+
+    tracks: TrackSpec
+    lift: Joint
+    drives: Mapping[str, JointDrive]  # the lift joint's hydraulic actuator
+    blade: Blade  # edge, width, capacity, angle gain, cutting
+    home_lift: float
+    source: str
+    pilot_cutoff: CutoffSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -157,9 +188,11 @@ class SensorSpec:
 class PlantSpec:
     """Everything the plant needs, with where it came from.
 
-    ``machines`` maps each machine's name on the site (``zx200``, ``ic120``, ``zx120``) to its spec and
-    ``types`` to its type (the plant profile, :mod:`sim_bridge.profiles`). The soil is dug by
-    ``excavator`` and carried by ``carrier``: the first machine of each type in the plant YAML.
+    ``machines`` maps each machine's name on the site (``zx200``, ``ic120``, ``zx120``, ``mst110cr``, ...) to its
+    spec, ``types`` to its type (the plant profile, :mod:`sim_bridge.profiles`) and ``dbcs`` to the DBC of its bus
+    (its machine description's). The paper's soil experiment (``experiment: dig_and_carry``, the default) digs with
+    ``excavator`` and carries with ``carrier``: the first machine of each type in the plant YAML; a plant YAML
+    with ``experiment: none`` may hold any machines (then ``excavator`` / ``carrier`` may be "").
     """
 
     machines: dict[str, Any]
@@ -173,6 +206,8 @@ class PlantSpec:
     files: tuple[str, ...]
     excavator: str = ""
     carrier: str = ""
+    dbcs: dict[str, str] = field(default_factory=dict)
+    experiment: str = "dig_and_carry"
 
     @property
     def zx200(self) -> ExcavatorSpec:
@@ -254,7 +289,7 @@ def load_carrier(path: str | Path) -> CarrierSpec:
     return CarrierSpec(
         tracks=_track_spec(m),
         hinge_xyz=v.hinge_xyz,
-        vessel=m.joints[0],
+        vessel=m.joint(VESSEL_JOINT),
         drives=m.drives,
         vessel_angle_gain=v.angle_gain,
         inner_length=v.inner_length,
@@ -264,6 +299,23 @@ def load_carrier(path: str | Path) -> CarrierSpec:
         dump_start_angle=v.dump_start_angle,
         dump_time=v.dump_time,
         dump_distance=v.dump_distance,
+        source=str(path),
+        pilot_cutoff=_cutoff_spec(m),
+        swing=m.joint(ROTATE_JOINT) if m.swing is not None else None,
+        swing_angle_gain=m.swing.angle_gain if m.swing is not None else 0.0,
+    )
+
+
+def load_dozer(path: str | Path) -> DozerSpec:
+    """The plant's view of a dozer description (tracks, blade, ``hydraulics:``)."""
+    m = _description(path, DOZER)
+    assert m.blade is not None  # tms_model: every dozer has one
+    return DozerSpec(
+        tracks=_track_spec(m),
+        lift=m.joint(LIFT_JOINT),
+        drives=m.drives,
+        blade=m.blade,
+        home_lift=m.home_pose[LIFT_JOINT],
         source=str(path),
         pilot_cutoff=_cutoff_spec(m),
     )
@@ -278,6 +330,10 @@ def load_ic120(path: str | Path | None = None) -> CarrierSpec:
     """The IC120 (default ``config/machines/ic120.yaml``)."""
     return load_carrier(path or machine_path("ic120"))
 
+
+#: plant YAML ``experiment``: the paper's dig-load-carry-dump soil experiment (needs an excavator and a crawler
+#: carrier), or none (any machines, e.g. a test plant of one kind)
+EXPERIMENTS = ("dig_and_carry", "none")
 
 Zx200Spec = ExcavatorSpec
 Ic120Spec = CarrierSpec
@@ -302,7 +358,11 @@ def load_plant(
     path = Path(path) if path else config_path("sim", "plant.yaml")
     data, where = load_yaml(path)
     top = Reader(data, where)
-    top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "initial_front", "soil", "sensors"})
+    top.only({"machines", "site", "step_s", "watchdog_s", "initial_poses", "initial_front", "soil", "sensors",
+              "experiment"})
+    experiment = top.string("experiment", default="dig_and_carry")
+    if experiment not in EXPERIMENTS:
+        raise top.key_error("experiment", f"expected one of {list(EXPERIMENTS)}, got {experiment!r}")
     m = top.sub("machines")
     base = config_path()
     given = {"zx200": zx200, "ic120": ic120}
@@ -352,6 +412,7 @@ def load_plant(
     )
     specs: dict[str, Any] = {}
     types: dict[str, str] = {}
+    dbcs: dict[str, str] = {}
     for name, mpath in machine_paths.items():
         description = _description(mpath)
         entry = site_model.machines.get(name)
@@ -366,16 +427,19 @@ def load_plant(
         except ConfigError as exc:
             raise SimConfigError(f"{mpath}: type: {exc}") from None
         specs[name], types[name] = profile.load_spec(mpath), kind
-    first = {k: next((n for n in types if types[n] == k), "") for k in ("excavator", "crawler_dump")}
-    if not first["excavator"] or not first["crawler_dump"]:
+        dbcs[name] = description.dbc or profile.dbc
+    first = {k: next((n for n in types if types[n] == k), "") for k in (EXCAVATOR, CRAWLER_DUMP)}
+    if experiment == "dig_and_carry" and (not first[EXCAVATOR] or not first[CRAWLER_DUMP]):
         raise top.key_error("machines", "the site needs an excavator and a crawler carrier (soil is dug and carried); "
-                       f"got types {types}")
-    if top.has("initial_front"):  # front joints of the digging excavator at start (default: its home_pose)
+                       f"got types {types} (a plant without the soil experiment says experiment: none)")
+    if top.has("initial_front"):
+        if not first[EXCAVATOR]:
+            raise top.key_error("initial_front", "front joints of the digging excavator, but the plant has none")  # front joints of the digging excavator at start (default: its home_pose)
         import dataclasses
 
-        zx = specs[first["excavator"]]
+        zx = specs[first[EXCAVATOR]]
         front = top.per_name("initial_front", list(zx.home_pose))
-        specs[first["excavator"]] = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
+        specs[first[EXCAVATOR]] = dataclasses.replace(zx, home_pose={**zx.home_pose, **front})
     return PlantSpec(
         machines=specs,
         types=types,
@@ -386,6 +450,8 @@ def load_plant(
         watchdog_s=top.number("watchdog_s", lo=0.01),
         initial_poses=poses,  # type: ignore[arg-type]
         files=(str(path), *(str(p) for p in machine_paths.values()), str(site_path)),
-        excavator=first["excavator"],
-        carrier=first["crawler_dump"],
+        excavator=first[EXCAVATOR],
+        carrier=first[CRAWLER_DUMP],
+        dbcs=dbcs,
+        experiment=experiment,
     )

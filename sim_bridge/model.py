@@ -21,7 +21,7 @@ from tms_model.geometry import quaternion_from_yaw, yaw_from_wxyz
 __all__ = ["build_mjcf", "SiteModel"]
 
 def build_mjcf(spec: PlantSpec) -> str:
-    """The MJCF XML of both machines on the site (pure function of the configuration)."""
+    """The MJCF XML of every machine on the site (pure function of the configuration)."""
     soil = spec.soil
     nrow = int(round(soil.size_y / soil.resolution))
     ncol = int(round(soil.size_x / soil.resolution))
@@ -37,6 +37,7 @@ def build_mjcf(spec: PlantSpec) -> str:
         '    <material name="soil" rgba="0.55 0.42 0.28 1"/>',
         '    <material name="zx" rgba="0.9 0.55 0.1 1"/>',
         '    <material name="ic" rgba="0.85 0.75 0.2 1"/>',
+        '    <material name="dz" rgba="0.95 0.8 0.1 1"/>',
         "  </asset>",
         "  <worldbody>",
         '    <light pos="0 0 40" dir="0 0 -1" directional="true"/>',
@@ -77,7 +78,7 @@ class SiteModel:
             name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"{name}_bucket_tip") for name in spec.machines
             if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"{name}_bucket_tip") >= 0
         }
-        self.tip_site = self._tip_sites[spec.excavator]
+        self.tip_site = self._tip_sites.get(spec.excavator, -1)  # -1: no digging excavator (experiment: none)
         self.bucket_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"{spec.excavator}_bucket_link")
         self.body_ids = {
             mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b): b for b in range(m.nbody)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sim_bridge.config import PlantSpec, load_plant
-from sim_bridge.machines import CrawlerCarrier, Excavator
+from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
 from sim_bridge.model import SiteModel
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
@@ -64,16 +64,21 @@ class Plant:
             name: PLANT_PROFILES.get(self.spec.types[name]).make_machine(ms, self.dt, self.spec.initial_poses[name])
             for name, ms in self.spec.machines.items()
         }
-        #: the soil-digging excavator and the soil-carrying crawler carrier (the paper's ZX200 and IC120)
-        self.excavator: Excavator = self.machines[self.spec.excavator]
-        self.carrier: CrawlerCarrier = self.machines[self.spec.carrier]
+        #: the soil-digging excavator and the soil-carrying crawler carrier (the paper's ZX200 and IC120); None in a
+        #: plant without them (``experiment: none``)
+        self.excavator: Excavator = self.machines.get(self.spec.excavator)  # type: ignore[assignment]
+        self.carrier: CrawlerCarrier = self.machines.get(self.spec.carrier)  # type: ignore[assignment]
+        self.carriers = {n: m for n, m in self.machines.items() if isinstance(m, CrawlerCarrier)}
+        self.dozers = {n: m for n, m in self.machines.items() if isinstance(m, Dozer)}
         self.model = SiteModel(self.spec)
         self.ground = HeightField(self.spec.soil)
-        self.soil = SoilState()
+        self.soil = SoilState(carrier=self.spec.carrier, vessels=dict.fromkeys(self.carriers, 0.0),
+                              blades=dict.fromkeys(self.dozers, 0.0))
         self.initial_volume = self.ground.volume()
         self._update_model()
-        self._tip = self.model.bucket_tip()
+        self._tip = self.model.bucket_tip() if self.excavator is not None else None
         self.tip_speed = 0.0
+        self._edges: dict[str, tuple[float, float, float]] = {}
 
     @property
     def zx200(self) -> Excavator:
@@ -91,11 +96,13 @@ class Plant:
         return MachineTruth(m.base.x, m.base.y, m.z, m.base.yaw)
 
     def bucket_tip(self) -> tuple[float, float, float]:
+        if self._tip is None:
+            return (math.nan, math.nan, math.nan)
         return (float(self._tip[0]), float(self._tip[1]), float(self._tip[2]))
 
     def total_volume(self) -> float:
-        """Ground (above the datum) + bucket + vessel: constant up to rounding."""
-        return self.ground.volume() + self.soil.bucket + self.soil.vessel
+        """Ground (above the datum) + bucket + vessels + blades: constant up to rounding."""
+        return self.ground.volume() + self.soil.held()
 
     def roll_pitch(self, machine: str) -> tuple[float, float]:
         """Roll and pitch of a base resting on the height field under its footprint [rad]."""
@@ -127,11 +134,15 @@ class Plant:
         for mach in self.machines.values():
             mach.step()
         self._update_model()
-        tip = self.model.bucket_tip()
-        prev = self._tip
-        self.tip_speed = math.dist(tip, prev) / self.dt
-        self._soil(prev, tip)
-        self._tip = tip
+        if self.excavator is not None:
+            tip = self.model.bucket_tip()
+            prev = self._tip
+            self.tip_speed = math.dist(tip, prev) / self.dt
+            self._soil(prev, tip)
+            self._tip = tip
+        self._dump()
+        for name, dz in self.dozers.items():
+            self._doze(name, dz)
         self.advance_clock()
 
     def advance_clock(self) -> None:
@@ -163,38 +174,93 @@ class Plant:
             out = min(soil.bucket, rate * self.dt)
             soil.bucket -= out
             self._land(tip[0], tip[1], out)
-        self._dump()
+
+    @staticmethod
+    def _vessel_frame(ic: CrawlerCarrier) -> tuple[float, float, float, float, float]:
+        """(ox, oy, cos, sin, yaw) of the vessel: base_link coordinates at swing 0 map to the map frame by turning
+        about the slew centre (ox, oy) by the swing, then by the base pose."""
+        s = ic.spec
+        ox, oy = (s.swing.origin_xyz[0], s.swing.origin_xyz[1]) if s.swing is not None else (0.0, 0.0)
+        th = ic.swing_angle
+        return ox, oy, math.cos(th), math.sin(th), ic.base.yaw + th
+
+    def _vessel_to_map(self, ic: CrawlerCarrier, bx: float, by: float) -> tuple[float, float]:
+        """Map position of the point (bx, by) of base_link at swing 0 on the swung upper body."""
+        ox, oy, c, sn, _ = self._vessel_frame(ic)
+        x, y = ox + c * (bx - ox) - sn * (by - oy), oy + sn * (bx - ox) + c * (by - oy)
+        cy, sy = math.cos(ic.base.yaw), math.sin(ic.base.yaw)
+        return ic.base.x + cy * x - sy * y, ic.base.y + sy * x + cy * y
 
     def _land(self, x: float, y: float, volume: float) -> None:
-        """Soil falling at (x, y): into the IC120 vessel when over it and lowered, else on the ground."""
-        ic = self.carrier
-        s = ic.spec
-        c, sn = math.cos(ic.base.yaw), math.sin(ic.base.yaw)
-        dx, dy = x - ic.base.x, y - ic.base.y
-        bx, by = c * dx + sn * dy, -sn * dx + c * dy
-        hinge_x = s.hinge_xyz[0]
-        over = hinge_x <= bx <= hinge_x + s.inner_length and abs(by) <= s.inner_width / 2
-        if over and ic.vessel_angle <= s.load_max_angle:
-            into = min(volume, max(0.0, s.capacity - self.soil.vessel))
-            self.soil.vessel += into
-            self.soil.loaded += into
-            volume -= into
+        """Soil falling at (x, y): into a carrier's vessel when over it and lowered, else on the ground."""
+        for name, ic in self.carriers.items():
+            s = ic.spec
+            ox, oy, _, _, yaw = self._vessel_frame(ic)
+            # (x, y) in the upper body's frame at the slew centre, then in base_link at swing 0
+            cx, cy = self._vessel_to_map(ic, ox, oy)
+            c, sn = math.cos(yaw), math.sin(yaw)
+            dx, dy = x - cx, y - cy
+            bx, by = ox + c * dx + sn * dy, oy - sn * dx + c * dy
+            hinge_x = s.hinge_xyz[0]
+            over = hinge_x <= bx <= hinge_x + s.inner_length and abs(by - s.hinge_xyz[1]) <= s.inner_width / 2
+            if over and ic.vessel_angle <= s.load_max_angle:
+                into = min(volume, max(0.0, s.capacity - self.soil.vessels[name]))
+                self.soil.vessels[name] += into
+                self.soil.loaded += into
+                volume -= into
+                break
         self.ground.deposit(x, y, volume, self.spec.soil.deposit_radius)
 
     def _dump(self) -> None:
-        ic = self.carrier
-        s = ic.spec
-        angle = ic.vessel_angle
-        if self.soil.vessel <= 0.0 or angle <= s.dump_start_angle:
+        """Every raised vessel empties onto a pile ``dump_distance`` behind its hinge, where the swung vessel points."""
+        for name, ic in self.carriers.items():
+            s = ic.spec
+            angle = ic.vessel_angle
+            load = self.soil.vessels[name]
+            if load <= 0.0 or angle <= s.dump_start_angle:
+                continue
+            span = max(1e-6, (s.vessel.upper or angle) - s.dump_start_angle)
+            rate = s.capacity / s.dump_time * min(1.0, (angle - s.dump_start_angle) / span)
+            out = min(load, rate * self.dt)
+            self.soil.vessels[name] = load - out
+            self.soil.dumped += out
+            px, py = self._vessel_to_map(ic, s.hinge_xyz[0] - s.dump_distance, s.hinge_xyz[1])
+            self.ground.deposit(px, py, out, self.spec.soil.dump_radius)
+
+    def dump_point(self, machine: str) -> tuple[float, float]:
+        """Map position where carrier ``machine`` would put its dumped pile now."""
+        ic = self.carriers[machine]
+        return self._vessel_to_map(ic, ic.spec.hinge_xyz[0] - ic.spec.dump_distance, ic.spec.hinge_xyz[1])
+
+    def blade_edge(self, machine: str) -> tuple[float, float, float]:
+        """Map position of dozer ``machine``'s blade edge (centre of the cutting edge)."""
+        dz = self.dozers[machine]
+        ex, ey, ez = dz.edge_in_base()
+        c, sn = math.cos(dz.base.yaw), math.sin(dz.base.yaw)
+        return dz.base.x + c * ex - sn * ey, dz.base.y + sn * ex + c * ey, dz.z + ez
+
+    def _doze(self, name: str, dz: Dozer) -> None:
+        """The blade cuts while moving below the surface and leaves its load ahead when lifted above it."""
+        b = dz.spec.blade
+        x, y, z = self.blade_edge(name)
+        prev = self._edges.get(name)
+        self._edges[name] = (x, y, z)
+        if prev is None:
             return
-        span = max(1e-6, (s.vessel.upper or angle) - s.dump_start_angle)
-        rate = s.capacity / s.dump_time * min(1.0, (angle - s.dump_start_angle) / span)
-        out = min(self.soil.vessel, rate * self.dt)
-        self.soil.vessel -= out
-        self.soil.dumped += out
-        c, sn = math.cos(ic.base.yaw), math.sin(ic.base.yaw)
-        bx = s.hinge_xyz[0] - s.dump_distance
-        self.ground.deposit(ic.base.x + c * bx, ic.base.y + sn * bx, out, self.spec.soil.dump_radius)
+        surface = self.ground.height(x, y)
+        load = self.soil.blades[name]
+        speed = math.hypot(x - prev[0], y - prev[1]) / self.dt
+        yaw = dz.base.yaw
+        if z < surface and speed >= b.cut_min_speed:
+            got = self.ground.cut((prev[0], prev[1]), (x, y), z, width=b.width,
+                                  lateral=(-math.sin(yaw), math.cos(yaw)), max_volume=b.capacity - load)
+            load += got
+            self.soil.pushed += got
+        elif load > 0.0 and z > surface + 0.05:
+            self.ground.deposit(x + math.cos(yaw) * b.spill_distance, y + math.sin(yaw) * b.spill_distance, load,
+                                self.spec.soil.dump_radius)
+            load = 0.0
+        self.soil.blades[name] = load
 
     # -- replay ------------------------------------------------------------------------------------
     def set_truth(self, machine: str, x: float, y: float, yaw: float, joints: dict[str, float]) -> None:
@@ -206,4 +272,5 @@ class Plant:
         for act in bank.actuators:
             act.reset()
         self._update_model()
-        self._tip = self.model.bucket_tip()
+        if self.excavator is not None:
+            self._tip = self.model.bucket_tip()

@@ -11,12 +11,15 @@ rounding). The ground volume is measured above a reference plane far below the s
   the load leaves at ``capacity / spill_time`` per second (scaled by how far open). Soil landing over
   the IC120 vessel (lowered) becomes vessel load up to its capacity; the rest piles on the ground.
 * Dumping: above ``dump_start_angle`` the vessel empties at ``capacity / dump_time`` per second (scaled
-  by the angle) onto a pile ``dump_distance`` behind the hinge.
+  by the angle) onto a pile ``dump_distance`` behind the hinge, along the vessel as its upper body is swung.
+* Dozing: while a dozer moves faster than ``cut_min_speed`` with its blade edge below the surface, the cells
+  under the edge are cut to the edge height into the blade's load up to its capacity; a blade lifted above the
+  surface leaves its load in a pile ``spill_distance`` ahead of the edge.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -147,10 +150,29 @@ class HeightField:
 
 @dataclass
 class SoilState:
-    """Soil held by the machines and the running totals, all in m^3."""
+    """Soil held by the machines and the running totals, all in m^3.
+
+    ``vessels`` holds every crawler carrier's load by machine name and ``blades`` every dozer blade's; ``vessel``
+    is the load of ``carrier``, the paper's soil-carrying carrier.
+    """
 
     bucket: float = 0.0
-    vessel: float = 0.0
-    dumped: float = 0.0  # total ever dumped from the vessel
-    loaded: float = 0.0  # total ever landed in the vessel
+    dumped: float = 0.0  # total ever dumped from the vessels
+    loaded: float = 0.0  # total ever landed in the vessels
     dug: float = 0.0  # total ever cut by the bucket
+    vessels: dict[str, float] = field(default_factory=dict)
+    blades: dict[str, float] = field(default_factory=dict)
+    carrier: str = ""
+    pushed: float = 0.0  # total ever cut by the blades
+
+    @property
+    def vessel(self) -> float:
+        return self.vessels.get(self.carrier, 0.0)
+
+    @vessel.setter
+    def vessel(self, value: float) -> None:
+        self.vessels[self.carrier] = value
+
+    def held(self) -> float:
+        """Soil off the ground: bucket, vessels and blades."""
+        return self.bucket + sum(self.vessels.values()) + sum(self.blades.values())

@@ -2,10 +2,14 @@
 
 :func:`load_machine` parses and validates the file (every problem is ``file:line: key.path: problem``)
 and caches the result per file, so the converter, the plant, the planners, the controllers, sensing
-and the UI all see one description of a machine. Two types of machine exist today:
+and the UI all see one description of a machine. Three types of machine exist today:
 
 * ``excavator`` (ZX200, ZX120): a front of four revolute joints swing/boom/arm/bucket, a bucket, tracks;
-* ``crawler_dump`` (IC120): tracks and a vessel on a rear hinge.
+* ``crawler_dump`` (IC120, MST-110CR, MST-2200VD): tracks and a vessel on a rear hinge; optionally (``swing:``)
+  an upper body that carries the vessel and rotates on a slew ring (the MSTs' ``rotate_joint``);
+* ``dozer`` (D37PXi): tracks and a blade on a lift arm (``lift_joint``, as OPERA's d37pxi_description names it).
+
+Every kind may name the DBC its COM3 bus speaks (``can: {dbc: <file in com3_can/dbc>}``).
 
 The ``type:`` key of the YAML names the type; sections another package owns alone (e.g. ``sim``) are
 left to it, but inside the sections read here an unknown key is an error (a typo must not silently fall
@@ -28,6 +32,7 @@ from tms_common.errors import ConfigError
 from tms_model.reader import Reader
 
 __all__ = [
+    "Blade",
     "Bucket",
     "Footprint",
     "Joint",
@@ -36,16 +41,28 @@ __all__ = [
     "PilotCutoff",
     "TrackDrive",
     "Tracks",
+    "Swing",
     "Vessel",
     "EXCAVATOR",
     "CRAWLER_DUMP",
+    "DOZER",
+    "ROTATE_JOINT",
+    "VESSEL_JOINT",
+    "LIFT_JOINT",
     "load_machine",
     "machine_path",
 ]
 
 EXCAVATOR = "excavator"
 CRAWLER_DUMP = "crawler_dump"
-TYPES = (EXCAVATOR, CRAWLER_DUMP)
+DOZER = "dozer"
+TYPES = (EXCAVATOR, CRAWLER_DUMP, DOZER)
+
+#: joint names of our interfaces (joint_states): a carrier's vessel and rotating upper body (com3_ros's MST name),
+#: a dozer's blade lift arm (OPERA d37pxi_description's name)
+VESSEL_JOINT = "vessel_joint"
+ROTATE_JOINT = "rotate_joint"
+LIFT_JOINT = "lift_joint"
 
 
 @dataclass(frozen=True)
@@ -138,6 +155,40 @@ class Vessel:
 
 
 @dataclass(frozen=True)
+class Swing:
+    """A carrier's rotating upper body (slew ring): ``rotate_joint`` about z at ``origin_xyz`` of base_link.
+
+    Angle 0 = the vessel dumps to the rear of the tracks, + = counter-clockwise from above (as the excavator's
+    swing). ``lower``/``upper`` None = endless (360 deg). The machine holds a commanded angle with its own
+    P controller (``angle_gain``) through the dead time and lag of its hydraulic slew motor.
+    """
+
+    origin_xyz: tuple[float, float, float]
+    lower: float | None
+    upper: float | None
+    velocity: float  # [rad/s]
+    acceleration: float  # [rad/s^2]
+    dead_time: float
+    time_constant: float
+    angle_gain: float  # [1/s]
+
+
+@dataclass(frozen=True)
+class Blade:
+    """A dozer's blade on its lift arm: ``lift_joint`` (URDF + = down), cutting edge in ``blade_arm_link``.
+
+    The machine holds a commanded lift angle with its own P controller (``angle_gain``) or follows a lift velocity.
+    """
+
+    edge_xyz: tuple[float, float, float]
+    width: float  # [m] cutting edge
+    capacity: float  # [m^3] soil the blade can push (rated blade capacity)
+    angle_gain: float  # [1/s]
+    cut_min_speed: float  # [m/s] the edge cuts only while the machine moves at least this fast
+    spill_distance: float  # [m] ahead of the edge where soil beyond the blade's capacity is piled
+
+
+@dataclass(frozen=True)
 class PilotCutoff:
     """Pilot cut-off (hydraulic lock): solenoid delay [s], then actuators decay with these time constants [s]."""
 
@@ -164,6 +215,9 @@ class Machine:
     bucket: Bucket | None = None
     vessel: Vessel | None = None
     tf_prefix: str = ""  # frames of this machine on /tf are "<tf_prefix>/<link>" ("" = bare link names)
+    swing: Swing | None = None  # crawler_dump: the rotating upper body, when it has one
+    blade: Blade | None = None  # dozer
+    dbc: str = ""  # DBC file of its COM3 bus in com3_can/dbc ("" = the type's default)
     source: str = field(default="", compare=False)
     #: the machine's name on the site (its namespace; :func:`tms_model.fleet.load_named`); "" = the kind itself
     name: str = ""
@@ -285,6 +339,18 @@ def _tf_prefix(top: Reader) -> str:
     return prefix
 
 
+def _dbc(top: Reader) -> str:
+    """``can.dbc``: the DBC file of the machine's COM3 bus (a file name in com3_can/dbc); "" when not given."""
+    if not top.has("can"):
+        return ""
+    c = top.sub("can")
+    c.only({"dbc"})
+    name = c.string("dbc")
+    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*\.dbc", name):
+        raise c.key_error("dbc", f"expected a DBC file name in com3_can/dbc such as crawler_carrier_com3.dbc, got {name!r}")
+    return name
+
+
 def _masses(top: Reader) -> Mapping[str, float]:
     m = top.sub("masses")
     return MappingProxyType({name: m.number(name, lo=0.0) for name in m.keys()})
@@ -337,13 +403,48 @@ def _excavator(top: Reader, kind: str, source: str) -> Machine:
         pump_flow=hyd.number("pump_flow_lpm", lo=1.0),
         bucket=bucket,
         tf_prefix=_tf_prefix(top),
+        dbc=_dbc(top),
         source=source,
+    )
+
+
+def _limits(r: Reader, key: str) -> tuple[float | None, float | None]:
+    """``position``-style limits: null = endless, else ``[lower, upper]`` with lower < upper."""
+    if r.raw(key) is None:
+        return None, None
+    lo, hi = r.vector(key, 2)
+    if not lo < hi:
+        raise r.key_error(key, f"lower limit must be below upper, got {r.raw(key)!r}")
+    return lo, hi
+
+
+def _swing(top: Reader, hyd: Reader) -> Swing | None:
+    if not top.has("swing"):
+        if hyd.has("swing"):
+            raise hyd.key_error("swing", "hydraulics of a swing, but the machine has no swing: section")
+        return None
+    s = top.sub("swing")
+    s.only({"origin_xyz", "position", "velocity", "acceleration"})
+    h = hyd.sub("swing")
+    h.only({"dead_time_s", "time_constant_s", "angle_gain"})
+    lo, hi = _limits(s, "position")
+    if lo is not None and hi is not None and not (-math.pi <= lo and hi <= math.pi):
+        raise s.key_error("position", f"limits must lie in [-pi, pi] rad (null = endless), got {s.raw('position')!r}")
+    return Swing(
+        origin_xyz=s.vector("origin_xyz", 3),  # type: ignore[arg-type]
+        lower=lo,
+        upper=hi,
+        velocity=s.number("velocity", lo=0.001),
+        acceleration=s.number("acceleration", lo=0.0),
+        dead_time=h.number("dead_time_s", lo=0.0, hi=5.0),
+        time_constant=h.number("time_constant_s", lo=0.0, hi=10.0),
+        angle_gain=h.number("angle_gain", lo=0.0),
     )
 
 
 def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
     hyd = top.sub("hydraulics")
-    hyd.only({"source", "tracks", "vessel"})
+    hyd.only({"source", "tracks", "vessel", "swing"})
     hv = hyd.sub("vessel")
     hv.only({"dead_time_s", "time_constant_s", "angle_gain", "load_max_angle", "dump_start_angle", "dump_time_s", "dump_distance"})
     v = top.sub("vessel")
@@ -364,25 +465,50 @@ def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
         dump_time=hv.number("dump_time_s", lo=0.01),
         dump_distance=hv.number("dump_distance", lo=0.0),
     )
-    joint = Joint(
-        name="vessel_joint",
-        parent="base_link",
+    swing = _swing(top, hyd)
+    joints: list[Joint] = []
+    drives = {}
+    home = {}
+    hinge_parent, hinge = "base_link", vessel.hinge_xyz
+    if swing is not None:  # bus order: rotate_joint, then the vessel (com3_ros's rot_dump_cmd order)
+        joints.append(Joint(
+            name=ROTATE_JOINT,
+            parent="track_link",
+            child="body_link",
+            origin_xyz=swing.origin_xyz,
+            origin_rpy=(0.0, 0.0, 0.0),
+            axis=(0.0, 0.0, 1.0),
+            lower=swing.lower,
+            upper=swing.upper,
+            velocity=swing.velocity,
+            acceleration=swing.acceleration,
+        ))
+        drives[ROTATE_JOINT] = JointDrive(swing.dead_time, swing.time_constant, 0.0)
+        home[ROTATE_JOINT] = 0.0
+        # the hinge is given in base_link at swing 0; on the rotating body it is relative to the slew centre
+        hinge_parent = "body_link"
+        hinge = tuple(h - o for h, o in zip(vessel.hinge_xyz, swing.origin_xyz, strict=True))  # type: ignore[assignment]
+    joints.append(Joint(
+        name=VESSEL_JOINT,
+        parent=hinge_parent,
         child="vessel_link",
-        origin_xyz=vessel.hinge_xyz,
+        origin_xyz=hinge,
         origin_rpy=(0.0, 0.0, 0.0),
         axis=(0.0, -1.0, 0.0),  # URDF: negative = raised about +y; ours: positive = raised
         lower=0.0,
         upper=max_angle,
         velocity=vessel.velocity,
         acceleration=math.inf,
-    )
+    ))
+    drives[VESSEL_JOINT] = JointDrive(vessel.dead_time, vessel.time_constant, 0.0)
+    home[VESSEL_JOINT] = 0.0
     tracks, footprint = _tracks(top)
     return Machine(
         kind=kind,
         type=CRAWLER_DUMP,
-        joints=(joint,),
-        drives=MappingProxyType({"vessel_joint": JointDrive(vessel.dead_time, vessel.time_constant, 0.0)}),
-        home_pose=MappingProxyType({"vessel_joint": 0.0}),
+        joints=tuple(joints),
+        drives=MappingProxyType(drives),
+        home_pose=MappingProxyType(home),
         masses=_masses(top),
         footprint=footprint,
         tracks=tracks,
@@ -390,6 +516,48 @@ def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
         pilot_cutoff=_cutoff(top),
         vessel=vessel,
         tf_prefix=_tf_prefix(top),
+        swing=swing,
+        dbc=_dbc(top),
+        source=source,
+    )
+
+
+def _dozer(top: Reader, kind: str, source: str) -> Machine:
+    hyd = top.sub("hydraulics")
+    hyd.only({"source", "tracks", "blade"})
+    hb = hyd.sub("blade")
+    hb.only({"dead_time_s", "time_constant_s", "angle_gain", "cut_min_speed", "spill_distance"})
+    b = top.sub("blade")
+    b.only({"lift_joint", "edge_xyz", "width", "capacity"})
+    lift = _joint(b, "lift_joint")
+    if lift.axis != (0.0, 1.0, 0.0) or lift.lower is None or lift.upper is None:
+        raise b.key_error("lift_joint", "the blade lifts about y with limits: axis [0, 1, 0], position [lower, upper]")
+    lift = Joint(LIFT_JOINT, lift.parent, lift.child, lift.origin_xyz, lift.origin_rpy, lift.axis, lift.lower,
+                 lift.upper, lift.velocity, lift.acceleration)
+    blade = Blade(
+        edge_xyz=b.vector("edge_xyz", 3),  # type: ignore[arg-type]
+        width=b.number("width", lo=0.1),
+        capacity=b.number("capacity", lo=0.01),
+        angle_gain=hb.number("angle_gain", lo=0.0),
+        cut_min_speed=hb.number("cut_min_speed", lo=0.0),
+        spill_distance=hb.number("spill_distance", lo=0.0),
+    )
+    tracks, footprint = _tracks(top)
+    return Machine(
+        kind=kind,
+        type=DOZER,
+        joints=(lift,),
+        drives=MappingProxyType({LIFT_JOINT: JointDrive(hb.number("dead_time_s", lo=0.0, hi=5.0),
+                                                        hb.number("time_constant_s", lo=0.0, hi=10.0), 0.0)}),
+        home_pose=MappingProxyType({LIFT_JOINT: max(lift.lower, min(lift.upper, 0.0))}),
+        masses=_masses(top),
+        footprint=footprint,
+        tracks=tracks,
+        track_drive=_track_drive(hyd),
+        pilot_cutoff=_cutoff(top),
+        blade=blade,
+        tf_prefix=_tf_prefix(top),
+        dbc=_dbc(top),
         source=source,
     )
 
@@ -408,6 +576,8 @@ def parse_machine(path: str | Path, kind: str | None = None) -> Machine:
         return _excavator(top, kind, str(path))
     if mtype == CRAWLER_DUMP:
         return _crawler_dump(top, kind, str(path))
+    if mtype == DOZER:
+        return _dozer(top, kind, str(path))
     raise top.key_error("type", f"unknown machine type {mtype!r}; expected one of {list(TYPES)}")
 
 

@@ -12,7 +12,10 @@ description packages do, so an RViz or MoveIt user sees the frames they know:
   body_link -dump_joint-> vessel_pin_link``. ``dump_joint`` turns about +y, negative = raised, limits
   [-max_angle, 0], as the xacro has it; on our interfaces (``joint_states`` ``vessel_joint``) raised is
   positive, so the URDF position is minus the joint state. The xacro's sprocket joints are left out: no
-  description gives a sprocket radius, so nothing could turn them.
+  description gives a sprocket radius, so nothing could turn them. A carrier with a swing (the MSTs) is
+  ``base_link -base_joint(fixed)-> track_link -rotate_joint-> body_link -dump_joint-> vessel_pin_link``.
+* dozer (d37pxi_ros2 ``d37pxi_description/urdf/d37pxi24.xacro``): ``base_link -> body_link -lift_joint->
+  blade_arm_link -> blade_link`` (the cutting edge).
 
 Link names carry the machine's ``tf_prefix`` (``ic120_tf/base_link``), as ic120_ros2's xacro writes them.
 Visuals are schematic (boxes and pin-to-pin cylinders from the description, the plant's shapes); OPERA's
@@ -26,7 +29,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
 
-from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
+from tms_model.machines import (
+    CRAWLER_DUMP,
+    DOZER,
+    EXCAVATOR,
+    LIFT_JOINT,
+    ROTATE_JOINT,
+    VESSEL_JOINT,
+    Machine,
+)
 from tms_model.transform import Transform, quaternion_from_axis_angle, quaternion_multiply
 
 __all__ = ["MachineTree", "TreeJoint", "Visual", "load_tree", "machine_tree"]
@@ -189,21 +200,50 @@ def _excavator(m: Machine) -> MachineTree:
 def _crawler_dump(m: Machine) -> MachineTree:
     assert m.vessel is not None
     v = m.vessel
-    state = m.joints[0].name  # the vessel joint of our interfaces (+ = raised)
+    vessel = m.joint(VESSEL_JOINT)  # the vessel joint of our interfaces (+ = raised)
+    fp = m.footprint
+    joints: list[TreeJoint] = []
+    if m.swing is None:
+        joints.append(TreeJoint("base_joint", FIXED, "base_link", "body_link", (0.0, 0.0, 0.0)))
+        tracks = "body_link"
+    else:  # the rotating upper body: base_link -> track_link -rotate_joint-> body_link (carries the vessel)
+        rot = m.joint(ROTATE_JOINT)
+        joints.append(TreeJoint("base_joint", FIXED, "base_link", "track_link", (0.0, 0.0, 0.0)))
+        joints.append(TreeJoint(rot.name, CONTINUOUS if rot.lower is None else REVOLUTE, rot.parent, rot.child,
+                                rot.origin_xyz, axis=rot.axis, lower=rot.lower, upper=rot.upper, velocity=rot.velocity,
+                                state=rot.name))
+        tracks = "track_link"
+    joints.append(TreeJoint("dump_joint", REVOLUTE, vessel.parent, "vessel_pin_link", vessel.origin_xyz,
+                            axis=(0.0, 1.0, 0.0), lower=-v.max_angle, upper=0.0, velocity=v.velocity,
+                            state=vessel.name, sign=-1.0))
+    visuals = (
+        Visual(tracks, "box", (fp.length, fp.width, TRACK_BOX_HEIGHT), (0.0, 0.0, TRACK_BOX_HEIGHT / 2)),
+        Visual("vessel_pin_link", "box", (v.inner_length, v.inner_width, 0.1), (v.inner_length / 2, 0.0, 0.53)),
+    )
+    return MachineTree(m, tuple(joints), visuals)
+
+
+def _dozer(m: Machine) -> MachineTree:
+    """d37pxi_description: ``base_link -base_joint(fixed)-> body_link -lift_joint-> blade_arm_link
+    -blade_joint(fixed)-> blade_link`` (OPERA's angle and tilt joints, which nothing here drives, are fixed at 0)."""
+    assert m.blade is not None
+    lift = m.joint(LIFT_JOINT)
+    fp = m.footprint
     joints = (
         TreeJoint("base_joint", FIXED, "base_link", "body_link", (0.0, 0.0, 0.0)),
-        TreeJoint("dump_joint", REVOLUTE, "body_link", "vessel_pin_link", v.hinge_xyz, axis=(0.0, 1.0, 0.0),
-                  lower=-v.max_angle, upper=0.0, velocity=v.velocity, state=state, sign=-1.0),
+        TreeJoint(lift.name, REVOLUTE, lift.parent, lift.child, lift.origin_xyz, lift.origin_rpy, lift.axis,
+                  lift.lower, lift.upper, lift.velocity, state=lift.name),
+        TreeJoint("blade_joint", FIXED, lift.child, "blade_link", m.blade.edge_xyz),
     )
-    fp = m.footprint
     visuals = (
-        Visual("body_link", "box", (fp.length, fp.width, TRACK_BOX_HEIGHT), (0.0, 0.0, TRACK_BOX_HEIGHT / 2)),
-        Visual("vessel_pin_link", "box", (v.inner_length, v.inner_width, 0.1), (v.inner_length / 2, 0.0, 0.53)),
+        Visual("body_link", "box", (fp.length * 0.7, fp.width * 0.8, TRACK_BOX_HEIGHT), (0.0, 0.0, TRACK_BOX_HEIGHT / 2)),
+        _cylinder(lift.child, m.blade.edge_xyz, 0.12),
+        Visual("blade_link", "box", (0.2, m.blade.width, 0.9), (0.0, 0.0, 0.45)),
     )
     return MachineTree(m, joints, visuals)
 
 
-_BUILDERS = {EXCAVATOR: _excavator, CRAWLER_DUMP: _crawler_dump}
+_BUILDERS = {EXCAVATOR: _excavator, CRAWLER_DUMP: _crawler_dump, DOZER: _dozer}
 
 
 def machine_tree(machine: Machine) -> MachineTree:

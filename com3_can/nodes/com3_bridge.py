@@ -1,7 +1,7 @@
 """``com3_bridge``: the ROS 2 <-> COM3 CAN converter of one machine (thin rclpy wrapper of BridgeCore).
 
 Run in the machine namespace, e.g. ``com3_bridge --ros-args -r __ns:=/zx200 -p machine:=zx200``.
-Parameters: ``machine`` (a config/machines/<machine>.yaml: zx200, zx120, ic120), ``can_config`` (YAML, default config/can/<machine>.yaml),
+Parameters: ``machine`` (a config/machines/<machine>.yaml: zx200, zx120, ic120, mst110cr, mst2200vd, d37pxi), ``can_config`` (YAML, default config/can/<machine>.yaml),
 ``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep; the link is chosen by
 :func:`com3_can.bus.link_config`, in-process when the plant shares this process), ``watchdog_s``,
 ``joint_states_period_s`` and ``odom_period_s`` (publish ``joint_states`` / ``odom_pose`` at most once per
@@ -16,7 +16,9 @@ a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thr
 Command topics and types are OPERA com3_ros's (``com3_msgs``), per machine type: an excavator takes
 ``front_cmd`` and ``tracks_cmd`` (com3_msgs/JointCmd), ``machine_setting`` (ExcavatorCom3MachineSetting); a
 crawler carrier takes ``track_cmd`` and ``rot_dump_cmd`` (com3_msgs/JointCmd; ``dump_joint`` POSITION = vessel
-angle) and ``crawler_carrier_machine_setting`` (CrawlerCarrierCom3MachineSetting); both take ``cmd_vel``
+angle, ``rotate_joint`` POSITION = swing angle where it has a swing) and ``crawler_carrier_machine_setting``
+(CrawlerCarrierCom3MachineSetting); a dozer takes ``track_cmd`` and ``blade_cmd`` (com3_msgs/JointCmd, ``lift_joint``
+POSITION or VELOCITY; ours, OPERA has no public one); all take ``cmd_vel``
 (geometry_msgs/Twist) and ``emg_stop`` (std_msgs/Bool).
 
 Site watchdog (a machine PC cut off from the site, docs/deployment.md): ``site_heartbeat_topic`` (std_msgs/String,
@@ -136,6 +138,8 @@ class Com3Bridge(Node):
             self.create_subscription(JointCmd, "rot_dump_cmd", self._on_rot_dump, depth)
             self.create_subscription(CrawlerCarrierCom3MachineSetting, profile.setting_topic, self._on_ic_setting,
                                      depth)
+        if "blade_cmd" in self.core.topics:
+            self.create_subscription(JointCmd, "blade_cmd", self._on_blade, depth)
         self.create_timer(0.05, self._diag_timer)
         self._threads = [
             threading.Thread(target=self._send_loop, name="com3_tx", daemon=True),
@@ -267,6 +271,10 @@ class Com3Bridge(Node):
     def _on_rot_dump(self, msg: Any) -> None:
         self._command(self.core.rot_dump_cmd, list(msg.joint_name), msg.control_type, list(msg.position))
 
+    def _on_blade(self, msg: Any) -> None:
+        self._command(self.core.blade_cmd, list(msg.joint_name), msg.control_type, list(msg.position),
+                      list(msg.velocity))
+
     def _on_zx_setting(self, msg: Any) -> None:
         self._command(self.core.machine_setting, {
             "engine_rpm": msg.engine_rpm,
@@ -280,7 +288,7 @@ class Com3Bridge(Node):
         })
 
     def _on_ic_setting(self, msg: Any) -> None:
-        if msg.swing_mode:  # lever input for a rotating body: the IC120 has none, so the request cannot be met
+        if msg.swing_mode and self.config.swing_range is None:  # lever input for a rotating body it lacks (IC120)
             self._log.warning(f"rejected: {self.core.profile.setting_topic}: swing_mode true (lever input) but the "
                               f"{self.config.machine} has no rotating body", throttle_duration_sec=0.5)
             return
@@ -288,6 +296,7 @@ class Com3Bridge(Node):
             "operation_mode": float(msg.operation_mode),
             "velocity_mode": float(msg.velocity_mode),
             "dump_mode": float(msg.dump_mode),
+            "swing_mode": float(msg.swing_mode),
             "eco_mode": float(msg.eco_mode),
             "speed_mode": float(msg.speed_mode),
         })

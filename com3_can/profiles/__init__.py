@@ -4,9 +4,9 @@ A profile says which DBC the type speaks, its command channels (frames guarded b
 each ROS command becomes frames and how each state frame becomes outputs. :class:`~com3_can.bridge_core.BridgeCore`
 is neutral: it validates, latches, schedules and counts, and hands every type-specific step to its profile.
 
-``PROFILES`` is the registry (``can.interfaces.BACKENDS`` style): the built-in types ``excavator`` and
-``crawler_dump`` register on import; another type registers its class with
-``PROFILES.register("name", Class)``. A machine model (``zx200``, ``zx120``, ``ic120``) names its type (key ``type``) in
+``PROFILES`` is the registry (``can.interfaces.BACKENDS`` style): the built-in types ``excavator``,
+``crawler_dump`` and ``dozer`` register on import; another type registers its class with
+``PROFILES.register("name", Class)``. A machine kind (``zx200``, ``zx120``, ``ic120``, ``mst110cr``, ``d37pxi``, ...) names its type (key ``type``) in
 ``config/machines/<model>.yaml``; :func:`profile_for` resolves a model to its profile class.
 """
 
@@ -28,10 +28,12 @@ def profile_for(machine: str) -> type[ConverterProfile]:
 
 def _register_builtins() -> None:
     from com3_can.profiles.crawler_carrier import CrawlerCarrierProfile
+    from com3_can.profiles.dozer import DozerProfile
     from com3_can.profiles.excavator import ExcavatorProfile
 
     PROFILES.register(ExcavatorProfile.machine_type, ExcavatorProfile)
     PROFILES.register(CrawlerCarrierProfile.machine_type, CrawlerCarrierProfile)
+    PROFILES.register(DozerProfile.machine_type, DozerProfile)
 
 
 _register_builtins()

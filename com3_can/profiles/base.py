@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from functools import cache
-from importlib import resources
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from com3_can.codec import Com3Codec, load_codec_from_string
+from com3_can.codec import Com3Codec, codec_for
 from com3_can.errors import Com3CommandError
 
 if TYPE_CHECKING:
@@ -17,22 +15,17 @@ if TYPE_CHECKING:
 __all__ = ["ConverterProfile", "codec_for"]
 
 
-@cache
-def codec_for(dbc: str, machine: str) -> Com3Codec:
-    """The (cached) codec of DBC file ``dbc`` (in ``com3_can/dbc``), named ``machine`` in its messages."""
-    text = resources.files("com3_can").joinpath("dbc", dbc).read_text()
-    return load_codec_from_string(text, machine)
-
-
 class ConverterProfile:
     """What the converter does for one machine type; one instance per converter (it may keep state).
 
     Class attributes a profile sets:
 
-    * ``type``: registry name; ``dbc``: DBC file in ``com3_can/dbc``;
+    * ``type``: registry name; ``dbc``: the type's default DBC file in ``com3_can/dbc`` (a machine description's
+      ``can.dbc`` overrides it, :func:`com3_can.codec.dbc_file`);
     * ``channels``: channel name -> command frames it feeds (one watchdog per channel);
     * ``topics``: the ROS command topics the type takes, named as OPERA's com3_ros names them for that type
-      (excavator ``front_cmd``, ``tracks_cmd``; crawler carrier ``track_cmd``, ``rot_dump_cmd``; both ``cmd_vel``);
+      (excavator ``front_cmd``, ``tracks_cmd``; crawler carrier ``track_cmd``, ``rot_dump_cmd``; dozer ``track_cmd``,
+      ``blade_cmd`` (ours: OPERA has none public); all ``cmd_vel``);
       ``tracks_topic``: which of them carries the per-track JointCmd; ``setting_topic``: the machine-setting topic;
     * ``state_handlers``: state frame name -> method name; the method gets ``(core, values, stamp)`` and
       returns outputs (:class:`~com3_can.bridge_core.JointStateOut`, ``OdomOut``, ...).
@@ -81,6 +74,10 @@ class ConverterProfile:
     def rot_dump_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
                      now: float) -> list[Tx]:
         raise self._refuse("rot_dump_cmd")
+
+    def blade_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+                  velocity: Sequence[float], now: float) -> list[Tx]:
+        raise self._refuse("blade_cmd")
 
     # state handlers shared by the types (both DBCs carry these frames)
     def roll_pitch(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:

@@ -5,7 +5,7 @@ its MuJoCo bodies, applies its COM3 command frames and builds its state frames, 
 map of :mod:`com3_can.signal_map`. :class:`~sim_bridge.can_io.PlantCanIO`, :class:`~sim_bridge.plant.Plant`
 and :func:`~sim_bridge.model.build_mjcf` are neutral and ask the profile of each machine's ``type``.
 
-``PLANT_PROFILES`` is the registry: ``excavator`` and ``crawler_dump`` register on import; another type
+``PLANT_PROFILES`` is the registry: ``excavator``, ``crawler_dump`` and ``dozer`` register on import; another type
 registers with ``PLANT_PROFILES.register("name", Class)`` (a duplicate name is refused, an unknown one
 named with the known ones).
 """
@@ -23,10 +23,12 @@ PLANT_PROFILES: Registry[type[PlantProfile]] = Registry("plant profile")
 
 def _register_builtins() -> None:
     from sim_bridge.profiles.crawler_carrier import CrawlerCarrierPlantProfile
+    from sim_bridge.profiles.dozer import DozerPlantProfile
     from sim_bridge.profiles.excavator import ExcavatorPlantProfile
 
     PLANT_PROFILES.register(ExcavatorPlantProfile.machine_type, ExcavatorPlantProfile)
     PLANT_PROFILES.register(CrawlerCarrierPlantProfile.machine_type, CrawlerCarrierPlantProfile)
+    PLANT_PROFILES.register(DozerPlantProfile.machine_type, DozerPlantProfile)
 
 
 _register_builtins()

@@ -1,8 +1,10 @@
-"""Crawler-carrier plant profile (IC120): our COM3 extension frames on a :class:`CrawlerCarrier`.
+"""Crawler-carrier plant profile (IC120, MST-110CR, MST-2200VD): our COM3 extension frames on a :class:`CrawlerCarrier`.
 
 Commands: ``Velocity_Cmd`` by ``velocity_mode`` (0 centre + yaw rate, 1 per track; pilot input is not
-modelled and stops the tracks), ``Vessel_Cmd`` (enable 1: target angle; 0 or lever dump mode: hold).
-States: track velocities, vessel angle, azimuth and yaw rate, roll/pitch, GNSS fix of the base (RTK noise).
+modelled and stops the tracks), ``Vessel_Cmd`` (enable 1: target angle; 0 or lever dump mode: hold),
+``Swing_Cmd`` (enable 1: target swing angle; 0 or lever swing mode: hold; counted and ignored by a carrier
+without a swing). States: track velocities, vessel angle, swing angle (0 without a swing), azimuth and yaw
+rate, roll/pitch, GNSS fix of the base (RTK noise).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from com3_can.profiles.crawler_carrier import CrawlerCarrierProfile
 from com3_can.signal_map import CARRIER_FRAMES as F
+from com3_can.signal_map import CARRIER_SWING as S
 from com3_can.signal_map import CARRIER_VESSEL as V
 from com3_can.signal_map import EXCAVATOR_TRACKS as T
 from sim_bridge.config import CarrierSpec, load_carrier
@@ -41,19 +44,35 @@ class CrawlerCarrierPlantProfile(PlantProfile):
     @staticmethod
     def mjcf(name: str, spec: CarrierSpec) -> list[str]:
         length, width = spec.inner_length, spec.inner_width
-        return [
+        vessel = spec.vessel
+        lines = [
             f'    <body name="{name}_base" mocap="true">',
             f'      <geom type="box" size="{spec.tracks.length / 2} {spec.tracks.width / 2} 0.45" pos="0 0 0.45" '
             'material="ic" contype="0" conaffinity="0"/>',
-            f'      <body name="{name}_vessel_link" pos="{_v(spec.hinge_xyz)}">',
-            f'        <joint name="{name}_{spec.vessel.name}" type="hinge" axis="0 -1 0"'
-            f' range="{spec.vessel.lower} {spec.vessel.upper}" limited="true"/>',
-            f'        <geom type="box" size="{length / 2} {width / 2} 0.05" pos="{length / 2} 0 0.53" material="ic" '
-            'contype="0" conaffinity="0" mass="1"/>',
-            f'        <site name="{name}_vessel_centre" pos="{length / 2} 0 0.53" size="0.1"/>',
-            "      </body>",
-            "    </body>",
         ]
+        indent = "      "
+        if spec.swing is not None:  # the rotating upper body carries the vessel
+            sw = spec.swing
+            rng = "" if sw.lower is None else f' range="{sw.lower} {sw.upper}" limited="true"'
+            lines += [
+                f'{indent}<body name="{name}_{sw.child}" pos="{_v(sw.origin_xyz)}">',
+                f'{indent}  <joint name="{name}_{sw.name}" type="hinge" axis="0 0 1"{rng}/>',
+                f'{indent}  <geom type="cylinder" size="1.0 0.1" material="ic" contype="0" conaffinity="0" mass="1"/>',
+            ]
+            indent += "  "
+        lines += [
+            f'{indent}<body name="{name}_vessel_link" pos="{_v(vessel.origin_xyz)}">',
+            f'{indent}  <joint name="{name}_{vessel.name}" type="hinge" axis="0 -1 0"'
+            f' range="{vessel.lower} {vessel.upper}" limited="true"/>',
+            f'{indent}  <geom type="box" size="{length / 2} {width / 2} 0.05" pos="{length / 2} 0 0.53" material="ic" '
+            'contype="0" conaffinity="0" mass="1"/>',
+            f'{indent}  <site name="{name}_vessel_centre" pos="{length / 2} 0 0.53" size="0.1"/>',
+            f"{indent}</body>",
+        ]
+        if spec.swing is not None:
+            lines.append("      </body>")
+        lines.append("    </body>")
+        return lines
 
     @staticmethod
     def command(io: PlantCanIO, side: Side, frame: str, v: dict[str, float]) -> None:
@@ -76,6 +95,16 @@ class CrawlerCarrierPlantProfile(PlantProfile):
                 ic.set_vessel_target(v[V.target_angle_cmd])
             else:
                 ic.set_vessel_velocity(0.0)
+        elif frame == F["swing"]:
+            if not ic.has_swing:
+                if v[S.enable_cmd] >= 0.5:
+                    side.counters["ignored_no_swing"] += 1
+                return
+            lever = s is not None and int(s.get(S.mode_setting, 0)) == 1  # lever input: not modelled, hold
+            if v[S.enable_cmd] >= 0.5 and not lever:
+                ic.set_swing_target(v[S.target_angle_cmd])
+            else:
+                ic.hold_swing()
 
     @staticmethod
     def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
@@ -85,7 +114,9 @@ class CrawlerCarrierPlantProfile(PlantProfile):
         if frame == F["track_velocity"]:
             return {V.left_track_velocity: ic.base.vl, V.right_track_velocity: ic.base.vr}
         if frame == F["vessel_angle"]:
-            return {V.angle: ic.vessel.q[0], V.angular_velocity: ic.vessel.v[0]}
+            return {V.angle: ic.vessel_angle, V.angular_velocity: ic.vessel_rate}
+        if frame == F["swing_angle"]:
+            return {S.angle: ic.swing_angle, S.angular_velocity: ic.swing_rate}
         if frame == "Vehicle_Azimuth":
             return {"track_body_azimuth": -_wrap(ic.base.yaw), "yaw_rate": -ic.base.w}
         if frame == "Roll_Pitch_Angle":

@@ -1,4 +1,5 @@
-"""Codec properties: round trip within one LSB for every signal of both DBCs, strict checks, neutrals."""
+"""Codec properties: round trip within one LSB for every signal of every DBC, strict checks, neutrals; each kind's
+codec found through its machine description."""
 
 from __future__ import annotations
 
@@ -8,9 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from com3_can.codec import MACHINES, AliveCounter, load_codec
+from com3_can.codec import AliveCounter, dbc_file, dbc_files, load_codec
 from com3_can.errors import Com3DecodeError, Com3EncodeError
+from tms_common.errors import ConfigError
 
+#: one machine kind per shipped bus DBC (the MSTs share the IC120's crawler-carrier DBC)
+MACHINES = ("zx200", "ic120", "d37pxi")
 ALL_FRAMES = [(m, f) for m in MACHINES for f in load_codec(m).frame_names]
 
 
@@ -96,6 +100,8 @@ def test_neutral_commands_are_not_all_zero_and_decode_to_rest(machine: str) -> N
                 assert value == pytest.approx(0.0, abs=1e-9), f"{frame}.{name}"
     # the motion frames with offsets are not all-zero bytes when neutral
     motion = "Velocity_Cmd_1" if machine == "zx200" else "Velocity_Cmd"
+    if machine == "d37pxi":  # neutral blade = hold (mode 0), target 0 rad: not all-zero bytes either
+        assert codec.encode("Blade_Cmd", codec.neutral("Blade_Cmd")) != bytes(8)
     assert codec.encode(motion, codec.neutral(motion)) != bytes(8)
 
 
@@ -120,3 +126,51 @@ def test_alive_counter_wraps() -> None:
     assert AliveCounter.is_successor(255, 0) and not AliveCounter.is_successor(3, 5)
     with pytest.raises(ValueError, match="outside"):
         AliveCounter(start=256)
+
+
+def test_each_kind_finds_its_dbc_through_its_machine_description() -> None:
+    assert {k: dbc_file(k) for k in ("zx200", "zx120", "ic120", "mst110cr", "mst2200vd", "d37pxi")} == {
+        "zx200": "excavator_com3.dbc", "zx120": "excavator_com3.dbc", "ic120": "crawler_carrier_com3.dbc",
+        "mst110cr": "crawler_carrier_com3.dbc", "mst2200vd": "crawler_carrier_com3.dbc", "d37pxi": "dozer_com3.dbc",
+    }
+    assert {"excavator_com3.dbc", "crawler_carrier_com3.dbc", "dozer_com3.dbc"} <= set(dbc_files())
+    mst = load_codec("mst110cr")
+    assert mst.machine == "mst110cr" and "Swing_Cmd" in mst.command_frames and "Swing_Angle" in mst.state_frames
+    assert mst.frame_names == load_codec("ic120").frame_names
+    with pytest.raises(ConfigError, match=r"no such machine description \(machine kind 'd61'"):
+        load_codec("d61")
+
+
+def test_a_description_naming_an_unshipped_dbc_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    import dataclasses
+
+    import tms_model.machines as machines
+
+    real = machines.load_machine("ic120")
+    monkeypatch.setattr(machines, "load_machine", lambda kind, path=None: dataclasses.replace(real, dbc="nope.dbc"))
+    with pytest.raises(ConfigError, match=r"ic120.yaml: can.dbc: no DBC file 'nope.dbc' in com3_can/dbc"):
+        dbc_file("ic120")
+
+
+def test_new_swing_and_blade_signals_round_trip() -> None:
+    ic, dz = load_codec("ic120"), load_codec("d37pxi")
+    cmd = {"target_swing_angle": -2.5, "swing_control_enable": 1.0}
+    assert ic.decode(ic.frame_id("Swing_Cmd"), ic.encode("Swing_Cmd", cmd))[1] == pytest.approx(cmd, abs=4e-4)
+    state = {"swing_angle": 3.1, "swing_angular_velocity": -0.35}
+    assert ic.decode(ic.frame_id("Swing_Angle"), ic.encode("Swing_Angle", state))[1] == pytest.approx(state, abs=4e-4)
+    assert ic.neutral("Swing_Cmd") == {"target_swing_angle": 0.0, "swing_control_enable": 0.0}  # hold
+    assert ic.neutral("Machine_Setting_Cmd")["swing_mode"] == 0.0  # angle control
+    blade = {"target_blade_lift_angle": 0.18, "target_blade_lift_velocity": -0.25, "blade_control_mode": 2.0}
+    assert dz.decode(dz.frame_id("Blade_Cmd"), dz.encode("Blade_Cmd", blade))[1] == pytest.approx(blade, abs=5e-4)
+    with pytest.raises(Com3EncodeError, match=r"Blade_Cmd.blade_control_mode: value 3"):
+        dz.encode("Blade_Cmd", {**blade, "blade_control_mode": 3.0})
+    got = dz.decode(dz.frame_id("Blade_Angle"), dz.encode("Blade_Angle", {"blade_lift_angle": -0.41,
+                                                                          "blade_lift_angular_velocity": 0.2}))
+    assert got == ("Blade_Angle", pytest.approx({"blade_lift_angle": -0.41, "blade_lift_angular_velocity": 0.2}, abs=4e-4))
+    # ids: J1939-style from SA 0x0A (commands) and 0xEA (dozer states); no id shared with the other DBCs
+    for f in dz.command_frames:
+        assert dz.frame_id(f) >> 26 == 6 and dz.frame_id(f) & 0xFF == 0x0A
+    assert all(dz.frame_id(f) & 0xFF == 0xEA for f in dz.state_frames)
+    zx = load_codec("zx200")
+    ids = [{c.frame_id(f) for f in c.frame_names} for c in (zx, ic, dz)]
+    assert not (ids[0] & ids[1] or ids[0] & ids[2] or ids[1] & ids[2])

@@ -45,7 +45,7 @@ def test_registries_refuse_duplicates_and_name_the_known_types() -> None:
     for registry in (PROFILES, PLANT_PROFILES):
         with pytest.raises(ValueError, match="'excavator' is already registered"):
             registry.register("excavator", object)  # type: ignore[arg-type]
-        with pytest.raises(ConfigError, match=r"unknown .*profile 'd61'; known: crawler_dump, excavator"):
+        with pytest.raises(ConfigError, match=r"unknown .*profile 'd61'; known: crawler_dump, dozer, excavator"):
             registry.get("d61")
 
 

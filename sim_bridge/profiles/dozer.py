@@ -1,0 +1,104 @@
+"""Dozer plant profile (D37PXi): our COM3 dozer extension frames (``dbc/dozer_com3.dbc``) on a :class:`Dozer`.
+
+Commands: ``Velocity_Cmd`` by ``velocity_mode`` (0 centre + yaw rate, 1 per track; pilot input is not modelled and
+stops the tracks); ``Blade_Cmd`` by ``blade_control_mode`` (0 hold, 1 target lift angle, 2 lift velocity);
+``track_lock`` / ``blade_lock`` of ``Machine_Setting_Cmd`` hold the tracks / the blade. States: track velocities,
+blade lift angle, azimuth and yaw rate, roll/pitch, GNSS fix of the base (RTK noise), as the carrier's.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from com3_can.profiles.dozer import DozerProfile
+from com3_can.signal_map import BLADE_ANGLE, BLADE_VELOCITY
+from com3_can.signal_map import DOZER_BLADE as B
+from com3_can.signal_map import DOZER_FRAMES as F
+from com3_can.signal_map import EXCAVATOR_TRACKS as T
+from sim_bridge.config import DozerSpec, load_dozer
+from sim_bridge.machines import Dozer
+from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.crawler_carrier import CrawlerCarrierPlantProfile
+from sim_bridge.profiles.excavator import _v
+
+if TYPE_CHECKING:
+    from sim_bridge.can_io import PlantCanIO, Side
+
+__all__ = ["DozerPlantProfile"]
+
+
+class DozerPlantProfile(PlantProfile):
+    machine_type = DozerProfile.machine_type
+    dbc = DozerProfile.dbc
+    motion_frames = frozenset(f for frames in DozerProfile.channels.values() for f in frames)
+
+    @staticmethod
+    def load_spec(path: Path) -> DozerSpec:
+        return load_dozer(path)
+
+    @staticmethod
+    def make_machine(spec: DozerSpec, dt: float, pose: tuple[float, float, float]) -> Dozer:
+        return Dozer(spec, dt, pose)
+
+    @staticmethod
+    def mjcf(name: str, spec: DozerSpec) -> list[str]:
+        j, b = spec.lift, spec.blade
+        t = spec.tracks
+        rng = f' range="{j.lower} {j.upper}" limited="true"'
+        return [
+            f'    <body name="{name}_base" mocap="true">',
+            f'      <geom type="box" size="{t.length * 0.35} {t.width * 0.4} 0.6" pos="0 0 0.6" material="dz" '
+            'contype="0" conaffinity="0"/>',
+            f'      <body name="{name}_{j.child}" pos="{_v(j.origin_xyz)}" euler="{_v(j.origin_rpy)}">',
+            f'        <joint name="{name}_{j.name}" type="hinge" axis="{_v(j.axis)}"{rng}/>',
+            f'        <geom type="box" size="{b.edge_xyz[0] / 2} 0.1 0.1" pos="{b.edge_xyz[0] / 2} 0 0" material="dz" '
+            'contype="0" conaffinity="0" mass="1"/>',
+            f'        <geom type="box" size="0.1 {b.width / 2} 0.45" pos="{_v((b.edge_xyz[0], b.edge_xyz[1], b.edge_xyz[2] + 0.45))}" '
+            'material="dz" contype="0" conaffinity="0" mass="1"/>',
+            f'        <site name="{name}_blade_edge" pos="{_v(b.edge_xyz)}" size="0.08"/>',
+            "      </body>",
+            "    </body>",
+        ]
+
+    @staticmethod
+    def command(io: PlantCanIO, side: Side, frame: str, v: dict[str, float]) -> None:
+        dz: Dozer = side.machine
+        s = side.settings
+        if frame == F["setting"]:
+            side.settings = v
+            if v["track_lock"] >= 0.5:
+                dz.set_track_speeds(0.0, 0.0)
+            if v["blade_lock"] >= 0.5:
+                dz.set_lift_velocity(0.0)
+        elif frame == F["travel_velocity"]:
+            if s is not None and s["track_lock"] >= 0.5:
+                side.counters["ignored_track_lock"] += 1
+                dz.set_track_speeds(0.0, 0.0)
+                return
+            mode = 0 if s is None else int(s["velocity_mode"])
+            if mode == 0:
+                dz.set_centre_velocity(v[T.centre_velocity_cmd], v[T.yaw_rate_cmd])
+            elif mode == 1:
+                dz.set_track_speeds(v[T.left_velocity_cmd], v[T.right_velocity_cmd])
+            else:  # pilot input: not modelled
+                side.counters["ignored_unsupported_mode"] += 1
+                dz.set_track_speeds(0.0, 0.0)
+        elif frame == F["blade"]:
+            mode = int(v[B.mode_cmd])
+            if s is not None and s["blade_lock"] >= 0.5:
+                mode = 0
+            if mode == BLADE_ANGLE:
+                dz.set_lift_target(v[B.target_angle_cmd])
+            elif mode == BLADE_VELOCITY:
+                dz.set_lift_velocity(v[B.target_velocity_cmd])
+            else:
+                dz.set_lift_velocity(0.0)
+
+    @staticmethod
+    def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+        dz: Dozer = side.machine
+        if frame == F["blade_angle"]:
+            return {B.angle: dz.lift_angle, B.angular_velocity: dz.lift_rate}
+        # travel, azimuth, attitude, GNSS and Machine_State frames are the carrier's
+        return CrawlerCarrierPlantProfile.state(io, side, frame)
