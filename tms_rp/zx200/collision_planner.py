@@ -9,9 +9,10 @@ straight tip line with the edge angle turning linearly (the IK of every sample).
 * The start pose, and the end of every target, in collision: refused (:class:`CollisionError`, naming the object,
   its record and the link).
 * A joint-space segment (change_pose's moves, excavate's approach) whose path collides is replaced by a detour:
-  the direct line if it is free, else *over* the object: raise the front (a blend of the start / goal front with
-  the carry front of the config, lowest level first) while swinging towards the goal, carry across at that height,
-  lower onto the goal; the raise starts swinging as early as stays free. The carry keeps ``detour_margin`` more
+  the direct line if it is free, else *over* the object, lowest lift level first (a blend of the start / goal front
+  with the carry front of the config): one apex half way (raise while swinging in, lower while swinging out) if
+  that is free, else raise, carry across at that height and lower onto the goal, the raise and the lower swinging
+  as far as stays free. The carry keeps ``detour_margin`` more
   clearance (tracking error); every via corner is checked cut by the controller's via tolerance. Where the short
   swing has no detour, the long way round is tried. No detour: refused naming the object that blocks.
 * A change_pose straight tip line that collides is replaced by the joint-space detour to its end; excavate's dig
@@ -125,6 +126,14 @@ class CollisionPlanner:
         """None when the joint-space line ``q_a`` -> ``q_b`` is free (with ``margin``), else the contact found."""
         return self.first_hit(self.joint_line(q_a, q_b), scene, margin)
 
+    def free_inner(self, q_a: np.ndarray, q_b: np.ndarray, scene: Scene, margin: float,
+                   near: float = 0.15) -> Contact | None:
+        """As :meth:`free`, ``margin`` kept except within ``near`` [rad, every joint] of the ends (a goal or start
+        beside an object has less)."""
+        qs = self.joint_line(q_a, q_b)
+        inner = np.array([min(np.max(np.abs(q - q_a)), np.max(np.abs(q - q_b))) > near for q in qs])
+        return self.first_hit(qs[inner], scene, margin) if inner.any() else None
+
     def min_clearance(self, qs: Iterable[np.ndarray], scene: Scene) -> float:
         return min((self.model.contact(q, scene.objects, scene.padding).clearance for q in qs), default=math.inf)
 
@@ -154,6 +163,13 @@ class CollisionPlanner:
             lam = level / levels
             front_a = q_a[1:] + lam * (carry - q_a[1:])
             front_b = q_b[1:] + lam * (carry - q_b[1:])
+            # one apex half way: raise while swinging in, lower while swinging out (2 segments, 1 via corner)
+            apex = np.r_[q_a[0] + swing / 2, (front_a + front_b) / 2]
+            if (self.free(q_a, apex, scene) is None and self.free(apex, q_b, scene) is None
+                    and self.free_inner(q_a, apex, scene, margin) is None
+                    and self.free_inner(apex, q_b, scene, margin) is None
+                    and self._corner_cut_free(q_a, apex, q_b, scene)):
+                return [apex, q_b]
             w1, w2 = np.r_[q_a[0], front_a], np.r_[q_b[0], front_b]
             if self.free(w1, w2, scene, margin) is not None:
                 continue  # not high enough to carry across
