@@ -34,7 +34,13 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from com3_msgs.action import SetDumpAngle
 from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
-from tms_if_opera.interface import CHANGE_POSE, CHANGE_POSE_PLAN, EXCAVATE_SIMPLE, EXCAVATE_SIMPLE_PLAN, RELEASE_SIMPLE
+from tms_if_opera.interface import (
+    CHANGE_POSE,
+    CHANGE_POSE_PLAN,
+    EXCAVATE_SIMPLE,
+    EXCAVATE_SIMPLE_PLAN,
+    RELEASE_SIMPLE,
+)
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_msg_rp.msg import TmsRpErrorCodes, TmsRpZx200PositionWithAngle
 from tms_ts.errors import SubtaskRecordError

@@ -10,8 +10,14 @@ import pytest
 from tms_model.excavator.codes import FAILURE
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
-from tms_rp.zx200.collision import (ArmCollisionModel, CollisionError, CollisionObject, CollisionRecordError,
-                                    load_collision_config, objects_from_record)
+from tms_rp.zx200.collision import (
+    ArmCollisionModel,
+    CollisionError,
+    CollisionObject,
+    CollisionRecordError,
+    load_collision_config,
+    objects_from_record,
+)
 from tms_rp.zx200.collision_planner import CollisionPlanner, Scene
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 

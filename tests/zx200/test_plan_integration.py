@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-from tms_model.excavator.kinematics import JOINTS
 from tests.rosproc import executable
+from tms_model.excavator.kinematics import JOINTS
 
 pytestmark = pytest.mark.integration
 

@@ -76,7 +76,12 @@ from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_rc.zx200.controller import load_controller_config
-from tms_rp.zx200.collision import ArmCollisionModel, CollisionRecordError, load_collision_config, objects_from_record
+from tms_rp.zx200.collision import (
+    ArmCollisionModel,
+    CollisionRecordError,
+    load_collision_config,
+    objects_from_record,
+)
 from tms_rp.zx200.collision_planner import CollisionPlanner, Scene
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
