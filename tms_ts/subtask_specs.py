@@ -34,7 +34,13 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from com3_msgs.action import SetDumpAngle
 from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
-from tms_if_opera.interface import CHANGE_POSE, EXCAVATE_SIMPLE, RELEASE_SIMPLE
+from tms_if_opera.interface import (
+    CHANGE_POSE,
+    CHANGE_POSE_PLAN,
+    EXCAVATE_SIMPLE,
+    EXCAVATE_SIMPLE_PLAN,
+    RELEASE_SIMPLE,
+)
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_msg_rp.msg import TmsRpErrorCodes, TmsRpZx200PositionWithAngle
 from tms_ts.errors import SubtaskRecordError
@@ -270,6 +276,13 @@ _SPECS = [
                 build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
                 zx200_planning=True),
     SubtaskSpec("subtask_zx200_excavate_simple", "zx200", EXCAVATE_SIMPLE, TmsRpZx200ExcavateSimple,
+                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, zx200_planning=True),
+    # the original's _plan variants: the same records; the planning server plans around the collision objects of
+    # its DB record (collision_object_record_name) and refuses with FAILURE naming the object
+    SubtaskSpec("subtask_zx200_change_pose_plan", "zx200", CHANGE_POSE_PLAN, TmsRpZx200ChangePose,
+                build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
+                zx200_planning=True),
+    SubtaskSpec("subtask_zx200_excavate_simple_plan", "zx200", EXCAVATE_SIMPLE_PLAN, TmsRpZx200ExcavateSimple,
                 build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, zx200_planning=True),
     SubtaskSpec("subtask_zx200_release_simple", "zx200", RELEASE_SIMPLE, TmsRpZx200ReleaseSimple,
                 build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan["target_angle"]), zx200_ok,

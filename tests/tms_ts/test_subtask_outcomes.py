@@ -36,7 +36,7 @@ def test_every_row_builds_its_own_actions_goal_and_reads_its_result() -> None:
     from tms_msg_rp.msg import TmsRpErrorCodes
     from tms_ts.subtask_specs import SUBTASKS
 
-    assert len(SUBTASKS) == 10
+    assert len(SUBTASKS) == 12
     for spec in SUBTASKS.values():
         goal = spec.goal(spec.build(_sample(spec), "r"))
         assert isinstance(goal, spec.action_type.Goal), (spec.name, type(goal))
@@ -60,7 +60,9 @@ def test_zx200_rows_speak_the_originals_planning_actions_and_send_options_only_w
     rows = {s.planning_action: s for s in SUBTASKS.values() if s.machine == "zx200"}
     assert {name: s.action_type for name, s in rows.items()} == {
         "tms_rp_zx200_change_pose": TmsRpZx200ChangePose, "tms_rp_zx200_excavate_simple": TmsRpZx200ExcavateSimple,
-        "tms_rp_zx200_release_simple": TmsRpZx200ReleaseSimple}
+        "tms_rp_zx200_release_simple": TmsRpZx200ReleaseSimple,
+        "tms_rp_zx200_change_pose_plan": TmsRpZx200ChangePose,
+        "tms_rp_zx200_excavate_simple_plan": TmsRpZx200ExcavateSimple}
     change = rows["tms_rp_zx200_change_pose"]
     pwa = {"position_with_angle": 1, "x": 5.0, "y": 0.0, "z": 1.0, "theta_w": 1.2}
     plain = change.build(pwa, "r")

@@ -176,9 +176,11 @@ def arm_stack(procs, domain: int, ros_node, tmp_path: Path) -> Iterator[Callable
     """``arm_stack(ic120_pose="ic120_start")`` -> :class:`ArmStack` once every node is ready."""
 
     def start(*, ic120_pose: str = "ic120_start", speed: float = SIM_SPEED, plant: str = "plant.yaml",
-              clock_period_s: float = 0.0, rate_hz: float = 0.0, joint_states_period_s: float = 0.0) -> ArmStack:
+              clock_period_s: float = 0.0, rate_hz: float = 0.0, joint_states_period_s: float = 0.0,
+              planner_args: tuple[str, ...] = ()) -> ArmStack:
         """Start the stack; the keyword arguments after ``speed`` reproduce the paper launch's choices
-        (config/launch/paper_experiment.yaml: paper_plant.yaml, /clock every 20 ms, 50 Hz controller)."""
+        (config/launch/paper_experiment.yaml: paper_plant.yaml, /clock every 20 ms, 50 Hz controller).
+        ``planner_args``: more ``--ros-args`` of the planner (``-p name:=value`` ...)."""
         from tms_common.config import config_path
 
         text = config_path("sim", plant).read_text().replace("ic120: ic120_start", f"ic120: {ic120_pose}")
@@ -202,11 +204,12 @@ def arm_stack(procs, domain: int, ros_node, tmp_path: Path) -> Iterator[Callable
         ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200",
                      "-p", "use_sim_time:=true", "-p", f"rate_hz:={rate_hz}"], name="zx200_arm_controller")
         planner = procs([str(executable("tms_if_opera", "zx200_planner")), "--ros-args", "-r", "__ns:=/zx200",
-                         "-p", "use_sim_time:=true"], name="zx200_planner")
+                         "-p", "use_sim_time:=true", *planner_args], name="zx200_planner")
         assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
         assert planner.wait_for("zx200_planner ready", 60), planner.output
         stack = ArmStack(ros_node)
         stack.procs = {"sim": sim, "bridge": bridge, "controller": ctl, "planner": planner}
+        stack.plant_config = cfg_file
         assert stack.spin_until(lambda: stack.q is not None and stack.tip is not None and stack.soil is not None, 30), \
             "no joint_states / truth from the plant"
         return stack

@@ -23,8 +23,16 @@ Goals run as coroutines on one executor thread (:class:`tms_common.ticker.Ticker
 arm's joints are read when a goal needs them: a ``joint_states`` subscription exists only while a goal waits
 for one (subscribed all the time, the 50 Hz stream cost ~16 % of a core in executor overhead alone).
 
-Parameters (read-only, read at start-up): ``machine_config``, ``planner_config``, ``controller_config``
-(YAML paths; defaults in config/).
+The original's collision-aware variants, same types: ``tms_rp_zx200_change_pose_plan`` (with its
+``/options``) and ``tms_rp_zx200_excavate_simple_plan``. Each goal reads the collision-object record named by
+``collision_object_record_name`` from the DB when it arrives and plans with
+:class:`tms_rp.zx200.collision_planner.CollisionPlanner` (dense path checks, detours over objects); a target or
+path it cannot clear ends with ``TmsRpErrorCodes.FAILURE`` and a message naming the object and its record.
+
+Parameters (read-only, read at start-up): ``machine_config``, ``planner_config``, ``controller_config``,
+``collision_config`` (YAML paths; defaults in config/), ``collision_object_record_name`` (the original's; "" = no
+objects), ``collision_object_dump_record_name`` (the original's mesh records: not supported, goals of the _plan
+actions are refused while it is set), ``db_uri`` / ``db_path`` (the store, ``tms_db.open_store``).
 """
 
 from __future__ import annotations
@@ -51,7 +59,10 @@ from tms_common.ticker import Ticker
 from tms_if_opera.interface import (
     CHANGE_POSE,
     CHANGE_POSE_OPTIONS,
+    CHANGE_POSE_PLAN,
+    CHANGE_POSE_PLAN_OPTIONS,
     EXCAVATE_SIMPLE,
+    EXCAVATE_SIMPLE_PLAN,
     OPTIONS_TTL_S,
     PLANNING_OUTCOME,
     RELEASE_SIMPLE,
@@ -65,6 +76,13 @@ from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_rc.zx200.controller import load_controller_config
+from tms_rp.zx200.collision import (
+    ArmCollisionModel,
+    CollisionRecordError,
+    load_collision_config,
+    objects_from_record,
+)
+from tms_rp.zx200.collision_planner import CollisionPlanner, Scene
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 __all__ = ["Zx200PlannerNode", "main"]
@@ -91,6 +109,18 @@ class Zx200PlannerNode(Node):
         pcfg = load_planner_config(path("planner_config"))
         ccfg = load_controller_config(path("controller_config"))
         self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.ground_min_z)
+        # the _plan actions: collision objects from the DB, as the original's planning servers read them
+        self.collision = CollisionPlanner(self.planner, ArmCollisionModel(kin, load_collision_config(
+            path("collision_config"))), via_tolerance_rad=ccfg.via_tolerance_rad)
+        self._collision_record = str(self.declare_parameter("collision_object_record_name", "", read_only).value)
+        dump = str(self.declare_parameter("collision_object_dump_record_name", "", read_only).value)
+        self._dump_records = [r.strip() for r in dump.split(",") if r.strip()]
+        db_uri, db_path = path("db_uri"), path("db_path")
+        self._store = None
+        if self._collision_record:
+            from tms_db import open_store  # the original's planning servers read the DB themselves (mongocxx)
+
+            self._store = open_store(uri=db_uri, path=db_path)
         self._group = ReentrantCallbackGroup()
         self._ticker = Ticker(self, TICK_S, callback_group=self._group)
         self._q_waiters: list[Future] = []
@@ -110,12 +140,16 @@ class Zx200PlannerNode(Node):
                 (TmsRpZx200ChangePose, CHANGE_POSE, self._change_pose),
                 (TmsRpZx200ExcavateSimple, EXCAVATE_SIMPLE, self._excavate),
                 (TmsRpZx200ReleaseSimple, RELEASE_SIMPLE, self._release),
+                (TmsRpZx200ChangePose, CHANGE_POSE_PLAN, self._change_pose_plan),
+                (TmsRpZx200ExcavateSimple, EXCAVATE_SIMPLE_PLAN, self._excavate_plan),
             )
         ]
         #: goal id bytes -> (pass_through, theta_w_tolerance, expiry [monotonic s]) given before the goal
         self._options: dict[bytes, tuple[bool, float, float]] = {}
         self._options_srv = self.create_service(Zx200ChangePoseOptions, CHANGE_POSE_OPTIONS, self._on_options,
                                                 callback_group=self._group)
+        self._plan_options_srv = self.create_service(Zx200ChangePoseOptions, CHANGE_POSE_PLAN_OPTIONS,
+                                                     self._on_options, callback_group=self._group)
         self._outcome_pub = self.create_publisher(Zx200PlanningOutcome, PLANNING_OUTCOME, OUTCOME_QOS)
         self.get_logger().info("zx200_planner ready")
 
@@ -186,10 +220,10 @@ class Zx200PlannerNode(Node):
         return pass_through, tol
 
     # -------------------------------------------------------------- common execution
-    def _end(self, handle, action_type, code: int, message: str) -> object:  # noqa: ANN001
+    def _end(self, handle, action_type, code: int, message: str, name: str | None = None) -> object:  # noqa: ANN001
         """Publish the goal's outcome (code and text), then end it: SUCCEEDED, CANCELED or ABORTED by ``code``."""
         self._outcome_pub.publish(Zx200PlanningOutcome(
-            action=f"{self.get_namespace().rstrip('/')}/{self._action_names[action_type]}", goal_id=handle.goal_id,
+            action=f"{self.get_namespace().rstrip('/')}/{name or self._action_names[action_type]}", goal_id=handle.goal_id,
             error_code=int(code), message=message))
         result = action_type.Result()
         result.error_code.val = int(code)
@@ -201,7 +235,8 @@ class Zx200PlannerNode(Node):
             handle.abort()
         return result
 
-    async def _run(self, handle, action_type, plan, needs_q: bool = True) -> object:  # noqa: ANN001
+    async def _run(self, handle, action_type, plan, needs_q: bool = True, name: str | None = None,  # noqa: ANN001
+                   report=None) -> object:  # noqa: ANN001
         t0 = time.monotonic()
         pass_through_end, self._pass_through_end = self._pass_through_end, None
         try:
@@ -215,12 +250,12 @@ class Zx200PlannerNode(Node):
             targets = plan(q_plan)
         except PlanningError as exc:
             self.get_logger().warning(f"goal rejected before motion: {exc}")
-            return self._end(handle, action_type, exc.code, str(exc))
+            return self._end(handle, action_type, exc.code, str(exc), name)
         deadline = time.monotonic() + 5.0
         while not self._ctl.server_is_ready():
             if time.monotonic() > deadline:
                 return self._end(handle, action_type, codes.NO_VALID_CONTROL,
-                                 "arm controller action arm_controller/move is not available")
+                                 "arm controller action arm_controller/move is not available", name)
             await self._ticker.next()
         t_plan = time.monotonic()
         code, message = await self._move(handle, action_type, targets, lambda: self.get_logger().info(
@@ -229,10 +264,11 @@ class Zx200PlannerNode(Node):
             "later (wall)"))
         if code != codes.SUCCESS:
             if self._goals.stopping.is_set() and not handle.is_cancel_requested:  # ended by our stop
-                return self._end(handle, action_type, codes.FAILURE, f"zx200_planner stopping (SIGINT/SIGTERM): {message}")
-            return self._end(handle, action_type, code, message)
+                return self._end(handle, action_type, codes.FAILURE, f"zx200_planner stopping (SIGINT/SIGTERM): {message}",
+                                 name)
+            return self._end(handle, action_type, code, message, name)
         self._pass_through_end = self.planner.pass_through_end(targets)
-        return self._end(handle, action_type, codes.SUCCESS, "done")
+        return self._end(handle, action_type, codes.SUCCESS, report() if report is not None else "done", name)
 
     @staticmethod
     def _segments(targets) -> list:  # noqa: ANN001
@@ -361,6 +397,72 @@ class Zx200PlannerNode(Node):
             return self.planner.release(handle.request.target_angle, q_plan)
 
         return await self._run(handle, TmsRpZx200ReleaseSimple, plan)
+
+    def destroy_node(self) -> None:
+        if self._store is not None:
+            self._store.close()
+        super().destroy_node()
+
+    # -------------------------------------------------------------- the _plan actions (collision objects)
+    def _scene(self) -> Scene:
+        """The collision objects and link padding for one goal, read from the DB now (the carrier may have moved)."""
+        if self._dump_records:
+            raise CollisionRecordError(self._dump_records[0], "data", "mesh collision objects (parameter "
+                                       "collision_object_dump_record_name) are not supported: give the object as a "
+                                       "primitive in the collision_objects of collision_object_record_name's record")
+        if not self._collision_record:
+            return Scene([], self.collision.model.padding_for())
+        from tms_db.errors import RecordNotFound, StoreError
+
+        try:
+            doc = self._store.get_record(self._collision_record)
+        except RecordNotFound:
+            raise CollisionRecordError(self._collision_record, None, "not found in the parameter collection "
+                                       "(planner parameter collision_object_record_name)") from None
+        except StoreError as exc:
+            raise CollisionRecordError(self._collision_record, None, f"cannot be read: {exc}") from None
+        objects, padding = objects_from_record(doc, self._collision_record)
+        return Scene(objects, self.collision.model.padding_for(padding))
+
+    def _plan_report(self) -> str:
+        r = self.collision.report
+        clearance = "none within 1 m" if math.isinf(r.min_clearance) else f"{r.min_clearance:.3f} m"
+        text = f"done; {r.checked} configurations checked, smallest clearance beyond padding {clearance}"
+        return text + (f"; detours: {'; '.join(r.detours)}" if r.detours else "")
+
+    async def _change_pose_plan(self, handle):  # noqa: ANN001, ANN202
+        g = handle.request
+        pass_through, theta_w_tolerance = self._take_options(handle)
+
+        def plan(q_plan):  # noqa: ANN001, ANN202
+            scene = self._scene()
+            targets = self.collision.change_pose(
+                scene,
+                joint_names=list(g.trajectory.joint_names),
+                joint_points=[list(p.positions) for p in g.trajectory.points],
+                poses=[([p.position.x, p.position.y, p.position.z],
+                        [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]) for p in g.pose_sequence],
+                positions_with_angle=[([p.position.x, p.position.y, p.position.z], p.theta_w)
+                                      for p in g.position_with_angle_sequence],
+                current_q=q_plan, pass_through=pass_through, theta_w_tolerance=theta_w_tolerance)
+            self.get_logger().info(f"{CHANGE_POSE_PLAN}: {len(scene.objects)} collision object(s); {self._plan_report()}")
+            return targets
+
+        return await self._run(handle, TmsRpZx200ChangePose, plan, name=CHANGE_POSE_PLAN, report=self._plan_report)
+
+    async def _excavate_plan(self, handle):  # noqa: ANN001, ANN202
+        p = handle.request.position_with_angle
+
+        def plan(q_plan):  # noqa: ANN001, ANN202
+            scene = self._scene()
+            targets = self.collision.excavate(scene, [p.position.x, p.position.y, p.position.z], p.theta_w, p.offset,
+                                              q_plan)
+            self.get_logger().info(f"{EXCAVATE_SIMPLE_PLAN}: {len(scene.objects)} collision object(s); "
+                                   f"{self._plan_report()}")
+            return targets
+
+        return await self._run(handle, TmsRpZx200ExcavateSimple, plan, name=EXCAVATE_SIMPLE_PLAN,
+                               report=self._plan_report)
 
 
 def main() -> int:
