@@ -30,6 +30,7 @@ Parameters: ``machine``, ``machine_config`` (the kind's description file instead
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -72,11 +73,9 @@ class _Axis:
 def _nav_vessel(nav_yaml: str, kind: str) -> dict:
     """The ``vessel`` tuning of the kind's nav file (merged over the default's), without loading tms_rp."""
     paths = [config_path("nav", "tracked_nav.yaml")]
-    own = nav_yaml or config_path("nav", f"{kind}_nav.yaml")
-    from pathlib import Path
-
-    if Path(own).is_file() and Path(own).resolve() != Path(paths[0]).resolve():
-        paths.append(own)
+    own = Path(nav_yaml) if nav_yaml else Path(config_path("nav", f"{kind}_nav.yaml"))
+    if (nav_yaml or own.is_file()) and own.resolve() != Path(paths[0]).resolve():
+        paths.append(own)  # a file given by parameter is read even when missing: the error names it
     out: dict = {}
     for path in paths:
         data, where = load_yaml(path)
