@@ -59,11 +59,13 @@ def _stack(machine: str, *, vessel: bool = False, arm: bool = False) -> list[dic
     return nodes
 
 
-def _plant(procs, tmp_path, machines: dict[str, str], poses: dict[str, object]):  # noqa: ANN001, ANN202
+def _plant(procs, tmp_path, machines: dict[str, str], poses: dict[str, object], parked: dict[str, str]):  # noqa: ANN001, ANN202
+    """The plant with ``machines`` (each with its converter) and ``parked`` ones (no converter: held at rest by
+    the plant's watchdog; the plant needs an excavator and a carrier on the site)."""
     plant = [{"name": "sim_plant", "package": "sim_bridge", "executable": "sim_plant",
-              "ros_args": ["--ros-args", "-p", f"config:={_plant_yaml(tmp_path, machines, poses)}"]}]
+              "ros_args": ["--ros-args", "-p", f"config:={_plant_yaml(tmp_path, {**machines, **parked}, poses)}"]}]
     plant += [_node("com3_bridge", "com3_can", "com3_bridge", name, machine=name) for name in machines]
-    return _container(procs, "plant", plant, TMS_CAN_IN_PROCESS=",".join(machines))
+    return _container(procs, "plant", plant, TMS_CAN_IN_PROCESS=",".join([*machines, *parked]))
 
 
 class _Truth:
@@ -83,12 +85,14 @@ class _Truth:
         self.pose = (m.pose.position.x, m.pose.position.y, yaw_of(m.pose.orientation))
 
 
-def _wait_estimate(node, name: str, timeout: float = 90.0) -> None:  # noqa: ANN001
+def _wait_estimate(node, name: str, *procs, timeout: float = 90.0) -> None:  # noqa: ANN001
     from nav_msgs.msg import Odometry
 
     got: list = []
     sub = node.create_subscription(Odometry, f"/{name}/odometry/global", got.append, 10)
-    assert spin_until(node, lambda: len(got) > 10, timeout), f"no /{name}/odometry/global"
+    spin_until(node, lambda: len(got) > 10 or any(p.popen.poll() is not None for p in procs), timeout)
+    assert len(got) > 10, \
+        f"no /{name}/odometry/global\n" + "\n".join(f"--- {p.name}:\n{p.output[-2500:]}" for p in procs)
     node.destroy_subscription(sub)
 
 
@@ -107,11 +111,11 @@ def test_two_carriers_of_one_kind_navigate_and_dump_through_their_own_converters
     names = ("ic120_1", "ic120_2")
     start = {"ic120_1": [22.0, 4.0, 0.0], "ic120_2": [22.0, 16.0, 0.0]}
     goals = {"ic120_1": (29.0, 4.0, 0.0), "ic120_2": (29.0, 16.0, 0.0)}
-    plant = _plant(procs, tmp_path, dict.fromkeys(names, "ic120"), start)
+    plant = _plant(procs, tmp_path, dict.fromkeys(names, "ic120"), {**start, "zx200": "zx200_base"}, {"zx200": "zx200"})
     pcs = {n: _container(procs, f"{n}_pc", _stack(n, vessel=True)) for n in names}
     truth = {n: _Truth(ros_node, n) for n in names}
     for n in names:
-        _wait_estimate(ros_node, n)
+        _wait_estimate(ros_node, n, plant, pcs[n])
     calls = {n: ActionCall(ros_node, NavigateToPose, f"/{n}/navigate_to_pose", NavigateToPose.Goal(
         pose=pose_stamped(*goals[n]))) for n in names}
     for n in names:  # both drive at once, each through its own navigator and converter
@@ -157,12 +161,13 @@ def test_zx200_drives_to_a_pose_through_its_subtask_and_a_sample_subtask_moves_o
     store.upsert_parameter({"model_name": "zx200", "type": "static", "record_name": "sample_swing",
                             "zx200_swing_goal_pos": 20.0})
     store.close()
-    plant = _plant(procs, tmp_path, {"zx200": "zx200"}, {"zx200": "zx200_base"})
+    plant = _plant(procs, tmp_path, {"zx200": "zx200"}, {"zx200": "zx200_base", "ic120": "ic120_start"},
+                   {"ic120": "ic120"})
     pc = _container(procs, "zx200_pc", _stack("zx200", arm=True))
     server = _container(procs, "site_server", [_node("zx200_subtasks", "tms_ts", "tms_ts_subtasks", "zx200",
                                                      model_name="zx200", db_path=db)])
     truth = _Truth(ros_node, "zx200")
-    _wait_estimate(ros_node, "zx200")
+    _wait_estimate(ros_node, "zx200", plant, pc)
     outcomes: dict[bytes, SubtaskOutcome] = {}
     from tms_common.goals import OUTCOME_QOS
 

@@ -45,6 +45,7 @@ from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
+from tms_common.rclpy_compat import create_deferred_service
 from tms_model.com3 import CARRIER_DUMP_JOINT, CARRIER_ROTATE_JOINT, POSITION
 from tms_model.fleet import load_named, machine_name, vessel_swing_joint
 from tms_model.machines import load_machine
@@ -122,7 +123,8 @@ class VesselControllerNode(Node):
         self.pub = self.create_publisher(JointCmd, "rot_dump_cmd", 10)
         self.create_subscription(JointState, "joint_states", self._on_joints, 20)
         self._servers = [self._action(SetDumpAngle, "set_dump_angle", "vessel")]
-        self._dump_up = self.create_service(DumpUp, "vessel_target_pos", self._on_dump_up)
+        # replies when the vessel is there (tms_common.rclpy_compat: the EventsExecutor awaits no async service)
+        self._dump_up = create_deferred_service(self, DumpUp, "vessel_target_pos", self._on_dump_up)
         if swing is not None:
             self._servers.append(self._action(SetSwingAngle, "set_swing_angle", "swing"))
         self.create_timer(1.0 / rate, self._tick)
@@ -193,15 +195,14 @@ class VesselControllerNode(Node):
             return action_type.Result(success=False)
         return await fut
 
-    async def _on_dump_up(self, request: DumpUp.Request, response: DumpUp.Response) -> DumpUp.Response:
+    def _on_dump_up(self, request: DumpUp.Request, reply) -> None:  # noqa: ANN001 - reply(response), once
         ax = self.axes["vessel"]
         fut, why = self._start(ax, None, request.vessel_angle, lambda ok: ok)
         if fut is None:
             self.get_logger().warning(f"vessel_target_pos: FAILED: {why}")
-            response.result = False
-            return response
-        response.result = bool(await fut)
-        return response
+            reply(DumpUp.Response(result=False))
+            return
+        fut.add_done_callback(lambda f: reply(DumpUp.Response(result=bool(f.result()))))
 
     def _tick(self) -> None:
         for ax in self.axes.values():
