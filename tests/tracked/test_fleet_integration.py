@@ -173,6 +173,7 @@ def test_zx200_drives_to_a_pose_through_its_subtask_and_a_sample_subtask_moves_o
 
     ros_node.create_subscription(SubtaskOutcome, "/zx200/subtask_outcome",
                                  lambda m: outcomes.__setitem__(bytes(m.goal_id.uuid), m), OUTCOME_QOS)
+    assert server.wait_for("subtask servers for /zx200", 60.0), server.output[-3000:]
     call = ActionCall(ros_node, LeafNodeBase, "/zx200/st_zx200_navigate_anywhere_deg",
                       LeafNodeBase.Goal(model_name="zx200", record_name="zx200_goal"), server_timeout=60.0)
     status, result = call.wait(120.0)

@@ -149,7 +149,7 @@ class SubtaskServers(Node):
         self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
         self.outcomes = self.create_publisher(SubtaskOutcome, f"/{self.model_name}/{SUBTASK_OUTCOME_TOPIC}", OUTCOME_QOS)
         self.planners: dict[str, RaceFreeActionClient] = {}
-        self.services: dict[str, object] = {}  # rows whose downstream is a service
+        self.service_clients: dict[str, object] = {}  # rows whose downstream is a service
         self._joints: dict[str, float] | None = None  # the latest joint_states, for rows that resolve
         self._joints_t = -1.0
         if any(spec.resolve is not None for spec in specs):
@@ -165,8 +165,8 @@ class SubtaskServers(Node):
         for spec in specs:
             planning = f"/{self.model_name}/{spec.planning_action}"
             if spec.downstream == "service":
-                if planning not in self.services:
-                    self.services[planning] = self.create_client(spec.action_type, planning, callback_group=group)
+                if planning not in self.service_clients:
+                    self.service_clients[planning] = self.create_client(spec.action_type, planning, callback_group=group)
             elif planning not in self.planners:
                 self.planners[planning] = RaceFreeActionClient(self, spec.action_type, planning, callback_group=group)
             if spec.options is not None and planning not in self.options_clients:
@@ -389,7 +389,7 @@ class SubtaskServers(Node):
     async def _call_service(self, gh, spec: SubtaskSpec, plan: dict, service: str) -> LeafNodeBase.Result:  # noqa: ANN001
         """A row whose downstream is a service: wait for it, call it, read its reply (cannot be canceled)."""
         record = gh.request.record_name
-        client = self.services[service]
+        client = self.service_clients[service]
         deadline = time.monotonic() + self.planning_wait_s
         while not client.service_is_ready():
             if gh.is_cancel_requested:
