@@ -111,8 +111,18 @@ def test_two_carriers_of_one_kind_navigate_and_dump_through_their_own_converters
     names = ("ic120_1", "ic120_2")
     start = {"ic120_1": [22.0, 4.0, 0.0], "ic120_2": [22.0, 16.0, 0.0]}
     goals = {"ic120_1": (29.0, 4.0, 0.0), "ic120_2": (29.0, 16.0, 0.0)}
+    from tms_db import open_store
+    from tms_msg_ts.action import LeafNodeBase
+
+    db = str(tmp_path / "db")
+    store = open_store(path=db)
+    store.upsert_parameter({"model_name": "ic120_2", "type": "static", "record_name": "release_angle", "target_angle": 0.4})
+    store.close()
     plant = _plant(procs, tmp_path, dict.fromkeys(names, "ic120"), {**start, "zx200": "zx200_base"}, {"zx200": "zx200"})
     pcs = {n: _container(procs, f"{n}_pc", _stack(n, vessel=True)) for n in names}
+    # ic120_2's subtasks as an MST2200VD's (the kind's rows): its release_soil calls the DumpUp service
+    server = _container(procs, "site_server", [_node("ic120_2_subtasks", "tms_ts", "tms_ts_subtasks", "ic120_2",
+                                                     model_name="ic120_2", machine="mst2200vd", db_path=db)])
     truth = {n: _Truth(ros_node, n) for n in names}
     for n in names:
         _wait_estimate(ros_node, n, plant, pcs[n])
@@ -126,23 +136,28 @@ def test_two_carriers_of_one_kind_navigate_and_dump_through_their_own_converters
         e_xy, e_yaw = _err(truth[n].pose, goals[n])
         print(f"{n}: at {truth[n].pose}, error {e_xy:.3f} m {e_yaw:.3f} rad")
         assert e_xy < 0.25 and e_yaw < 0.12, n
-    # dump: ic120_1 through the OPERA action, ic120_2 through the DumpUp service the MST release calls
+    # dump: ic120_1 through the OPERA action; ic120_2 through the MST release subtask, whose downstream is the
+    # DumpUp service vessel_target_pos of ic120_2's vessel controller
     dump = ActionCall(ros_node, SetDumpAngle, "/ic120_1/set_dump_angle", SetDumpAngle.Goal(target_angle=0.6))
-    cli = ros_node.create_client(DumpUp, "/ic120_2/vessel_target_pos")
-    assert spin_until(ros_node, cli.service_is_ready, 20.0)
-    reply = cli.call_async(DumpUp.Request(vessel_angle=0.4))
+    release = ActionCall(ros_node, LeafNodeBase, "/ic120_2/st_mst2200_release_soil",
+                         LeafNodeBase.Goal(model_name="ic120_2", record_name="release_angle"), server_timeout=60.0)
     status, result = dump.wait(60.0)
     assert status == 4 and result.success, pcs["ic120_1"].output[-2000:]
-    assert spin_until(ros_node, reply.done, 60.0) and reply.result().result, pcs["ic120_2"].output[-2000:]
+    status, result = release.wait(60.0)
+    assert status == 4 and result.result, (server.output[-2000:], pcs["ic120_2"].output[-2000:])
+    cli = ros_node.create_client(DumpUp, "/ic120_2/vessel_target_pos")  # a bad angle: the reply says false
+    assert spin_until(ros_node, cli.service_is_ready, 20.0)
+    reply = cli.call_async(DumpUp.Request(vessel_angle=3.0))
+    assert spin_until(ros_node, reply.done, 10.0) and reply.result().result is False
     for n, target in (("ic120_1", 0.6), ("ic120_2", 0.4)):
         assert spin_until(ros_node, lambda n=n, t=target: abs(truth[n].joints.get("vessel_joint", -9.0) - t)
                           < math.radians(2.0), 5.0), (n, truth[n].joints)
-    # each name has its own actions; the IC120 has no vessel swing, so no set_swing_angle
-    from rclpy.action import get_action_names_and_types
+    # each name's vessel controller serves its own actions; the IC120 has no vessel swing: no set_swing_angle
+    from rclpy.action import get_action_server_names_and_types_by_node
 
-    actions = {name for name, _ in get_action_names_and_types(ros_node)}
-    assert {f"/{n}/{a}" for n in names for a in ("navigate_to_pose", "set_dump_angle")} <= actions
-    assert not any(a.endswith("set_swing_angle") for a in actions)
+    for n in names:
+        served = {a for a, _ in get_action_server_names_and_types_by_node(ros_node, "vessel_controller", f"/{n}")}
+        assert served == {f"/{n}/set_dump_angle"}, served
     print(f"two carriers: {time.monotonic() - t0:.1f} s")
 
 
