@@ -13,8 +13,9 @@ every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On 
 it had, the control step was 3.7 % of the node's py-spy samples and rclpy's dispatch most of the rest; the
 node took about a third more CPU in the paper demo than on one thread.
 
-Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml),
-``machine_config`` (default config/machines/zx200.yaml).
+Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml), ``machine`` (the
+excavator on the site it drives, e.g. zx120; default the namespace's last segment, else zx200),
+``machine_config`` (default the machine kind's config/machines/<kind>.yaml).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from com3_msgs.msg import JointCmd
 from tms_common.errors import ConfigError
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
+from tms_model.fleet import machine_kind, machine_name
 from tms_model.com3 import VELOCITY
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
@@ -56,7 +58,9 @@ class ArmControllerNode(Node):
         super().__init__("zx200_arm_controller", **kwargs)
         cfg_path = declare_startup(self, "config", "").value or None
         machine_path = declare_startup(self, "machine_config", "").value or None
-        self.kin = load_kinematics("zx200", path=machine_path or None)
+        # any excavator of the site (zx200, zx120): the machine parameter, else the namespace, else zx200
+        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace(), "zx200")
+        self.kin = load_kinematics(machine_kind(self.machine), path=machine_path or None)
         self.cfg = load_controller_config(cfg_path)
         rate = float(declare_startup(self, "rate_hz", 0.0).value)  # 0 = rate_hz of the config file
         if rate < 0:
