@@ -95,10 +95,14 @@ def free_can_ports(domain: int, count: int, rng: random.Random | None = None) ->
 def ros_env(domain: int, **extra: str) -> dict[str, str]:
     """Environment for a node process on ``domain``, discovery limited to this host."""
     env = dict(os.environ)
+    # the venv's prefix, after any overlay of this project's data (a worktree's share/tms_common, so its nodes
+    # read the worktree's config/ and not the checkout the venv was installed from)
+    overlays = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
+                if p and Path(p, "share", "tms_common").is_dir() and Path(p).resolve() != VENV.resolve()]
     env.update(
         ROS_DOMAIN_ID=str(domain),
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-        AMENT_PREFIX_PATH=str(VENV),
+        AMENT_PREFIX_PATH=os.pathsep.join([*overlays, str(VENV)]),
         PYTHONUNBUFFERED="1",
     )
     env.update(extra)

@@ -27,7 +27,7 @@ from rclpy.callback_groups import CallbackGroup
 
 __all__ = ["TESTED_RCLPY", "RCLPY_VERSION", "INTERNALS", "use_internals", "park", "poll_ready",
            "SubscriptionWaiter", "SubscriptionDestroyed", "executor_thread_pool", "installed_rclpy_version",
-           "SlicedEventsExecutor", "EVENTS_SLICE_S"]
+           "SlicedEventsExecutor", "EVENTS_SLICE_S", "create_deferred_service"]
 
 TESTED_RCLPY = "7.1.6"  # the ros-jazzy-rclpy version pinned in constraints.txt
 
@@ -186,6 +186,52 @@ def executor_thread_pool(executor: Any) -> Any | None:
         return None
     pool = getattr(executor, "_executor", None)
     return pool if isinstance(pool, ThreadPoolExecutor) else None
+
+
+# -- services that reply later ---------------------------------------------------------------------
+
+def create_deferred_service(node: Any, srv_type: Any, name: str, on_request: Any, **kwargs: Any) -> Any:
+    """A service whose reply is sent when it is ready, not when its callback returns.
+
+    ``on_request(request, reply)`` runs on the executor thread and must call ``reply(response)`` exactly once,
+    then or later (e.g. when a motion it started ends). An ``async`` service callback would do the same on
+    the SingleThreadedExecutor, but the EventsExecutor of rclpy 7.1.6 does not await it (it sends the
+    coroutine as the response: TypeError). Both executors answer a request by calling the service's
+    ``send_response(response, header)`` after the callback, so the callback returns a marker and the instance's
+    ``send_response`` keeps the header of a marked request until ``reply`` comes; the requests of one service
+    are answered in the order the executor took them.
+    """
+    deferred = object()
+    pending: list[dict] = []  # per request taken: its header (once known) and its reply (once given)
+
+    def callback(request: Any, _response: Any) -> Any:
+        box: dict = {"header": None, "response": None}
+        pending.append(box)
+
+        def reply(response: Any) -> None:
+            if box["header"] is None:
+                box["response"] = response  # replied before the executor handed over the header
+            else:
+                original(response, box["header"])
+
+        on_request(request, reply)
+        return deferred
+
+    service = node.create_service(srv_type, name, callback, **kwargs)
+    original = service.send_response
+
+    def send_response(response: Any, header: Any) -> None:
+        if response is not deferred:
+            original(response, header)
+            return
+        box = pending.pop(0)
+        if box["response"] is not None:
+            original(box["response"], header)
+        else:
+            box["header"] = header
+
+    service.send_response = send_response
+    return service
 
 
 # -- the EventsExecutor ------------------------------------------------------------------------------

@@ -5,14 +5,16 @@ before anything runs (malformed XML, unknown node id or port, bad literal, wrong
 message names the node id and its position in the document. ``TreeRuntimeError`` is raised while
 ticking (a ``{key}`` that is not on the blackboard, a value of the wrong type); the manager turns it
 into the task's FAILURE message. ``SubtaskRecordError`` is raised by the subtask servers when a DB
-record is missing or malformed; it names the record and the field.
+record is missing or malformed; it names the record and the field. ``SubtaskStateError``: the machine state a
+subtask needs besides its record (its ``joint_states``) is not there.
 """
 
 from __future__ import annotations
 
 from tms_common.errors import TmsError
 
-__all__ = ["TsError", "TreeLoadError", "TreeRuntimeError", "SubtaskRecordError", "ExpressionError", "TaskSequenceError"]
+__all__ = ["TsError", "TreeLoadError", "TreeRuntimeError", "SubtaskRecordError", "SubtaskStateError", "ExpressionError",
+           "TaskSequenceError"]
 
 
 class TsError(TmsError):
@@ -39,6 +41,10 @@ class SubtaskRecordError(TsError, ValueError):
         self.field = field
         where = f"record '{record_name}'" + (f" field '{field}'" if field else "")
         super().__init__(f"{where}: {problem}")
+
+
+class SubtaskStateError(TsError, RuntimeError):
+    """The machine state a subtask needs (a joint on ``joint_states``) is missing; the message says which."""
 
 
 class TaskSequenceError(TsError, ValueError):

@@ -1,13 +1,24 @@
 """Every subtask as one row: record -> planning goal data, downstream action and its result check.
 
 ``SUBTASKS`` maps a subtask action name (served at ``/<model_name>/<name>``) to a :class:`SubtaskSpec`,
-the one place a subtask is defined: its machine family, its planning action (relative to the machine
-namespace) and that action's type, ``build(doc, record_name) -> dict`` that validates the record and
+the one place a subtask is defined: its name family, its planning action (relative to the machine
+namespace; or a service, ``downstream="service"``) and that action's type, ``build(doc, record_name) -> dict`` that validates the record and
 returns the planning goal as plain data, ``goal(plan) -> <action>.Goal``, ``options(plan)`` for what a goal
 needs beyond the planning type (ZX200 change_pose: tms_msg/srv/Zx200ChangePoseOptions) and ``check(result)
 -> (ok, detail)`` that reads the planning result's own typed code. The ZX200 rows speak the original's
 tms_msg_rp actions (:mod:`tms_if_opera.interface`). A missing or malformed field raises
 :class:`SubtaskRecordError` naming the record and the field. Adding a subtask is adding a row.
+
+A row may need the machine's state besides its record: ``resolve(plan, joints, machine) -> plan`` gets the
+latest ``/<model_name>/joint_states`` (name -> position) and the machine's description (None when the name is
+not on the site) and finishes the plan (the sample subtasks keep the other joints where they are; the swing
+alignment picks 0 or pi). ``reads_record=False``: the row reads no record (the original's swing alignment).
+
+Which machine serves which rows: ``KIND_SUBTASKS`` maps each machine kind to the name patterns of its rows
+(the original's prefixes: kind ``mst2200vd`` serves ``st_mst2200_*`` and, as the original's trees send it to
+``/mst2200``, ``st_ic120_release_soil``). A subtask server for machine NAME serves :func:`subtasks_for` its
+kind under ``/<NAME>/<subtask>``. Adding a kind is adding its entry (and rows, if its names are new); the
+travel rows of a name prefix are :func:`travel_rows`.
 
 Planning goal data (``kind`` -> keys):
 
@@ -18,6 +29,13 @@ Planning goal data (``kind`` -> keys):
 * ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
 * ``navigate_to_pose``: ``pose`` {x, y, z, qx..qw}; ``follow_waypoints`` / ``navigate_through_poses``:
   ``poses`` [{x, y, z, qx..qw}, ...] in frame ``map``. ``_deg`` variants give yaw in degrees.
+* ``swing``: ``target_angle`` [rad] (SetSwingAngle); ``swing_align``: ``target_angle`` 0 or pi, whichever is
+  nearer the swing joint's position (resolved from ``joint_states``)
+* ``sample``: ``joint`` and ``goal`` [rad] (the record's ``<machine>_<joint>_goal_pos`` [deg]); resolved to
+  ``joints`` [rad] of the four front joints, the others where they are (one JOINT segment of
+  ``arm_controller/move``, tms_msg/action/Zx200ArmMove: the arm controller moves the joint and reports
+  SUCCESS when it is there; the original's stub published std_msgs/Float64 on ``/zx200/<joint>/cmd``, a topic
+  no node of OPERA's stack nor ours subscribes)
 
 Imports message types only (no rclpy).
 """
@@ -32,7 +50,8 @@ from typing import Any
 from geometry_msgs.msg import Point, Pose, PoseStamped
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from com3_msgs.action import SetDumpAngle
+from com3_msgs.action import SetDumpAngle, SetSwingAngle
+from com3_msgs.srv import DumpUp
 from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
 from tms_if_opera.interface import (
     CHANGE_POSE,
@@ -41,12 +60,15 @@ from tms_if_opera.interface import (
     EXCAVATE_SIMPLE_PLAN,
     RELEASE_SIMPLE,
 )
+from tms_msg.action import Zx200ArmMove
+from tms_msg.msg import Zx200ArmSegment
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_msg_rp.msg import TmsRpErrorCodes, TmsRpZx200PositionWithAngle
-from tms_ts.errors import SubtaskRecordError
+from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 
-__all__ = ["SubtaskSpec", "SUBTASKS", "subtasks_for", "ZX200_JOINTS", "change_pose_goal", "change_pose_options",
-           "zx200_ok", "nav2_ok", "dump_ok"]
+__all__ = ["SubtaskSpec", "SUBTASKS", "KIND_SUBTASKS", "subtasks_for", "travel_rows", "ZX200_JOINTS",
+           "change_pose_goal", "change_pose_options", "zx200_ok", "nav2_ok", "dump_ok", "dump_up_ok", "swing_ok",
+           "arm_ok"]
 
 ZX200_JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 _QUAT = ("qx", "qy", "qz", "qw")
@@ -143,6 +165,47 @@ def build_release(doc: dict, record: str) -> dict:
 
 def build_dump(doc: dict, record: str) -> dict:
     return {"kind": "dump", "target_angle": _num(doc, record, "target_angle")}
+
+
+def build_swing(doc: dict, record: str) -> dict:
+    return {"kind": "swing", "target_angle": _num(doc, record, "target_angle")}
+
+
+def build_swing_align(doc: dict, record: str) -> dict:
+    """The original's align subtask reads no record: the target comes from joint_states (:func:`resolve_swing_align`)."""
+    return {"kind": "swing_align"}
+
+
+def resolve_swing_align(plan: dict, joints: dict[str, float], machine: Any) -> dict:
+    """0 or pi, whichever is nearer (wrapped) the position of the vessel's swing joint: the description's
+    (:func:`tms_model.fleet.vessel_swing_joint`), else ``swing_joint`` as the original reads."""
+    from tms_model.fleet import vessel_swing_joint
+
+    joint = vessel_swing_joint(machine) if machine is not None else None
+    name = joint.name if joint is not None else "swing_joint"
+    if name not in joints:
+        raise SubtaskStateError(f"no {name} on joint_states (has {sorted(joints)})")
+    q = joints[name]
+    to_zero, to_pi = abs(math.remainder(q, 2 * math.pi)), abs(math.remainder(q - math.pi, 2 * math.pi))
+    return {**plan, "target_angle": 0.0 if to_zero <= to_pi else math.pi}
+
+
+def build_sample(machine: str, joint: str) -> Callable[[dict, str], dict]:
+    """The original's single-joint sample subtask: field ``<machine>_<joint>_goal_pos`` [deg] of ``<joint>_joint``."""
+    field = f"{machine}_{joint}_goal_pos"
+
+    def build(doc: dict, record: str) -> dict:
+        return {"kind": "sample", "joint": f"{joint}_joint", "goal": math.radians(_num(doc, record, field))}
+
+    return build
+
+
+def resolve_sample(plan: dict, joints: dict[str, float], machine: Any) -> dict:
+    """The four front joints: the sampled one at its goal, the others where joint_states has them."""
+    missing = [j for j in ZX200_JOINTS if j not in joints]
+    if missing:
+        raise SubtaskStateError(f"no {', '.join(missing)} on joint_states (has {sorted(joints)})")
+    return {**plan, "joints": {j: plan["goal"] if j == plan["joint"] else joints[j] for j in ZX200_JOINTS}}
 
 
 def build_nav_pose(deg: bool) -> Callable[[dict, str], dict]:
@@ -243,6 +306,21 @@ def dump_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs SetDumpAngl
     return bool(result.success), "" if result.success else "success false (the set_dump_angle server's log says why)"
 
 
+def swing_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs SetSwingAngle.Result
+    """com3_msgs SetSwingAngle: the ``success`` flag (the server logs the reason)."""
+    return bool(result.success), "" if result.success else "success false (the set_swing_angle server's log says why)"
+
+
+def dump_up_ok(response) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs DumpUp.Response
+    """com3_msgs/srv/DumpUp: the reply's ``result`` (the server logs the reason)."""
+    return bool(response.result), "" if response.result else "result false (the vessel_target_pos server's log says why)"
+
+
+def arm_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - tms_msg Zx200ArmMove.Result
+    """The arm controller: TmsRpErrorCodes SUCCESS, else its code and message."""
+    return result.error_code.val == TmsRpErrorCodes.SUCCESS, f"error_code {result.error_code.val}: {result.message}"
+
+
 @dataclass(frozen=True)
 class SubtaskSpec:
     """One subtask: machine family, downstream planning action, record -> goal, result check."""
@@ -260,6 +338,13 @@ class SubtaskSpec:
     options: Callable[[dict], dict | None] | None = None
     #: the planning server publishes each goal's outcome text on /<model_name>/tms_rp_zx200_outcome
     zx200_planning: bool = False
+    #: "action" or "service" (``action_type`` is then the service type, ``goal`` builds its request and ``check``
+    #: reads its response)
+    downstream: str = "action"
+    #: False: the row reads no record (the goal's record_name is not looked up)
+    reads_record: bool = True
+    #: (plan, joints {name: rad} from /<model_name>/joint_states, the machine's description or None) -> plan
+    resolve: Callable[[dict, dict[str, float], Any], dict] | None = None
 
 
 def _excavate_goal(plan: dict) -> TmsRpZx200ExcavateSimple.Goal:
@@ -271,6 +356,46 @@ def _nav_pose_goal(plan: dict) -> NavigateToPose.Goal:
 
 
 _FW, _NTP = _poses_goal(FollowWaypoints), _poses_goal(NavigateThroughPoses)
+
+
+def travel_rows(prefix: str) -> list[SubtaskSpec]:
+    """``st_<prefix>_{follow_waypoints,navigate_anywhere,navigate_through_poses}[_deg]``: the original's travel
+    subtasks of every tracked machine, to the Nav2-named actions of the machine's navigator (tms_rp)."""
+    rows = []
+    for deg in (False, True):
+        tail = "_deg" if deg else ""
+        rows += [
+            SubtaskSpec(f"st_{prefix}_follow_waypoints{tail}", prefix, "follow_waypoints", FollowWaypoints,
+                        build_poses("follow_waypoints", deg), _FW, nav2_ok),
+            SubtaskSpec(f"st_{prefix}_navigate_anywhere{tail}", prefix, "navigate_to_pose", NavigateToPose,
+                        build_nav_pose(deg), _nav_pose_goal, nav2_ok),
+            SubtaskSpec(f"st_{prefix}_navigate_through_poses{tail}", prefix, "navigate_through_poses",
+                        NavigateThroughPoses, build_poses("navigate_through_poses", deg), _NTP, nav2_ok),
+        ]
+    return rows
+
+
+def _swing_rows(prefix: str) -> list[SubtaskSpec]:
+    """The vessel swing and the DumpUp release of an MST-type carrier (the vessel controller of tms_rc)."""
+    swing_goal = lambda plan: SetSwingAngle.Goal(target_angle=plan["target_angle"])  # noqa: E731
+    return [
+        SubtaskSpec(f"st_{prefix}_release_soil", prefix, "vessel_target_pos", DumpUp, build_dump,
+                    lambda plan: DumpUp.Request(vessel_angle=plan["target_angle"]), dump_up_ok, downstream="service"),
+        SubtaskSpec(f"st_{prefix}_swing", prefix, "set_swing_angle", SetSwingAngle, build_swing, swing_goal, swing_ok),
+        SubtaskSpec(f"st_{prefix}_swing_align_to_heading", prefix, "set_swing_angle", SetSwingAngle, build_swing_align,
+                    swing_goal, swing_ok, reads_record=False, resolve=resolve_swing_align),
+    ]
+
+
+def _sample_rows(prefix: str) -> list[SubtaskSpec]:
+    """The original's single-joint sample subtasks of an excavator, through its arm controller."""
+    goal = lambda plan: Zx200ArmMove.Goal(segments=[Zx200ArmSegment(  # noqa: E731
+        kind=Zx200ArmSegment.JOINT, label=f"sample {plan['joint']}",
+        joint_positions=[plan["joints"][j] for j in ZX200_JOINTS])])
+    return [SubtaskSpec(f"st_{prefix}_sample_{j}", prefix, "arm_controller/move", Zx200ArmMove, build_sample(prefix, j),
+                        goal, arm_ok, resolve=resolve_sample) for j in ("swing", "boom", "arm", "bucket")]
+
+
 _SPECS = [
     SubtaskSpec("subtask_zx200_change_pose", "zx200", CHANGE_POSE, TmsRpZx200ChangePose,
                 build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
@@ -287,28 +412,33 @@ _SPECS = [
     SubtaskSpec("subtask_zx200_release_simple", "zx200", RELEASE_SIMPLE, TmsRpZx200ReleaseSimple,
                 build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan["target_angle"]), zx200_ok,
                 zx200_planning=True),
-    SubtaskSpec("st_ic120_follow_waypoints", "ic120", "follow_waypoints", FollowWaypoints,
-                build_poses("follow_waypoints", False), _FW, nav2_ok),
-    SubtaskSpec("st_ic120_follow_waypoints_deg", "ic120", "follow_waypoints", FollowWaypoints,
-                build_poses("follow_waypoints", True), _FW, nav2_ok),
-    SubtaskSpec("st_ic120_navigate_anywhere", "ic120", "navigate_to_pose", NavigateToPose,
-                build_nav_pose(False), _nav_pose_goal, nav2_ok),
-    SubtaskSpec("st_ic120_navigate_anywhere_deg", "ic120", "navigate_to_pose", NavigateToPose,
-                build_nav_pose(True), _nav_pose_goal, nav2_ok),
-    SubtaskSpec("st_ic120_navigate_through_poses", "ic120", "navigate_through_poses", NavigateThroughPoses,
-                build_poses("navigate_through_poses", False), _NTP, nav2_ok),
-    SubtaskSpec("st_ic120_navigate_through_poses_deg", "ic120", "navigate_through_poses", NavigateThroughPoses,
-                build_poses("navigate_through_poses", True), _NTP, nav2_ok),
+    *travel_rows("ic120"),
     SubtaskSpec("st_ic120_release_soil", "ic120", "set_dump_angle", SetDumpAngle,
                 build_dump, lambda plan: SetDumpAngle.Goal(target_angle=plan["target_angle"]), dump_ok),
+    *travel_rows("zx200"), *_sample_rows("zx200"),
+    *travel_rows("zx120"), *_sample_rows("zx120"),  # the original has the ZX120's sample subtasks only
+    *travel_rows("mst2200"), *_swing_rows("mst2200"),
+    *travel_rows("mst110cr"), *_swing_rows("mst110cr"),
+    *travel_rows("d37pxi"),  # the original builds the D37PXi's travel subtasks only (no blade, no release)
 ]
 SUBTASKS: dict[str, SubtaskSpec] = {s.name: s for s in _SPECS}
 
+#: machine kind -> the name patterns (fnmatch) of the rows a machine of that kind serves
+KIND_SUBTASKS: dict[str, tuple[str, ...]] = {
+    "zx200": ("subtask_zx200_*", "st_zx200_*"),
+    "zx120": ("st_zx120_*",),
+    "ic120": ("st_ic120_*",),
+    "mst110cr": ("st_mst110cr_*",),
+    "mst2200vd": ("st_mst2200_*", "st_ic120_release_soil"),  # the original's trees send that name to /mst2200
+    "d37pxi": ("st_d37pxi_*",),
+}
 
-def subtasks_for(machine: str) -> list[SubtaskSpec]:
-    """Every subtask of a machine family (``zx200`` or ``ic120``); ValueError naming the valid ones."""
-    specs = [s for s in _SPECS if s.machine == machine]
-    if not specs:
-        valid = sorted({s.machine for s in _SPECS})
-        raise ValueError(f"unknown machine {machine!r}: expected one of {', '.join(valid)}")
-    return specs
+
+def subtasks_for(kind: str) -> list[SubtaskSpec]:
+    """Every subtask a machine of ``kind`` serves (``KIND_SUBTASKS``); ValueError naming the known kinds."""
+    from fnmatch import fnmatchcase
+
+    patterns = KIND_SUBTASKS.get(kind)
+    if patterns is None:
+        raise ValueError(f"unknown machine kind {kind!r}: expected one of {', '.join(sorted(KIND_SUBTASKS))}")
+    return [s for s in _SPECS if any(fnmatchcase(s.name, p) for p in patterns)]

@@ -1,5 +1,10 @@
-"""IC120 control: the vessel (dump body) angle controller behind ``set_dump_angle``.
+"""The former name of :mod:`tms_rc.carrier` (the vessel controller was IC120-only).
 
-The track commands of the IC120 come from the navigator's controller (tms_rp.ic120.controller), which
-already applies the machine's speed and acceleration limits; the vessel is positioned here.
+``tms_rc.ic120.vessel`` is ``tms_rc.carrier.vessel``.
 """
+
+import importlib
+import sys
+
+vessel = importlib.import_module("tms_rc.carrier.vessel")
+sys.modules[f"{__name__}.vessel"] = vessel

@@ -1,8 +1,14 @@
-"""IC120 crawler dump planning: localisation, costmap, global planner, local controller, goal checking.
+"""The former name of :mod:`tms_rp.tracked` (the navigation and localisation stack was IC120-only).
 
-Pure-Python cores (no rclpy import; GNSS -> map is :mod:`tms_model.site`): :mod:`ekf` (filterpy EKF
-fusing track odometry, GNSS and azimuth with Mahalanobis gating), :mod:`costmap` (Nav2 map_server PGM+YAML,
-inflation with the IC120 footprint), :mod:`planner` (coarse-to-fine Dijkstra on scipy.sparse graphs),
-:mod:`controller` (regulated pure pursuit for a tracked vehicle, forward and reverse), :mod:`goal_checker`
-and :mod:`navigator` (the Nav2 navigate_* semantics as a step function). Nodes live in :mod:`tms_rp.nodes`.
+Every module of :mod:`tms_rp.tracked` is reachable under this name too (``tms_rp.ic120.controller`` is
+``tms_rp.tracked.controller``), so code and benchmarks written against the old name keep working.
 """
+
+import importlib
+import sys
+
+for _name in ("config", "controller", "costmap", "ekf", "errors", "mapgen", "navigator", "planner"):
+    _module = importlib.import_module(f"tms_rp.tracked.{_name}")
+    sys.modules[f"{__name__}.{_name}"] = _module
+    globals()[_name] = _module
+del _name, _module

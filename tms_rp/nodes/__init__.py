@@ -1,1 +1,2 @@
-"""ROS 2 nodes of tms_rp (console scripts): ``ic120_localization`` and ``ic120_navigator``."""
+"""ROS 2 nodes of tms_rp (console scripts): ``tracked_localization``, ``tracked_navigator`` (any tracked
+machine) and their former names ``ic120_localization``, ``ic120_navigator`` (default machine ``ic120``)."""

@@ -1,7 +1,7 @@
 """``tms_ts_subtasks``: the subtask action servers of one machine.
 
-For ``machine`` zx200 or ic120 it serves every subtask of :mod:`tms_ts.subtask_specs` at
-``/<model_name>/<subtask_name>`` as the original's subtask nodes do: ``tms_msg_ts/action/LeafNodeBase``,
+For the machine called ``model_name`` it serves every subtask of its kind (:mod:`tms_ts.subtask_specs`
+``KIND_SUBTASKS``) at ``/<model_name>/<subtask_name>`` as the original's subtask nodes do: ``tms_msg_ts/action/LeafNodeBase``,
 goal ``{model_name, record_name}``, result ``result`` true only when SUCCEEDED (false with ABORTED or
 CANCELED), feedback ``status``. Every goal is accepted (unless the server is stopping); a goal that cannot
 run ends ABORTED. Its typed outcome goes beside the original's bool: a ``tms_msg/SubtaskOutcome`` (goal id,
@@ -21,6 +21,14 @@ latches ``/<model_name>/emg_stop`` (nothing may keep driving the machine blind) 
 The last feedback ``status`` of a failed goal is ``<CODE>: <error_msg>``, so the reason stays readable for
 a client that reads only the original's type.
 
+A row whose downstream is a service (the MST release_soil: com3_msgs/srv/DumpUp ``vessel_target_pos``) is
+called once the service is there (within ``planning_wait_s``, else PLANNING_UNAVAILABLE); its reply is awaited
+for ``service_timeout_s`` (60 s, the original's), else PLANNING_FAILED. A service call cannot be canceled: a
+cancel (or a stop) waits for the reply, then the goal ends CANCELED (SERVER_STOPPING). A row that needs the
+machine's state (``resolve``: the sample and swing-alignment subtasks) takes the latest
+``/<model_name>/joint_states``, waiting up to ``joint_states_wait_s`` (2 s, the original's) for one: none, or
+the joint it needs missing, ends PLANNING_UNAVAILABLE.
+
 Goals run as coroutines on one executor thread (:class:`tms_common.ticker.Ticker` paces their checks).
 Heartbeat: a thread publishes the model name on ``/tms_ts/subtask_heartbeat`` (std_msgs/String) every
 0.05 s of wall time, so the manager notices a dead server process (SIGKILL) in a second instead of
@@ -30,7 +38,8 @@ sensing may update the excavation target again), as the original subtasks did.
 
 Parameters (read-only, read at start-up): ``machine`` (the kind whose subtasks are served; default the kind of
 ``model_name`` on the site, config/site.yaml ``machines``), ``model_name`` (the namespace; default = machine),
-``planning_wait_s`` (5.0), ``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri``, ``db_path``.
+``planning_wait_s`` (5.0), ``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``service_timeout_s`` (60.0),
+``joint_states_wait_s`` (2.0), ``db_uri``, ``db_path``.
 The node is named ``<machine>_subtasks`` when ``-p machine:=<m>`` is on the command line, so the two
 machines' servers started by hand do not share a name.
 """
@@ -50,6 +59,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, String
 from unique_identifier_msgs.msg import UUID
 
@@ -62,7 +72,7 @@ from tms_if_opera.interface import PLANNING_OUTCOME
 from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_ts.action import LeafNodeBase
-from tms_ts.errors import SubtaskRecordError
+from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
 from tms_ts.outcomes import SUBTASK_OUTCOME_TOPIC, code_name
 from tms_ts.subtask_specs import SubtaskSpec, subtasks_for
@@ -119,9 +129,18 @@ class SubtaskServers(Node):
         self.planning_wait_s = float(param("planning_wait_s", 5.0))
         self.stop_timeout_s = float(param("stop_timeout_s", 5.0))
         self.server_lost_s = float(param("server_lost_s", 3.0))
+        self.service_timeout_s = float(param("service_timeout_s", 60.0))
+        self.joint_states_wait_s = float(param("joint_states_wait_s", 2.0))
         db_uri = str(param("db_uri", ""))
         db_path = str(param("db_path", ""))
-        specs = subtasks_for(machine)  # ValueError naming the valid machines
+        specs = subtasks_for(machine)  # ValueError naming the known kinds
+        self.description = None  # the machine's description, for rows that resolve against it
+        try:
+            from tms_model.fleet import load_named
+
+            self.description = load_named(self.model_name)
+        except Exception as exc:  # noqa: BLE001 - a name not on the site: rows resolve without it
+            self.get_logger().debug(f"no description of {self.model_name}: {exc}")
         from tms_db import open_store
 
         self.store = open_store(uri=db_uri or None, path=db_path or None)
@@ -130,6 +149,12 @@ class SubtaskServers(Node):
         self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
         self.outcomes = self.create_publisher(SubtaskOutcome, f"/{self.model_name}/{SUBTASK_OUTCOME_TOPIC}", OUTCOME_QOS)
         self.planners: dict[str, RaceFreeActionClient] = {}
+        self.service_clients: dict[str, object] = {}  # rows whose downstream is a service
+        self._joints: dict[str, float] | None = None  # the latest joint_states, for rows that resolve
+        self._joints_t = -1.0
+        if any(spec.resolve is not None for spec in specs):
+            self.create_subscription(JointState, f"/{self.model_name}/joint_states", self._on_joints, 10,
+                                     callback_group=group)
         self.options_clients: dict[str, object] = {}
         #: planning goal id -> Zx200PlanningOutcome (the ZX200 planner's text for its code), newest last
         self.planning_outcomes: OrderedDict[bytes, Zx200PlanningOutcome] = OrderedDict()
@@ -139,7 +164,10 @@ class SubtaskServers(Node):
         self.action_servers = []
         for spec in specs:
             planning = f"/{self.model_name}/{spec.planning_action}"
-            if planning not in self.planners:
+            if spec.downstream == "service":
+                if planning not in self.service_clients:
+                    self.service_clients[planning] = self.create_client(spec.action_type, planning, callback_group=group)
+            elif planning not in self.planners:
                 self.planners[planning] = RaceFreeActionClient(self, spec.action_type, planning, callback_group=group)
             if spec.options is not None and planning not in self.options_clients:
                 self.options_clients[planning] = self.create_client(
@@ -166,6 +194,21 @@ class SubtaskServers(Node):
             except Exception:  # noqa: BLE001 - context shut down at exit
                 return
 
+    def _on_joints(self, msg: JointState) -> None:
+        joints = dict(self._joints or {})
+        joints.update(zip(msg.name, (float(p) for p in msg.position), strict=False))
+        self._joints, self._joints_t = joints, time.monotonic()
+
+    async def _resolve(self, gh, spec: SubtaskSpec, plan: dict) -> dict:  # noqa: ANN001
+        """The plan finished against the machine's state (a fresh joint_states); SubtaskStateError when none."""
+        asked = time.monotonic()
+        deadline = asked + self.joint_states_wait_s
+        while self._joints is None or self._joints_t < asked - 0.5:
+            if time.monotonic() > deadline or gh.is_cancel_requested or self._goals.stopping.is_set():
+                raise SubtaskStateError(f"no /{self.model_name}/joint_states within {self.joint_states_wait_s:g} s")
+            await self._ticker.next()
+        return spec.resolve(plan, dict(self._joints), self.description)
+
     def _on_planning_outcome(self, msg: Zx200PlanningOutcome) -> None:
         self.planning_outcomes[_uuid_key(msg.goal_id)] = msg
         while len(self.planning_outcomes) > 100:
@@ -175,6 +218,8 @@ class SubtaskServers(Node):
     def _plan(self, goal: LeafNodeBase.Goal, spec: SubtaskSpec) -> dict:
         from tms_db.errors import RecordNotFound
 
+        if not spec.reads_record:
+            return spec.build({}, goal.record_name)
         model = goal.model_name or self.model_name
         try:
             doc = self.store.get_parameter(model, goal.record_name)
@@ -259,7 +304,16 @@ class SubtaskServers(Node):
             plan = self._plan(gh.request, spec)
         except SubtaskRecordError as exc:
             return self._finish(gh, spec, R.RECORD_INVALID, str(exc))
+        if spec.resolve is not None:
+            try:
+                plan = await self._resolve(gh, spec, plan)
+            except SubtaskRecordError as exc:
+                return self._finish(gh, spec, R.RECORD_INVALID, str(exc))
+            except SubtaskStateError as exc:
+                return self._finish(gh, spec, R.PLANNING_UNAVAILABLE, str(exc))
         planning = f"/{self.model_name}/{spec.planning_action}"
+        if spec.downstream == "service":
+            return await self._call_service(gh, spec, plan, planning)
         client = self.planners[planning]
         deadline = time.monotonic() + self.planning_wait_s
         while not client.server_is_ready():
@@ -331,6 +385,41 @@ class SubtaskServers(Node):
         if spec.zx200_planning:
             detail = f"{detail}: {await self._planning_text(goal_id)}"
         return self._finish(gh, spec, R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
+
+    async def _call_service(self, gh, spec: SubtaskSpec, plan: dict, service: str) -> LeafNodeBase.Result:  # noqa: ANN001
+        """A row whose downstream is a service: wait for it, call it, read its reply (cannot be canceled)."""
+        record = gh.request.record_name
+        client = self.service_clients[service]
+        deadline = time.monotonic() + self.planning_wait_s
+        while not client.service_is_ready():
+            if gh.is_cancel_requested:
+                return self._finish(gh, spec, R.CANCELED, f"canceled while waiting for service {service} (nothing was sent)")
+            if self._goals.stopping.is_set():
+                return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping while waiting for "
+                                    f"service {service} (nothing was sent)")
+            if time.monotonic() > deadline:
+                return self._finish(gh, spec, R.PLANNING_UNAVAILABLE,
+                                    f"service {service} not available within {self.planning_wait_s:g} s")
+            await self._ticker.next()
+        future = self._ticker.wake_on(client.call_async(spec.goal(plan)))
+        deadline = time.monotonic() + self.service_timeout_s
+        told = False
+        while not future.done():
+            if time.monotonic() > deadline:
+                return self._finish(gh, spec, R.PLANNING_FAILED, f"service {service} gave no reply within "
+                                    f"{self.service_timeout_s:g} s for record '{record}'")
+            if (gh.is_cancel_requested or self._goals.stopping.is_set()) and not told:
+                told = True
+                gh.publish_feedback(LeafNodeBase.Feedback(status=f"a {service} call cannot be canceled: waiting for its reply"))
+            await self._ticker.next()
+        if gh.is_cancel_requested:
+            return self._finish(gh, spec, R.CANCELED, f"canceled; service {service} replied (its call cannot be stopped)")
+        if self._goals.stopping.is_set():
+            return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping; service {service} replied")
+        ok, detail = spec.check(future.result())
+        if ok:
+            return self._finish(gh, spec, R.NONE, f"{spec.name} '{record}' done")
+        return self._finish(gh, spec, R.PLANNING_FAILED, f"service {service} failed for record '{record}': {detail}")
 
     def destroy_node(self) -> None:
         self._beat_stop.set()

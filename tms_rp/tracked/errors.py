@@ -1,4 +1,4 @@
-"""Errors of IC120 planning, each carrying the Nav2 ``error_code`` a Nav2 (jazzy) navigator reports for it.
+"""Errors of tracked-machine navigation, each carrying the Nav2 ``error_code`` a Nav2 (jazzy) navigator reports for it.
 
 The navigator node turns any :class:`NavError` into an aborted action result with ``error_code`` =
 ``exc.code`` and ``error_msg`` = ``str(exc)`` through one table (no per-class catch ladder).

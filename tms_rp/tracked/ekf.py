@@ -1,4 +1,4 @@
-"""EKF localisation of the IC120 in the map frame: track odometry + GNSS position (+ azimuth).
+"""EKF localisation of a tracked machine in the map frame: track odometry + GNSS position (+ azimuth).
 
 State ``[x, y, yaw, k]`` in ``map`` (REP-105), ``k`` being the odometry scale error (track slip: the
 machine moves ``(1 + k)`` times what the tracks report). Odometry is used as a *relative* motion: the pose
@@ -47,7 +47,7 @@ LOGGER = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class EkfParams:
-    """Noise and gating parameters (config/nav/ic120_nav.yaml ``localization``)."""
+    """Noise and gating parameters (the nav file's ``localization``)."""
 
     gnss_sigma: float = 0.02
     azimuth_sigma: float = 0.01

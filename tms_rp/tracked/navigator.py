@@ -7,7 +7,8 @@ decisions (leg direction, replanning, failure reasons) are made here so they are
 Legs: the machine drives from where it is to each pose in turn. A pose at the machine's position (closer
 than ``turn_in_place_radius``) is a *turn in place* to its heading. Otherwise the leg is driven in
 reverse when the pose's heading is opposite (> 90 deg) to the bearing from the leg start to the pose, else
-forward (the rule of config/site.yaml's route). Intermediate poses of navigate_through_poses are reached
+forward (the rule of config/site.yaml's route); a kind whose nav config says ``legs: {reverse: false}``
+drives every leg forward. Intermediate poses of navigate_through_poses are reached
 in position only; the last pose (and every pose of navigate_to_pose / follow_waypoints) also in heading.
 """
 
@@ -20,16 +21,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tms_model.geometry import wrap_angle, yaw_from_quaternion
-from tms_rp.ic120.controller import ControllerParams, Limits, TrackedPurePursuit
-from tms_rp.ic120.costmap import Costmap
-from tms_rp.ic120.errors import (
+from tms_rp.tracked.controller import ControllerParams, Limits, TrackedPurePursuit
+from tms_rp.tracked.costmap import Costmap
+from tms_rp.tracked.errors import (
     GoalOutsideMapError,
     InvalidGoalError,
     NavError,
     NavTimeoutError,
     NoValidPathError,
 )
-from tms_rp.ic120.planner import GridPlanner
+from tms_rp.tracked.planner import GridPlanner
 
 __all__ = ["GoalChecker", "ProgressChecker", "NavigatorCore", "NavStep", "validate_pose", "leg_direction"]
 
@@ -122,13 +123,16 @@ class NavigatorCore:
     """Runs one navigation goal at a time: ``start(poses)`` then ``step(pose, now)`` until not RUNNING."""
 
     def __init__(self, costmap: Costmap, planner: GridPlanner, controller_params: ControllerParams, limits: Limits,
-                 goal_checker: GoalChecker, progress_checker: ProgressChecker, *, turn_in_place_radius: float = 0.3) -> None:
+                 goal_checker: GoalChecker, progress_checker: ProgressChecker, *, turn_in_place_radius: float = 0.3,
+                 reverse: bool = True) -> None:
         self.costmap = costmap
         self.planner = planner
         self.controller = TrackedPurePursuit(controller_params, limits)
         self.goal_checker = goal_checker
         self.progress = progress_checker
         self.turn_in_place_radius = turn_in_place_radius
+        #: the kind's ``legs.reverse``: False drives every leg forward (and turns at the pose)
+        self.reverse = reverse
         self._poses: list[tuple[float, float, float]] = []
         self._yaw_each = False
         self._index = 0
@@ -149,7 +153,7 @@ class NavigatorCore:
             ox, oy = cm.map.origin
             sx, sy = cm.map.size_m
             raise GoalOutsideMapError(f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]")
-        from tms_rp.ic120.errors import GoalOccupiedError
+        from tms_rp.tracked.errors import GoalOccupiedError
 
         if cm.obstacles[cm.map.world_to_cell(x, y)]:
             raise GoalOccupiedError(f"pose {index} ({x:.2f}, {y:.2f}) lies inside an obstacle")
@@ -193,7 +197,7 @@ class NavigatorCore:
             self.path = np.array([[pose[0], pose[1]]])
             self.controller.set_path(self.path, 1, goal[2])
         else:
-            direction = leg_direction(pose, goal)
+            direction = leg_direction(pose, goal) if self.reverse else 1
             if check_yaw:
                 self.path = self.planner.plan_with_approach(self.costmap, (pose[0], pose[1]), goal, direction)
             else:

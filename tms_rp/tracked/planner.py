@@ -1,4 +1,4 @@
-"""Global planner: coarse-to-fine Dijkstra on the IC120 costmap (scipy.sparse.csgraph).
+"""Global planner: coarse-to-fine Dijkstra on a tracked machine's costmap (scipy.sparse.csgraph).
 
 Pure-Python A* on a 2000 x 2000 grid (200 m at 0.1 m) cannot meet a 200 ms budget, so the search runs in
 scipy's compiled Dijkstra on two small graphs instead of one huge one:
@@ -24,8 +24,8 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from tms_rp.ic120.costmap import INSCRIBED, Costmap
-from tms_rp.ic120.errors import GoalOccupiedError, GoalOutsideMapError, InvalidGoalError, NoValidPathError
+from tms_rp.tracked.costmap import INSCRIBED, Costmap
+from tms_rp.tracked.errors import GoalOccupiedError, GoalOutsideMapError, InvalidGoalError, NoValidPathError
 
 __all__ = ["PlannerParams", "GridPlanner"]
 
@@ -34,7 +34,7 @@ _OFFSETS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)
 
 @dataclass(frozen=True)
 class PlannerParams:
-    """``planner`` section of config/nav/ic120_nav.yaml."""
+    """``planner`` section of the nav file (tms_rp.tracked.config)."""
 
     coarse_factor: int = 8
     corridor_width: float = 2.0
@@ -99,7 +99,7 @@ def _shortest(cost: np.ndarray, passable: np.ndarray, start: int, goal: int, cos
 
 
 class GridPlanner:
-    """Plans a collision-free centre path for the IC120 on a :class:`Costmap`."""
+    """Plans a collision-free centre path for the machine on a :class:`Costmap`."""
 
     def __init__(self, params: PlannerParams | None = None) -> None:
         self.params = params or PlannerParams()

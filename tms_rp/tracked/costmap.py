@@ -1,4 +1,4 @@
-"""Occupancy maps (Nav2 map_server PGM + YAML) and the inflated costmap of the IC120.
+"""Occupancy maps (Nav2 map_server PGM + YAML) and the inflated costmap of a tracked machine.
 
 ``load_map`` reads the same YAML keys as Nav2's map_server (``image, resolution, origin, negate,
 occupied_thresh, free_thresh, mode``; trinary mode) and the PGM with Pillow; row 0 of the image is the
@@ -50,7 +50,7 @@ class Footprint:
 
 @dataclass(frozen=True)
 class CostmapParams:
-    """``costmap`` section of config/nav/ic120_nav.yaml."""
+    """``costmap`` section of the nav file (tms_rp.tracked.config)."""
 
     footprint_padding: float = 0.3
     inflation_radius: float = 2.5
@@ -159,7 +159,7 @@ def save_map(omap: OccupancyMap, yaml_path: str | Path) -> None:
 class Costmap:
     """Inflated cost grid (uint8, Nav2 scale) plus the raw obstacles and free-space components.
 
-    Unknown cells count as free (Nav2 ``allow_unknown: true`` in the IC120 config).
+    Unknown cells count as free (Nav2 ``allow_unknown: true`` in the nav config).
     """
 
     def __init__(self, omap: OccupancyMap, footprint: Footprint, params: CostmapParams | None = None) -> None:

@@ -1,10 +1,10 @@
-"""Local controller of the IC120: a regulated pure pursuit for a tracked (skid-steer) vehicle.
+"""Local controller of a tracked machine: a regulated pure pursuit for a tracked (skid-steer) vehicle.
 
 Nav2's RPP adapted to tracks: the machine can turn on the spot, so a large heading error is removed by
 rotating in place ("align"); the path is then tracked forward or in *reverse* (the virtual robot frame is
 turned by pi, so the same curvature law drives backwards into the loading point). The speed is regulated
 by the path curvature and by the distance to the goal, then limited by the machine's speed, yaw-rate and
-acceleration limits (config/machines/ic120.yaml ``tracks``). At the end of the path translation stops
+acceleration limits (config/machines/<kind>.yaml ``tracks``, the nav file's ``tracks`` where it has none). At the end of the path translation stops
 and the machine turns to the goal heading ("final_rotate"). :meth:`TrackedPurePursuit.compute` is pure
 apart from the controller's own state: no I/O, the debug values are returned in the command.
 """
@@ -25,7 +25,7 @@ __all__ = ["Limits", "ControllerParams", "TrackedPurePursuit", "Command"]
 
 @dataclass(frozen=True)
 class Limits:
-    """Machine limits (config/machines/ic120.yaml ``tracks``)."""
+    """Machine limits (config/machines/<kind>.yaml ``tracks``, the nav file's ``tracks`` where it has none)."""
 
     max_speed: float
     max_yaw_rate: float
@@ -48,7 +48,7 @@ class Limits:
 
 @dataclass(frozen=True)
 class ControllerParams:
-    """``controller`` section of config/nav/ic120_nav.yaml."""
+    """``controller`` section of the nav file (tms_rp.tracked.config)."""
 
     frequency: float = 20.0
     desired_speed: float = 1.0
