@@ -301,9 +301,9 @@ class ExperimentNode(Node):
         ok = not timed_out and all(self.tasks.get(t, {}).get("state") == "SUCCESS" for t in self.task_ids)
         for tid in self.task_ids:
             info = self.tasks.get(tid, {})
-            machine = self.rec.task_machines.get(tid)
-            print(f"[experiment] task {tid}{f' ({machine})' if machine else ''}: {info.get('state')} "
-                  f"{info.get('message', '')}", flush=True)
+            machine = self.rec.task_machines.get(tid) if self.carriers else None
+            print(f"[experiment] task {tid}: {info.get('state')} {info.get('message', '')}"
+                  + (f" (machine {machine})" if machine else ""), flush=True)
         for name, figures in metrics.get("carriers", {}).items():
             print(f"[experiment] {name}: soil moved {figures['soil_moved_m3']} m3, loaded {figures['loaded_m3']} m3",
                   flush=True)
