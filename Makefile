@@ -20,9 +20,10 @@ test: setup vm-setup
 bench: setup
 	scripts/isolated.sh $(PY) -m tests.bench $(BENCH_ARGS)
 
-DEMO_LAUNCH ?= config/launch/paper_experiment.yaml
+# SCENARIO=paper (default) or fleet picks the seed and launch file (scripts/demo.sh); DEMO_LAUNCH replaces the launch file
+DEMO_LAUNCH ?=
 demo: setup
-	scripts/isolated.sh scripts/demo.sh $(DEMO_LAUNCH) $(DEMO_ARGS)
+	SCENARIO=$(or $(SCENARIO),paper) scripts/isolated.sh scripts/demo.sh $(DEMO_LAUNCH) $(DEMO_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .

@@ -207,6 +207,7 @@ class Plant:
                 into = min(volume, max(0.0, s.capacity - self.soil.vessels[name]))
                 self.soil.vessels[name] += into
                 self.soil.loaded += into
+                self.soil.loaded_by[name] = self.soil.loaded_by.get(name, 0.0) + into
                 volume -= into
                 break
         self.ground.deposit(x, y, volume, self.spec.soil.deposit_radius)
@@ -224,6 +225,7 @@ class Plant:
             out = min(load, rate * self.dt)
             self.soil.vessels[name] = load - out
             self.soil.dumped += out
+            self.soil.dumped_by[name] = self.soil.dumped_by.get(name, 0.0) + out
             px, py = self._vessel_to_map(ic, s.hinge_xyz[0] - s.dump_distance, s.hinge_xyz[1])
             self.ground.deposit(px, py, out, self.spec.soil.dump_radius)
 

@@ -161,6 +161,10 @@ class SoilState:
     loaded: float = 0.0  # total ever landed in the vessels
     dug: float = 0.0  # total ever cut by the bucket
     vessels: dict[str, float] = field(default_factory=dict)
+    #: total ever dumped per carrier (by machine name)
+    dumped_by: dict[str, float] = field(default_factory=dict)
+    #: total ever landed in each carrier's vessel (by machine name)
+    loaded_by: dict[str, float] = field(default_factory=dict)
     blades: dict[str, float] = field(default_factory=dict)
     carrier: str = ""
     pushed: float = 0.0  # total ever cut by the blades

@@ -9,7 +9,7 @@
       param get RECORD [--model-name M]
       param set RECORD FIELD=VALUE... [--model-name M] [--upsert]   (VALUE parsed as JSON: true, 3, 1.5, "s")
       dump DIR | restore DIR [--drop] (MongoDB Extended JSON, one document per line; mongoimport reads it)
-      seed paper [--file config/seeds/paper.yaml]
+      seed paper|fleet [--file config/seeds/<name>.yaml]
       check                           (the store's consistency check)
 
 The store is chosen as in :func:`tms_db.open_store`: ``--uri`` (default ``$TMS_DB_URI``) for MongoDB,
@@ -65,7 +65,8 @@ def import_parameters(store: Store, path: str | Path, docs: Any = None, where: A
 
 
 def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
-    """Load a seed file ``{tasks: [{task_id, file, description}], parameters: [...]}``; idempotent.
+    """Load a seed file ``{tasks: [{task_id, file, description, model_name?, blackboard?}], parameters: [...]}``;
+    idempotent. A task's ``blackboard`` gives its parameters (initial blackboard entries, e.g. ``{machine: ic120_1}``).
 
     Task files are relative to the project root (else to the seed file's folder). Returns
     (tasks, parameters) loaded.
@@ -97,7 +98,7 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
             raise StoreError(f"{seed_file}:{line}: task file {entry['file']}: {exc.strerror}") from None
         try:
             store.add_task(xml, task_id=entry["task_id"], description=entry.get("description", ""),
-                           model_name=entry.get("model_name"), replace=True)
+                           model_name=entry.get("model_name"), replace=True, blackboard=entry.get("blackboard"))
         except ValidationError as exc:
             raise ValidationError(f"{seed_file}:{line}: {xml_path}: {exc}") from None
     n_params = 0
@@ -157,8 +158,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("dir")
     r.add_argument("--drop", action="store_true", help="empty each restored collection first")
     s = sub.add_parser("seed", help="load a named seed")
-    s.add_argument("name", choices=["paper"])
-    s.add_argument("--file", default=None, help=f"seed file (default {PAPER_SEED})")
+    s.add_argument("name", choices=["paper", "fleet"])
+    s.add_argument("--file", default=None, help="seed file (default config/seeds/<name>.yaml)")
     sub.add_parser("check", help="run the store's consistency check")
     return p
 
@@ -208,10 +209,9 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"tms-db: {len(result.rejected)} document(s) left out; the others are restored", file=sys.stderr)
                 return 1
         elif args.cmd == "seed":
-            seed_file = Path(args.file) if args.file else repo_root() / PAPER_SEED
+            seed_file = Path(args.file) if args.file else repo_root() / PAPER_SEED.with_name(f"{args.name}.yaml")
             if not args.file and not seed_file.is_file():
-                raise StoreError(f"{seed_file}: the paper seed file does not exist yet "
-                                 "(it is written with the paper experiment, issue 9); pass --file SEED.yaml")
+                raise StoreError(f"{seed_file}: seed file not found; pass --file SEED.yaml")
             n_tasks, n_params = seed(store, seed_file)
             print(f"seed {args.name}: {n_tasks} task(s), {n_params} parameter document(s) from {seed_file}")
         elif args.cmd == "check":

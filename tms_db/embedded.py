@@ -223,8 +223,8 @@ class EmbeddedStore(Store):
         return decode_body(*rows[0])
 
     def add_task(self, xml: str, task_id: int | None = None, description: str = "", model_name: str | None = None,
-                 *, replace: bool = False) -> int:
-        doc = build_task_doc(xml, task_id, description, model_name)
+                 *, replace: bool = False, blackboard: dict | None = None) -> int:
+        doc = build_task_doc(xml, task_id, description, model_name, blackboard)
 
         def insert(conn: sqlite3.Connection) -> int:
             tid = task_id

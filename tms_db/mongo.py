@@ -77,8 +77,8 @@ class MongoStore(Store):
         return doc
 
     def add_task(self, xml: str, task_id: int | None = None, description: str = "", model_name: str | None = None,
-                 *, replace: bool = False) -> int:
-        doc = build_task_doc(xml, task_id, description, model_name)
+                 *, replace: bool = False, blackboard: dict | None = None) -> int:
+        doc = build_task_doc(xml, task_id, description, model_name, blackboard)
         for _attempt in range(20):
             tid = task_id
             if tid is None:

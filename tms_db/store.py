@@ -141,7 +141,7 @@ class Store(abc.ABC):
     @abc.abstractmethod
     def add_task(
         self, xml: str, task_id: int | None = None, description: str = "", model_name: str | None = None,
-        *, replace: bool = False,
+        *, replace: bool = False, blackboard: dict | None = None,
     ) -> int:
         """Store a behavior tree; returns its task id.
 
@@ -150,6 +150,9 @@ class Store(abc.ABC):
         the smallest free positive id, and a tree already stored (same one-line text, or contained in
         a stored one) is refused naming the existing id. With ``task_id`` taken, StoreError unless
         ``replace``. ``model_name`` defaults to the machine names found in the XML, comma-joined.
+        ``blackboard``: the task's parameters, initial blackboard entries (name -> bool/number/text) set before
+        its tree is loaded (``{machine: ic120_1}``; tms_ts.loader), stored in the field ``blackboard`` beside the
+        original's fields.
         """
 
     @abc.abstractmethod
@@ -255,7 +258,8 @@ def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **
     return EmbeddedStore(Path(path).expanduser() if path else default_path(), **options)
 
 
-def build_task_doc(xml: str, task_id: int | None, description: str, model_name: str | None) -> dict:
+def build_task_doc(xml: str, task_id: int | None, description: str, model_name: str | None,
+                   blackboard: dict | None = None) -> dict:
     """The task document for ``add_task`` (without ``task_id`` when it is still to be chosen)."""
     from tms_db.schema import detect_model_names, normalise_task_xml
 
@@ -271,6 +275,15 @@ def build_task_doc(xml: str, task_id: int | None, description: str, model_name: 
         raise ValidationError(f"{label}: field 'model_name' must be a string, got {model_name!r}")
     doc = {"task_id": task_id, "type": "task", "model_name": model_name, "description": description,
            "task_sequence": sequence}
+    if blackboard is not None:
+        if not isinstance(blackboard, dict):
+            raise ValidationError(f"{label}: field 'blackboard' must be a mapping of name: value, got {blackboard!r}")
+        for key, value in blackboard.items():
+            if not isinstance(key, str) or not key or key.startswith("$") or "." in key:
+                raise ValidationError(f"{label}: field 'blackboard': key {key!r} must be a name (no '$', '.')")
+            if not isinstance(value, bool | int | float | str):
+                raise ValidationError(f"{label}: field 'blackboard': key {key!r} = {value!r} must be a bool, number or text")
+        doc["blackboard"] = dict(blackboard)
     if task_id is None:
         del doc["task_id"]
     return doc

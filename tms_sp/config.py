@@ -21,7 +21,7 @@ from tms_sp.heightgrid import GridSpec
 from tms_sp.mound import ExcavationParams
 from tms_sp.vessel import VesselGeometry, VesselParams
 
-__all__ = ["SensingConfig", "load_sensing_config"]
+__all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry"]
 
 
 @dataclass(frozen=True)
@@ -186,3 +186,17 @@ def load_sensing_config(
         arrival_point=point,
         swing_axis_in_base=(float(swing_origin[0]), float(swing_origin[1])),
     )
+
+
+def carrier_vessel_geometry(cfg: SensingConfig, name: str) -> VesselGeometry:
+    """The vessel of the site's machine ``name`` (config/site.yaml ``machines``; its kind's description): inner
+    size, capacity and hinge from the description, floor and rim heights above the hinge from sensing.yaml (the
+    IC120 mesh's figures: no other kind publishes them)."""
+    import dataclasses
+
+    from tms_model.fleet import load_named
+
+    m = load_named(name).require(CRAWLER_DUMP)
+    assert m.vessel is not None
+    return dataclasses.replace(cfg.vessel_geom, inner_length=m.vessel.inner_length, inner_width=m.vessel.inner_width,
+                               capacity=m.vessel.capacity, hinge_xyz=m.vessel.hinge_xyz)

@@ -12,6 +12,12 @@ changed through a tms_db store (``open_store``), as the original tms_sp updaters
 * the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> the global-blackboard
   record, written on the first assessment and then on every change.
 
+Several carriers (the fleet experiment): the pose and vessel inputs are those of one carrier, ``carrier``
+(default ``ic120``). :meth:`SiteSensing.follow_holder` reads the carrier's name from a field of the
+global-blackboard record (``LOADAREA_MACHINE``: the carrier that claimed the loading point writes it) and
+:meth:`select_carrier` switches to it: a new arrival detector, that carrier's vessel geometry (``vessels``), and
+the release target and SENSING_LOADED_FLG assessed afresh from its own vessel.
+
 Every write goes through :class:`tms_sp.ingest.SensingWriter`, the rule by which the original's updaters
 (and our ``tms_sp_ingest`` node, for an external sensing PC) write: only ``type: dynamic`` records, only
 fields the seeded record has. :meth:`SiteSensing.check_records` raises :class:`SensingError` naming a
@@ -33,7 +39,7 @@ from tms_sp.config import SensingConfig
 from tms_sp.heightgrid import rasterize
 from tms_sp.ingest import SensingWriter
 from tms_sp.mound import MoundAssessment, assess_mound
-from tms_sp.vessel import VesselAssessment, assess_vessel, release_in_zx200
+from tms_sp.vessel import VesselAssessment, VesselGeometry, assess_vessel, release_in_zx200
 
 __all__ = ["SiteSensing", "FLAGS"]
 
@@ -60,10 +66,47 @@ class SiteSensing:
     _release_spot: tuple[float, float] | None = None  # vessel frame x, y of the written release target
     _arrival: ArrivalDetector | None = None
     _writer: SensingWriter | None = None
+    #: the carrier whose pose and vessel are sensed (the one at or coming to the loading point)
+    carrier: str = "ic120"
+    #: vessel geometry per carrier name (default: the configuration's, the IC120's)
+    vessels: dict[str, VesselGeometry] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self._arrival = ArrivalDetector(self.cfg.points[self.cfg.arrival_point], self.cfg.arrival)
         self._writer = SensingWriter(self.store)
+
+    @property
+    def vessel_geom(self) -> VesselGeometry:
+        """The vessel geometry of the sensed carrier."""
+        return self.vessels.get(self.carrier, self.cfg.vessel_geom)
+
+    # ---- carriers ---------------------------------------------------------------------------------
+    def select_carrier(self, name: str) -> bool:
+        """Sense carrier ``name`` from now on; True when that is a change (its state is then started afresh)."""
+        if name == self.carrier:
+            return False
+        log.info("sensing carrier %s (was %s)", name, self.carrier)
+        self.carrier = name
+        self.ic120_pose = None
+        self.vessel = None
+        self._arrival = ArrivalDetector(self.cfg.points[self.cfg.arrival_point], self.cfg.arrival)
+        self._last_release = None
+        self._release_spot = None
+        self.flags["SENSING_LOADED_FLG"] = False  # hysteresis starts from this carrier's own vessel
+        return True
+
+    def follow_holder(self, field_name: str, known: set[str] | None = None) -> str:
+        """Select the carrier named in ``field_name`` of the global-blackboard record (when it names one of
+        ``known``, or any non-empty name when ``known`` is None); returns the sensed carrier."""
+        from tms_db.errors import RecordNotFound
+
+        try:
+            name = self.store.get_record(self.cfg.blackboard_record).get(field_name)
+        except RecordNotFound:
+            return self.carrier
+        if isinstance(name, str) and name and (known is None or name in known):
+            self.select_carrier(name)
+        return self.carrier
 
     # ---- setup ------------------------------------------------------------------------------------
     def check_records(self) -> None:
@@ -122,14 +165,15 @@ class SiteSensing:
 
     def on_vessel_points(self, points: np.ndarray) -> VesselAssessment:
         """Vessel points (vessel frame, see :mod:`tms_sp.vessel`) -> release target + SENSING_LOADED_FLG."""
-        spec = self.cfg.vessel_geom.grid_spec(self.cfg.resolution)
+        geom = self.vessel_geom
+        spec = geom.grid_spec(self.cfg.resolution)
         grid = rasterize(points, spec, sensor="vessel points")
-        v = assess_vessel(grid, self.cfg.vessel_geom, self.cfg.vessel, previous_xy=self._release_spot,
+        v = assess_vessel(grid, geom, self.cfg.vessel, previous_xy=self._release_spot,
                           was_loaded=self.flags.get("SENSING_LOADED_FLG", False))
         self.vessel = v
         if self.ic120_pose is not None and self._at_loading_point():
             pose, angle = release_in_zx200(
-                v.release_xyz, self.ic120_pose, self.base, self.cfg.vessel_geom,
+                v.release_xyz, self.ic120_pose, self.base, geom,
                 self.cfg.swing_axis_in_base, self.cfg.vessel.carry_theta_w,
             )
             xyz = (pose["x"], pose["y"], pose["z"])

@@ -3,8 +3,9 @@
 ``<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose"
 record_name="{pose}"/>`` sends ``{model_name, record_name}`` to ``/<model_name>/<subtask_name>``
 (the original's tms_msg_ts/action/LeafNodeBase). Every ``LeafNode*`` id (LeafNodeIc120, LeafNodeZx200, LeafNodeMst2200, ...)
-is this one class; ``model_name`` and ``subtask_name`` must be literals (read once, as the original
-constructor did), ``record_name`` may be a ``{key}`` resolved at each start.
+is this one class; ``model_name`` and ``subtask_name`` are read once, as the original constructor did: literals,
+or a ``{key}`` of the task's parameters (the task document's ``blackboard``), which the loader resolves when the
+tree is loaded (:mod:`tms_ts.loader`); ``record_name`` may be a ``{key}`` resolved at each start.
 
 Protocol (reference §4.2, made non-blocking): first tick sends the goal -> RUNNING; not accepted
 within ``ctx.accept_timeout_s`` -> cancel, FAILURE; rejected (the server is stopping) -> FAILURE naming
@@ -116,8 +117,8 @@ class LeafNode(StatefulNode):
     """Action client of ``/<model_name>/<subtask_name>``; see the module docstring."""
 
     PORTS = {
-        "model_name": Port("str", description="machine namespace, e.g. zx200 (literal)"),
-        "subtask_name": Port("str", description="subtask action name (literal)"),
+        "model_name": Port("str", description="machine name = namespace, e.g. zx200 (literal, or a task parameter {key})"),
+        "subtask_name": Port("str", description="subtask action name (literal, or a task parameter {key})"),
         "record_name": Port("str", description="DB record the subtask reads ({key} allowed)"),
     }
     LITERAL_PORTS = ("model_name", "subtask_name")
@@ -127,7 +128,7 @@ class LeafNode(StatefulNode):
         for port in cls.LITERAL_PORTS:
             value = attrs.get(port, "")
             if value.startswith("{"):
-                return f"port '{port}' must be a literal, got {value!r}"
+                return f"port '{port}' must be a literal or a task parameter, got {value!r}"
             if not value.strip():
                 return f"port '{port}' must not be empty"
         return None

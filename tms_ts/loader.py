@@ -16,6 +16,14 @@ with ``__shared_blackboard="true"`` (v3) / ``_autoremap="true"`` (v4) it shares 
 blackboard, otherwise each other attribute remaps a subtree key (``key="{parent_key}"``) or sets it
 to a literal. Without ``main_tree_to_execute`` the document must hold exactly one BehaviorTree.
 
+Task parameters: a task document may carry initial blackboard entries (field ``blackboard``, e.g.
+``{machine: ic120_1}``; :func:`load_tree`'s ``blackboard``), set before the tree is built, so one tree serves
+every machine of a kind. A port a node reads once when it is built (``LITERAL_PORTS``: a leaf's ``model_name``
+and ``subtask_name``, fixed for the run as the original's leaf constructor reads them) may be a ``{key}`` of
+these entries: it is resolved here, at load; a key the task does not set is a TreeLoadError naming the task, the
+key, the node and its line. Other ``{key}`` ports read the blackboard at every tick as before, so
+``input_value="{machine}"`` writes the parameter to the DB.
+
 Everything is checked before anything runs: malformed XML, unknown node ids, unknown or missing
 ports, literals of the wrong type, child counts, unknown or recursive subtrees. Each error is a
 :class:`TreeLoadError` naming the node id and its line/column.
@@ -24,10 +32,10 @@ ports, literals of the wrong type, child counts, unknown or recursive subtrees. 
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
-from tms_ts.blackboard import Blackboard
+from tms_ts.blackboard import MISSING, Blackboard
 from tms_ts.bt.builtins import BUILTINS
 from tms_ts.bt.core import IDLE, RUNNING, BtNode, Status, TreeContext, convert
 from tms_ts.bt.custom import CUSTOM_NODES
@@ -35,7 +43,7 @@ from tms_ts.errors import TreeLoadError
 from tms_ts.leaf import LeafNode
 from tms_ts.xmldoc import Element, parse_xml
 
-__all__ = ["Tree", "load_tree", "node_class", "register_node", "known_ids"]
+__all__ = ["Tree", "load_tree", "check_task_blackboard", "node_class", "register_node", "known_ids"]
 
 _FAMILY_TAGS = frozenset({"Action", "Condition", "Control", "Decorator"})
 _SUBTREE_TAGS = frozenset({"SubTree", "SubTreePlus"})
@@ -161,6 +169,10 @@ class _Builder:
             raise self.error(el, node_id, "unknown node ID")
         name = attrs.pop("name", node_id)
         where = f"{self.source} {el.where}" if self.source != "<xml>" else el.where
+        for port in getattr(cls, "LITERAL_PORTS", ()):
+            m = _KEY_RE.match(attrs.get(port, ""))
+            if m:
+                attrs[port] = self.load_time_value(el, node_id, port, m.group(1), ctx)
         ports: dict[str, tuple[bool, Any]] = {}
         for port, raw in attrs.items():
             spec = cls.PORTS.get(port)
@@ -196,6 +208,18 @@ class _Builder:
             child.parent = node
             node.children.append(child)
         return node
+
+    def load_time_value(self, el: Element, node_id: str, port: str, key: str, ctx: TreeContext) -> str:
+        """The text of blackboard entry ``key`` for a port read once at load (a task parameter)."""
+        value = ctx.blackboard.get(key)
+        if value is MISSING:
+            raise self.error(el, _describe(el, node_id),
+                             f"port '{port}' reads blackboard key '{key}' when the tree is loaded, and the task sets "
+                             f"no such entry (the task document's field 'blackboard', e.g. {{{key}: ...}})")
+        if isinstance(value, bool) or not isinstance(value, str | int | float):
+            raise self.error(el, _describe(el, node_id),
+                             f"port '{port}' reads blackboard key '{key}' = {value!r}: expected a name (text)")
+        return str(value)
 
     def subtree(self, el: Element, tree_id: str, attrs: dict[str, str], ctx: TreeContext, stack: tuple[str, ...]) -> BtNode:
         if tree_id not in self.trees:
@@ -236,8 +260,33 @@ class _Builder:
         return self.build(body.children[0], ctx, (main_id,))
 
 
-def load_tree(xml: str, ctx: TreeContext | None = None, *, source: str = "<xml>") -> Tree:
-    """Build the main tree of a BT.CPP v3/v4 document; TreeLoadError names the culprit node."""
+def check_task_blackboard(entries: Any, source: str = "<xml>") -> dict[str, Any]:
+    """A task's initial blackboard entries (its document's ``blackboard``): names -> bool/int/float/str.
+
+    TreeLoadError naming the task (``source``) and the key otherwise.
+    """
+    if entries is None:
+        return {}
+    if not isinstance(entries, Mapping):
+        raise TreeLoadError(f"{source}: field 'blackboard' must be a mapping of key: value, got {entries!r}")
+    checked: dict[str, Any] = {}
+    for key, value in entries.items():
+        if not isinstance(key, str) or not key.strip() or "{" in key or "}" in key:
+            raise TreeLoadError(f"{source}: field 'blackboard': key {key!r} must be a non-empty name without braces")
+        if not isinstance(value, bool | int | float | str):
+            raise TreeLoadError(f"{source}: field 'blackboard': key '{key}' = {value!r} must be a bool, number or text")
+        checked[key] = value
+    return checked
+
+
+def load_tree(xml: str, ctx: TreeContext | None = None, *, source: str = "<xml>",
+              blackboard: Mapping[str, Any] | None = None) -> Tree:
+    """Build the main tree of a BT.CPP v3/v4 document; TreeLoadError names the culprit node.
+
+    ``blackboard``: the task's initial entries (its parameters, :func:`check_task_blackboard`), set on the
+    tree's blackboard before the nodes are built.
+    """
+    entries = check_task_blackboard(blackboard, source)
     doc = parse_xml(xml, source)
     if doc.tag != "root":
         raise TreeLoadError(f"{source}: document element is <{doc.tag}> ({doc.where}), expected <root>")
@@ -245,6 +294,8 @@ def load_tree(xml: str, ctx: TreeContext | None = None, *, source: str = "<xml>"
     if fmt not in (None, "3", "4"):
         raise TreeLoadError(f"{source}: root ({doc.where}): unsupported BTCPP_format={fmt!r} (3 or 4)")
     ctx = ctx if ctx is not None else TreeContext()
+    for key, value in entries.items():
+        ctx.blackboard.set(key, value)
     builder = _Builder(doc, source, v4=fmt == "4")
     root = builder.main(doc, ctx)
     return Tree(root, ctx, source)

@@ -12,6 +12,11 @@ An episode is a run of increases with no gap longer than ``episode_gap_s``: a bu
 vessel over a second or two and a vessel empties over several, sampled many times on the way; each
 counts once, at the sample where its total first passes the threshold.
 
+Several carriers (the fleet experiment, ``carriers``): each carrier's soil is fed by name
+(:meth:`ExperimentRecorder.on_carrier_soil`: what landed in its vessel and what it dumped), and the **smallest
+distance between two carriers near the loading point** is kept: the distance between two carriers' base
+positions (truth) whenever at least one of them is within ``near_radius`` of ``loading_point``.
+
 The **leaf times** are how long each task's leaves (its subtask calls, waits and flag reads, named as in
 the tree) ran, from the ``running_leaves`` of ``/tms_ts/status``: where a load pass's time goes.
 
@@ -191,6 +196,17 @@ class ExperimentRecorder:
     _dumps: _Episodes | None = None
     _aligned: dict[str, AlignedError] = field(default_factory=dict)
     _leaf_starts: dict[int, dict[str, float]] = field(default_factory=dict)
+    #: the carriers by name (fleet); empty for the paper's single IC120
+    carriers: list[str] = field(default_factory=list)
+    #: (x, y) of the loading point and the radius around it in which carrier distances count
+    loading_point: tuple[float, float] | None = None
+    near_radius: float = 12.0
+    carrier_soil: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
+    min_carrier_distance: float = math.inf
+    min_carrier_distance_at: tuple[float, str, str] | None = None
+    #: task id -> machine name (for the report)
+    task_machines: dict[int, str] = field(default_factory=dict)
+    _last_pose: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     # -- inputs -------------------------------------------------------------------------------
     def on_soil(self, t: float, mound: float, bucket: float, vessel: float, dumped: float) -> None:
@@ -222,6 +238,22 @@ class ExperimentRecorder:
         path = self.paths.setdefault(machine, [])
         if not path or math.hypot(path[-1][1] - x, path[-1][2] - y) > 0.1:
             path.append((t, x, y))
+        if machine in self.carriers and self.loading_point is not None:
+            self._last_pose[machine] = (x, y)
+            lx, ly = self.loading_point
+            near = math.hypot(x - lx, y - ly) <= self.near_radius
+            for other, (ox, oy) in self._last_pose.items():
+                if other == machine or not (near or math.hypot(ox - lx, oy - ly) <= self.near_radius):
+                    continue
+                d = math.hypot(x - ox, y - oy)
+                if d < self.min_carrier_distance:
+                    self.min_carrier_distance, self.min_carrier_distance_at = d, (t, *sorted((machine, other)))
+
+    def on_carrier_soil(self, t: float, machine: str, vessel: float, loaded: float, dumped: float) -> None:
+        """Carrier ``machine``'s load now and its totals landed in the vessel and dumped [m^3]."""
+        series = self.carrier_soil.setdefault(machine, [])
+        if not series or series[-1][1:] != (vessel, loaded, dumped):
+            series.append((t, vessel, loaded, dumped))
 
     def on_estimated_pose(self, t: float, machine: str, x: float, y: float) -> None:
         """Localisation estimate stamped ``t``; compared with the truth at ``t`` (:class:`AlignedError`)."""
@@ -298,6 +330,28 @@ class ExperimentRecorder:
             },
             "pass_events_s": [round(t, 2) for t in self.pass_events],
             "dump_events_s": [round(t, 2) for t in self.dump_events],
+            "task_end_states": {str(k): v[-1][1] for k, v in self.task_states.items() if v},
+            **self._fleet_metrics(),
+        }
+
+    def _fleet_metrics(self) -> dict[str, Any]:
+        if not self.carriers:
+            return {}
+        per: dict[str, Any] = {}
+        for name in self.carriers:
+            series = self.carrier_soil.get(name, [])
+            first, last = (series[0], series[-1]) if series else ((0.0, 0.0, 0.0, 0.0),) * 2
+            per[name] = {"soil_moved_m3": round(last[3] - first[3], 4), "loaded_m3": round(last[2] - first[2], 4),
+                         "in_vessel_m3": round(last[1], 4)}
+        at = self.min_carrier_distance_at
+        return {
+            "carriers": per,
+            "tasks": {str(k): {"machine": m, "state": (self.task_states.get(k) or [(0.0, None)])[-1][1]}
+                      for k, m in sorted(self.task_machines.items())},
+            "min_carrier_distance_near_loading_point_m": (
+                round(self.min_carrier_distance, 3) if math.isfinite(self.min_carrier_distance) else None),
+            "min_carrier_distance_at": {"t": round(at[0], 2), "carriers": list(at[1:])} if at else None,
+            "near_radius_m": self.near_radius,
         }
 
     def _unmatched(self, key: str) -> int:

@@ -11,9 +11,13 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
   (sensor_msgs/JointState), ``/sim/truth/zx200/bucket_tip`` (geometry_msgs/PointStamped),
 * ``/sim/truth/soil`` (std_msgs/Float64MultiArray ``[mound, bucket, vessel, dumped, total_error, ground]`` m^3,
   labels in ``layout.dim[0].label``), every ``truth_period_s``,
-* ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/ic120/vessel_points``
-  (PointCloud2, ``ic120/vessel``): LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every
-  ``scan_period_s`` of simulated time (0.5 s), noise ``scan_noise_m`` (0.02 m),
+* ``/sim/truth/<carrier>/soil`` (std_msgs/Float64MultiArray ``[vessel, loaded, dumped]`` m^3, labels in
+  ``layout.dim[0].label``) for every crawler carrier by name: its load now and the totals that landed in its
+  vessel and that it dumped, every ``truth_period_s``,
+* ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/<carrier>/vessel_points``
+  (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name (the paper's IC120: ``/sim/sensors/ic120/
+  vessel_points``): LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
+  simulated time (0.5 s), noise ``scan_noise_m`` (0.02 m),
 * ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
   ignored_out_of_range, ignored_bad_dlc, ignored_unknown_id, watchdog_trips) and the real-time factor.
 """
@@ -100,7 +104,10 @@ class SimPlantNode(Node):
         self._scan_noise = float(p("scan_noise_m", 0.02).value)
         self._next_scan = 0.0
         self.mound_pub = self.create_publisher(PointCloud2, "/sim/sensors/mound/points", 2)
-        self.vessel_pub = self.create_publisher(PointCloud2, "/sim/sensors/ic120/vessel_points", 2)
+        self.vessel_pub = {m: self.create_publisher(PointCloud2, f"/sim/sensors/{m}/vessel_points", 2)
+                           for m in self.plant.carriers}
+        self.carrier_soil_pub = {m: self.create_publisher(Float64MultiArray, f"/sim/truth/{m}/soil", 10)
+                                 for m in self.plant.carriers}
         self._next_truth = 0.0
         self._status_period = status_period
         self._next_status = 0.0
@@ -170,6 +177,11 @@ class SimPlantNode(Node):
         soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error,
                      plant.ground.ground_soil_volume()]
         self.soil_pub.publish(soil)
+        for m, pub in self.carrier_soil_pub.items():
+            msg = self._Float64MultiArray()
+            msg.layout.dim = [self._Dim(label="vessel,loaded,dumped", size=3, stride=3)]
+            msg.data = [plant.soil.vessels.get(m, 0.0), plant.soil.loaded_by.get(m, 0.0), plant.soil.dumped_by.get(m, 0.0)]
+            pub.publish(msg)
 
     def _cloud(self, points, frame: str, stamp):  # noqa: ANN001, ANN202
         from sim_bridge.scanners import pack_xyz
@@ -195,10 +207,11 @@ class SimPlantNode(Node):
         pts = mound_scan(plant.ground, soil.mound_center, soil.mound_base_radius + 1.5, noise=self._scan_noise,
                          rng=self._scan_rng)
         self.mound_pub.publish(self._cloud(pts, "map", stamp))
-        ic = plant.spec.ic120
-        pts = vessel_scan(plant.soil.vessel, ic.inner_length, ic.inner_width, noise=self._scan_noise,
-                          rng=self._scan_rng)
-        self.vessel_pub.publish(self._cloud(pts, "ic120/vessel", stamp))
+        for m, pub in self.vessel_pub.items():
+            spec = plant.carriers[m].spec
+            pts = vessel_scan(plant.soil.vessels[m], spec.inner_length, spec.inner_width, noise=self._scan_noise,
+                              rng=self._scan_rng)
+            pub.publish(self._cloud(pts, f"{m}/vessel", stamp))
 
     def _publish_status(self, plant: Plant, stamp) -> None:  # noqa: ANN001
         from diagnostic_msgs.msg import DiagnosticStatus, KeyValue

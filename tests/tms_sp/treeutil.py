@@ -9,7 +9,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 SEED = ROOT / "config" / "seeds" / "paper.yaml"
-TREE_FILES = sorted((ROOT / "trees").glob("*.xml"))
+TREE_FILES = sorted((ROOT / "trees").glob("paper_*.xml"))  # the paper experiment (fleet: tests/tms_sp/test_fleet.py)
 
 # BehaviorTree.CPP v3 built-ins the runtime (tms_ts) supports, as used by the original XMLs.
 BUILTINS = {

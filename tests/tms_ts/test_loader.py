@@ -64,10 +64,10 @@ def test_bad_literal_type_and_missing_port_and_child_count():
         '<root><BehaviorTree ID="B"><IfThenElse><AlwaysSuccess/></IfThenElse></BehaviorTree></root>')
 
 
-def test_leaf_model_and_subtask_must_be_literal():
+def test_leaf_model_and_subtask_are_literals_or_task_parameters():
     msg = _err('<root><BehaviorTree ID="B"><Action ID="LeafNodeIc120" model_name="{m}" subtask_name="s" '
                'record_name="r"/></BehaviorTree></root>')
-    assert "LeafNodeIc120" in msg and "model_name" in msg and "literal" in msg
+    assert "LeafNodeIc120" in msg and "model_name" in msg and "'m'" in msg and "field 'blackboard'" in msg
 
 
 def test_main_tree_and_subtree_errors():

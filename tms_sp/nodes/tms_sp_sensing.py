@@ -16,7 +16,14 @@ mound_in_reach_m3, vessel_volume_m3, vessel_fill, the three flags, target_x/y/z/
 
 Parameters: ``db_uri``, ``db_path`` (contract [C]), ``config`` (sensing YAML, default
 config/tms_sp/sensing.yaml), ``site``/``ic120``/``zx200`` (YAML paths, default config/...),
-``rate_hz`` (2.0), ``mound_topic``, ``vessel_topic``, ``ic120_pose_topic``, ``zx200_pose_topic``.
+``rate_hz`` (2.0), ``mound_topic``, ``vessel_topic``, ``ic120_pose_topic``, ``zx200_pose_topic``,
+``blackboard_record`` ("" = the sensing YAML's).
+
+Several carriers (the fleet experiment): ``carriers`` (default ``[ic120]``) names the carriers on the site; with
+more than one, each one's pose and vessel come from ``/sim/truth/<name>/pose`` and
+``/sim/sensors/<name>/vessel_points`` (the single-carrier topics above are the paper's), and the carrier sensed is
+the one named in field ``holder_field`` (``LOADAREA_MACHINE``) of the global-blackboard record: the carrier that
+claimed the loading point (:meth:`tms_sp.processor.SiteSensing.follow_holder`); its vessel geometry is its kind's.
 On start every record it writes must exist and be ``type: dynamic`` (seed first), else it exits 1
 naming the record.
 """
@@ -66,15 +73,36 @@ class SensingNode(Node):
             "zx200_pose_topic": "/sim/truth/zx200/pose",
         }
         topics = {k: declare_startup(self, k, v).value for k, v in topics.items()}
+        record = str(declare_startup(self, "blackboard_record", "").value)
+        if record:
+            import dataclasses
+
+            cfg = dataclasses.replace(cfg, blackboard_record=record)
+        self.carriers = [str(c) for c in declare_startup(self, "carriers", ["ic120"]).value]
+        self.holder_field = str(declare_startup(self, "holder_field", "LOADAREA_MACHINE").value)
+        if not self.carriers:
+            raise ConfigError("tms_sp_sensing: parameter carriers must name at least one carrier")
         self.store = declare_and_open(self)
-        self.sensing = SiteSensing(cfg, self.store)
+        self.sensing = SiteSensing(cfg, self.store, carrier=self.carriers[0])
+        if len(self.carriers) > 1:
+            from tms_sp.config import carrier_vessel_geometry
+
+            self.sensing.vessels = {c: carrier_vessel_geometry(cfg, c) for c in self.carriers}
         self.sensing.check_records()
         self._mound = None
-        self._vessel = None
+        self._vessel: dict[str, Any] = {}
         self._topics = topics
         self.create_subscription(PointCloud2, topics["mound_topic"], lambda m: setattr(self, "_mound", m), 2)
-        self.create_subscription(PointCloud2, topics["vessel_topic"], lambda m: setattr(self, "_vessel", m), 2)
-        self.create_subscription(PoseStamped, topics["ic120_pose_topic"], self._on_ic120, 10)
+        if len(self.carriers) == 1:
+            c = self.carriers[0]
+            self._vessel_topics = {c: topics["vessel_topic"]}
+            pose_topics = {c: topics["ic120_pose_topic"]}
+        else:
+            self._vessel_topics = {c: f"/sim/sensors/{c}/vessel_points" for c in self.carriers}
+            pose_topics = {c: f"/sim/truth/{c}/pose" for c in self.carriers}
+        for c in self.carriers:
+            self.create_subscription(PointCloud2, self._vessel_topics[c], lambda m, c=c: self._vessel.__setitem__(c, m), 2)
+            self.create_subscription(PoseStamped, pose_topics[c], lambda m, c=c: self._on_carrier(c, m), 10)
         self.create_subscription(PoseStamped, topics["zx200_pose_topic"],
                                  lambda m: self.sensing.on_zx200_pose(pose2d(m)), 10)
         self._status = self.create_publisher(DiagnosticArray, "/tms_sp/status", 10)
@@ -82,21 +110,26 @@ class SensingNode(Node):
         self._kv = (KeyValue, DiagnosticStatus, DiagnosticArray)
         self._log.info(f"sensing: blackboard {cfg.blackboard_record}, topics {topics}, {rate:g} Hz")
 
-    def _on_ic120(self, msg: PoseStamped) -> None:
+    def _on_carrier(self, name: str, msg: PoseStamped) -> None:
+        if name != self.sensing.carrier:
+            return
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if t == 0.0:
             t = self.get_clock().now().nanoseconds * 1e-9
         self.sensing.on_ic120_pose(t, pose2d(msg))
 
     def _process(self) -> None:
-        for attr, topic, handler in (
-            ("_mound", self._topics["mound_topic"], self.sensing.on_mound_points),
-            ("_vessel", self._topics["vessel_topic"], self.sensing.on_vessel_points),
+        if len(self.carriers) > 1:
+            self.sensing.follow_holder(self.holder_field, set(self.carriers))
+        carrier = self.sensing.carrier
+        vessel = self._vessel.pop(carrier, None)
+        mound, self._mound = self._mound, None
+        for msg, topic, handler in (
+            (mound, self._topics["mound_topic"], self.sensing.on_mound_points),
+            (vessel, self._vessel_topics[carrier], self.sensing.on_vessel_points),
         ):
-            msg = getattr(self, attr)
             if msg is None:
                 continue
-            setattr(self, attr, None)
             try:
                 handler(xyz_from_cloud(msg, topic=topic))
             except SensingError as exc:
@@ -107,6 +140,7 @@ class SensingNode(Node):
         key_value, status_t, array_t = self._kv
         s = self.sensing
         values = {f: str(v).lower() for f, v in s.flags.items()}
+        values["carrier"] = s.carrier
         if s.mound is not None:
             values["mound_volume_m3"] = f"{s.mound.volume_total:.3f}"
             values["mound_in_reach_m3"] = f"{s.mound.volume_in_reach:.3f}"

@@ -15,6 +15,17 @@ topic                      type                   meaning
                                                   JSON ``{"tasks": [{task_id, task_sequence}]}``
 =========================  =====================  =================================================
 
+A task document's field ``blackboard`` (e.g. ``{machine: ic120_1}``) gives the task's initial blackboard
+entries, its parameters: one tree of a machine kind runs for each machine named there (:mod:`tms_ts.loader`).
+
+Global-blackboard reservations: every task is ticked from this one timer callback, one task after the other,
+and a tree node's DB read or write completes inside its tick (the store calls are synchronous). A
+read-check-write sequence of one tree (BlackboardValueReaderMongo -> ConditionalExpression ->
+MongoValueWriter under one Sequence) that runs within one tick therefore runs with no other task's node in
+between: two tasks of this manager can never both read a flag false and both set it. (MongoValueWriter returns
+RUNNING only when the record is missing: then the claim fails anyway.) Writers in other processes (sensing, a
+second manager) are not covered; the loading-point flag has none. trees/README.md, "Reservation".
+
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
 ``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
 ``db_path`` ("" = tms_db default); all read-only (read at start-up). ``task_id`` (-1), the original's:
@@ -125,14 +136,18 @@ class TaskManager(Node):
             self.get_logger().warning(f"task {task_id} is already running; start ignored")
             return
         try:
+            blackboard = None  # the task's parameters: its document's initial blackboard entries
             if xml is None:
-                xml = self.store.get_task(task_id).get("task_sequence", "")
+                doc = self.store.get_task(task_id)
+                xml, blackboard = doc.get("task_sequence", ""), doc.get("blackboard")
+            elif task_id >= 0:  # /task_sequence naming a stored task: its parameters too
+                blackboard = self._stored_blackboard(task_id)
             # Delay / Timeout / Sleep run on the node's clock (simulated time under use_sim_time)
             ctx = TreeContext(store=self.store, ros=self.ros, task_id=task_id,
                               task_clock=lambda: self.get_clock().now().nanoseconds * 1e-9,
                               accept_timeout_s=self.accept_timeout_s, halt_timeout_s=self.halt_timeout_s,
                               server_lost_s=self.server_lost_s)
-            tree = load_tree(xml, ctx, source=f"task {task_id}")
+            tree = load_tree(xml, ctx, source=f"task {task_id}", blackboard=blackboard)
         except (TsError, KeyError, ValueError) as exc:
             message = f"cannot start task {task_id}: {exc}"
             self.get_logger().error(message)
@@ -142,6 +157,14 @@ class TaskManager(Node):
         self.finished.pop(task_id, None)
         self.runs[task_id] = TaskRun(task_id, tree, server_wait_s=self.server_wait_s)
         self.get_logger().info(f"task {task_id} started ({len(tree.nodes)} nodes, {len(tree.leaves)} leaves)")
+
+    def _stored_blackboard(self, task_id: int):  # noqa: ANN202
+        from tms_db.errors import RecordNotFound
+
+        try:
+            return self.store.get_task(task_id).get("blackboard")
+        except RecordNotFound:
+            return None
 
     def _on_cancel(self, msg: Int32) -> None:
         run = self.runs.get(int(msg.data))

@@ -13,6 +13,13 @@ It is the job node of ``config/launch/paper_experiment.yaml`` (``on_exit: shutdo
 4. writes ``runs/<timestamp>/`` (metrics.json, PNG plots, index.html) and exits 0 when every task
    ended SUCCESS, 1 otherwise (or on ``timeout_s`` of simulated time).
 
+Several carriers (the fleet experiment, ``config/launch/fleet.yaml``): ``carriers`` names them; each one's soil
+comes from ``/sim/truth/<name>/soil`` and its pose from ``/sim/truth/<name>/pose``; the report gives per
+carrier the soil it moved, the smallest distance between two carriers near the loading point
+(``loading_point``, a site point, and ``near_radius_m``) and each task's machine and end state. ``loads`` > 0
+ends the work after that many vessel loads (the ZX200 tree counts them in the record's ``LOAD_COUNT``) instead of
+``cycles`` dumps: a carrier queues again as soon as it has dumped, so counting dumps would let one more in.
+
 Inputs: ``/clock`` (as the node clock: ``use_sim_time`` must be true), ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
 ``/sim/truth/zx200/bucket_tip``, ``/zx200/joint_states`` (measured, for the end-effector error),
 ``/ic120/odometry/global`` (EKF estimate, for the localisation error), and the flags of
@@ -74,7 +81,12 @@ class ExperimentNode(Node):
         runs = Path(d("runs_dir", "runs").value)
         self.run_dir = (runs if runs.is_absolute() else repo_root() / runs) / datetime.now().strftime("%Y%m%d-%H%M%S")
         self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
-        self.rec = ExperimentRecorder()
+        self.carriers = [str(c) for c in d("carriers", [""]).value if str(c)]
+        self.loads_target = int(d("loads", 0).value)
+        loading_point = str(d("loading_point", "P1").value)
+        near_radius = float(d("near_radius_m", 12.0).value)
+        self.title = str(d("title", "Paper experiment: two-machine earthwork").value)
+        self.rec = ExperimentRecorder(carriers=self.carriers, near_radius=near_radius)
         self.rec.wall_start = time.monotonic()
         if not self.get_parameter("use_sim_time").value:
             raise ConfigError("tms_ur_experiment measures simulated time: run it with use_sim_time:=true "
@@ -92,14 +104,21 @@ class ExperimentNode(Node):
         self._kin, self._joint_order = load_kinematics(), JOINTS
         self._np = np
         self.site = load_site()
+        if self.carriers:
+            lp = self.site.point(loading_point)
+            self.rec.loading_point = (lp.x, lp.y)
         self._store = None
+        self._loads = 0
         self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", reliable)
         self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
         self.create_subscription(Float64MultiArray, "/sim/truth/soil", self._on_soil, 10)
-        for m in ("ic120", "zx200"):
+        for m in (self.carriers or ["ic120"]) + ["zx200"]:
             self.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: self._on_pose(m, msg), 10)
+        for m in self.carriers:
+            self.create_subscription(Float64MultiArray, f"/sim/truth/{m}/soil",
+                                     lambda msg, m=m: self._on_carrier_soil(m, msg), 10)
         self.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", self._on_tip, 10)
         self.create_subscription(JointState, "/zx200/joint_states", self._on_joints, 10)
         self.create_subscription(Odometry, "/ic120/odometry/global", self._on_estimate, 10)
@@ -126,6 +145,12 @@ class ExperimentNode(Node):
         v = dict(zip(labels, msg.data, strict=False))
         if {"mound", "bucket", "vessel", "dumped"} <= v.keys():
             self.rec.on_soil(self.sim_t, v["mound"], v["bucket"], v["vessel"], v["dumped"])
+
+    def _on_carrier_soil(self, machine: str, msg: Float64MultiArray) -> None:
+        labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+        v = dict(zip(labels, msg.data, strict=False))
+        if {"vessel", "loaded", "dumped"} <= v.keys():
+            self.rec.on_carrier_soil(self.sim_t, machine, v["vessel"], v["loaded"], v["dumped"])
 
     def _stamp(self, header) -> float:  # noqa: ANN001
         """A message's stamp [s of simulated time]; this node's clock when it is unset."""
@@ -177,13 +202,19 @@ class ExperimentNode(Node):
             doc = self._db().get_record(self.record)
         except KeyError:
             return  # not seeded yet: the tasks cannot start either
-        self.rec.on_flags(self.sim_t, {k: v for k, v in doc.items() if k.endswith("_FLG") and isinstance(v, bool)})
+        flags = {k: v for k, v in doc.items() if (k.endswith("_FLG") or k == "LOADAREA") and isinstance(v, bool)}
+        if self.carriers and isinstance(doc.get("LOADAREA_MACHINE"), str):
+            flags["LOADAREA_MACHINE"] = doc["LOADAREA_MACHINE"] or "-"
+        self.rec.on_flags(self.sim_t, flags)
+        if isinstance(doc.get("LOAD_COUNT"), int) and not isinstance(doc.get("LOAD_COUNT"), bool):
+            self._loads = doc["LOAD_COUNT"]
 
     def _tick(self) -> None:
         if self.exit_code is not None:
             return
         if not self.started:
             if self.count_subscribers("/tms_ts/start") > 0 and self.sim_t > 0.0 and not self._missing_actions():
+                self._task_machines()
                 self.pub_start.publish(TaskIds(task_ids=self.task_ids))
                 self.started = True
                 self._t0 = (time.monotonic(), self.sim_t)
@@ -195,9 +226,11 @@ class ExperimentNode(Node):
             self._last_progress = now
             self._progress()
         ended = [tid for tid in self.task_ids if self.tasks.get(tid, {}).get("state") in DONE]
-        if not self.stopping and (self.rec.cycles >= self.cycles_target or self._failed()):
+        enough = self._loads >= self.loads_target if self.loads_target > 0 else self.rec.cycles >= self.cycles_target
+        if not self.stopping and (enough or self._failed()):
             self.stopping = True
-            reason = "a task failed" if self._failed() else f"{self.rec.cycles} cycle(s) done"
+            done = f"{self._loads} load(s)" if self.loads_target > 0 else f"{self.rec.cycles} cycle(s)"
+            reason = "a task failed" if self._failed() else f"{done} done"
             if self._failed():
                 for tid, info in sorted(self.tasks.items()):
                     if info.get("state") == "FAILURE":
@@ -213,6 +246,15 @@ class ExperimentNode(Node):
         elif self.sim_t - (self.rec.sim_start or self.sim_t) > self.timeout:
             print(f"[experiment] timeout: {self.timeout:g} s of simulated time", flush=True)
             self._finish(timed_out=True)
+
+    def _task_machines(self) -> None:
+        """Task id -> its machine (the task's parameter ``machine``, else its model_name) for the report."""
+        for tid in self.task_ids:
+            try:
+                doc = self._db().get_task(tid)
+            except KeyError:
+                continue
+            self.rec.task_machines[tid] = str((doc.get("blackboard") or {}).get("machine") or doc.get("model_name", ""))
 
     def _missing_actions(self) -> list[str]:
         # the server publishes <action>/_action/status (clients only subscribe to it)
@@ -231,9 +273,15 @@ class ExperimentNode(Node):
         phases = "; ".join(
             f"task {tid} {info['state']}: {', '.join(info['running']) or '-'}" for tid, info in sorted(self.tasks.items())
         )
+        per = ""
+        if self.carriers:
+            moved = {m: (self.rec.carrier_soil.get(m) or [(0, 0, 0, 0)])[-1][3] for m in self.carriers}
+            d = self.rec.min_carrier_distance
+            per = (f" ({', '.join(f'{m} {v:.2f}' for m, v in moved.items())}) | load {self._loads}/{self.loads_target}"
+                   f" | min carrier distance near {self.rec.near_radius:g} m of loading {d:.1f} m")
         print(
             f"[experiment] cycle {self.rec.cycles}/{self.cycles_target} | passes {len(self.rec.pass_events)} | "
-            f"soil moved {self.rec.soil_moved():.2f} m3 | t_sim {self.sim_t:.0f} s ({rtf:.1f}x) | {phases}",
+            f"soil moved {self.rec.soil_moved():.2f} m3{per} | t_sim {self.sim_t:.0f} s ({rtf:.1f}x) | {phases}",
             flush=True,
         )
 
@@ -242,7 +290,7 @@ class ExperimentNode(Node):
         self.rec.wall_start, self.rec.sim_start = self._t0
         self.rec.wall_end, self.rec.sim_end = time.monotonic(), self.sim_t
         self.rec.ended = "stopped" if stopped else "timeout" if timed_out else "done"
-        title = "Paper experiment: two-machine earthwork" + (" (stopped before the end)" if stopped else "")
+        title = self.title + (" (stopped before the end)" if stopped else "")
         index = self.rec.report(self.run_dir, site=self.site, title=title)
         metrics = self.rec.metrics()
         if stopped:
@@ -253,7 +301,16 @@ class ExperimentNode(Node):
         ok = not timed_out and all(self.tasks.get(t, {}).get("state") == "SUCCESS" for t in self.task_ids)
         for tid in self.task_ids:
             info = self.tasks.get(tid, {})
-            print(f"[experiment] task {tid}: {info.get('state')} {info.get('message', '')}", flush=True)
+            machine = self.rec.task_machines.get(tid) if self.carriers else None
+            print(f"[experiment] task {tid}: {info.get('state')} {info.get('message', '')}"
+                  + (f" (machine {machine})" if machine else ""), flush=True)
+        for name, figures in metrics.get("carriers", {}).items():
+            print(f"[experiment] {name}: soil moved {figures['soil_moved_m3']} m3, loaded {figures['loaded_m3']} m3",
+                  flush=True)
+        if self.carriers:
+            print(f"[experiment] min distance between two carriers within {self.rec.near_radius:g} m of the loading "
+                  f"point: {metrics['min_carrier_distance_near_loading_point_m']} m "
+                  f"({metrics['min_carrier_distance_at']})", flush=True)
         print(
             f"[experiment] {'DONE' if ok else 'FAILED'}: {metrics['cycles']} cycle(s), {metrics['soil_moved_m3']} m3 moved, "
             f"real-time factor {metrics['real_time_factor']}, load pass {metrics['load_pass_time_s']}, report {index}",
