@@ -2,9 +2,8 @@
 
 Each machine's nodes run in a container process of its own (``python -m tms_launch.container``, as tms-launch
 runs a computer of the real system); the plant and the converters share one process with in-process CAN
-buses (``TMS_CAN_IN_PROCESS``, the composed paper layout's plant container). The generic nodes are started
-through the installed ``ic120_*`` executables (the same classes) renamed ``tracked_*``: a venv installed before
-the generic console scripts existed has only those.
+buses (``TMS_CAN_IN_PROCESS``, the composed paper layout's plant container). The nodes are the generic
+``tracked_localization``, ``tracked_navigator`` and ``vessel_controller`` of each machine by name.
 """
 
 from __future__ import annotations
@@ -23,8 +22,8 @@ from tms_common.config import config_path, load_yaml
 pytestmark = pytest.mark.integration
 
 #: the generic node classes, through the executables the venv has (tms_launch.container.node_class)
-STACK = {"localization": ("tms_rp", "ic120_localization"), "navigator": ("tms_rp", "ic120_navigator"),
-         "vessel": ("tms_rc", "ic120_vessel"), "arm": ("tms_rc", "zx200_arm_controller")}
+STACK = {"localization": ("tms_rp", "tracked_localization"), "navigator": ("tms_rp", "tracked_navigator"),
+         "vessel": ("tms_rc", "vessel_controller"), "arm": ("tms_rc", "zx200_arm_controller")}
 
 
 def _plant_yaml(tmp_path, machines: dict[str, str], poses: dict[str, object]) -> str:
