@@ -1,5 +1,6 @@
 """Every new machine kind over COM3 CAN in the MuJoCo plant, driven by the original's subtask names, as real processes:
-MST110CR (``mst110cr_2``), MST2200VD (``mst2200``) and D37PXi (``d37pxi_24``), each by the name the original's trees use.
+MST110CR (``mst110cr_2``), MST2200VD (``mst2200``), D37PXi (``d37pxi_24``) and the ZX120, each by the name the original's
+trees use (the ZX200 and the IC120: tests/tracked/test_fleet_integration.py).
 
 Per kind: drives to a pose (``st_<prefix>_navigate_anywhere_deg``: subtask server -> navigator -> converter -> plant);
 for the MSTs swings the vessel (``st_<prefix>_swing``), dumps (``st_<prefix>_release_soil``: the DumpUp service) and
@@ -25,6 +26,8 @@ KINDS = {
     "mst110cr_2": ("mst110cr", "mst110cr", [24.0, -8.0, 0.0], (30.0, -8.0, 0.0), True),
     "mst2200": ("mst2200vd", "mst2200", [24.0, -8.0, 0.0], (30.0, -8.0, 0.0), True),
     "d37pxi_24": ("d37pxi", "d37pxi", [-10.0, 12.0, 0.0], (-4.0, 12.0, 0.0), False),
+    # the ZX120 travels on its tracks too (our st_zx120_* travel rows; the original has its sample subtasks only)
+    "zx120": ("zx120", "zx120", [-12.0, -12.0, 0.0], (-6.0, -12.0, 0.0), False),
 }
 WATCHDOG_S = 0.5  # config/can/<kind>.yaml bridge.watchdog_s
 
