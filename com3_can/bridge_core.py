@@ -496,7 +496,10 @@ class BridgeCore:
                 if ch.last_cmd is not None and not ch.timed_out and now - ch.last_cmd > self.config.watchdog_s:
                     ch.timed_out = True
                     self.counters[f"watchdog_{ch.name}"] += 1
-                    _log.warning(
+                    # a sender that stopped after a neutral command (a navigator at its goal) left nothing moving
+                    moving = any(self._values[f] != self.codec.neutral(f) for f in ch.frames)
+                    _log.log(
+                        logging.WARNING if moving else logging.DEBUG,
                         "%s: watchdog: no %s for %.2f s -> neutral %s", self.machine, ch.last_topic,
                         now - ch.last_cmd, "/".join(ch.frames),
                     )

@@ -153,6 +153,20 @@ def test_watchdog_neutral_and_reason() -> None:
     assert core.next_wake() <= 0.7 + 0.5 + 0.001
 
 
+def test_watchdog_warns_only_when_it_stops_a_moving_machine(caplog: pytest.LogCaptureFixture) -> None:
+    core = ic()
+    core.cmd_vel(0.5, 0.0, now=0.0)
+    core.cmd_vel(0.0, 0.0, now=0.1)  # a navigator at its goal: a neutral command, then silence
+    with caplog.at_level("DEBUG", logger="com3_can.bridge_core"):
+        core.tick(0.7)
+        core.cmd_vel(0.5, 0.0, now=1.0)  # driving, then the sender dies
+        core.tick(1.6)
+    assert core.counters["watchdog_travel"] == 2
+    levels = [(r.levelname, r.getMessage()) for r in caplog.records if "watchdog" in r.getMessage()]
+    assert [lv for lv, _ in levels] == ["DEBUG", "WARNING"], levels
+    assert "ic120: watchdog: no cmd_vel for 0.60 s" in levels[1][1]
+
+
 def test_tick_emits_each_frame_at_its_cycle_with_alive_counter() -> None:
     core = zx(now=0.0)
     counts: dict[str, int] = {}
