@@ -279,8 +279,10 @@ class ExperimentNode(Node):
             d = self.rec.min_carrier_distance
             per = (f" ({', '.join(f'{m} {v:.2f}' for m, v in moved.items())}) | load {self._loads}/{self.loads_target}"
                    f" | min carrier distance near {self.rec.near_radius:g} m of loading {d:.1f} m")
+        # the fleet ends after its loads (per above); its carriers' dumps are not the paper's cycles
+        head = f"dumps {self.rec.cycles}" if self.carriers else f"cycle {self.rec.cycles}/{self.cycles_target}"
         print(
-            f"[experiment] cycle {self.rec.cycles}/{self.cycles_target} | passes {len(self.rec.pass_events)} | "
+            f"[experiment] {head} | passes {len(self.rec.pass_events)} | "
             f"soil moved {self.rec.soil_moved():.2f} m3{per} | t_sim {self.sim_t:.0f} s ({rtf:.1f}x) | {phases}",
             flush=True,
         )
