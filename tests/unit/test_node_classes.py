@@ -117,7 +117,12 @@ def _overrides(tmp: Path) -> dict[str, object]:
 
 
 #: per executable (module name), what differs from the paper launch's common parameters
-SPECIFIC: dict[str, dict[str, object]] = {"sim_plant": {"use_sim_time": False}}
+SPECIFIC: dict[str, dict[str, object]] = {
+    "sim_plant": {"use_sim_time": False},
+    # a vessel controller serves a crawler carrier (it refuses an excavator, naming it)
+    "vessel_controller": {"machine": "ic120"},
+    "ic120_vessel": {"machine": "ic120"},
+}
 
 
 def test_every_node_class_is_built_and_destroyed_in_one_process(context, tmp_path):
