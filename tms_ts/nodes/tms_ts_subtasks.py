@@ -150,11 +150,11 @@ class SubtaskServers(Node):
         self.outcomes = self.create_publisher(SubtaskOutcome, f"/{self.model_name}/{SUBTASK_OUTCOME_TOPIC}", OUTCOME_QOS)
         self.planners: dict[str, RaceFreeActionClient] = {}
         self.service_clients: dict[str, object] = {}  # rows whose downstream is a service
-        self._joints: dict[str, float] | None = None  # the latest joint_states, for rows that resolve
+        # joint_states only while a row that resolves against them waits for one (as the original's align
+        # subtask subscribes): a standing subscription would deliver the machine's 50 Hz state to the site server
+        self._joints: dict[str, float] | None = None
         self._joints_t = -1.0
-        if any(spec.resolve is not None for spec in specs):
-            self.create_subscription(JointState, f"/{self.model_name}/joint_states", self._on_joints, 10,
-                                     callback_group=group)
+        self._group = group
         self.options_clients: dict[str, object] = {}
         #: planning goal id -> Zx200PlanningOutcome (the ZX200 planner's text for its code), newest last
         self.planning_outcomes: OrderedDict[bytes, Zx200PlanningOutcome] = OrderedDict()
@@ -203,10 +203,15 @@ class SubtaskServers(Node):
         """The plan finished against the machine's state (a fresh joint_states); SubtaskStateError when none."""
         asked = time.monotonic()
         deadline = asked + self.joint_states_wait_s
-        while self._joints is None or self._joints_t < asked - 0.5:
-            if time.monotonic() > deadline or gh.is_cancel_requested or self._goals.stopping.is_set():
-                raise SubtaskStateError(f"no /{self.model_name}/joint_states within {self.joint_states_wait_s:g} s")
-            await self._ticker.next()
+        sub = self.create_subscription(JointState, f"/{self.model_name}/joint_states", self._on_joints, 10,
+                                       callback_group=self._group)
+        try:
+            while self._joints is None or self._joints_t < asked:
+                if time.monotonic() > deadline or gh.is_cancel_requested or self._goals.stopping.is_set():
+                    raise SubtaskStateError(f"no /{self.model_name}/joint_states within {self.joint_states_wait_s:g} s")
+                await self._ticker.next()
+        finally:
+            self.destroy_subscription(sub)
         return spec.resolve(plan, dict(self._joints), self.description)
 
     def _on_planning_outcome(self, msg: Zx200PlanningOutcome) -> None:
