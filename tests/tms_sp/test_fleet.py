@@ -10,19 +10,17 @@ import dataclasses
 import math
 
 import numpy as np
-import pytest
 import yaml
 
+import tms_db
+import tms_ts.loader as tms_ts_loader
 from tests.tms_sp.treeutil import ROOT
+from tms_db.cli import seed
 from tms_model.geometry import Pose2D, yaw_from_quaternion
 from tms_sp import synthetic as syn
 from tms_sp.config import carrier_vessel_geometry, load_sensing_config
 from tms_sp.processor import SiteSensing
-
-tms_ts_loader = pytest.importorskip("tms_ts.loader")
-tms_db = pytest.importorskip("tms_db")
-from tms_db.cli import seed  # noqa: E402
-from tms_ts.bt.core import TreeContext  # noqa: E402
+from tms_ts.bt.core import TreeContext
 
 BB = "GLOBAL_BLACKBOARD_FLEET"
 SEED = yaml.safe_load((ROOT / "config" / "seeds" / "fleet.yaml").read_text())

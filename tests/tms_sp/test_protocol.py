@@ -12,16 +12,15 @@ import math
 import numpy as np
 import pytest
 
+import tms_db
+import tms_ts.loader as tms_ts_loader
 from tests.tms_sp.treeutil import ROOT, load_seed
+from tms_db.cli import seed
 from tms_model.geometry import Pose2D, yaw_from_quaternion
 from tms_sp import synthetic as syn
 from tms_sp.config import load_sensing_config
 from tms_sp.processor import SiteSensing
-
-tms_ts_loader = pytest.importorskip("tms_ts.loader", reason="needs the tms_ts BT runtime (issue 8)")
-tms_db = pytest.importorskip("tms_db", reason="needs tms_db (issue 7)")
-from tms_db.cli import seed  # noqa: E402
-from tms_ts.bt.core import TreeContext  # noqa: E402
+from tms_ts.bt.core import TreeContext
 
 BB = "GLOBAL_BLACKBOARD_EARTHWORK"
 DT = 0.5  # [s] world time per tick
