@@ -13,6 +13,7 @@ truth samples into the figures the tests assert.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import random
@@ -264,17 +265,29 @@ def wait_servers(node, timeout: float) -> list[str]:  # noqa: ANN001
         module, name = spec.split(":")
         return getattr(importlib.import_module(module), name)
 
-    clients = {name: ActionClient(node, action_type(t), name) for name, t in SERVERS.items()}
-    end = time.monotonic() + timeout
-    missing = list(clients)
-    while time.monotonic() < end:
-        missing = [n for n, c in clients.items() if not c.server_is_ready()]
-        if not missing:
-            break
-        time.sleep(0.2)
-    for c in clients.values():
-        c.destroy()
+    # The clients live on a node of their own that no executor holds: the caller's node may be spun by a
+    # Probe's thread, and destroying a client there while that thread builds its wait set invalidates it
+    # (RCLError "action client pointer is invalid"). server_is_ready() reads the graph and needs no spinning.
+    import rclpy
+
+    checker = rclpy.create_node(f"wait_servers_{os.getpid()}_{next(_CHECKERS)}", context=node.context)
+    try:
+        clients = {name: ActionClient(checker, action_type(t), name) for name, t in SERVERS.items()}
+        end = time.monotonic() + timeout
+        missing = list(clients)
+        while time.monotonic() < end:
+            missing = [n for n, c in clients.items() if not c.server_is_ready()]
+            if not missing:
+                break
+            time.sleep(0.2)
+        for c in clients.values():
+            c.destroy()
+    finally:
+        checker.destroy_node()
     return missing
+
+
+_CHECKERS = itertools.count()
 
 
 def speeds(prev: Sample, cur: Sample) -> dict[str, float]:
