@@ -19,6 +19,7 @@ rounding). The ground volume is measured above a reference plane far below the s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -52,17 +53,29 @@ class HeightField:
         self.h = spec.ground_z + h
         self.datum = spec.ground_z - 10.0  # volume reference plane
         self._mound_mask: np.ndarray | None = None
+        # The volumes are sums over the whole grid (90,000 cells on the fleet's site), asked for with every truth
+        # message; the grid changes only in deposit() and cut(), which bump the version (nothing else writes h).
+        self.version = 0
+        self._sums: dict[str, tuple[int, float]] = {}
+
+    def _cached(self, key: str, compute: Callable[[], float]) -> float:
+        hit = self._sums.get(key)
+        if hit is not None and hit[0] == self.version:
+            return hit[1]
+        value = compute()
+        self._sums[key] = (self.version, value)
+        return value
 
     def volume(self) -> float:
         """Ground volume above the datum [m^3]."""
-        return float((self.h - self.datum).sum() * self.cell_area)
+        return self._cached("volume", lambda: float((self.h - self.datum).sum() * self.cell_area))
 
     def ground_soil_volume(self) -> float:
         """Soil above the original ground plane anywhere [m^3]: mound and piles, minus holes dug below it.
 
         ``ground_soil_volume() + bucket + vessel`` is conserved exactly.
         """
-        return float((self.h - self.spec.ground_z).sum() * self.cell_area)
+        return self._cached("ground", lambda: float((self.h - self.spec.ground_z).sum() * self.cell_area))
 
     def mound_volume(self) -> float:
         """Soil above the ground plane within ``mound_base_radius + mound_region_margin`` of the mound
@@ -72,7 +85,8 @@ class HeightField:
             gx, gy = np.meshgrid(self.xs, self.ys)
             radius = spec.mound_base_radius + spec.mound_region_margin
             self._mound_mask = np.hypot(gx - spec.mound_center[0], gy - spec.mound_center[1]) <= radius
-        return float((self.h - spec.ground_z)[self._mound_mask].sum() * self.cell_area)
+        mask = self._mound_mask
+        return self._cached("mound", lambda: float((self.h - spec.ground_z)[mask].sum() * self.cell_area))
 
     def index(self, x: float, y: float) -> tuple[int, int]:
         """(row, col) of the cell holding (x, y), clamped to the grid."""
@@ -93,6 +107,7 @@ class HeightField:
         """Spread ``volume`` evenly over the cells within ``radius`` of (x, y) (at least one cell)."""
         if volume <= 0.0:
             return
+        self.version += 1
         rows, cols = self.window(x, y, radius)
         gx = self.xs[cols][None, :]
         gy = self.ys[rows][:, None]
@@ -144,6 +159,7 @@ class HeightField:
         if available <= 0.0:
             return 0.0
         frac = min(1.0, max_volume / available)
+        self.version += 1
         self.h[rows, cols] = block - excess * frac
         return available * frac
 

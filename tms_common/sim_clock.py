@@ -23,7 +23,7 @@ from tms_common import rclpy_compat
 if TYPE_CHECKING:  # pragma: no cover
     from rclpy.node import Node
 
-__all__ = ["ClockRelay", "relay_clock"]
+__all__ = ["ClockRelay", "on_simulated_time", "relay_clock", "share_time_source"]
 
 _WAIT_NS = 1_000_000_000  # the relay thread re-checks its stop flag at least once a second
 
@@ -115,3 +115,28 @@ def relay_clock(node: Node) -> ClockRelay | None:
     if not own or not rclpy_compat.use_internals("relaying /clock off the executor"):
         return None
     return ClockRelay(node, own[0])
+
+
+def on_simulated_time(node: Node) -> bool:
+    """True when ``node`` holds its own ``/clock`` subscription (rclpy's TimeSource made it: use_sim_time)."""
+    from rclpy.time_source import CLOCK_TOPIC
+
+    return any(s.topic_name == CLOCK_TOPIC for s in node.subscriptions)
+
+
+def share_time_source(leader: Node, follower: Node) -> bool:
+    """Drop ``follower``'s own ``/clock`` subscription and let ``leader``'s TimeSource set its clock.
+
+    For nodes spun by one EventsExecutor, where :class:`ClockRelay` cannot park a subscription: every node on
+    simulated time otherwise holds a ``/clock`` subscription of its own, and every one of them is a DDS reader
+    the clock's publisher serves and a callback this process runs, 50 times per simulated second each. Both
+    must be on simulated time; False (nothing changed) when either is not. The follower's TimeSource keeps its
+    parameter callback (``use_sim_time`` set false still switches its clock to system time).
+    """
+    if leader is follower or not (on_simulated_time(leader) and on_simulated_time(follower)):
+        return False
+    if not rclpy_compat.use_internals("one /clock subscription per container"):
+        return False
+    follower._time_source.detach_node()  # noqa: SLF001 - rclpy gives no accessor; destroys its subscription
+    leader._time_source.attach_clock(follower.get_clock())  # noqa: SLF001
+    return True

@@ -15,8 +15,9 @@ does for one node, for all of them:
 * on ``single`` only (EventsExecutor ignores callback groups, so nothing can be kept off it): the
   QoS-incompatibility events of every node are polled off the executor
   (:func:`tms_common.qos_events.defer_qos_incompatibility_events`), and one ``/clock`` relay thread sets the
-  clock of every node on simulated time (:class:`tms_common.sim_clock.ClockRelay`); on ``events`` each node
-  keeps its own, as under :func:`tms_common.node.run_node`;
+  clock of every node on simulated time (:class:`tms_common.sim_clock.ClockRelay`); on ``events`` the first
+  node on simulated time keeps its ``/clock`` subscription and its TimeSource sets the clocks of the others,
+  whose own subscriptions are dropped (:func:`tms_common.sim_clock.share_time_source`);
 * SIGINT/SIGTERM stop the nodes one at a time, last in the file first, with the context still valid: a
   node's ``on_stop_requested`` hook runs (the spin goes on while it returns True), a short settle spin
   handles what its last callbacks left queued, then it leaves the executor and ``destroy_node`` runs while
@@ -150,7 +151,7 @@ def run_container(name: str, members: list[_Member]) -> int:
     from tms_common.errors import TmsError
     from tms_common.node import make_executor, uses_wait_set
     from tms_common.qos_events import defer_qos_incompatibility_events
-    from tms_common.sim_clock import relay_clock
+    from tms_common.sim_clock import on_simulated_time, relay_clock, share_time_source
 
     logging.basicConfig(level=logging.WARNING, format=f"[{name}] %(levelname)s %(name)s: %(message)s")
     use_platform_profiles()
@@ -158,6 +159,7 @@ def run_container(name: str, members: list[_Member]) -> int:
     guard: list[Any] = []
     relay = None
     relay_owner: _Member | None = None
+    clock_leader: Any = None  # events: the first node on simulated time, whose /clock sets every node's clock
     built: list[_Member] = []
     current: _Member | None = None
     executor = None
@@ -174,6 +176,10 @@ def run_container(name: str, members: list[_Member]) -> int:
                 member.node = cls(cli_args=member.ros_args)
                 built.append(member)
                 if not wait_set:
+                    if clock_leader is None:
+                        clock_leader = member.node if on_simulated_time(member.node) else None
+                    else:
+                        share_time_source(clock_leader, member.node)
                     continue
                 defer_qos_incompatibility_events(member.node)
                 if relay is None:

@@ -69,3 +69,61 @@ def test_relayed_clock_fires_timers_at_simulated_times_without_waking_per_clock_
         relay.close()
         relay.close()  # idempotent
         node.destroy_node()
+
+
+def test_shared_time_source_drives_every_node_of_an_events_container_from_one_clock_subscription(ros_node):
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.task import Future
+    from rosgraph_msgs.msg import Clock
+
+    from tms_common.node import make_executor
+    from tms_common.sim_clock import on_simulated_time, share_time_source
+
+    sim = [Parameter("use_sim_time", value=True)]
+    leader = rclpy.create_node("clock_leader", context=ros_node.context, parameter_overrides=sim)
+    follower = rclpy.create_node("clock_follower", context=ros_node.context, parameter_overrides=sim)
+    walltime = rclpy.create_node("wall_node", context=ros_node.context)
+    try:
+        assert not share_time_source(leader, walltime), "a node on wall time must keep system time"
+        assert not share_time_source(leader, leader)
+        assert share_time_source(leader, follower)
+        assert on_simulated_time(leader) and not on_simulated_time(follower), "the follower kept its /clock reader"
+        fired: list[float] = []
+        follower.create_timer(0.1, lambda: fired.append(follower.get_clock().now().nanoseconds * 1e-9))
+        pub = ros_node.create_publisher(Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        deadline = time.monotonic() + 10
+        while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert pub.get_subscription_count() == 1, "one /clock subscription for the two simulated-time nodes"
+
+        executor = make_executor("events", context=ros_node.context)
+        for n in (leader, follower, walltime):
+            executor.add_node(n)
+        done = Future()
+        spinner = threading.Thread(target=lambda: executor.spin_until_future_complete(done, timeout_sec=20),
+                                   daemon=True)
+        spinner.start()
+        for k in range(1, 101):  # 10 ms of simulated time every 5 ms: 1 s simulated
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = divmod(k * 10_000_000, 1_000_000_000)
+            for _ in range(3 if k == 100 else 1):
+                pub.publish(msg)
+                time.sleep(0.005)
+        end = time.monotonic() + 5
+        while follower.get_clock().now().nanoseconds < 1_000_000_000 and time.monotonic() < end:
+            time.sleep(0.02)
+        assert abs(follower.get_clock().now().nanoseconds * 1e-9 - 1.0) < 1e-6
+        assert abs(leader.get_clock().now().nanoseconds * 1e-9 - 1.0) < 1e-6
+        assert walltime.get_clock().now().nanoseconds > 1e18, "the wall-time node left system time"
+        time.sleep(0.2)
+        assert 9 <= len(fired) <= 11, fired
+        late = [(k, t) for k, t in enumerate(fired, 1) if not k * 0.1 - 1e-6 <= t <= k * 0.1 + 0.05]
+        assert not late, f"timer calls off their simulated due times (k, t): {late}"
+        done.set_result(None)
+        spinner.join(timeout=5)
+        executor.shutdown()
+    finally:
+        for n in (follower, walltime, leader):
+            n.destroy_node()
