@@ -139,17 +139,30 @@ def _level_cuts(
     ci = np.clip(((px - spec.x_min) / res).astype(int), 0, spec.nx - 1)
     ri = np.clip(((py - spec.y_min) / res).astype(int), 0, spec.ny - 1)
     swept = z[ri, ci]  # fancy indexing: a copy
-    inside = along[None, :, None] <= length[:, None, None]
+    # samples beyond a cell's drag length take no part: as low as can be, they never stand above a level
+    swept[~np.broadcast_to(along[None, :, None] <= length[:, None, None], swept.shape)] = -np.inf
     surface = z[rows, cols]
     depths = np.linspace(params.penetration_depth, params.max_penetration_depth, params.depth_steps)
-    cuts = np.empty((len(depths), len(rows)))
+    # Shallowest depth first; a cell leaves the search at the first depth that fills the bucket, so each
+    # deeper step works on the cells still short (the sensing node runs this on every mound scan).
+    pick = np.full(len(rows), len(depths) - 1)
+    cut = np.zeros(len(rows))
+    left = np.arange(len(rows))
+    area = res * res
     for k, d in enumerate(depths):
-        level = np.maximum(surface - d, params.ground_z)
-        cuts[k] = (np.clip(swept - level[:, None, None], 0.0, None) * inside).sum(axis=(1, 2)) * res * res
-    enough = cuts >= params.bucket_volume
-    pick = np.where(enough.any(axis=0), np.argmax(enough, axis=0), len(depths) - 1)
-    idx = np.arange(len(rows))
-    return depths[pick], cuts[pick, idx]
+        level = np.maximum(surface[left] - d, params.ground_z)
+        above = swept[left] if k else swept.copy()
+        np.subtract(above, level[:, None, None], out=above)
+        np.maximum(above, 0.0, out=above)
+        cuts = above.sum(axis=(1, 2)) * area
+        full = cuts >= params.bucket_volume
+        done = full if k < len(depths) - 1 else np.ones_like(full)
+        pick[left[done]] = k
+        cut[left[done]] = cuts[done]
+        left = left[~done]
+        if not left.size:
+            break
+    return depths[pick], cut
 
 
 def assess_mound(
