@@ -151,7 +151,7 @@ def _level_cuts(
     area = res * res
     for k, d in enumerate(depths):
         level = np.maximum(surface[left] - d, params.ground_z)
-        above = swept[left] if k else swept.copy()
+        above = swept[left]  # fancy indexing: a copy, worked on in place
         np.subtract(above, level[:, None, None], out=above)
         np.maximum(above, 0.0, out=above)
         cuts = above.sum(axis=(1, 2)) * area
