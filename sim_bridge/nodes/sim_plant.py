@@ -17,7 +17,8 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
 * ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/<carrier>/vessel_points``
   (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name (the paper's IC120: ``/sim/sensors/ic120/
   vessel_points``): LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
-  simulated time (0.5 s), noise ``scan_noise_m`` (0.02 m),
+  simulated time (0.5 s; the mound's every ``mound_scan_period_s``, default the same), noise ``scan_noise_m``
+  (0.02 m),
 * ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
   ignored_out_of_range, ignored_bad_dlc, ignored_unknown_id, watchdog_trips) and the real-time factor.
 """
@@ -35,6 +36,7 @@ from typing import Any  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
 from sim_bridge.config import load_plant  # noqa: E402
+from sim_bridge.errors import SimConfigError  # noqa: E402
 from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
 from tms_common.node import run_node  # noqa: E402
@@ -101,8 +103,14 @@ class SimPlantNode(Node):
 
         self._PointCloud2, self._PointField = PointCloud2, PointField
         self._scan_period = float(p("scan_period_s", 0.5).value)
+        # The mound changes only where the bucket cuts, and its cloud (~40k points) and assessment are the costly
+        # scan: a site with several carriers scans it less often than their vessels (config/launch/fleet.yaml).
+        self._mound_scan_period = float(p("mound_scan_period_s", 0.0).value) or self._scan_period
+        if self._scan_period < 0 or self._mound_scan_period < 0:
+            raise SimConfigError(f"sim_plant: scan_period_s / mound_scan_period_s must be >= 0, got "
+                              f"{self._scan_period} / {self._mound_scan_period}")
         self._scan_noise = float(p("scan_noise_m", 0.02).value)
-        self._next_scan = 0.0
+        self._next_scan = self._next_mound_scan = 0.0
         self.mound_pub = self.create_publisher(PointCloud2, "/sim/sensors/mound/points", 2)
         self.vessel_pub = {m: self.create_publisher(PointCloud2, f"/sim/sensors/{m}/vessel_points", 2)
                            for m in self.plant.carriers}
@@ -144,9 +152,12 @@ class SimPlantNode(Node):
         if plant.time + 1e-9 >= self._next_truth:
             self._next_truth += self._truth_period
             self._publish_truth(plant, stamp)
+        if self._mound_scan_period > 0 and plant.time + 1e-9 >= self._next_mound_scan:
+            self._next_mound_scan += self._mound_scan_period
+            self._publish_mound_scan(plant, stamp)
         if self._scan_period > 0 and plant.time + 1e-9 >= self._next_scan:
             self._next_scan += self._scan_period
-            self._publish_scans(plant, stamp)
+            self._publish_vessel_scans(plant, stamp)
         if plant.time + 1e-9 >= self._next_status:
             self._next_status += self._status_period
             self._publish_status(plant, stamp)
@@ -196,21 +207,28 @@ class SimPlantNode(Node):
         msg.data = data
         return msg
 
-    def _publish_scans(self, plant: Plant, stamp) -> None:  # noqa: ANN001
-        import numpy as np
-
-        from sim_bridge.scanners import mound_scan, vessel_scan
-
+    def _rng(self, plant: Plant):  # noqa: ANN202
         if not hasattr(self, "_scan_rng"):
+            import numpy as np
+
             self._scan_rng = np.random.default_rng(plant.spec.sensors.seed + 1)
+        return self._scan_rng
+
+    def _publish_mound_scan(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+        from sim_bridge.scanners import mound_scan
+
         soil = plant.spec.soil
         pts = mound_scan(plant.ground, soil.mound_center, soil.mound_base_radius + 1.5, noise=self._scan_noise,
-                         rng=self._scan_rng)
+                         rng=self._rng(plant))
         self.mound_pub.publish(self._cloud(pts, "map", stamp))
+
+    def _publish_vessel_scans(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+        from sim_bridge.scanners import vessel_scan
+
         for m, pub in self.vessel_pub.items():
             spec = plant.carriers[m].spec
             pts = vessel_scan(plant.soil.vessels[m], spec.inner_length, spec.inner_width, noise=self._scan_noise,
-                              rng=self._scan_rng)
+                              rng=self._rng(plant))
             pub.publish(self._cloud(pts, f"{m}/vessel", stamp))
 
     def _publish_status(self, plant: Plant, stamp) -> None:  # noqa: ANN001

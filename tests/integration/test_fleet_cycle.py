@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import subprocess
 from pathlib import Path
 
@@ -23,7 +22,6 @@ from tests.rosproc import VENV
 
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "config" / "launch" / "fleet.yaml"
-SENSING = ROOT / "config" / "tms_sp" / "sensing.yaml"
 TARGET_FILL = 0.1  # one pass loads a carrier
 #: two footprint half-diagonals (IC120 3.46 m, MST110CR 3.62 m): below this two carriers could touch
 MIN_DISTANCE_M = 7.1
@@ -33,18 +31,13 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(WALL_LIMIT_S + 180)]
 
 
 def _launch(tmp: Path) -> Path:
-    text = SENSING.read_text()
-    text, n = re.subn(r"(?m)^(\s*target_fill:\s*)[0-9.]+", rf"\g<1>{TARGET_FILL}", text)
-    assert n == 1
-    sensing = tmp / "sensing_small_fill.yaml"
-    sensing.write_text(text)
     launch = yaml.safe_load(LAUNCH.read_text())
     for node in launch["nodes"]:
         params = node.setdefault("parameters", {})
         if node["executable"] == "sim_plant":
             params["config"] = str(ROOT / params["config"])
         elif node["executable"] == "tms_sp_sensing":
-            params["config"] = str(sensing)
+            params["target_fill"] = TARGET_FILL
         elif node["executable"] == "tms_ur_experiment":
             params.update(loads=3, runs_dir=str(tmp / "runs"), timeout_s=3000.0)
             node["stop_grace_s"] = 180

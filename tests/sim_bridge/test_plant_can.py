@@ -287,3 +287,25 @@ def test_truth_stamps_and_clock_never_go_back_so_arrival_holds_at_p1(start_plant
     rises = [t for (_, a), (t, b) in zip(flags, flags[1:], strict=False) if b and not a]
     falls = [t for (_, a), (t, b) in zip(flags, flags[1:], strict=False) if a and not b]
     assert len(rises) == 1 and not falls, f"SENSING_ARRIVAL_FLG rose at {rises}, fell at {falls}"
+
+
+def test_mound_scanned_at_its_own_period_vessels_at_theirs(start_plant, ros_node):
+    """``mound_scan_period_s`` 2.0 beside ``scan_period_s`` 0.5: over 8 s of simulated time the vessel cloud
+    comes every 0.5 s and the mound cloud every 2 s (the fleet scans its mound less often: fleet.yaml)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import PointCloud2
+
+    qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    stamps: dict[str, list[float]] = {"mound": [], "vessel": []}
+    for key, topic in (("mound", "/sim/sensors/mound/points"), ("vessel", "/sim/sensors/ic120/vessel_points")):
+        ros_node.create_subscription(
+            PointCloud2, topic,
+            lambda m, key=key: stamps[key].append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), qos)
+    start_plant(speed=2.0, scan_period_s=0.5, mound_scan_period_s=2.0)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (stamps["vessel"] and stamps["vessel"][-1] >= 8.0):
+        ros_node.executor_for_test.spin_once(timeout_sec=0.05)
+    assert stamps["vessel"] and stamps["vessel"][-1] >= 8.0, stamps
+    gaps = {key: sorted({round(b - a, 6) for a, b in zip(s, s[1:], strict=False)}) for key, s in stamps.items()}
+    assert gaps["vessel"] == [0.5], gaps
+    assert gaps["mound"] == [2.0] and len(stamps["mound"]) >= 4, gaps

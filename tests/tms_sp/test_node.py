@@ -122,3 +122,14 @@ def test_sensing_node_refuses_an_unseeded_db(procs, tmp_path):
     assert node.popen.wait(timeout=60) == 2  # a deliberate error (tms_common.node.run_node): one line, exit 2
     assert node.wait_for("seed it first", 10.0), node.output
     assert "GLOBAL_BLACKBOARD_EARTHWORK" in node.output and "Traceback" not in node.output, node.output
+
+
+@pytest.mark.integration
+def test_sensing_node_refuses_a_target_fill_out_of_range(procs, tmp_path):
+    db = tmp_path / "db"
+    _seeded_db(db).close()
+    node = procs([executable("tms_sp", "tms_sp_sensing"), "--ros-args", "-p", f"db_path:={db}",
+                  "-p", "target_fill:=2.0"])
+    assert node.popen.wait(timeout=60) == 2, node.output
+    assert node.wait_for("parameter target_fill", 10.0), node.output
+    assert "(0, 1.5]" in node.output and "Traceback" not in node.output, node.output

@@ -17,7 +17,9 @@ mound_in_reach_m3, vessel_volume_m3, vessel_fill, the three flags, target_x/y/z/
 Parameters: ``db_uri``, ``db_path`` (contract [C]), ``config`` (sensing YAML, default
 config/tms_sp/sensing.yaml), ``site``/``ic120``/``zx200`` (YAML paths, default config/...),
 ``rate_hz`` (2.0), ``mound_topic``, ``vessel_topic``, ``ic120_pose_topic``, ``zx200_pose_topic``,
-``blackboard_record`` ("" = the sensing YAML's).
+``blackboard_record`` ("" = the sensing YAML's), ``target_fill`` (0.0 = the sensing YAML's ``vessel.target_fill``:
+the fill fraction at which a vessel counts as loaded; the fleet loads part of each vessel so that its three rounds
+fit the one mound).
 
 Several carriers (the fleet experiment): ``carriers`` (default ``[ic120]``) names the carriers on the site; with
 more than one, each one's pose and vessel come from ``/sim/truth/<name>/pose`` and
@@ -30,6 +32,7 @@ naming the record.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from typing import Any
 
@@ -75,9 +78,13 @@ class SensingNode(Node):
         topics = {k: declare_startup(self, k, v).value for k, v in topics.items()}
         record = str(declare_startup(self, "blackboard_record", "").value)
         if record:
-            import dataclasses
-
             cfg = dataclasses.replace(cfg, blackboard_record=record)
+        fill = float(declare_startup(self, "target_fill", 0.0).value)
+        if fill:
+            try:
+                cfg = dataclasses.replace(cfg, vessel=dataclasses.replace(cfg.vessel, target_fill=fill))
+            except ValueError as exc:
+                raise ConfigError(f"tms_sp_sensing: parameter target_fill: {exc}") from None
         self.carriers = [str(c) for c in declare_startup(self, "carriers", ["ic120"]).value]
         self.holder_field = str(declare_startup(self, "holder_field", "LOADAREA_MACHINE").value)
         if not self.carriers:
