@@ -210,20 +210,33 @@ class ExperimentRecorder:
 
     # -- inputs -------------------------------------------------------------------------------
     def on_soil(self, t: float, mound: float, bucket: float, vessel: float, dumped: float) -> None:
+        """``/sim/truth/soil``: ``vessel`` is the paper's one vessel (with carriers by name, passes come from their
+        own totals: :meth:`on_carrier_soil`)."""
         self._clock(t)
         if self.initial_mound is None:
             self.initial_mound = mound
-            self._passes = _Episodes(self.pass_threshold, self.episode_gap_s)
+        if self._dumps is None:
             self._dumps = _Episodes(self.pass_threshold, self.episode_gap_s)
         self.soil.append(Sample(t, {"mound": mound, "bucket": bucket, "vessel": vessel, "dumped": dumped}))
-        if self._passes.update(t, vessel):
-            if self.pass_events and (not self.dump_events or self.pass_events[-1] > self.dump_events[-1]):
-                self.pass_times.append(t - self.pass_events[-1])
-            self.pass_events.append(t)
+        if not self.carriers:
+            self._on_load(t, vessel)
         if self._dumps.update(t, dumped):
             if self.dump_events:
                 self.cycle_times.append(t - self.dump_events[-1])
             self.dump_events.append(t)
+
+    def _on_load(self, t: float, load: float) -> None:
+        """A sample of the soil landed so far; an episode of rise is a load pass."""
+        if self._passes is None:
+            self._passes = _Episodes(self.pass_threshold, self.episode_gap_s)
+        if self._passes.update(t, load):
+            if self.pass_events and (not self.dump_events or self.pass_events[-1] > self.dump_events[-1]):
+                self.pass_times.append(t - self.pass_events[-1])
+            self.pass_events.append(t)
+
+    def _is_located(self, machine: str) -> bool:
+        """A machine whose localisation estimate is compared with its truth: the paper's IC120, the carriers."""
+        return machine == "ic120" or machine in self.carriers
 
     def _error_series(self, key: str) -> AlignedError:
         if key not in self._aligned:
@@ -233,8 +246,8 @@ class ExperimentRecorder:
     def on_truth_pose(self, t: float, machine: str, x: float, y: float, yaw: float) -> None:  # noqa: ARG002 - yaw: API
         """Truth pose stamped ``t`` (the plant's simulated time)."""
         self._clock(t)
-        if machine == "ic120":
-            self._error_series("ic120").truth(t, x, y)
+        if self._is_located(machine):
+            self._error_series(machine).truth(t, x, y)
         path = self.paths.setdefault(machine, [])
         if not path or math.hypot(path[-1][1] - x, path[-1][2] - y) > 0.1:
             path.append((t, x, y))
@@ -254,11 +267,13 @@ class ExperimentRecorder:
         series = self.carrier_soil.setdefault(machine, [])
         if not series or series[-1][1:] != (vessel, loaded, dumped):
             series.append((t, vessel, loaded, dumped))
+        # every carrier's landed total together: one ZX200 loads one carrier at a time
+        self._on_load(t, sum(s[-1][2] for s in self.carrier_soil.values()))
 
     def on_estimated_pose(self, t: float, machine: str, x: float, y: float) -> None:
         """Localisation estimate stamped ``t``; compared with the truth at ``t`` (:class:`AlignedError`)."""
-        if machine == "ic120":
-            self._error_series("ic120").estimate(t, x, y)
+        if self._is_located(machine):
+            self._error_series(machine).estimate(t, x, y)
 
     def on_truth_tip(self, t: float, x: float, y: float) -> None:
         """The bucket tip's true position (map frame, horizontal) stamped ``t``."""
@@ -320,7 +335,7 @@ class ExperimentRecorder:
             "wall_time_s": round(wall, 2),
             "real_time_factor": round(sim / wall, 2) if wall > 0 else None,
             "localisation_error_m": {"rms": _rms(self.loc_errors), **(_stats(self.loc_errors) or {}),
-                                     "unmatched": self._unmatched("ic120")},
+                                     "unmatched": sum(self._unmatched(k) for k in self._aligned if k != "tip")},
             "end_effector_error_m": {"rms": _rms(self.tip_errors), **(_stats(self.tip_errors) or {}),
                                      "unmatched": self._unmatched("tip")},
             "flags_timeline": {k: [[round(t, 2), v] for t, v in series] for k, series in self.flags.items()},

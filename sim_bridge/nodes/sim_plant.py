@@ -39,7 +39,7 @@ from sim_bridge.config import load_plant  # noqa: E402
 from sim_bridge.errors import SimConfigError  # noqa: E402
 from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
-from tms_common.node import run_node  # noqa: E402
+from tms_common.node import realtime_thread, run_node  # noqa: E402
 from tms_common.params import startup_parameters
 
 SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
@@ -125,11 +125,7 @@ class SimPlantNode(Node):
         self.get_logger().info(f"sim_plant: running at speed {speed} ({'free-running' if speed == 0 else 'paced'}), {mode}")
 
     def _loop(self) -> None:
-        if self._rt_priority > 0:  # SCHED_FIFO for the loop thread only (needs CAP_SYS_NICE / root)
-            try:
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self._rt_priority))
-            except OSError as exc:
-                self.get_logger().warning(f"realtime_priority {self._rt_priority} refused ({exc}); normal scheduling")
+        realtime_thread(self._rt_priority, "sim_plant loop", self.get_logger())  # the loop thread only
         try:
             self.runner.run()
         except Exception as exc:  # noqa: BLE001 - report, then let the process die visibly

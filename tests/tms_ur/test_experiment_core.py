@@ -174,3 +174,35 @@ def test_site_map_labels_do_not_overlap_and_the_plot_fills_the_figure(tmp_path):
             assert not a.overlaps(boxes[j]), (texts[i], texts[j])
     assert info["axes_fraction"] > 0.6, info["axes_fraction"]
     assert info["reach"] == pytest.approx(kin.envelope()["max_reach"])
+
+
+def test_fleet_passes_count_every_carrier_and_localisation_is_per_carrier():
+    """Carriers by name: passes are rises of the carriers' landed totals (not the one vessel of /sim/truth/soil),
+    each carrier's estimate is compared with its own truth."""
+    carriers = ["ic120_1", "ic120_2", "mst110cr_2"]
+    rec = ExperimentRecorder(carriers=carriers)
+    rec.wall_start, rec.wall_end = 0.0, 100.0
+    t, dumped = 0.0, 0.0
+    loaded = dict.fromkeys(carriers, 0.0)
+    rec.on_soil(t, 20.0, 0.0, 0.0, dumped)
+    for c in carriers:
+        rec.on_carrier_soil(t, c, 0.0, 0.0, 0.0)
+    for i, c in enumerate(carriers):
+        for _ in range(3):  # three passes of 0.5 m^3 into this carrier, 20 s apart
+            t += 20.0
+            loaded[c] += 0.5
+            rec.on_carrier_soil(t, c, loaded[c], loaded[c], 0.0)
+            rec.on_soil(t, 20.0 - sum(loaded.values()), 0.0, 0.0, dumped)  # the plant's one vessel: ic120_1 only
+        t += 60.0
+        dumped += loaded[c]
+        rec.on_carrier_soil(t, c, 0.0, loaded[c], loaded[c])
+        rec.on_soil(t, 20.0 - sum(loaded.values()), 0.0, 0.0, dumped)
+        rec.on_truth_pose(t, c, 38.0, 10.0 + i, 0.0)
+        rec.on_estimated_pose(t, c, 38.0, 10.0 + i + 0.1 * (i + 1))  # 0.1, 0.2, 0.3 m off
+    m = rec.metrics()
+    assert m["load_passes"] == 9, m["pass_events_s"]
+    assert m["load_pass_time_s"]["n"] == 6 and m["load_pass_time_s"]["median"] == pytest.approx(20.0)
+    assert m["localisation_error_m"]["n"] == 3
+    assert m["localisation_error_m"]["max"] == pytest.approx(0.3, abs=1e-6)
+    assert m["localisation_error_m"]["unmatched"] == 0
+    assert {c: f["soil_moved_m3"] for c, f in m["carriers"].items()} == dict.fromkeys(carriers, 1.5)

@@ -28,7 +28,8 @@ second manager) are not covered; the loading-point flag has none. trees/README.m
 
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
 ``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
-``db_path`` ("" = tms_db default); all read-only (read at start-up). ``task_id`` (-1), the original's:
+``db_path`` ("" = tms_db default), ``realtime_priority`` (0 = off; 1-99: SCHED_FIFO for the thread that spins
+the manager, needs CAP_SYS_NICE, :func:`tms_common.node.realtime_thread`); all read-only (read at start-up). ``task_id`` (-1), the original's:
 which entry of a ``/task_sequence`` JSON to run (-1: every entry), and the id an XML runs under (-1: the
 stored task with that tree, else an ad-hoc negative id); read on every message, as the original does
 (:mod:`tms_ts.task_sequence`).
@@ -51,7 +52,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Int32, String
 
 from tms_common.errors import TmsError
-from tms_common.node import run_node
+from tms_common.node import realtime_thread, run_node
 from tms_msg.msg import TaskIds, TaskState, TaskStatus
 from tms_ts.bt.core import TreeContext
 from tms_ts.errors import TsError
@@ -106,6 +107,9 @@ class TaskManager(Node):
         self.create_timer(self.period, self._tick)
         self.create_timer(1.0 / status_rate, self._publish_status)
         self.create_timer(1.0, self._publish_stats)
+        # SCHED_FIFO for the thread that builds the node: the one that spins it, under run_node and in a container
+        # (whose other nodes then share the priority)
+        realtime_thread(int(p("realtime_priority", 0).value), "tms_ts_manager", self.get_logger())
         self.get_logger().info(f"tms_ts_manager ready: {self.tick_rate:g} Hz, db {db_uri or db_path or 'default'}")
 
     # commands ----------------------------------------------------------------------------------

@@ -15,14 +15,15 @@ It is the job node of ``config/launch/paper_experiment.yaml`` (``on_exit: shutdo
 
 Several carriers (the fleet experiment, ``config/launch/fleet.yaml``): ``carriers`` names them; each one's soil
 comes from ``/sim/truth/<name>/soil`` and its pose from ``/sim/truth/<name>/pose``; the report gives per
-carrier the soil it moved, the smallest distance between two carriers near the loading point
+carrier the soil it moved (load passes: rises of the carriers' landed totals; localisation error: each carrier's
+``/<name>/odometry/global`` against its truth), the smallest distance between two carriers near the loading point
 (``loading_point``, a site point, and ``near_radius_m``) and each task's machine and end state. ``loads`` > 0
 ends the work after that many vessel loads (the ZX200 tree counts them in the record's ``LOAD_COUNT``) instead of
 ``cycles`` dumps: a carrier queues again as soon as it has dumped, so counting dumps would let one more in.
 
 Inputs: ``/clock`` (as the node clock: ``use_sim_time`` must be true), ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
 ``/sim/truth/zx200/bucket_tip``, ``/zx200/joint_states`` (measured, for the end-effector error),
-``/ic120/odometry/global`` (EKF estimate, for the localisation error), and the flags of
+``/ic120/odometry/global`` (the estimate, for the localisation error), and the flags of
 ``blackboard_record`` from tms_db.
 """
 
@@ -121,7 +122,8 @@ class ExperimentNode(Node):
                                      lambda msg, m=m: self._on_carrier_soil(m, msg), 10)
         self.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", self._on_tip, 10)
         self.create_subscription(JointState, "/zx200/joint_states", self._on_joints, 10)
-        self.create_subscription(Odometry, "/ic120/odometry/global", self._on_estimate, 10)
+        for m in self.carriers or ["ic120"]:  # each carrier's localisation estimate, against its truth pose
+            self.create_subscription(Odometry, f"/{m}/odometry/global", lambda msg, m=m: self._on_estimate(m, msg), 10)
         self.create_timer(flags_period, self._sample_flags)
         self.create_timer(0.2, self._tick)
 
@@ -165,9 +167,9 @@ class ExperimentNode(Node):
         if machine == "zx200":
             self._zx200_base = (p.x, p.y, yaw)
 
-    def _on_estimate(self, msg: Odometry) -> None:
+    def _on_estimate(self, machine: str, msg: Odometry) -> None:
         p = msg.pose.pose.position
-        self.rec.on_estimated_pose(self._stamp(msg.header), "ic120", p.x, p.y)
+        self.rec.on_estimated_pose(self._stamp(msg.header), machine, p.x, p.y)
 
     def _on_joints(self, msg: JointState) -> None:
         """End-effector estimate: FK of the joint angles measured over CAN, at their stamp.
