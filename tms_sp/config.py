@@ -121,6 +121,7 @@ def load_sensing_config(
             ground_z=mound.ground_z,
             target_hysteresis=ex("target_hysteresis"),
             depleted_hysteresis=ex("depleted_hysteresis"),
+            min_cut=ex("min_cut"),
         )
     except ValueError as exc:
         raise sw.error(e, str(exc)) from None

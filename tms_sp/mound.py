@@ -10,7 +10,11 @@ Target choice (one call per sensing update):
    the soil above that level in the swept strip. ``depth`` is the shallowest of
    ``penetration_depth .. max_penetration_depth`` whose cut fills ``bucket_volume`` (else the deepest):
    on a slope a level drag leaves the soil after a short way, so it must start deeper than on the top.
-3. Score = min(cut, bucket_volume) - ``distance_penalty`` x distance from the swing axis: the bucket goes
+3. Cells whose cut is below ``min_cut`` are no targets: with the soil left only beyond a dug-out near side, the
+   distance penalty made a cell at the foot (its drag cut short by ``reach_min``) win with almost nothing to
+   cut, and the excavator went there pass after pass (27 near-empty passes in a fleet demo). No cell cutting
+   ``min_cut`` -> no target, the mound counts as depleted.
+4. Score = min(cut, bucket_volume) - ``distance_penalty`` x distance from the swing axis: the bucket goes
    where one pass fills it, and at equal fill to the nearer soil. The target is the best cell's (x, y)
    at ``z = surface - depth`` (not below ground); ``expected_volume`` is its cut. ``theta_w``
    (bucket-edge angle to the x-y plane, positive = tip down) = local surface slope rising away from the
@@ -55,6 +59,7 @@ class ExcavationParams:
     ground_z: float = 0.0
     target_hysteresis: float = 0.0
     depleted_hysteresis: float = 0.0
+    min_cut: float = 0.0
 
     def __post_init__(self) -> None:
         problems = []
@@ -68,7 +73,7 @@ class ExcavationParams:
         if not self.bucket_volume > 0 or self.depth_steps < 1:
             problems.append(f"bucket_volume must be > 0 and depth_steps >= 1, got {self.bucket_volume}, {self.depth_steps}")
         for name in ("penetration_depth", "min_height", "min_volume", "distance_penalty", "target_hysteresis",
-                     "depleted_hysteresis"):
+                     "depleted_hysteresis", "min_cut"):
             if getattr(self, name) < 0:
                 problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
         if not self.theta_w_min <= self.theta_w_max:
@@ -197,9 +202,13 @@ def assess_mound(
 
     target = None
     candidates = in_reach & (h_dig > 0)
+    rows = cols = np.empty(0, dtype=np.intp)
     if has_soil and candidates.any():
         rows, cols = np.nonzero(candidates)
         depth, cut = _level_cuts(grid.z, spec, rows, cols, r[rows, cols], swing_axis_xy, params)
+        worth = cut >= params.min_cut  # step 3 of the module docstring
+        rows, cols, depth, cut = rows[worth], cols[worth], depth[worth], cut[worth]
+    if rows.size:
         score = np.minimum(cut, params.bucket_volume) - params.distance_penalty * r[rows, cols]
         best = int(np.argmax(score))
         if previous_xy is not None:

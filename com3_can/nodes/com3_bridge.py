@@ -4,9 +4,9 @@ Run in the machine namespace, e.g. ``com3_bridge --ros-args -r __ns:=/zx200 -p m
 Parameters: ``machine`` (a config/machines/<machine>.yaml: zx200, zx120, ic120, mst110cr, mst2200vd, d37pxi), ``can_config`` (YAML, default config/can/<machine>.yaml),
 ``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep; the link is chosen by
 :func:`com3_can.bus.link_config`, in-process when the plant shares this process), ``watchdog_s``,
-``joint_states_period_s`` and ``odom_period_s`` (publish ``joint_states`` / ``odom_pose`` at most once per
-this period of the node clock; 0 = on every state frame, 100 Hz; the odometry is integrated on every frame
-either way, so a longer period drops samples, not accuracy).
+``joint_states_period_s``, ``odom_period_s`` and ``imu_period_s`` (publish ``joint_states`` / ``odom_pose`` /
+``imu`` at most once per this period of the node clock; 0 = on every state frame: 100 Hz, ``imu`` 50 Hz; the
+odometry is integrated on every frame either way, so a longer period drops samples, not accuracy).
 
 Three threads touch the core (it locks): the executor (command callbacks send their frame at once),
 a sender thread (cyclic frames at DBC cycle times, watchdog), and a receiver thread (state frames ->
@@ -98,6 +98,9 @@ class Com3Bridge(Node):
         self._odom_period = float(declare_startup(self, "odom_period_s", 0.0).value)
         if self._odom_period < 0:
             raise ConfigError(f"com3_bridge: odom_period_s must be >= 0, got {self._odom_period}")
+        self._imu_period = float(declare_startup(self, "imu_period_s", 0.0).value)
+        if self._imu_period < 0:
+            raise ConfigError(f"com3_bridge: imu_period_s must be >= 0, got {self._imu_period}")
         self._last_published: dict[Any, float] = {}
         cfg = load_bus_config(machine, can_config or None)
         self.config = BridgeConfig.load(machine, cfg, watchdog_s=watchdog, site_timeout_s=site_timeout)
@@ -217,6 +220,8 @@ class Com3Bridge(Node):
             od.twist.twist.linear.x, od.twist.twist.angular.z = out.v, out.yaw_rate
             self.pub_odom.publish(od)
         elif isinstance(out, ImuOut):
+            if self._too_soon("imu", self._imu_period, stamp):
+                return
             imu = Imu()
             imu.header.stamp = stamp
             imu.header.frame_id = "base_link"

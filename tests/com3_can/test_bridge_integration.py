@@ -14,6 +14,7 @@ condition waits (spin until the frame/message is there, up to a generous deadlin
 
 from __future__ import annotations
 
+import math
 import os
 import statistics
 import time
@@ -365,6 +366,33 @@ def test_odom_period_publishes_fewer_odom_pose_messages_without_losing_odometry(
     # at most one per 0.1 s (+1 for phase), far fewer than the frames
     assert 5 <= published <= elapsed / 0.1 + 2, (published, frames, elapsed)
     assert odoms[-1].pose.pose.position.x - x0 == pytest.approx(0.5 * 2.0, abs=0.35)
+
+
+def test_imu_period_thins_imu(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+    """``imu_period_s`` 0.1: Roll_Pitch_Angle frames every 10 ms give at most one ``imu`` per 0.1 s of the
+    node clock, and the latest roll still comes through."""
+    from sensor_msgs.msg import Imu
+
+    start_bridge(procs, "ic120", can_cfg, imu_period_s=0.1)
+    imus: list[Imu] = []
+    ros_node.create_subscription(Imu, "/ic120/imu", imus.append, 100)
+    rp = IC.encode("Roll_Pitch_Angle", {"roll_angle": 0.05, "pitch_angle": 0.0})
+    assert spin_until(ros_node, lambda: bool(imus), 20 * SCALE, (0.05, lambda: peer.send(IC.frame_id("Roll_Pitch_Angle"), rp)))
+    n0, t0 = len(imus), time.monotonic()
+    frames = 0
+
+    def send() -> None:
+        nonlocal frames
+        peer.send(IC.frame_id("Roll_Pitch_Angle"), rp)
+        frames += 1
+
+    spin(ros_node, 2.0, (0.01, send))
+    spin(ros_node, 0.3)
+    elapsed, published = time.monotonic() - t0, len(imus) - n0
+    assert frames >= 50, frames
+    assert 5 <= published <= elapsed / 0.1 + 2, (published, frames, elapsed)
+    q = imus[-1].orientation
+    assert math.atan2(2 * (q.w * q.x + q.y * q.z), 1 - 2 * (q.x * q.x + q.y * q.y)) == pytest.approx(0.05, abs=1e-3)
 
 
 def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
