@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -153,9 +154,13 @@ class Com3Bridge(Node):
         self._log.info("com3_bridge ready")
 
     # -------------------------------------------------------------- CAN side
-    def _send(self, txs: list[Tx]) -> None:
+    def _send(self, produce: Callable[[], list[Tx]]) -> None:
+        """Compute the frames with ``produce()`` and put them on the bus, both under one lock. Computed outside
+        it, a cyclic command frame the sender thread built just before an emg_stop latched reached the wire
+        after the emg_stop's neutral frame (seen on a slow machine): the two threads' frames must leave in the
+        order the core produced them."""
         with self._send_lock:
-            for tx in txs:
+            for tx in produce():
                 try:
                     self.bus.send(can.Message(arbitration_id=tx.arbitration_id, data=tx.data, is_extended_id=True))
                 except can.CanError as exc:
@@ -165,11 +170,11 @@ class Com3Bridge(Node):
     def _send_loop(self) -> None:
         while not self._stop.is_set():
             now = time.monotonic()
-            self._send(self.core.tick(now))
+            self._send(lambda now=now: self.core.tick(now))
             with self._cutoff_lock:
                 frame = self.cutoff.due(now)
             if frame is not None:
-                self._send([Tx(CUTOFF_FRAME, self.cutoff.frame_id, frame)])
+                self._send(lambda frame=frame: [Tx(CUTOFF_FRAME, self.cutoff.frame_id, frame)])
             wait = self.core.next_wake() - time.monotonic()
             if wait > 0:
                 self._stop.wait(min(wait, 0.01))
@@ -260,7 +265,7 @@ class Com3Bridge(Node):
     # -------------------------------------------------------------- ROS commands
     def _command(self, fn: Any, *args: Any) -> None:
         try:
-            self._send(fn(*args, time.monotonic()))
+            self._send(lambda: fn(*args, time.monotonic()))
         except Com3CommandError as exc:
             self._log.warning(f"rejected: {exc}", throttle_duration_sec=0.5)
 
@@ -312,7 +317,7 @@ class Com3Bridge(Node):
             frame = self.cutoff.set(source, on, time.monotonic())
             after = self.cutoff.engaged
         if frame is not None:
-            self._send([Tx(CUTOFF_FRAME, self.cutoff.frame_id, frame)])
+            self._send(lambda: [Tx(CUTOFF_FRAME, self.cutoff.frame_id, frame)])
         if before != after:
             self._log.warning(f"pilot cut-off {'ENGAGED' if after else 'released'} ({source})")
 
@@ -324,7 +329,7 @@ class Com3Bridge(Node):
             self.core.site_heartbeat(time.monotonic())
 
     def _site_check(self) -> None:
-        self._send(self.core.site_check(time.monotonic()))
+        self._send(lambda: self.core.site_check(time.monotonic()))
         if self.core.emg_latched and not self.cutoff.sources.get("emg_stop"):  # the site watchdog latched it
             self._log.error(f"{self.core.emg_reason}: emg_stop latched, neutral frames, pilot cut-off")
             self._set_cutoff("emg_stop", True)
@@ -332,7 +337,7 @@ class Com3Bridge(Node):
 
     def _on_emg(self, msg: Any) -> None:
         was = self.core.emg_latched
-        self._send(self.core.emg_stop(bool(msg.data), time.monotonic()))
+        self._send(lambda: self.core.emg_stop(bool(msg.data), time.monotonic()))
         self._set_cutoff("emg_stop", self.core.emg_latched)
         if was != self.core.emg_latched:
             self._log.warning("emg_stop latched: neutral frames" if msg.data else "emg_stop cleared")
