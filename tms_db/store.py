@@ -231,6 +231,11 @@ class Store(abc.ABC):
     def close(self) -> None:
         """Release connections and files."""
 
+    def checkpoint_in_background(self, period_s: float) -> None:  # noqa: B027 - a no-op unless the backend needs it
+        """Keep a writer's commits short: a backend that sometimes does maintenance work inside a commit moves it to
+        a background thread run every ``period_s`` [s] (the embedded store: SQLite's WAL checkpoint). For a caller
+        with a deadline per write, the task manager's tick. Nothing to do for MongoDB."""
+
     def __enter__(self) -> Store:
         return self
 

@@ -28,7 +28,9 @@ second manager) are not covered; the loading-point flag has none. trees/README.m
 
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
 ``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
-``db_path`` ("" = tms_db default), ``realtime_priority`` (0 = off; 1-99: SCHED_FIFO for the thread that spins
+``db_path`` ("" = tms_db default), ``db_checkpoint_period_s`` (1.0; the embedded store's WAL checkpoint runs in a
+thread of its own this often instead of inside a flag write of the tick, :meth:`tms_db.store.Store.checkpoint_in_background`;
+0 = SQLite's automatic checkpoint), ``realtime_priority`` (0 = off; 1-99: SCHED_FIFO for the thread that spins
 the manager, needs CAP_SYS_NICE, :func:`tms_common.node.realtime_thread`); all read-only (read at start-up). ``task_id`` (-1), the original's:
 which entry of a ``/task_sequence`` JSON to run (-1: every entry), and the id an XML runs under (-1: the
 stored task with that tree, else an ad-hoc negative id); read on every message, as the original does
@@ -89,6 +91,12 @@ class TaskManager(Node):
         from tms_db import open_store
 
         self.store = open_store(uri=db_uri or None, path=db_path or None)
+        # flag writes happen inside the tick: the embedded store's WAL checkpoint goes to a thread of its own
+        checkpoint_s = float(p("db_checkpoint_period_s", 1.0).value)
+        if checkpoint_s < 0:
+            raise ValueError(f"tms_ts_manager: parameter db_checkpoint_period_s must be >= 0, got {checkpoint_s}")
+        if checkpoint_s > 0:
+            self.store.checkpoint_in_background(checkpoint_s)
         self.ros = ManagerRosPort(self)
         self.runs: dict[int, TaskRun] = {}
         self.finished: dict[int, TaskState] = {}

@@ -1,0 +1,54 @@
+"""The embedded store's background WAL checkpoint (``Store.checkpoint_in_background``): the writing connection no
+longer checkpoints inside a commit, the store's thread keeps the WAL from growing, nothing written is lost, and a
+bad period is refused naming the store."""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import time
+
+import pytest
+
+from tms_db import StoreError, open_store
+from tms_db.embedded import DB_FILE
+
+
+def _write(store, n: int, pause_s: float) -> None:  # noqa: ANN001
+    store.upsert_parameter({"record_name": "BB", "type": "dynamic", "N": 0})
+    for i in range(n):
+        store.set_fields("BB", {f"T{i % 10}": i, "N": i})
+        time.sleep(pause_s)
+
+
+def test_background_checkpoint_bounds_the_wal_and_keeps_every_write(tmp_path) -> None:  # noqa: ANN001
+    store = open_store(path=tmp_path / "db")
+    store.checkpoint_in_background(0.05)
+    thread = store._checkpointer  # noqa: SLF001
+    assert thread is not None and thread.is_alive()
+    # the writer's own automatic checkpoint is off
+    assert store._query("PRAGMA wal_autocheckpoint") == [(0,)]  # noqa: SLF001
+    _write(store, 300, 0.01)
+    wal = tmp_path / "db" / f"{DB_FILE}-wal"
+    # 300 commits of >= 1 page (4 KiB) each: 1.2 MB and more if nothing had checkpointed and restarted the WAL
+    assert os.path.getsize(wal) < 0.4e6, os.path.getsize(wal)
+    store.close()
+    assert not thread.is_alive()
+    with open_store(path=tmp_path / "db") as again:
+        record = again.get_record("BB")
+        assert record["N"] == 299 and [record[f"T{k}"] for k in range(10)] == list(range(290, 300))
+        assert again.check() == []
+
+
+def test_without_the_thread_the_writer_checkpoints_itself(tmp_path) -> None:  # noqa: ANN001
+    with open_store(path=tmp_path / "db") as store:
+        assert store._query("PRAGMA wal_autocheckpoint") == [(1000,)]  # noqa: SLF001 - SQLite's default
+        _write(store, 50, 0.0)
+    with sqlite3.connect(tmp_path / "db" / DB_FILE) as conn:
+        assert conn.execute("SELECT count(*) FROM documents").fetchone()[0] >= 1
+
+
+@pytest.mark.parametrize("period", [0.0, -1.0])
+def test_a_bad_period_is_refused_naming_the_store(tmp_path, period: float) -> None:  # noqa: ANN001
+    with open_store(path=tmp_path / "db") as store, pytest.raises(StoreError, match=r"rostmsdb\.sqlite3.*period"):
+        store.checkpoint_in_background(period)
