@@ -460,10 +460,11 @@ class EmbeddedStore(Store):
 
     def checkpoint_in_background(self, period_s: float) -> None:
         """SQLite's automatic checkpoint runs inside the commit that fills the WAL past 1000 pages: about one
-        commit in 400 of a flag write took 5-15 ms (its fsync) where the others took 0.2 ms, and the task
-        manager's 50 Hz tick, which writes flags, ran late. Here this connection's automatic checkpoint is off
-        and a thread of this store checkpoints (PASSIVE: it never waits for or blocks a writer) every
-        ``period_s`` on a connection of its own; other processes' connections keep theirs."""
+        flag write in 1000 took 4-7 ms (the checkpoint's fsync) where the median took 0.3 ms, and one took 15 ms
+        inside the task manager's 50 Hz tick, which then ran late. Here this connection's automatic checkpoint
+        is off and a thread of this store checkpoints (PASSIVE: it never waits for or blocks a writer) every
+        ``period_s`` on a connection of its own; other processes' connections keep theirs. The WAL restarts
+        from its beginning once a checkpoint has caught up with it between two writes."""
         if not period_s > 0:
             raise StoreError(f"embedded store {self.file}: checkpoint period must be > 0 s, got {period_s}")
         if self._checkpointer is not None:
