@@ -56,6 +56,8 @@ from tms_db.store import (
 __all__ = ["EmbeddedStore", "DB_FILE", "encode_body", "decode_body"]
 
 DB_FILE = "rostmsdb.sqlite3"
+#: [pages] a writer whose checkpoints run in the background still checkpoints itself past this WAL size (40 MB)
+BACKSTOP_CHECKPOINT_PAGES = 10_000
 LOCK_FILE = "write.lock"
 SCHEMA_VERSION = "1"
 T = TypeVar("T")
@@ -461,16 +463,18 @@ class EmbeddedStore(Store):
     def checkpoint_in_background(self, period_s: float) -> None:
         """SQLite's automatic checkpoint runs inside the commit that fills the WAL past 1000 pages: about one
         flag write in 1000 took 4-7 ms (the checkpoint's fsync) where the median took 0.3 ms, and one took 15 ms
-        inside the task manager's 50 Hz tick, which then ran late. Here this connection's automatic checkpoint
-        is off and a thread of this store checkpoints (PASSIVE: it never waits for or blocks a writer) every
-        ``period_s`` on a connection of its own; other processes' connections keep theirs. The WAL restarts
-        from its beginning once a checkpoint has caught up with it between two writes."""
+        inside the task manager's 50 Hz tick, which then ran late. Here this connection checkpoints itself only
+        past :data:`BACKSTOP_CHECKPOINT_PAGES`, and a thread of this store checkpoints (PASSIVE: it never waits
+        for or blocks a writer) every ``period_s`` on a connection of its own; other processes' connections keep
+        SQLite's default. The WAL restarts from its beginning once a checkpoint has caught up with it between
+        two writes; writes back to back that never leave it a gap meet the backstop."""
         if not period_s > 0:
             raise StoreError(f"embedded store {self.file}: checkpoint period must be > 0 s, got {period_s}")
         if self._checkpointer is not None:
             return
         with self._lock:
-            self._connect().execute("PRAGMA wal_autocheckpoint=0")
+            # not 0: should the thread never catch up (writes back to back), the writer still bounds the WAL
+            self._connect().execute(f"PRAGMA wal_autocheckpoint={BACKSTOP_CHECKPOINT_PAGES}")
 
         def run() -> None:
             conn = sqlite3.connect(self.file, timeout=self._busy_timeout_s, check_same_thread=False)
