@@ -6,9 +6,10 @@
 2. LeafNode round trip: this process sends LeafNodeBase goals exactly as the manager does (ManagerRosPort)
    to a ``tms_ts_subtasks`` process, which reads the DB record and calls a planning stub process that
    succeeds at once; goal sent -> SUCCEEDED seen.
-3. A ``tms_ts_manager`` process (at nice 0, at nice -10, then with ``realtime_priority`` 10) at 50 Hz running 10 tasks (endless loops of a LeafNode, a DB read, a DB write
-   and an expression) against subtask servers and planning stubs; its ``/tms_ts/tick_stats`` gives
-   ticks, missed ticks and tick durations.
+3. A ``tms_ts_manager`` process at 50 Hz running 10 tasks (endless loops of a LeafNode, a DB read, a DB write
+   and an expression) against subtask servers and planning stubs: at nice 0, at nice -10, with
+   ``realtime_priority`` 10, then that with ``db_checkpoint_period_s`` 0 (the WAL checkpoint back inside the
+   tick's flag writes); its ``/tms_ts/tick_stats`` gives ticks, missed ticks and tick durations.
 4. The executor's share: the same manager node in this process, the same 10 tasks, ``TS_EXEC_S`` seconds
    on the SingleThreadedExecutor and then on ``events`` (tms_common.node.make_executor): ticks, missed
    ticks, goals completed and the process's CPU (rusage) per second and per tick.
@@ -139,7 +140,7 @@ def _round_trip(domain: int, db: str) -> str:
     return f"leaf goal -> result through tms_ts_subtasks (DB read + planning goal): {summary_ms(times)}"
 
 
-def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0) -> str:
+def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0, checkpoint_s: float = 1.0) -> str:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -150,7 +151,8 @@ def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0) -> str:
     procs = _start_servers(domain, db, 0.2)
     env = ros_env(domain)
     manager = Proc(["nice", "-n", str(nice), str(executable("tms_ts", "tms_ts_manager")), "--ros-args", "-p", f"db_path:={db}",
-                    "-p", "tick_rate_hz:=50.0", "-p", "server_wait_s:=30.0", "-p", f"realtime_priority:={rt}"], env,
+                    "-p", "tick_rate_hz:=50.0", "-p", "server_wait_s:=30.0", "-p", f"realtime_priority:={rt}",
+                    "-p", f"db_checkpoint_period_s:={checkpoint_s}"], env,
                    name="manager")
     procs.append(manager)
     ctx = Context()
@@ -198,7 +200,8 @@ def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0) -> str:
             p.kill()
     ticks = last["ticks"] - base["ticks"]
     missed = last["missed"] - base["missed"]
-    how = f"SCHED_FIFO {rt}" if rt else f"nice {nice}"
+    how = (f"SCHED_FIFO {rt}" if rt else f"nice {nice}") + (
+        f", WAL checkpoint every {checkpoint_s:g} s in a thread" if checkpoint_s else ", SQLite's automatic WAL checkpoint")
     return (f"10 tasks at 50 Hz for {LOAD_SECONDS:g} s, manager at {how}: {ticks} ticks (expected {int(LOAD_SECONDS * 50)}), "
             f"missed {missed}, mean tick {last['mean_tick_ms']:.2f} ms, max tick {last['max_tick_ms']:.1f} ms, "
             f"max late {last['max_late_ms']:.1f} ms; tasks not running at the end: {len(failed)}; "
@@ -281,6 +284,8 @@ def main() -> None:
         # and with the manager's tick thread under SCHED_FIFO (realtime_priority; refused without CAP_SYS_NICE,
         # which the manager's log says)
         print(_ten_tasks(domain, db, rt=10), flush=True)
+        # and SCHED_FIFO with the WAL checkpoint back inside the flag writes of the tick (db_checkpoint_period_s 0)
+        print(_ten_tasks(domain, db, rt=10, checkpoint_s=0.0), flush=True)
         for kind in ("single", "events"):
             print(_manager_on(kind, domain, db), flush=True)
 
