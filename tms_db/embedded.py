@@ -489,6 +489,7 @@ class EmbeddedStore(Store):
             finally:
                 conn.close()
 
+        self._checkpoint_stop.clear()  # a store closed before may start its thread again
         self._checkpointer = threading.Thread(target=run, name="tms_db_checkpoint", daemon=True)
         self._checkpointer.start()
 
