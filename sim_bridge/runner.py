@@ -2,9 +2,10 @@
 
 One loop iteration = poll command frames, watchdog, one plant step (``dt`` of simulated time), state
 frames due, then the ``on_step`` hook (the node publishes ``/clock`` and truth from it). With
-``speed > 0`` the loop sleeps to an absolute deadline ``start + sim_time / speed`` (no drift; a late
-step is not made up by a burst, it shifts the schedule), so in real time the 10 ms frames leave every
-10 ms of wall time. ``speed == 0`` runs as fast as the CPU allows.
+``speed > 0`` the loop sleeps to an absolute deadline ``start + sim_time / speed`` (no drift), so in real time
+the 10 ms frames leave every 10 ms of wall time. A late loop makes up at most ``catch_up_s`` of wall time by
+running its steps without sleeping (default 0: none, a late step shifts the schedule); a longer stall shifts the
+schedule by the rest. ``speed == 0`` runs as fast as the CPU allows.
 
 Truth log (JSON lines, one record per ``period`` of simulated time)::
 
@@ -117,17 +118,22 @@ class PlantRunner:
         speed: float = 1.0,
         on_step: Callable[[Plant], None] | None = None,
         replay: TruthLog | None = None,
+        catch_up_s: float = 0.0,
     ) -> None:
         if speed < 0:
             raise ValueError(f"speed must be >= 0 (0 = as fast as possible), got {speed}")
+        if catch_up_s < 0:
+            raise ValueError(f"catch_up_s must be >= 0 (0 = no catching up), got {catch_up_s}")
         self.plant = plant
         self.io = io
         self.speed = speed
+        self.catch_up_s = catch_up_s
         self.on_step = on_step
         self.replay = replay
         if io is not None and replay is not None:
             io.replay = True
         self._stop = threading.Event()
+        self._now, self._sleep = time.perf_counter, time.sleep  # the wall clock (a test's own, to step it)
         self.wall_elapsed = 0.0
         self.late_steps = 0  # steps that started more than one dt (wall, scaled) behind schedule
 
@@ -137,19 +143,24 @@ class PlantRunner:
     def run(self, duration: float | None = None) -> None:
         plant, io = self.plant, self.io
         t_sim0 = plant.time
-        wall0 = start = time.perf_counter()
+        wall0 = start = self._now()
         dt = plant.dt
+        # the backlog made up by steps without sleep; at least one step, as a step is late by design when it
+        # only just misses its deadline
+        backlog = max(self.catch_up_s, dt / self.speed) if self.speed > 0 else 0.0
         while not self._stop.is_set():
             if duration is not None and plant.time - t_sim0 >= duration - 1e-9:
                 break
             if self.speed > 0:
                 deadline = wall0 + (plant.time - t_sim0) / self.speed
-                delay = deadline - time.perf_counter()
+                delay = deadline - self._now()
                 if delay > 0:
-                    time.sleep(delay)
+                    self._sleep(delay)
                 elif delay < -dt / self.speed:
                     self.late_steps += 1
-                    wall0 -= delay  # shift the schedule instead of bursting to catch up
+                    if -delay > backlog:
+                        # beyond the backlog: shift the schedule (by all of it when not catching up at all)
+                        wall0 -= delay + (backlog if self.catch_up_s > 0 else 0.0)
             if io is not None:
                 io.poll()
                 io.watchdog()
@@ -162,4 +173,4 @@ class PlantRunner:
                 io.emit()
             if self.on_step is not None:
                 self.on_step(plant)
-        self.wall_elapsed = time.perf_counter() - start
+        self.wall_elapsed = self._now() - start

@@ -65,6 +65,7 @@ class SimPlantNode(Node):
         self._Float64MultiArray, self._Dim, self._DiagnosticArray = Float64MultiArray, MultiArrayDimension, DiagnosticArray
         p = startup_parameters(self)
         speed = float(p("speed", 1.0).value)
+        catch_up = float(p("catch_up_s", 0.0).value)
         config = str(p("config", "").value) or None
         watchdog = float(p("watchdog_s", -1.0).value)
         self._truth_period = float(p("truth_period_s", 0.05).value)
@@ -90,7 +91,8 @@ class SimPlantNode(Node):
         self.io = PlantCanIO(self.plant, buses, watchdog_s=watchdog if watchdog > 0 else spec.watchdog_s)
         self.recorder = TruthRecorder(record, self._truth_period) if record else None
         log = TruthLog(replay) if replay else None
-        self.runner = PlantRunner(self.plant, self.io, speed=speed, on_step=self._on_step, replay=log)
+        self.runner = PlantRunner(self.plant, self.io, speed=speed, on_step=self._on_step, replay=log,
+                                  catch_up_s=catch_up)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.pose_pub = {m: self.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in self.plant.machines}
         self.joint_pub = {

@@ -213,3 +213,43 @@ def test_plant_time_on_the_step_grid_and_stamps_carry_the_second(spec):
     for _ in range(300):
         plant.step()
     assert plant.steps == 300 and plant.time == 300 * plant.dt and stamp_parts(plant.time) == (3, 0)
+
+
+class _WallClock:
+    """A wall clock the runner's sleeps advance; a step costs ``step_s``, one step stalls ``stall_s``."""
+
+    def __init__(self, step_s: float, stall_at: int, stall_s: float) -> None:
+        self.t, self.step_s, self.stall_at, self.stall_s = 0.0, step_s, stall_at, stall_s
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, s: float) -> None:
+        self.t += s
+
+    def on_step(self, plant: Plant) -> None:
+        self.t += self.step_s + (self.stall_s if plant.steps == self.stall_at else 0.0)
+
+
+@pytest.mark.parametrize(("catch_up_s", "lost_s"), [(0.0, 0.3), (0.1, 0.2), (0.5, 0.0)])
+def test_paced_runner_makes_up_a_stall_within_catch_up_s(spec, catch_up_s, lost_s):
+    """At 2x real time, a 0.3 s stall at step 50: the runner makes up at most ``catch_up_s`` of it by steps
+    without sleep, and the rest shifts the schedule (wall time lost for good)."""
+    from sim_bridge.runner import PlantRunner
+
+    plant = Plant(spec)
+    clock = _WallClock(step_s=0.001, stall_at=50, stall_s=0.3)
+    runner = PlantRunner(plant, None, speed=2.0, on_step=clock.on_step, catch_up_s=catch_up_s)
+    runner._now, runner._sleep = clock.now, clock.sleep
+    runner.run(duration=2.0)
+    ideal = 2.0 / 2.0 - plant.dt / 2.0 + 0.001  # the last step starts at its deadline, then costs one step
+    assert plant.steps == 200
+    assert runner.wall_elapsed == pytest.approx(ideal + lost_s, abs=0.006)
+    assert runner.late_steps >= 1
+
+
+def test_paced_runner_refuses_a_negative_catch_up(spec):
+    from sim_bridge.runner import PlantRunner
+
+    with pytest.raises(ValueError, match="catch_up_s must be >= 0"):
+        PlantRunner(Plant(spec), None, speed=1.0, catch_up_s=-0.1)
