@@ -82,8 +82,9 @@ def bench_controller() -> None:
 
 
 def bench_ekf() -> None:
-    from tests.ic120.synth import simulate
     from tms_rp.ic120.ekf import Ic120Ekf
+
+    from tests.ic120.synth import simulate
 
     samples = simulate(120.0)
     ekf = Ic120Ekf()
@@ -114,10 +115,11 @@ def bench_ekf() -> None:
 
 def _ekf_loop_route(seed: int):  # noqa: ANN202
     """One paper cycle with the EKF in the loop on the kinematic model; returns final errors and collisions."""
-    from tests.ic120.harness import paper_legs, site_points
-    from tests.ic120.kinematics import TrackedModel
     from tms_rp.ic120.config import load_nav_config
     from tms_rp.ic120.ekf import Ic120Ekf
+
+    from tests.ic120.harness import paper_legs, site_points
+    from tests.ic120.kinematics import TrackedModel
 
     rng = np.random.default_rng(seed)
     cfg = load_nav_config()
@@ -240,13 +242,13 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import NavSatFix
+    from tms_rp.ic120.config import load_nav_config
 
     from nav2_msgs.action import NavigateThroughPoses
     from tests.ic120.harness import paper_legs, site_points
     from tests.ic120.rosutil import ActionCall, Truth, pose_stamped, spin_for, spin_until, yaw_of
     from tests.ic120.stack import start_ours, start_plant_and_bridge
     from tests.rosproc import Proc, isolated_domain, ros_env
-    from tms_rp.ic120.config import load_nav_config
 
     pts = site_points()
     costmap = load_nav_config().build_costmap()

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import math
 
+from tms_rp.ic120.navigator import NavigatorCore
+
 from tests.ic120.kinematics import TrackedModel
 from tms_model.site import load_site
-from tms_rp.ic120.navigator import NavigatorCore
 
 
 def site_points() -> dict:

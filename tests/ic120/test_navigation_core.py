@@ -8,16 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from tests.ic120.harness import drive, paper_legs, pose_error, site_points
-from tests.ic120.kinematics import TrackedModel
-from tms_common.errors import ConfigError
 from tms_rp.ic120.config import load_nav_config
 from tms_rp.ic120.controller import ControllerParams, Limits, TrackedPurePursuit
 from tms_rp.ic120.costmap import INSCRIBED, LETHAL, Costmap, Footprint, OccupancyMap, load_map, save_map
 from tms_rp.ic120.errors import GoalOccupiedError, InvalidGoalError, NoValidPathError
 from tms_rp.ic120.navigator import GoalChecker, leg_direction, validate_pose
 from tms_rp.ic120.planner import GridPlanner, PlannerParams
+
+from tests.ic120.harness import drive, paper_legs, pose_error, site_points
+from tests.ic120.kinematics import TrackedModel
+from tms_common.errors import ConfigError
 
 CFG = load_nav_config()
 

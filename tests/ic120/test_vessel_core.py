@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import pytest
-
 from tms_rc.ic120.vessel import VesselController, VesselError, VesselParams
 
 

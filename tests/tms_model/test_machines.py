@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
 
 from tms_common.config import config_path
 from tms_common.errors import ConfigError
-import math
-
 from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR, load_machine, parse_machine
 
 

@@ -17,7 +17,15 @@ import time
 import pytest
 
 from tests.ic120.rosutil import ActionCall, spin_until
-from tests.tracked.test_fleet_integration import _container, _err, _node, _plant, _stack, _Truth, _wait_estimate
+from tests.tracked.test_fleet_integration import (
+    _container,
+    _err,
+    _node,
+    _plant,
+    _stack,
+    _Truth,
+    _wait_estimate,
+)
 
 pytestmark = pytest.mark.integration
 

@@ -35,10 +35,10 @@ from com3_msgs.msg import JointCmd
 from tms_common.errors import ConfigError
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
-from tms_model.fleet import machine_kind, machine_name
 from tms_model.com3 import VELOCITY
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.fleet import machine_kind, machine_name
 from tms_msg.action import Zx200ArmMove
 from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.segments import targets_from_segments
