@@ -145,9 +145,6 @@ class PlantRunner:
         t_sim0 = plant.time
         wall0 = start = self._now()
         dt = plant.dt
-        # the backlog made up by steps without sleep; at least one step, as a step is late by design when it
-        # only just misses its deadline
-        backlog = max(self.catch_up_s, dt / self.speed) if self.speed > 0 else 0.0
         while not self._stop.is_set():
             if duration is not None and plant.time - t_sim0 >= duration - 1e-9:
                 break
@@ -158,9 +155,8 @@ class PlantRunner:
                     self._sleep(delay)
                 elif delay < -dt / self.speed:
                     self.late_steps += 1
-                    if -delay > backlog:
-                        # beyond the backlog: shift the schedule (by all of it when not catching up at all)
-                        wall0 -= delay + (backlog if self.catch_up_s > 0 else 0.0)
+                    if -delay > self.catch_up_s:  # keep catch_up_s of the lag to make up, shift by the rest
+                        wall0 += -delay - self.catch_up_s
             if io is not None:
                 io.poll()
                 io.watchdog()
