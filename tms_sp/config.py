@@ -28,7 +28,7 @@ __all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry"]
 class SensingConfig:
     """Everything the sensing processors and node need."""
 
-    blackboard_record: str
+    blackboard_records: tuple[str, ...]  # global-blackboard records the SENSING_* flags go to (the first is read too)
     resolution: float
     points: dict[str, Pose2D]
     mound: Mound
@@ -70,6 +70,15 @@ def _get(data: Any, where: Where, path: tuple[Any, ...], kind: type | tuple[type
         names = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
         raise where.error(path, f"{'.'.join(map(str, path))}: expected {names}, got {node!r}")
     return node
+
+
+def _records(data: Any, where: Where) -> tuple[str, ...]:
+    """``blackboard_records``: a non-empty list of distinct record names."""
+    names = _get(data, where, ("blackboard_records",), list)
+    if not names or not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+        raise where.error(("blackboard_records",),
+                          f"blackboard_records: expected a non-empty list of distinct record names, got {names!r}")
+    return tuple(names)
 
 
 def load_sensing_config(
@@ -166,7 +175,7 @@ def load_sensing_config(
 
     swing_origin = zx.joints[0].origin_xyz
     return SensingConfig(
-        blackboard_record=_get(s, sw, ("blackboard_record",), str),
+        blackboard_records=_records(s, sw),
         resolution=res,
         points=points,
         mound=mound,
@@ -175,7 +184,7 @@ def load_sensing_config(
         excavation_model=_get(s, sw, e + ("model_name",), str),
         excavation_record=_get(s, sw, e + ("record",), str),
         excavation_update_threshold=ex("update_threshold"),
-        approach_record=_get(s, sw, e + ("approach_record",), str),
+        approach_record=_get(s, sw, e + ("approach_record",), str),  # "" = none (the original's trees have none)
         approach_height=ex("approach_height"),
         vessel_geom=geom,
         vessel=vparams,

@@ -20,8 +20,9 @@ Target choice (one call per sensing update):
    (bucket-edge angle to the x-y plane, positive = tip down) = local surface slope rising away from the
    machine + the attack angle, clipped to ``[theta_w_min, theta_w_max]``.
 
-The mound is "present" (SENSING_CHECK_MOUND_FLG true) while the diggable volume in reach is at least
-``min_volume`` and some cell stands ``min_height`` above ground.
+The mound has soil (``has_soil``; SENSING_CHECK_MOUND_FLG false, as Table 7 of the seed paper defines the flag:
+true = not enough soil) while the diggable volume in reach is at least ``min_volume`` and some cell stands
+``min_height`` above ground.
 """
 
 from __future__ import annotations
@@ -119,7 +120,7 @@ class MoundAssessment:
     volume_in_reach: float   # [m^3] diggable soil in the reach annulus
     max_height: float        # [m] highest soil above ground
     target: ExcavationTarget | None
-    has_soil: bool           # SENSING_CHECK_MOUND_FLG
+    has_soil: bool           # not SENSING_CHECK_MOUND_FLG (Table 7: the flag is true when soil is lacking)
 
 
 

@@ -9,8 +9,11 @@ changed through a tms_db store (``open_store``), as the original tms_sp updaters
   ``approach_height`` higher (the paper tree returns the arm there after a release);
 * the release target -> ``(zx200, target_release_pose)`` and the swing angle -> ``(zx200, release_angle)``,
   only while the IC120 stands at the loading point (elsewhere the vessel is not where the ZX200 releases);
-* the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> the global-blackboard
-  record, written on the first assessment and then on every change.
+* the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> every global-blackboard
+  record of ``blackboard_records`` (the records the running tasks read them from: the paper's trees name
+  GLOBAL_BLACKBOARD_EARTHWORK, the original's 2024-12 trees SAMPLE_BLACKBOARD_SHIMIZU), written on the first
+  assessment and then on every change. Meanings as the seed paper's Table 7: SENSING_CHECK_MOUND_FLG is true
+  when there is *not* enough soil in the mound (initially false).
 
 Several carriers (the fleet experiment): the pose and vessel inputs are those of one carrier, ``carrier``
 (default ``ic120``). :meth:`SiteSensing.follow_holder` reads the carrier's name from a field of the
@@ -101,7 +104,7 @@ class SiteSensing:
         from tms_db.errors import RecordNotFound
 
         try:
-            name = self.store.get_record(self.cfg.blackboard_record).get(field_name)
+            name = self.store.get_record(self.cfg.blackboard_records[0]).get(field_name)
         except RecordNotFound:
             return self.carrier
         if isinstance(name, str) and name and (known is None or name in known):
@@ -111,14 +114,15 @@ class SiteSensing:
     # ---- setup ------------------------------------------------------------------------------------
     def check_records(self) -> None:
         """Every record this processor writes exists and is dynamic; else SensingError naming it."""
-        wanted = [
-            (None, self.cfg.blackboard_record),
+        wanted = [(None, record) for record in self.cfg.blackboard_records] + [
             (self.cfg.excavation_model, self.cfg.excavation_record),
             (self.cfg.excavation_model, self.cfg.approach_record),
             (self.cfg.vessel_model, self.cfg.release_record),
             (self.cfg.vessel_model, self.cfg.angle_record),
         ]
         for model, record in wanted:
+            if not record:  # an optional record switched off ("")
+                continue
             self._writer.record(record, model)
 
     # ---- inputs -----------------------------------------------------------------------------------
@@ -138,11 +142,11 @@ class SiteSensing:
         return self.zx200_pose or self.cfg.zx200_base
 
     def on_mound_points(self, points: np.ndarray) -> MoundAssessment:
-        """Mound points (map frame) -> excavation target + SENSING_CHECK_MOUND_FLG."""
+        """Mound points (map frame) -> excavation target + SENSING_CHECK_MOUND_FLG (true: not enough soil)."""
         grid = rasterize(points, self.cfg.mound_grid, sensor="mound points")
         axis = self.base.to_map(np.array([*self.cfg.swing_axis_in_base, 0.0]))
         a = assess_mound(grid, (float(axis[0]), float(axis[1])), self.cfg.excavation, previous_xy=self._last_target_xy,
-                         was_depleted=self.flags.get("SENSING_CHECK_MOUND_FLG") is False)
+                         was_depleted=self.flags.get("SENSING_CHECK_MOUND_FLG") is True)
         self.mound = a
         if a.target is not None:
             fields = a.target.record_fields(self.base)
@@ -154,13 +158,14 @@ class SiteSensing:
                 else:
                     self._writer.write(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model,
                                        strict=True)
-                    approach = a.target.approach_record_fields(self.base, self.cfg.approach_height)
-                    self._writer.write(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model,
-                                       strict=True)
+                    if self.cfg.approach_record:
+                        approach = a.target.approach_record_fields(self.base, self.cfg.approach_height)
+                        self._writer.write(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model,
+                                           strict=True)
                     self.writes += 1
                     self._last_target = xyz
                     self._last_target_xy = (a.target.x, a.target.y)
-        self._set_flag("SENSING_CHECK_MOUND_FLG", a.has_soil)
+        self._set_flag("SENSING_CHECK_MOUND_FLG", not a.has_soil)  # Table 7: true = not enough soil
         return a
 
     def on_vessel_points(self, points: np.ndarray) -> VesselAssessment:
@@ -200,7 +205,8 @@ class SiteSensing:
         self.flags[name] = value
         if self._written_flags.get(name) is value:
             return
-        self._writer.write(self.cfg.blackboard_record, {name: bool(value)}, strict=True)
+        for record in self.cfg.blackboard_records:
+            self._writer.write(record, {name: bool(value)}, strict=True)
         self.writes += 1
         self._written_flags[name] = value
         log.info("%s -> %s", name, value)

@@ -47,7 +47,7 @@ TASK_DONE = frozenset({"SUCCESS", "FAILURE", "CANCELED"})
 def tasks_to_cancel_after_failure(task_ids: list[int], states: dict[int, str]) -> list[int]:
     """The supervisor's policy when a task FAILED: every started task that has not ended yet, in order.
 
-    Its partner would otherwise wait for a flag that never comes (the IC120 task waits for LOADED_FLG from
+    Its partner would otherwise wait for a flag that never comes (the IC120 task waits for MOVING_FLG from
     a ZX200 task that failed). ``states`` maps task id -> state name; returns [] when no task FAILED.
     """
     if not any(state == "FAILURE" for state in states.values()):

@@ -137,10 +137,11 @@ def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path, backend):
     assert first_pass < first_dump, (first_pass, first_dump)
 
     # Flags in the protocol's order (Table 7): IC120 arrives (task + sensing) -> ZX200 loads -> sensing
-    # sees the load -> (LOADED_FLG) -> IC120 leaves (ARRIVAL false) -> dump. The supervisor samples the DB
-    # every 0.2 s wall; LOADED_FLG's true phase lasts only until the IC120 task answers (a few ticks), so
-    # it is checked through its consequence (ARRIVAL_FLG false only follows LOADED_FLG in the IC120 tree)
-    # and its final value (the ZX200 task ends with LOADED_FLG true).
+    # sees the load -> ZX200 faces the mound (INITIAL_POSE_FLG) and allows the dump to move (MOVING_FLG) ->
+    # IC120 leaves (ARRIVAL false) -> dump. The supervisor samples the DB every 0.05 s wall; MOVING_FLG's
+    # true phase lasts only until the IC120 task answers (a few ticks), so it is checked through its
+    # consequence (ARRIVAL_FLG false only follows MOVING_FLG in the IC120 tree) and its final value (the
+    # ZX200 task ends with MOVING_FLG true).
     f = m["flags_timeline"]
     arrival = _first(f["ARRIVAL_FLG"], True)
     sensed_arrival = _first(f["SENSING_ARRIVAL_FLG"], True)
@@ -151,5 +152,6 @@ def test_one_full_load_haul_dump_cycle(procs, domain, tmp_path, backend):
     assert arrival <= first_pass and sensed_arrival <= first_pass, (f, first_pass)
     assert first_pass <= sensed_loaded <= left, f
     assert left < first_dump, (f["ARRIVAL_FLG"], first_dump)
-    assert f["LOADED_FLG"][-1][1] is True and f["CONTINUE_FLG"][-1][1] is False, f
+    assert f["MOVING_FLG"][-1][1] is True and f["CONTINUE_FLG"][-1][1] is False, f
+    assert _first(f["INITIAL_POSE_FLG"], False) is not None and f["INITIAL_POSE_FLG"][-1][1] is True, f
 

@@ -154,7 +154,7 @@ def test_fleet_seed_points_are_the_sites_and_every_task_names_its_machine():
 
 def test_fleet_trees_load_each_carrier_in_turn_and_sensing_follows_the_holder(tmp_path):
     cfg = load_sensing_config()
-    cfg = dataclasses.replace(cfg, blackboard_record=BB, arrival=dataclasses.replace(cfg.arrival, hold_s=1.0))
+    cfg = dataclasses.replace(cfg, blackboard_records=(BB,), arrival=dataclasses.replace(cfg.arrival, hold_s=1.0))
     store = tms_db.open_store(path=tmp_path / "db")
     seed(store, ROOT / "config" / "seeds" / "fleet.yaml")
     geoms = {c: carrier_vessel_geometry(cfg, c) for c in CARRIERS}

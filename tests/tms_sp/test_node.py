@@ -99,13 +99,13 @@ def test_sensing_node_writes_flags_and_targets(procs, ros_node, tmp_path):
         mound_pub.publish(mound)
         vessel_pub.publish(vessel)
         ros_node.executor_for_test.spin_once(timeout_sec=0.2)
-        flags = store.get_record(CFG.blackboard_record)
+        flags = store.get_record(CFG.blackboard_records[0])
         if flags["SENSING_ARRIVAL_FLG"] and flags["SENSING_LOADED_FLG"]:
             break
         assert node.popen.poll() is None, node.output
     assert flags["SENSING_ARRIVAL_FLG"] is True, node.output
     assert flags["SENSING_LOADED_FLG"] is True
-    assert flags["SENSING_CHECK_MOUND_FLG"] is True
+    assert flags["SENSING_CHECK_MOUND_FLG"] is False  # Table 7: false = enough soil in the mound
     target = store.get_parameter("zx200", "target_excavate_pose")
     assert math.hypot(target["x"] - before["x"], target["y"] - before["y"]) > 0.5  # moved off the pit
     assert target["position_with_angle"] == 1 and "timestamps" in target

@@ -161,16 +161,19 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
             if status.get(name) in (None, "RUNNING"):
                 status[name] = tree.tick().name
         bb = store.get_record(BB)
-        for flag in ("CONTINUE_FLG", "ARRIVAL_FLG", "LOADED_FLG", "SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "SENSING_CHECK_MOUND_FLG"):
+        # sensing's flags first: in a step, sensing runs before the trees tick
+        for flag in ("SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "SENSING_CHECK_MOUND_FLG", "CONTINUE_FLG",
+                     "ARRIVAL_FLG", "INITIAL_POSE_FLG", "MOVING_FLG"):
             if last.get(flag) is not bb[flag]:
                 timeline.append((t, flag, bb[flag]))
                 last[flag] = bb[flag]
         if all(s in ("SUCCESS", "FAILURE") for s in status.values()):
             break
     assert set(status.values()) == {"SUCCESS"}, (status, world.log[-10:])
-    # Work ended because the mound is depleted: sensing cleared the check flag, the ZX200 task CONTINUE_FLG.
+    # Work ended because the mound is depleted: sensing raised the check flag (Table 7: true = not enough
+    # soil), the ZX200 task cleared CONTINUE_FLG.
     bb = store.get_record(BB)
-    assert bb["CONTINUE_FLG"] is False and bb["SENSING_CHECK_MOUND_FLG"] is False
+    assert bb["CONTINUE_FLG"] is False and bb["SENSING_CHECK_MOUND_FLG"] is True
     # Soil conservation: everything dug is in the dump (nothing left in bucket or vessel).
     dug = world.initial_volume - float(world.surface.sum() * world.spec.cell_area)
     assert dug > 0.8 * world.initial_volume
@@ -178,14 +181,17 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
     # The IC120 ends parked at P3 facing east; the ZX200 ends in finish_pose.
     assert (world.ic120.x, world.ic120.y) == pytest.approx((cfg.points["P3"].x, cfg.points["P3"].y))
     assert world.log[-1] in ("zx200:finish_pose", "ic120:TURN_TO_LOAD") and "zx200:finish_pose" in world.log
-    # Flag order in every load cycle: dump arrives (task, then sensing), vessel sensed loaded, ZX200 says
-    # loaded, dump leaves, loaded is reset.
-    ups = [(f, v) for _, f, v in timeline if f in ("ARRIVAL_FLG", "SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "LOADED_FLG")]
+    # Flag order in every load cycle (Table 7): dump arrives (task, then sensing), the ZX200 leaves its
+    # initial pose, vessel sensed loaded, the ZX200 faces the mound again and allows the dump to move, dump
+    # leaves, moving is denied again.
+    ups = [(f, v) for _, f, v in timeline
+           if f in ("ARRIVAL_FLG", "SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "MOVING_FLG", "INITIAL_POSE_FLG")]
     cycles = []
     current: list = []
     for f, v in ups:
         current.append((f, v))
-        if (f, v) == ("LOADED_FLG", False) and any(x == ("LOADED_FLG", True) for x in current):
+        # (the seed's initial MOVING_FLG=true, denied at the ZX200 task's start, is no load cycle)
+        if (f, v) == ("MOVING_FLG", False) and ("MOVING_FLG", True) in current and ("ARRIVAL_FLG", True) in current:
             cycles.append(current)
             current = []
     assert len(cycles) >= 2, timeline
@@ -193,8 +199,10 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
         names = [f"{f}={v}" for f, v in cyc]
         a = names.index("ARRIVAL_FLG=True")
         sa = names.index("SENSING_ARRIVAL_FLG=True", a)
-        ld = names.index("LOADED_FLG=True", sa)
-        names.index("ARRIVAL_FLG=False", ld)  # the dump leaves only after it was told it is loaded
+        names.index("INITIAL_POSE_FLG=False", sa)  # loading starts only once both say the dump is there
+        ip = names.index("INITIAL_POSE_FLG=True", sa)
+        ld = names.index("MOVING_FLG=True", ip)  # facing the mound before the dump may move
+        names.index("ARRIVAL_FLG=False", ld)  # the dump leaves only after it was allowed to
         if k < len(cycles) - 1:  # full loads: sensing saw the vessel loaded before the ZX200 said so
             assert "SENSING_LOADED_FLG=True" in names[sa:ld], names
     # Each full cycle: several passes, and the dump leaves only after sensing saw it loaded (except the last).

@@ -37,7 +37,7 @@ def _params() -> dict[tuple[str | None, str], dict]:
 
 
 def _blackboard() -> dict:
-    docs = [d for d in SEED["parameters"] if d["record_name"] == CFG.blackboard_record]
+    docs = [d for d in SEED["parameters"] if d["record_name"] == CFG.blackboard_records[0]]
     assert len(docs) == 1
     return docs[0]
 
@@ -130,7 +130,7 @@ def test_blackboard_nodes_use_seeded_typed_flags(path):
     for el in iter_nodes(path):
         nid = node_id(el)
         if nid in ("BlackboardValueReaderMongo", "MongoValueWriter"):
-            assert el.get("mongo_record_name") == CFG.blackboard_record
+            assert el.get("mongo_record_name") == CFG.blackboard_records[0]
             field = el.get("mongo_param_name")
             assert isinstance(bb.get(field), bool), f"{field} not a bool flag of the blackboard seed"
             if nid == "MongoValueWriter":
@@ -151,17 +151,43 @@ def test_blackboard_nodes_use_seeded_typed_flags(path):
             assert re.fullmatch(r"[\w\s()=!]+", expr)
 
 
-def test_table7_flags_all_seeded_and_used():
+#: The seed paper's Table 7: flag -> (update method, initial state). "Auto": written by the tasks' trees;
+#: "Manual (Sensing)": written by sensing only. SENSING_CHECK_MOUND_FLG true means *not enough* soil in the mound.
+TABLE7 = {
+    "ARRIVAL_FLG": ("Auto", False),
+    "CONTINUE_FLG": ("Auto", True),
+    "MOVING_FLG": ("Auto", True),
+    "INITIAL_POSE_FLG": ("Auto", True),
+    "SENSING_ARRIVAL_FLG": ("Manual", False),
+    "SENSING_CHECK_MOUND_FLG": ("Manual", False),
+    "SENSING_LOADED_FLG": ("Manual", False),
+}
+PAPER_TREES = [p for p in TREE_FILES if p.name.startswith("paper_")]
+
+
+def test_table7_flags_seeded_with_table7_initial_states():
     bb = _blackboard()
     assert bb["type"] == "dynamic"  # sensing may only update dynamic documents
-    flags = {"CONTINUE_FLG", "ARRIVAL_FLG", "LOADED_FLG", "SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "SENSING_CHECK_MOUND_FLG"}
-    assert flags <= set(bb)
-    used = set()
-    for path in TREE_FILES:
-        used |= {el.get("mongo_param_name") for el in iter_nodes(path) if el.get("mongo_param_name")}
-    assert flags <= used
-    assert bb["CONTINUE_FLG"] is True and bb["SENSING_CHECK_MOUND_FLG"] is True
-    assert not any(bb[f] for f in flags - {"CONTINUE_FLG", "SENSING_CHECK_MOUND_FLG"})
+    flags = {k for k, v in bb.items() if isinstance(v, bool)}
+    assert flags == set(TABLE7), f"flags not in Table 7: {flags - set(TABLE7)}; missing: {set(TABLE7) - flags}"
+    assert {f: bb[f] for f in TABLE7} == {f: initial for f, (_, initial) in TABLE7.items()}
+
+
+def test_table7_flags_written_by_the_party_table7_names():
+    from tms_sp.processor import FLAGS
+
+    written, read = set(), set()
+    for path in PAPER_TREES:
+        for el in iter_nodes(path):
+            if node_id(el) == "MongoValueWriter":
+                written.add(el.get("mongo_param_name"))
+            elif node_id(el) == "BlackboardValueReaderMongo":
+                read.add(el.get("mongo_param_name"))
+    auto = {f for f, (method, _) in TABLE7.items() if method == "Auto"}
+    manual = set(TABLE7) - auto
+    assert written == auto, f"trees write {written}, Table 7's Auto flags are {auto}"
+    assert set(FLAGS) == manual  # sensing writes the Manual ones, and only those
+    assert set(TABLE7) <= read | {"CONTINUE_FLG"} and manual <= read
 
 
 def test_seed_tasks_point_at_tree_files_one_machine_each():

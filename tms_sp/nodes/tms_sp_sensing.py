@@ -17,7 +17,9 @@ mound_in_reach_m3, vessel_volume_m3, vessel_fill, the three flags, target_x/y/z/
 Parameters: ``db_uri``, ``db_path`` (contract [C]), ``config`` (sensing YAML, default
 config/tms_sp/sensing.yaml), ``site``/``ic120``/``zx200`` (YAML paths, default config/...),
 ``rate_hz`` (2.0), ``mound_topic``, ``vessel_topic``, ``ic120_pose_topic``, ``zx200_pose_topic``,
-``blackboard_record`` ("" = the sensing YAML's), ``target_fill`` (0.0 = the sensing YAML's ``vessel.target_fill``:
+``blackboard_records`` ([] = the sensing YAML's: every global-blackboard record the running tasks read the
+SENSING_* flags from; the first one is also read, for ``holder_field``), ``approach_record`` ("-" = the sensing
+YAML's, "" = none: the original's trees have no approach record), ``target_fill`` (0.0 = the sensing YAML's ``vessel.target_fill``:
 the fill fraction at which a vessel counts as loaded; the fleet loads part of each vessel so that its three rounds
 fit the one mound).
 
@@ -76,9 +78,14 @@ class SensingNode(Node):
             "zx200_pose_topic": "/sim/truth/zx200/pose",
         }
         topics = {k: declare_startup(self, k, v).value for k, v in topics.items()}
-        record = str(declare_startup(self, "blackboard_record", "").value)
-        if record:
-            cfg = dataclasses.replace(cfg, blackboard_record=record)
+        records = [str(r) for r in declare_startup(self, "blackboard_records", [""]).value if r]
+        if records:
+            if len(set(records)) != len(records):
+                raise ConfigError(f"tms_sp_sensing: parameter blackboard_records names a record twice: {records}")
+            cfg = dataclasses.replace(cfg, blackboard_records=tuple(records))
+        approach = str(declare_startup(self, "approach_record", "-").value)
+        if approach != "-":
+            cfg = dataclasses.replace(cfg, approach_record=approach)
         fill = float(declare_startup(self, "target_fill", 0.0).value)
         if fill:
             try:
@@ -115,7 +122,7 @@ class SensingNode(Node):
         self._status = self.create_publisher(DiagnosticArray, "/tms_sp/status", 10)
         self.create_timer(1.0 / rate, self._process)
         self._kv = (KeyValue, DiagnosticStatus, DiagnosticArray)
-        self._log.info(f"sensing: blackboard {cfg.blackboard_record}, topics {topics}, {rate:g} Hz")
+        self._log.info(f"sensing: flags to {', '.join(cfg.blackboard_records)}, topics {topics}, {rate:g} Hz")
 
     def _on_carrier(self, name: str, msg: PoseStamped) -> None:
         if name != self.sensing.carrier:

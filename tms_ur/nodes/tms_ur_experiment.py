@@ -74,7 +74,7 @@ class ExperimentNode(Node):
         self.timeout = float(d("timeout_s", 3600.0).value)
         self.progress_period = float(d("progress_period_s", 2.0).value)
         # The flags are polled from the DB (no change stream in the embedded store): fast enough to see
-        # LOADED_FLG's short true phase, which a 5 Hz poll missed.
+        # MOVING_FLG's short true phase, which a 5 Hz poll missed.
         flags_period = float(d("flags_period_s", 0.05).value)
         # Tasks start only once every planning and subtask action server is on the graph: with the
         # launcher's parallel start-up a leaf sent before its server exists fails the task at once.
