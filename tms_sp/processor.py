@@ -11,8 +11,8 @@ changed through a tms_db store (``open_store``), as the original tms_sp updaters
   only while the IC120 stands at the loading point (elsewhere the vessel is not where the ZX200 releases);
 * the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> every global-blackboard
   record of ``blackboard_records`` (the records the running tasks read them from: the paper's trees name
-  GLOBAL_BLACKBOARD_EARTHWORK, the original's 2024-12 trees SAMPLE_BLACKBOARD_SHIMIZU), written on the first
-  assessment and then on every change. Meanings as the seed paper's Table 7: SENSING_CHECK_MOUND_FLG is true
+  GLOBAL_BLACKBOARD_EARTHWORK, the original's 2024-12 trees SAMPLE_BLACKBOARD_SHIMIZU), written whenever a
+  record holds another value than the assessment (also after a tree reset the flag). Meanings as the seed paper's Table 7: SENSING_CHECK_MOUND_FLG is true
   when there is *not* enough soil in the mound (initially false).
 
 Several carriers (the fleet experiment): the pose and vessel inputs are those of one carrier, ``carrier``
@@ -62,7 +62,6 @@ class SiteSensing:
     vessel: VesselAssessment | None = None
     flags: dict[str, bool] = field(default_factory=dict)
     writes: int = 0
-    _written_flags: dict[str, bool] = field(default_factory=dict)
     _last_target: tuple[float, float, float] | None = None
     _last_target_xy: tuple[float, float] | None = None  # map frame, kept by assess_mound while it scores near the best
     _last_release: tuple[float, float, float] | None = None
@@ -202,11 +201,15 @@ class SiteSensing:
         return last is None or math.dist(last, new) > threshold
 
     def _set_flag(self, name: str, value: bool) -> None:
+        """Write the assessment where a record holds another value. Compared with the record, not with what
+        sensing wrote last: the original's trees also write the Manual flags (the 2024-12 IC120 tree resets
+        SENSING_LOADED_FLG after leaving P1), and sensing must assert its assessment again at its next scan."""
         self.flags[name] = value
-        if self._written_flags.get(name) is value:
-            return
+        changed = False
         for record in self.cfg.blackboard_records:
-            self._writer.write(record, {name: bool(value)}, strict=True)
-        self.writes += 1
-        self._written_flags[name] = value
-        log.info("%s -> %s", name, value)
+            if self._writer.record(record).get(name) is not value:
+                self._writer.write(record, {name: bool(value)}, strict=True)
+                changed = True
+        if changed:
+            self.writes += 1
+            log.info("%s -> %s", name, value)

@@ -218,3 +218,30 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
     approach = store.get_parameter("zx200", cfg.approach_record)
     assert (approach["x"], approach["y"], approach["theta_w"]) == (target["x"], target["y"], target["theta_w"])
     assert approach["z"] == pytest.approx(target["z"] + cfg.approach_height)
+
+
+def test_sensing_writes_every_record_the_tasks_read_and_asserts_flags_a_tree_reset(tmp_path):
+    """Flags go to each record of blackboard_records; a Manual flag a tree overwrote (the original's 2024-12
+    IC120 tree resets SENSING_LOADED_FLG after leaving P1) is written again at the next assessment."""
+    cfg = load_sensing_config()
+    other = "SAMPLE_BLACKBOARD_SHIMIZU"  # the record the original's 2024-12 trees read
+    cfg = dataclasses.replace(cfg, blackboard_records=(BB, other))
+    store = tms_db.open_store(path=tmp_path / "db")
+    seed(store, ROOT / "config" / "seeds" / "paper.yaml")
+    sensing = SiteSensing(cfg, store)
+    with pytest.raises(Exception, match=other):  # not seeded yet: named at start, nothing written
+        sensing.check_records()
+    flags = {f: False for f in ("SENSING_ARRIVAL_FLG", "SENSING_LOADED_FLG", "SENSING_CHECK_MOUND_FLG")}
+    store.upsert_parameter({"record_name": other, "model_name": "global_blackboard", "type": "dynamic", **flags})
+    sensing.check_records()
+    world = World(store, cfg)
+    world.vessel = 4.0  # a loaded vessel
+    rng = np.random.default_rng(1)
+    sensing.on_vessel_points(world.vessel_scan(rng))
+    assert [store.get_record(r)["SENSING_LOADED_FLG"] for r in (BB, other)] == [True, True]
+    store.set_fields(other, {"SENSING_LOADED_FLG": False})  # a tree resets it; the vessel is still loaded
+    sensing.on_vessel_points(world.vessel_scan(rng))
+    assert [store.get_record(r)["SENSING_LOADED_FLG"] for r in (BB, other)] == [True, True]
+    # Table 7: the mound full of soil -> SENSING_CHECK_MOUND_FLG false ("enough soil") in both records
+    sensing.on_mound_points(world.mound_scan(rng))
+    assert [store.get_record(r)["SENSING_CHECK_MOUND_FLG"] for r in (BB, other)] == [False, False]
