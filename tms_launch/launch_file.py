@@ -55,12 +55,15 @@ Every problem (malformed YAML, unknown key, unknown executable, duplicate name) 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import yaml
 
 from com3_can.bus import IN_PROCESS_ENV
 from tms_common.config import Where, load_yaml, repo_root
@@ -147,6 +150,29 @@ class LaunchFile:
     def containers(self) -> tuple[str, ...]:
         """The container names of the file, in the order their first node appears."""
         return tuple(dict.fromkeys(n.container for n in self.nodes if n.container))
+
+
+def with_parameters(launch: LaunchFile, overrides: list[str]) -> LaunchFile:
+    """``launch`` with node parameters set from ``NODE:KEY=VALUE`` texts (tms-launch ``--param``): NODE is a
+    node's name or fully qualified name (every node of that name), VALUE is YAML (``[a, b]``, ``3.0``, ``""``).
+    A node or text that does not fit is a ConfigError naming it."""
+    nodes = list(launch.nodes)
+    for text in overrides:
+        target, sep, assignment = text.partition(":")
+        key, eq, value_text = assignment.partition("=")
+        if not sep or not eq or not target or not key:
+            raise ConfigError(f"--param {text!r}: expected NODE:KEY=VALUE (e.g. tms_sp_sensing:rate_hz=1.0)")
+        try:
+            value = yaml.safe_load(value_text) if value_text.strip() else ""
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--param {text!r}: VALUE is not YAML: {exc}") from None
+        hits = [i for i, n in enumerate(nodes) if target in (n.name, n.fqn)]
+        if not hits:
+            raise ConfigError(f"--param {text!r}: {launch.file} has no node {target!r} "
+                              f"(nodes: {', '.join(n.fqn for n in nodes)})")
+        for i in hits:
+            nodes[i] = dataclasses.replace(nodes[i], parameters={**nodes[i].parameters, key: value})
+    return dataclasses.replace(launch, nodes=tuple(nodes))
 
 
 @dataclass(frozen=True)

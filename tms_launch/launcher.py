@@ -50,6 +50,7 @@ from tms_launch.launch_file import (
     ProcessSpec,
     parse_launch_file,
     processes,
+    with_parameters,
 )
 
 SIGTERM_GRACE_S = 1.5
@@ -351,12 +352,15 @@ def main(argv: list[str] | None = None) -> int:
                              f"(default: ${LAYOUT_ENV}, else composed)")
     parser.add_argument("--containers", default=None, metavar="A,B",
                         help="start only the nodes of these containers (comma-separated)")
+    parser.add_argument("--param", action="append", default=[], metavar="NODE:KEY=VALUE",
+                        help="set a node's parameter (VALUE as YAML); repeatable, e.g. "
+                             "--param tms_sp_sensing:blackboard_records=[SAMPLE_BLACKBOARD_SHIMIZU]")
     opts = parser.parse_args(argv)
     path = Path(opts.launch_file)
     layout = opts.layout or os.environ.get(LAYOUT_ENV) or "composed"
     containers = [c.strip() for c in opts.containers.split(",") if c.strip()] if opts.containers is not None else None
     try:
-        launch = parse_launch_file(path)
+        launch = with_parameters(parse_launch_file(path), opts.param)
         launcher = Launcher(launch, layout=layout, containers=containers)
     except ConfigError as exc:
         print(f"tms-launch: {exc}", file=sys.stderr, flush=True)

@@ -13,7 +13,7 @@ import pytest
 
 from com3_can.bus import IN_PROCESS_ENV, link_config, load_bus_config
 from tms_common.errors import ConfigError
-from tms_launch.launch_file import parse_launch_file, processes
+from tms_launch.launch_file import parse_launch_file, processes, with_parameters
 from tms_launch.launcher import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -147,3 +147,18 @@ def test_layout_from_the_environment(capsys, monkeypatch):
     monkeypatch.setenv("TMS_LAYOUT", "per-node")
     assert main(["--list", "--containers", "plant", str(PAPER)]) == 0
     assert len(capsys.readouterr().out.splitlines()) == 3
+
+
+def test_param_overrides_set_a_nodes_parameter_and_name_what_does_not_fit():
+    launch = parse_launch_file(PAPER)
+    out = with_parameters(launch, ["tms_sp_sensing:blackboard_records=[SAMPLE_BLACKBOARD_SHIMIZU]",
+                                   "tms_sp_sensing:approach_record=", "/zx200/zx200_arm_controller:rate_hz=25.0"])
+    by = {n.fqn: n for n in out.nodes}
+    assert by["/tms_sp_sensing"].parameters["blackboard_records"] == ["SAMPLE_BLACKBOARD_SHIMIZU"]
+    assert by["/tms_sp_sensing"].parameters["approach_record"] == ""
+    assert by["/zx200/zx200_arm_controller"].parameters["rate_hz"] == 25.0
+    assert "-p" in by["/tms_sp_sensing"].ros_args() and launch.nodes != out.nodes  # the input is not changed
+    for bad, culprit in (("nobody:x=1", "no node 'nobody'"), ("tms_sp_sensing=1", "NODE:KEY=VALUE"),
+                         ("tms_sp_sensing:x=[1,", "not YAML")):
+        with pytest.raises(ConfigError, match=culprit):
+            with_parameters(launch, [bad])
