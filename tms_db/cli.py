@@ -9,7 +9,7 @@
       param get RECORD [--model-name M]
       param set RECORD FIELD=VALUE... [--model-name M] [--upsert]   (VALUE parsed as JSON: true, 3, 1.5, "s")
       dump DIR | restore DIR [--drop] (MongoDB Extended JSON, one document per line; mongoimport reads it)
-      seed paper|fleet [--file config/seeds/<name>.yaml]
+      seed paper|fleet|original_202412 [--file config/seeds/<name>.yaml]
       check                           (the store's consistency check)
 
 The store is chosen as in :func:`tms_db.open_store`: ``--uri`` (default ``$TMS_DB_URI``) for MongoDB,
@@ -158,7 +158,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("dir")
     r.add_argument("--drop", action="store_true", help="empty each restored collection first")
     s = sub.add_parser("seed", help="load a named seed")
-    s.add_argument("name", choices=["paper", "fleet"])
+    s.add_argument("name", choices=["paper", "fleet", "original_202412"])
     s.add_argument("--file", default=None, help="seed file (default config/seeds/<name>.yaml)")
     sub.add_parser("check", help="run the store's consistency check")
     return p

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 
-from tests.tms_sp.treeutil import load_seed
+from tests.tms_sp.treeutil import ROOT, load_seed
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.geometry import Pose2D
 from tms_rc.zx200.controller import load_controller_config
@@ -123,3 +124,17 @@ def test_every_sensed_excavation_target_passes_planner_validation():
         seen += 1
         surface = syn.dig_pit(surface, a.target.x, a.target.y, radius=0.7, depth=0.5)
     assert seen >= 5
+
+
+def _original_zx200() -> dict[str, dict]:
+    seed = yaml.safe_load((ROOT / "config" / "seeds" / "original_202412.yaml").read_text())
+    return {d["record_name"]: d for d in seed["parameters"] if d.get("model_name") == "zx200"}
+
+
+@pytest.mark.parametrize("record", sorted(_original_zx200()))
+def test_every_zx200_record_for_the_originals_2024_12_trees_passes_planner_validation(record):
+    """The records the original's own 2024-12 trees name (config/seeds/original_202412.yaml)."""
+    doc = _original_zx200()[record]
+    _validate(record, doc)
+    if record.startswith("hold_soil"):  # carried soil stays in the bucket on the way
+        assert doc["theta_w"] > SPILL_ANGLE + 0.2
