@@ -47,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import Point, Pose, PoseStamped
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -68,7 +69,7 @@ from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 
 __all__ = ["SubtaskSpec", "SUBTASKS", "KIND_SUBTASKS", "subtasks_for", "travel_rows", "ZX200_JOINTS",
            "change_pose_goal", "change_pose_options", "zx200_ok", "nav2_ok", "dump_ok", "dump_up_ok", "swing_ok",
-           "arm_ok"]
+           "arm_ok", "planning_verdict"]
 
 ZX200_JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 _QUAT = ("qx", "qy", "qz", "qw")
@@ -319,6 +320,32 @@ def dump_up_ok(response) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs DumpUp
 def arm_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - tms_msg Zx200ArmMove.Result
     """The arm controller: TmsRpErrorCodes SUCCESS, else its code and message."""
     return result.error_code.val == TmsRpErrorCodes.SUCCESS, f"error_code {result.error_code.val}: {result.message}"
+
+
+_STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CANCELED: "CANCELED",
+                 GoalStatus.STATUS_ABORTED: "ABORTED"}
+
+
+def planning_verdict(check: Callable[[Any], tuple[bool, str]], result: Any, status: int) -> tuple[bool, str]:
+    """(ok, detail) of a planning goal that ended with action ``status`` and ``result``, read by its row's ``check``.
+
+    ok only when the goal SUCCEEDED and ``check`` reads its result as a success. A goal that ended otherwise
+    while its result reads as a success, or whose result is empty (rclpy ends a goal whose execute callback
+    raised ABORTED with a default-constructed result: Nav2's error_code 0 there reads as NONE, TmsRpErrorCodes'
+    0 is no code at all), is named for what happened instead of passing on that code as the failure's.
+    """
+    ok, detail = check(result)
+    empty = result == type(result)()
+    if status == GoalStatus.STATUS_SUCCEEDED:
+        if ok or not empty:
+            return ok, detail
+        return False, f"planning goal SUCCEEDED with an empty result ({detail})"
+    name = _STATUS_NAMES.get(status, f"with status {status}")
+    if empty:
+        return False, f"planning goal {name} without a result (an empty result: {detail})"
+    if ok:
+        return False, f"planning goal {name} although its result reads as a success ({detail})"
+    return False, detail
 
 
 @dataclass(frozen=True)

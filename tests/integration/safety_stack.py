@@ -66,9 +66,11 @@ def _literal(value: object) -> str:
     return str(value)
 
 
-def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | None = None) -> dict:  # noqa: ANN001
+def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | None = None,  # noqa: ANN001
+                skip: set[str] | frozenset[str] = frozenset(), tasks: dict[int, tuple[str, str]] | None = None) -> dict:
     """Seed the DB (paper seed + tasks 91/92) and start every node; returns ``{label: Proc}``.
-    ``overrides`` maps a node name of the launch file to parameters replacing its own."""
+    ``overrides`` maps a node name of the launch file to parameters replacing its own; ``skip`` names more nodes
+    not to start (labels as returned, e.g. ``ic120/com3_bridge``); ``tasks`` adds ``{task_id: (xml, description)}``."""
     db = tmp / "db"
     db.mkdir()
     env = {"TMS_DB_PATH": str(db)}
@@ -81,6 +83,8 @@ def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | N
     try:
         store.add_task(ZX200_XML, ZX200_TASK, "safety test: ZX200 excavate_simple", replace=True)
         store.add_task(IC120_XML, IC120_TASK, "safety test: IC120 shuttle P3 <-> P1", replace=True)
+        for task_id, (xml, description) in (tasks or {}).items():
+            store.add_task(xml, task_id, description, replace=True)
     finally:
         store.close()
 
@@ -92,7 +96,8 @@ def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | N
     out = {}
     for node in launch["nodes"]:
         exe = node["executable"]
-        if exe in SKIP:
+        label = f"{node.get('namespace', '').strip('/')}/{node['name']}".strip("/")
+        if exe in SKIP or label in skip:
             continue
         params = {**common, **node.get("parameters", {}), **(overrides or {}).get(node["name"], {})}
         if exe == "sim_plant":
@@ -108,7 +113,6 @@ def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | N
             cmd += ["-r", f"__ns:={node['namespace']}"]
         for key, value in params.items():
             cmd += ["-p", f"{key}:={_literal(value)}"]
-        label = f"{node.get('namespace', '').strip('/')}/{node['name']}".strip("/")
         out[label] = procs(cmd, name=label, **env)
     return out
 
@@ -255,8 +259,8 @@ class Probe:
         return cond()
 
 
-def wait_servers(node, timeout: float) -> list[str]:  # noqa: ANN001
-    """Wait until every action server of :data:`SERVERS` is available; returns the missing ones."""
+def wait_servers(node, timeout: float, servers: dict[str, str] | None = None) -> list[str]:  # noqa: ANN001
+    """Wait until every action server of ``servers`` (default :data:`SERVERS`) is available; returns the missing ones."""
     import importlib
 
     from rclpy.action import ActionClient
@@ -272,7 +276,7 @@ def wait_servers(node, timeout: float) -> list[str]:  # noqa: ANN001
 
     checker = rclpy.create_node(f"wait_servers_{os.getpid()}_{next(_CHECKERS)}", context=node.context)
     try:
-        clients = {name: ActionClient(checker, action_type(t), name) for name, t in SERVERS.items()}
+        clients = {name: ActionClient(checker, action_type(t), name) for name, t in (servers or SERVERS).items()}
         end = time.monotonic() + timeout
         missing = list(clients)
         while time.monotonic() < end:

@@ -146,3 +146,68 @@ def test_a_goal_sent_before_the_first_joint_states_waits_for_them(procs, ros_nod
     finally:
         executor.shutdown(timeout_sec=5.0)
         node.destroy_node()
+
+
+def _send(node, executor, client, segments, timeout: float = 30.0):  # noqa: ANN001, ANN202
+    """Send a goal and wait for its acceptance; returns its result future."""
+    from tms_msg.action import Zx200ArmMove
+
+    send = client.send_goal_async(Zx200ArmMove.Goal(segments=segments))
+    end = time.monotonic() + timeout
+    while not send.done() and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
+    assert send.done() and send.result().accepted, "goal not accepted"
+    return send.result().get_result_async()
+
+
+def _wait(executor, futures, timeout: float = 60.0) -> None:  # noqa: ANN001
+    end = time.monotonic() + timeout
+    while not all(f.done() for f in futures) and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
+    assert all(f.done() for f in futures), f"{sum(not f.done() for f in futures)} goal(s) without a result"
+
+
+def test_re_sent_goals_to_the_held_pose_and_a_preempting_goal_each_end_with_a_result(controller) -> None:
+    """Issue 39: the original's ZX200 tree re-sends change_pose to the pose the arm holds; one such goal ended
+    before the controller's first tick and its end-of-goal log line raised, so rclpy aborted it with an empty
+    result. Every goal here must end with a result of its own, and the controller must never raise."""
+    from rclpy.action import ActionClient
+
+    from tms_msg.action import Zx200ArmMove
+
+    node, executor, _, ctl = controller
+    client = ActionClient(node, Zx200ArmMove, "/zx200/arm_controller/move")
+    assert client.wait_for_server(timeout_sec=30.0), "arm_controller/move not available"
+    # 1. ten goals to the pose held, one after the other: each SUCCEEDED with SUCCESS
+    for k in range(10):
+        result = _send(node, executor, client, [_joint("hold", Q)])
+        _wait(executor, [result])
+        outcome = result.result()
+        assert outcome.status == 4 and outcome.result.error_code.val == codes.SUCCESS, (k, outcome)
+    # 2. a goal while one runs: the newer goal drives the arm (SUCCEEDED), the older ends with a failure result
+    # of its own, not the newer one's result and not rclpy's empty one (error_code 0)
+    q_far = [Q[0] + 0.3, Q[1], Q[2], Q[3]]  # never reached: the test's joint_states hold Q
+    first = _send(node, executor, client, [_joint("far", q_far)])
+    end = time.monotonic() + 0.3
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
+    second = _send(node, executor, client, [_joint("hold", Q)])
+    _wait(executor, [first, second])
+    assert first.result().status == 6, first.result()  # ABORTED
+    assert first.result().result.error_code.val == codes.FAILURE, first.result().result
+    assert first.result().result.message == "preempted by a newer goal before it ended", first.result().result
+    assert second.result().status == 4 and second.result().result.error_code.val == codes.SUCCESS, second.result()
+    # 3. two goals back to back, the second before the first has seen a tick: both end with a result
+    a = client.send_goal_async(Zx200ArmMove.Goal(segments=[_joint("hold", Q)]))
+    b = client.send_goal_async(Zx200ArmMove.Goal(segments=[_joint("hold", Q)]))
+    _wait(executor, [a, b], 30.0)
+    results = [a.result().get_result_async(), b.result().get_result_async()]
+    _wait(executor, results)
+    codes_seen = [(r.result().status, r.result().result.error_code.val) for r in results]
+    assert (4, codes.SUCCESS) in codes_seen and all(c != 0 for _, c in codes_seen), codes_seen
+    executor.spin_once(timeout_sec=0.2)
+    ended = [ln for ln in ctl.output.splitlines() if "goal ended" in ln]
+    assert len(ended) == 14, "\n".join(ended)  # one log line per goal: 10 + 2 + 2
+    assert "Traceback" not in ctl.output and "Error raised in execute callback" not in ctl.output, ctl.output
+    print(f"\n{len(ended)} goals ended; preempted before any tick ('at once'): "
+          f"{sum('at once' in ln for ln in ended)}; back to back: {codes_seen}")

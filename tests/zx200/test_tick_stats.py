@@ -27,3 +27,19 @@ def test_no_stamp_and_a_bad_period():
     assert stats.late == 0 and stats.max_age == 0.0 and stats.ticks == 2
     with pytest.raises(ValueError, match="period"):
         TickStats(0.0)
+
+
+def test_segment_spans_of_a_goal_that_ended_before_any_tick_read_at_once():
+    from tms_rc.zx200.tick_stats import SegmentSpans
+
+    # a goal to the pose already held can end on its first tick, a preempted one before it: no span recorded
+    assert SegmentSpans().summary(12.0) == "at once"
+
+
+def test_segment_spans_end_where_the_next_begins_and_repeat_labels_extend_a_span():
+    from tms_rc.zx200.tick_stats import SegmentSpans
+
+    spans = SegmentSpans()
+    for label, t in (("approach", 1.0), ("approach", 1.5), ("penetrate", 3.0), ("stopping", 4.0)):
+        spans.enter(label, t)
+    assert spans.summary(4.5) == "after 3.5 s; segments [s]: approach 2.0, penetrate 1.0, stopping 0.5"

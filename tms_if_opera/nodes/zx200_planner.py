@@ -40,6 +40,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import traceback
 import uuid
 
 import numpy as np
@@ -93,6 +94,8 @@ RESULT_GRACE_S = 3.0            # [s wall] after the goal status says it ended, 
 SERVER_GONE_S = 5.0             # [s wall] the controller's action server absent this long: the segment fails
 STOP_TIMEOUT_S = 15.0           # [s wall] stopped mid-goal: wait this long for the controller to end the goal
 TICK_S = 0.02                   # [s wall] how often a waiting goal looks at cancel, stop, deadlines, the server
+_STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CANCELED: "CANCELED",
+                 GoalStatus.STATUS_ABORTED: "ABORTED"}
 
 
 class Zx200PlannerNode(Node):
@@ -133,7 +136,8 @@ class Zx200PlannerNode(Node):
         self._action_names = {TmsRpZx200ChangePose: CHANGE_POSE, TmsRpZx200ExcavateSimple: EXCAVATE_SIMPLE,
                               TmsRpZx200ReleaseSimple: RELEASE_SIMPLE}
         self._servers = [
-            ActionServer(self, action_type, name, execute_callback=functools.partial(self._execute, execute),
+            ActionServer(self, action_type, name,
+                         execute_callback=functools.partial(self._execute, execute, action_type, name),
                          goal_callback=self._on_goal, cancel_callback=self._on_cancel, callback_group=self._group,
                          result_timeout=ACTION_RESULT_TIMEOUT_S)
             for action_type, name, execute in (
@@ -192,9 +196,15 @@ class Zx200PlannerNode(Node):
         self._ticker.wake()  # forwarded to the controller now, not at the next tick
         return CancelResponse.ACCEPT
 
-    async def _execute(self, execute, handle):  # noqa: ANN001, ANN202
+    async def _execute(self, execute, action_type, name, handle):  # noqa: ANN001, ANN202
         with self._goals.running():
-            return await execute(handle)
+            try:
+                return await execute(handle)
+            except Exception as exc:  # noqa: BLE001 - the goal ends with a failure code, never rclpy's empty result
+                self.get_logger().error(f"{name} goal failed inside the planner: {traceback.format_exc()}")
+                if not handle.is_active:
+                    raise
+                return self._end(handle, action_type, codes.FAILURE, f"zx200_planner error: {exc!r}", name)
 
     def on_stop_requested(self) -> bool:
         """Cancel the running controller goals (the waits below see ``stopping``); True while any runs."""
@@ -361,9 +371,12 @@ class Zx200PlannerNode(Node):
         res = outcome.result
         if cancel_sent and outcome.status == GoalStatus.STATUS_CANCELED:  # the controller's CANCELED means at rest
             return codes.CANCELED, f"canceled, arm at rest (controller: {res.message or 'no message'})"
+        # a controller goal that did not succeed never passes on SUCCESS or the empty result's 0
+        code, message = codes.reported(outcome.status == GoalStatus.STATUS_SUCCEEDED, res.error_code.val, res.message,
+                                       f"{_STATUS_NAMES.get(outcome.status, f'status {outcome.status}')} at the arm controller")
         if cancel_sent:
-            return res.error_code.val, f"cancel sent, but the controller ended the goal with status {outcome.status}: {res.message}"
-        return res.error_code.val, res.message
+            return code, f"cancel sent, but the controller ended the goal with status {outcome.status}: {message}"
+        return code, message
 
     # -------------------------------------------------------------- the three actions
     async def _change_pose(self, handle):  # noqa: ANN001, ANN202

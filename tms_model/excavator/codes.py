@@ -19,6 +19,30 @@ JOINT_LIMIT = 4
 CANCELED = 5
 TIMEOUT = 6
 NO_VALID_CONTROL = 7
+#: no code at all: the value of a result nobody filled in (rclpy ends a goal whose execute callback raised
+#: ABORTED with such an empty result); not a class of its own, and never reported as one
+NO_CODE = 0
+
+
+def reported(succeeded: bool, code: int, message: str, status: str = "ABORTED") -> tuple[int, str]:
+    """The (code, message) to report for a goal that ended ``status`` with ``code`` and ``message`` in its result.
+
+    SUCCESS only when the goal SUCCEEDED and its result says SUCCESS. Otherwise a failure code: the result's
+    own when it carries one; FAILURE when it carries SUCCESS or :data:`NO_CODE` (the goal aborted without a
+    result, or succeeded without a code), with a message naming what happened, so no failure goes on with
+    the success code (or none).
+    """
+    if code == SUCCESS and succeeded:
+        return code, message
+    if code not in (SUCCESS, NO_CODE):
+        return code, message
+    if succeeded:
+        what = f"goal {status} without a result code (error_code {code})"
+    elif code == NO_CODE and not message:
+        what = f"goal {status} without a result"
+    else:
+        what = f"goal {status} although its result says {'SUCCESS' if code == SUCCESS else f'error_code {code}'}"
+    return FAILURE, f"{what}: {message}" if message else what
 
 
 class PlanningError(TmsError):

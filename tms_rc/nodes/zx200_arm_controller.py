@@ -6,7 +6,9 @@ to the COM3 converter, and serves the internal action ``arm_controller/move`` (t
 that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
 joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
 malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.zx200.segments`). Cancel decelerates within the
-limits and the goal ends CANCELED only when the arm is at rest.
+limits and the goal ends CANCELED only when the arm is at rest. One goal drives the arm at a time: a new goal
+preempts the running one, which ends ABORTED with FAILURE "preempted by a newer goal" (a result, never rclpy's
+empty one); a goal to the pose the arm already holds ends SUCCESS once it is confirmed there.
 
 One thread: the goal's execute callback is a coroutine that the control tick wakes (feedback at most
 every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On the MultiThreadedExecutor
@@ -21,6 +23,8 @@ excavator on the site it drives, e.g. zx120; default the namespace's last segmen
 from __future__ import annotations
 
 import time
+import traceback
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,13 +46,21 @@ from tms_model.fleet import machine_kind, machine_name
 from tms_msg.action import Zx200ArmMove
 from tms_rc.zx200.controller import ArmController, load_controller_config
 from tms_rc.zx200.segments import targets_from_segments
-from tms_rc.zx200.tick_stats import TickStats
+from tms_rc.zx200.tick_stats import SegmentSpans, TickStats
 
 __all__ = ["ArmControllerNode", "main"]
 
 
 JOINT_STATES_WAIT_S = 15.0  # [s] a goal waits this long for the first joint_states (wall clock)
 FEEDBACK_PERIOD_S = 0.05  # [s wall] feedback at most this often (the result is checked on every tick)
+
+
+@dataclass(eq=False)
+class _Run:
+    """One goal's run of the controller: its tick timing and, once the controller ends it, (code, message)."""
+
+    stats: TickStats
+    result: tuple[int, str] | None = None
 
 
 class ArmControllerNode(Node):
@@ -73,8 +85,7 @@ class ArmControllerNode(Node):
         self._q: np.ndarray | None = None
         self._dq: np.ndarray | None = None
         self._q_stamp: float | None = None  # header stamp of the last joint_states [s]
-        self._tick_stats: TickStats | None = None  # of the running goal
-        self._goal_active = False
+        self._run: _Run | None = None  # the goal that drives the arm now
         self._pub = self.create_publisher(JointCmd, "front_cmd", 10)
         self.create_subscription(JointState, "joint_states", self._on_state, 20)
         # futures completed by the next control tick / the first joint_states (coroutines await them)
@@ -123,9 +134,12 @@ class ArmControllerNode(Node):
         # predictor, integrators and reference by the time that really passed, so late or
         # skipped ticks under CPU load do not corrupt the prediction (issue 9: swing stuck off).
         now = self.get_clock().now().nanoseconds * 1e-9
-        if self._tick_stats is not None:
-            self._tick_stats.tick(now, self._q_stamp)
+        run = self._run
+        if run is not None:
+            run.stats.tick(now, self._q_stamp)
         u = self.ctl.step(q, dq, now=now)
+        if run is not None:
+            self._note_end(run)  # recorded here, so the run's result survives a goal that starts before it wakes
         msg = JointCmd()
         msg.joint_name = list(JOINTS)
         msg.control_type = VELOCITY
@@ -159,24 +173,67 @@ class ArmControllerNode(Node):
             result.error_code.val = codes.INVALID_GOAL
             result.message = str(exc)
             return result
+        # One arm, one run: a new goal preempts the running one (whose coroutine then ends it FAILURE),
+        # as a trajectory controller does; the tree's halt-and-resend pattern relies on the newer goal winning.
+        run = _Run(TickStats(self.cfg.dt))
+        preempts = self._run is not None
+        self._run = run
         self.ctl.start(targets)
-        self._tick_stats = TickStats(self.cfg.dt)
+        spans = SegmentSpans()
+        try:
+            code, message = await self._follow(handle, run, spans)
+        except Exception as exc:  # noqa: BLE001 - every goal ends with a result, never rclpy's empty one
+            self.get_logger().error(f"goal failed inside the controller: {traceback.format_exc()}")
+            if self._run is run:
+                self.ctl.stop(f"controller error: {exc!r}")  # the arm comes to rest; no goal drives it any more
+            code, message = codes.FAILURE, f"arm controller error: {exc!r}"
+        finally:
+            if self._run is run:
+                self._run = None
+        code, message = codes.reported(code == codes.SUCCESS, code, message, "ended")
+        result.error_code.val = int(code)
+        result.message = message
+        self.get_logger().info(
+            f"goal ended {code} ({message}) {spans.summary(self.get_clock().now().nanoseconds * 1e-9)}"
+            + (" (it preempted a running goal)" if preempts else "")
+            + f"; control loop: {run.stats.summary()}"
+        )
+        if code == codes.SUCCESS:
+            handle.succeed()
+        elif code == codes.CANCELED and handle.is_cancel_requested:
+            handle.canceled()
+        else:
+            handle.abort()
+        return result
+
+    def _note_end(self, run: _Run) -> None:
+        """The controller's result, if its run (``run``, still the current one) has just ended."""
+        st = self.ctl.status
+        if self._run is run and run.result is None and st.result is not None:
+            run.result = (int(st.result), st.message)
+
+    async def _follow(self, handle, run: _Run, spans: SegmentSpans) -> tuple[int, str]:  # noqa: ANN001
+        """Wait on the control ticks until ``run`` ends (its result), is preempted, or is canceled and at rest."""
         canceling = False
         last_feedback = -1e9
-        # (label, start) of each segment in ROS-clock seconds: logged at the end, where a motion's time went
-        spans: list[list] = []
         while True:
             await self._next_tick()
+            # the result the tick recorded for this run comes first: a run that ended at the tick before a
+            # newer goal started keeps its own result
+            if run.result is not None:
+                return run.result
+            if self._run is not run:
+                return codes.FAILURE, "preempted by a newer goal before it ended"
             st = self.ctl.status
-            label = "stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}")
-            if st.result is None and (not spans or spans[-1][0] != label):  # ended: idle, no segment
-                spans.append([label, self.get_clock().now().nanoseconds * 1e-9])
+            spans.enter("stopping" if st.mode == "stopping" else (st.label or f"segment {st.segment}"),
+                        self.get_clock().now().nanoseconds * 1e-9)
             if handle.is_cancel_requested and not canceling:
                 self.ctl.stop("canceled")
                 canceling = True
+                self._note_end(run)  # stopping an arm already at rest ends the run at once
+                if run.result is not None:
+                    return run.result
                 st = self.ctl.status
-            if st.result is not None:
-                break
             if time.monotonic() - last_feedback < FEEDBACK_PERIOD_S:
                 continue
             last_feedback = time.monotonic()
@@ -187,23 +244,6 @@ class ArmControllerNode(Node):
             fb.state = "stopping" if stopping else f"{st.label or 'moving'} ({st.segment}/{st.segments})"
             fb.distance_remaining = float(st.distance_remaining)
             handle.publish_feedback(fb)
-        result.error_code.val = int(st.result)
-        result.message = st.message
-        ends = [start for _, start in spans[1:]] + [self.get_clock().now().nanoseconds * 1e-9]
-        took = f"after {ends[-1] - spans[0][1]:.1f} s; segments [s]: " if spans else "at once"
-        stats, self._tick_stats = self._tick_stats, None
-        self.get_logger().info(
-            f"goal ended {st.result} ({st.message}) {took}"
-            + ", ".join(f"{label} {end - start:.1f}" for (label, start), end in zip(spans, ends, strict=True))
-            + (f"; control loop: {stats.summary()}" if stats else "")
-        )
-        if st.result == codes.SUCCESS:
-            handle.succeed()
-        elif st.result == codes.CANCELED and handle.is_cancel_requested:
-            handle.canceled()
-        else:
-            handle.abort()
-        return result
 
 
 def main() -> int:

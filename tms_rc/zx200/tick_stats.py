@@ -1,15 +1,15 @@
-"""Control-loop timing of one goal: how regular the ticks were and how old the measurement was.
+"""Timing of one goal: how regular the control ticks were, how old the measurement was, where the time went.
 
-The arm controller node logs :meth:`TickStats.summary` with each goal's result, so a goal that took
-longer in the running stack than in-process (``python -m tests.bench load_pass``) can be told apart
-from a late control loop (CPU starvation on a loaded host) or a stale ``joint_states``.
+The arm controller node logs :meth:`TickStats.summary` and :meth:`SegmentSpans.summary` with each goal's
+result, so a goal that took longer in the running stack than in-process (``python -m tests.bench load_pass``)
+can be told apart from a late control loop (CPU starvation on a loaded host) or a stale ``joint_states``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-__all__ = ["TickStats"]
+__all__ = ["SegmentSpans", "TickStats"]
 
 
 @dataclass
@@ -54,3 +54,25 @@ class TickStats:
         return (f"{self.ticks} ticks, {self.late} late (> {self.late_factor:g} periods apart, longest gap "
                 f"{self.max_gap * 1000:.0f} ms), joint_states {mean_age * 1000:.0f} ms old on average, "
                 f"at most {self.max_age * 1000:.0f} ms")
+
+
+@dataclass
+class SegmentSpans:
+    """The phases of one goal as (label, start) in ROS-clock seconds, in the order the goal saw them."""
+
+    spans: list[tuple[str, float]] = field(default_factory=list)
+
+    def enter(self, label: str, now: float) -> None:
+        """The goal is in phase ``label`` at ``now`` (a new span only when the label changes)."""
+        if not self.spans or self.spans[-1][0] != label:
+            self.spans.append((label, now))
+
+    def summary(self, now: float) -> str:
+        """``after X s; segments [s]: a 1.0, b 2.0`` with the goal ending at ``now``; ``at once`` for a goal
+        that ended before any tick recorded a phase (a goal to the pose already held can end on its first
+        tick, and a preempted one before it). Each span ends where the next begins, the last at ``now``."""
+        if not self.spans:
+            return "at once"
+        ends = [start for _, start in self.spans[1:]] + [now]
+        parts = [f"{label} {end - start:.1f}" for (label, start), end in zip(self.spans, ends, strict=True)]
+        return f"after {now - self.spans[0][1]:.1f} s; segments [s]: " + ", ".join(parts)

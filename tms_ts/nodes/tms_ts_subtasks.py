@@ -75,7 +75,7 @@ from tms_msg_ts.action import LeafNodeBase
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
 from tms_ts.outcomes import SUBTASK_OUTCOME_TOPIC, code_name
-from tms_ts.subtask_specs import SubtaskSpec, subtasks_for
+from tms_ts.subtask_specs import SubtaskSpec, planning_verdict, subtasks_for
 
 __all__ = ["SubtaskServers", "main", "node_name_from_args"]
 
@@ -377,7 +377,8 @@ class SubtaskServers(Node):
                 return self._finish(gh, spec, R.STOP_TIMEOUT, f"planning {planning} did not confirm the stop within "
                                     f"{self.stop_timeout_s:g} s: /{self.model_name}/emg_stop latched")
         res = result_future.result()
-        ok, detail = spec.check(res.result)
+        # the status and the result together: an aborted goal's (empty) result never passes for a success code
+        ok, detail = planning_verdict(spec.check, res.result, res.status)
         status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
             res.status, "ABORTED")
         if gh.is_cancel_requested:
@@ -385,7 +386,7 @@ class SubtaskServers(Node):
         if self._goals.stopping.is_set():
             return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping (SIGINT/SIGTERM): planning "
                                 f"{planning} canceled ({status})")
-        if res.status == GoalStatus.STATUS_SUCCEEDED and ok:
+        if ok:
             return self._finish(gh, spec, R.NONE, f"{spec.name} '{record}' done")
         if spec.zx200_planning:
             detail = f"{detail}: {await self._planning_text(goal_id)}"
