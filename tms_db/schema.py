@@ -51,8 +51,7 @@ _FAMILIES = {
     "pose": ("x", "y", "z", "qx", "qy", "qz", "qw"),
     "position_with_angle": ("x", "y", "z", "theta_w"),
 }
-#: Machines recognised in task XML for the task's ``model_name`` (the original detects zx120|zx200|ic120).
-MODEL_NAME_PATTERN = re.compile(r"zx120|zx200|ic120|mst110cr|mst2200|d37pxi", re.IGNORECASE)
+_PORT_KEY_RE = re.compile(r"\{([^{}]+)\}")
 
 
 def is_number(value: Any) -> bool:
@@ -225,11 +224,30 @@ def normalise_task_xml(xml: str, task: str = "new task") -> str:
     return one_line
 
 
-def detect_model_names(xml: str) -> str:
-    """Comma-joined lower-case machine names found in the XML, in order of first appearance."""
+def detect_model_names(xml: str, blackboard: Mapping[str, Any] | None = None) -> str:
+    """The machines a task's leaves drive, comma-joined in document order: the ``model_name`` port of every node
+    inside a ``<BehaviorTree>``.
+
+    The node palette (``<TreeNodesModel>``, Groot's list of node types with their default ports) names machines
+    the task may never drive, so it is not read. (The original's task_generator.py searched the whole text for
+    zx120|zx200|ic120: a tree driving the ZX200 and the IC120 with LeafNodeSampleZx120 in its palette became
+    "zx200,ic120,zx120".) A port ``model_name="{key}"`` names the machine the task parameter ``key`` holds
+    (``blackboard``, the task document's field) when it is text; without it that leaf names no machine.
+    """
+    root = ET.fromstring(xml)
+    trees = [root] if root.tag == "BehaviorTree" else root.findall("BehaviorTree")
     seen: list[str] = []
-    for match in MODEL_NAME_PATTERN.finditer(xml):
-        name = match.group(0).lower()
-        if name not in seen:
-            seen.append(name)
+    for tree in trees:
+        for el in tree.iter():
+            raw = el.get("model_name")
+            if raw is None:
+                continue
+            name = raw.strip()
+            m = _PORT_KEY_RE.fullmatch(name)
+            if m:
+                value = (blackboard or {}).get(m.group(1))
+                name = value.strip() if isinstance(value, str) else ""
+            name = name.strip("/")
+            if name and name not in seen:
+                seen.append(name)
     return ",".join(seen)

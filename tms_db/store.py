@@ -274,9 +274,7 @@ def build_task_doc(xml: str, task_id: int | None, description: str, model_name: 
     if not isinstance(description, str):
         raise ValidationError(f"{label}: field 'description' must be a string, got {description!r}")
     sequence = normalise_task_xml(xml, label)
-    if model_name is None:
-        model_name = detect_model_names(sequence)
-    elif not isinstance(model_name, str):
+    if model_name is not None and not isinstance(model_name, str):
         raise ValidationError(f"{label}: field 'model_name' must be a string, got {model_name!r}")
     doc = {"task_id": task_id, "type": "task", "model_name": model_name, "description": description,
            "task_sequence": sequence}
@@ -289,6 +287,8 @@ def build_task_doc(xml: str, task_id: int | None, description: str, model_name: 
             if not isinstance(value, bool | int | float | str):
                 raise ValidationError(f"{label}: field 'blackboard': key {key!r} = {value!r} must be a bool, number or text")
         doc["blackboard"] = dict(blackboard)
+    if model_name is None:  # the machines its leaves name (model_name="{machine}": the task's parameter)
+        doc["model_name"] = detect_model_names(sequence, blackboard)
     if task_id is None:
         del doc["task_id"]
     return doc

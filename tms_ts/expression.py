@@ -1,25 +1,28 @@
-"""A safe evaluator for ConditionalExpression strings (no ``eval``, no attribute access, no calls).
+"""A safe evaluator for ConditionalExpression strings with ExprTk's operators (no ``eval``, no attribute access).
 
-The original node substituted blackboard values into the text and handed it to ExprTk. Here the text
-is tokenised and parsed once into a small AST (:func:`compile_expression`), then evaluated against a
-resolver for identifiers at every tick. Grammar (lowest to highest precedence)::
+The original node substitutes blackboard values into the text and hands it to ExprTk (tms_ts.bt.custom,
+ConditionalExpression). Here the text is tokenised and parsed once into a small AST (:func:`compile_expression`),
+then evaluated against a resolver for identifiers. The grammar is the part of ExprTk's that a substituted text can
+hold, with ExprTk's precedence (checked against the ExprTk the original ships), lowest first::
 
-    or:   and ( ("or" | "||") and )*
-    and:  not ( ("and" | "&&") not )*
-    not:  ("not" | "!") not | cmp
-    cmp:  sum ( ("==" | "=" | "!=" | "<" | "<=" | ">" | ">=") sum )?
-    sum:  prod ( ("+" | "-") prod )*
-    prod: unary ( ("*" | "/" | "%") unary )*
-    unary: "-" unary | atom
-    atom: number | 'string' | "string" | true | false | identifier | "(" or ")"
+    or:    and ( ("or" | "|") and )*
+    and:   cmp ( ("and" | "&") cmp )*
+    cmp:   sum ( ("==" | "=" | "!=" | "<>" | "<" | "<=" | ">" | ">=") sum )*     (chains: 1 < 2 == 1)
+    sum:   prod ( ("+" | "-") prod )*
+    prod:  unary ( ("*" | "/" | "%") unary )*
+    unary: ("-" | "+") unary | power
+    power: atom ( "^" unary )?                                                (-2^2 = -4, 2^3^2 = 512)
+    atom:  number | 'string' | true | false | pi | epsilon | inf | identifier | "(" or ")" | not "(" or ")"
 
-As in ExprTk, booleans are numbers (true = 1, false = 0) and the result is true when non-zero.
-Strings compare only with strings (==, !=, ordering); mixing a string with a number is an
-:class:`ExpressionError`, which the node reports as FAILURE.
+As in ExprTk: booleans are numbers (true = 1, false = 0), the result is true when non-zero (NaN too), ``x/0``
+is inf and ``x%0`` NaN. Strings (single quotes) compare with strings and concatenate with ``+``; mixing a
+string with a number is an :class:`ExpressionError`, as ExprTk refuses to compile it. What ExprTk does not
+parse is refused too: double quotes, ``!``, ``&&``, ``||``, ``not`` without parentheses.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,13 +35,14 @@ __all__ = ["Expression", "compile_expression", "evaluate"]
 _TOKEN_RE = re.compile(
     r"""\s*(?:
         (?P<num>\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?
-      | (?P<str>'[^']*'|"[^"]*")
-      | (?P<op>==|!=|<=|>=|&&|\|\||[-+*/%<>=!()])
+      | (?P<str>'[^']*')
+      | (?P<op>==|!=|<>|<=|>=|[-+*/%^<>=()&|])
       | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
     )""",
     re.VERBOSE,
 )
 _WORD_OPS = {"and": "and", "or": "or", "not": "not", "true": "true", "false": "false"}
+_CONSTANTS = {"pi": math.pi, "epsilon": 2.220446049250313e-16, "inf": math.inf}
 
 
 @dataclass(frozen=True)
@@ -58,7 +62,8 @@ def _tokenise(text: str) -> list[_Tok]:
             break
         m = _TOKEN_RE.match(text, pos)
         if m is None or m.end() == pos:
-            raise ExpressionError(f"expression {text!r}: unexpected character {text[pos]!r} at position {pos}")
+            hint = " (ExprTk has no double-quoted strings)" if text[pos] == '"' else ""
+            raise ExpressionError(f"expression {text!r}: unexpected character {text[pos]!r} at position {pos}{hint}")
         kind = m.lastgroup or "op"
         tok = m.group(0).strip()
         if kind == "num":
@@ -106,29 +111,24 @@ class _Parser:
 
     def or_(self) -> tuple:
         node = self.and_()
-        while self._is("or", "||"):
+        while self._is("or", "|"):
             self.take()
             node = ("bin", "or", node, self.and_())
         return node
 
     def and_(self) -> tuple:
-        node = self.not_()
-        while self._is("and", "&&"):
+        node = self.cmp()
+        while self._is("and", "&"):
             self.take()
-            node = ("bin", "and", node, self.not_())
+            node = ("bin", "and", node, self.cmp())
         return node
-
-    def not_(self) -> tuple:
-        if self._is("not", "!"):
-            self.take()
-            return ("un", "not", self.not_())
-        return self.cmp()
 
     def cmp(self) -> tuple:
         node = self.sum()
-        if self._is("==", "=", "!=", "<", "<=", ">", ">="):
-            op = self.take().text
-            node = ("bin", "==" if op == "=" else op, node, self.sum())
+        while self._is("==", "=", "!=", "<>", "<", "<=", ">", ">="):
+            text = self.take().text
+            op = {"=": "==", "<>": "!="}.get(text, text)
+            node = ("bin", op, node, self.sum())
         return node
 
     def sum(self) -> tuple:
@@ -152,7 +152,14 @@ class _Parser:
         if self._is("+"):
             self.take()
             return self.unary()
-        return self.atom()
+        return self.power()
+
+    def power(self) -> tuple:
+        node = self.atom()
+        if self._is("^"):
+            self.take()
+            node = ("bin", "^", node, self.unary())
+        return node
 
     def atom(self) -> tuple:
         tok = self.take()
@@ -161,9 +168,20 @@ class _Parser:
         if tok.kind == "str":
             return ("str", tok.text[1:-1])
         if tok.kind == "name":
+            if tok.text in _CONSTANTS:
+                return ("num", _CONSTANTS[tok.text])
             return ("var", tok.text)
         if tok.kind == "op" and tok.text in ("true", "false"):
             return ("num", 1.0 if tok.text == "true" else 0.0)
+        if tok.kind == "op" and tok.text == "not":
+            if not self._is("("):
+                raise self.error(self.peek(), "'not' is ExprTk's function: expected '(' after it")
+            self.take()
+            node = self.or_()
+            if not self._is(")"):
+                raise self.error(self.peek(), "missing ')'")
+            self.take()
+            return ("un", "not", node)
         if tok.kind == "op" and tok.text == "(":
             node = self.or_()
             if not self._is(")"):
@@ -221,21 +239,35 @@ class Expression:
             if op == "+":
                 return a + b  # type: ignore[operator]
             raise ExpressionError(f"expression {self.text!r}: cannot apply '{op}' to strings")
-        if op == "+":
-            return a + b  # type: ignore[operator]
-        if op == "-":
-            return a - b  # type: ignore[operator]
-        if op == "*":
-            return a * b  # type: ignore[operator]
-        if b == 0.0:
-            raise ExpressionError(f"expression {self.text!r}: division by zero")
-        return a / b if op == "/" else a % b  # type: ignore[operator]
+        return _arith(op, a, b)  # type: ignore[arg-type]
 
     def _truth(self, node: tuple, resolve: Callable[[str], Any]) -> bool:
         v = self._eval(node, resolve)
         if isinstance(v, str):
             raise ExpressionError(f"expression {self.text!r}: the string {v!r} is not a truth value")
         return v != 0.0
+
+
+def _arith(op: str, a: float, b: float) -> float:
+    """IEEE arithmetic as ExprTk's doubles: x/0 = +-inf (0/0 NaN), x%0 = NaN (fmod), overflowing ^ = inf."""
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "^":
+        try:
+            return math.pow(a, b)
+        except OverflowError:
+            return math.inf
+        except ValueError:
+            return math.nan
+    if b == 0.0:
+        if op == "%" or a == 0.0 or math.isnan(a):
+            return math.nan
+        return math.copysign(math.inf, a) * math.copysign(1.0, b)
+    return a / b if op == "/" else math.fmod(a, b)
 
 
 def _as_value(text: str, name: str, value: Any) -> float | str:

@@ -35,7 +35,7 @@ import re
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from tms_ts.blackboard import MISSING, Blackboard
+from tms_ts.blackboard import MISSING, Blackboard, BlackboardError
 from tms_ts.bt.builtins import BUILTINS
 from tms_ts.bt.core import IDLE, RUNNING, BtNode, Status, TreeContext, convert
 from tms_ts.bt.custom import CUSTOM_NODES
@@ -172,7 +172,9 @@ class _Builder:
         for port in getattr(cls, "LITERAL_PORTS", ()):
             m = _KEY_RE.match(attrs.get(port, ""))
             if m:
-                attrs[port] = self.load_time_value(el, node_id, port, m.group(1), ctx)
+                value = self.load_time_value(el, node_id, port, m.group(1), ctx)
+                self.declare(el, node_id, cls, port, m.group(1), ctx)
+                attrs[port] = value
         ports: dict[str, tuple[bool, Any]] = {}
         for port, raw in attrs.items():
             spec = cls.PORTS.get(port)
@@ -182,6 +184,7 @@ class _Builder:
             m = _KEY_RE.match(raw)
             if m:
                 ports[port] = (True, m.group(1))
+                self.declare(el, node_id, cls, port, m.group(1), ctx)
             elif spec.type == "key":
                 ports[port] = (False, raw)
             else:
@@ -208,6 +211,14 @@ class _Builder:
             child.parent = node
             node.children.append(child)
         return node
+
+    def declare(self, el: Element, node_id: str, cls: type[BtNode], port: str, key: str, ctx: TreeContext) -> None:
+        """BT.CPP creates the entry of a ``{key}`` port with the port's type when it builds the node; a key two
+        ports declare with different types is refused there (tms_ts.blackboard, "Declared at load")."""
+        try:
+            ctx.blackboard.declare(key, cls.PORTS[port].cpp_type)
+        except BlackboardError as exc:
+            raise self.error(el, _describe(el, node_id), f"port '{port}' = '{{{key}}}': {exc}") from None
 
     def load_time_value(self, el: Element, node_id: str, port: str, key: str, ctx: TreeContext) -> str:
         """The text of blackboard entry ``key`` for a port read once at load (a task parameter)."""

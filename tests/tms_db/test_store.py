@@ -14,7 +14,8 @@ TREE = """<root main_tree_to_execute="BehaviorTree">
     <Sequence>
       <Action ID="LeafNodeZx200" subtask_name="subtask_zx200_change_pose"
               record_name="initial_pose" model_name="zx200"/>
-      <Action ID="LeafNodeIc120" subtask_name="st_ic120_follow_waypoints" record_name="LOAD_PATH"/>
+      <Action ID="LeafNodeIc120" subtask_name="st_ic120_follow_waypoints" record_name="LOAD_PATH"
+              model_name="ic120"/>
     </Sequence>
   </BehaviorTree>
 </root>

@@ -85,9 +85,12 @@ def test_writer_retries_a_missing_record_then_fails(store):  # noqa: ANN001
 
 def test_conditional_expression_over_blackboard():
     ok = [("A == true and N != 3", {"A": True, "N": 4}, True),
-          ("LOC == 'LOAD' or LOC == \"DUMP\"", {"LOC": "DUMP"}, True),
-          ("(A or B) and not C", {"A": False, "B": True, "C": False}, True),
-          ("UNKNOWN == ''", {}, True),  # unknown key is the empty string
+          ("LOC == WANTED", {"LOC": "DUMP", "WANTED": "DUMP"}, True),  # two string entries: "DUMP" == "DUMP"
+          ('LOC == "DUMP"', {"LOC": "DUMP"}, False),  # the original substitutes the quoted word too (no such key)
+          ("(A or B) and C == false", {"A": False, "B": True, "C": False}, True),
+          ("(A or B) and not C", {"A": False, "B": True, "C": False}, False),  # "not" is a word: substituted
+          ('UNKNOWN == ""', {}, True),  # unknown key is the empty string
+          ("UNKNOWN == ''", {}, False),  # "" == '' : ExprTk has no double-quoted strings
           ("N >= 2.5", {"N": 2}, False)]
     for expr, bb, expected in ok:
         t = _run(f'<Condition ID="ConditionalExpression" conditional_expression="{expr.replace(chr(34), "&quot;")}"/>',
@@ -96,7 +99,8 @@ def test_conditional_expression_over_blackboard():
     t = _run('<Condition ID="ConditionalExpression" conditional_expression="N == "/>', None, N=1)
     assert t.tick() is FAILURE and "expected a value" in t.root.feedback_message
     t = _run('<Condition ID="ConditionalExpression" conditional_expression="S == 1"/>', None, S="x")
-    assert t.tick() is FAILURE and "cannot apply" in t.root.feedback_message
+    assert t.tick() is FAILURE and "no double-quoted strings" in t.root.feedback_message
+    assert """ExprTk input '"x" == 1'""" in t.root.feedback_message
 
 
 def test_expression_evaluator_is_not_python_eval():
@@ -107,8 +111,10 @@ def test_expression_evaluator_is_not_python_eval():
 
 
 def test_conditional_expression_bool_only_sees_bools():
-    t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not B"/>', None, A=True, B=False)
+    t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not(B)"/>', None, A=True, B=False)
     assert t.tick() is SUCCESS
+    t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not B"/>', None, A=True, B=False)
+    assert t.tick() is FAILURE  # ExprTk: not is a function, "not B" does not parse
     t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and N"/>', None, A=True, N=1)
     assert t.tick() is FAILURE and "'N' is not a bool" in t.root.feedback_message
 
@@ -124,7 +130,7 @@ def test_keep_running_until_flgup_waits_for_bool_true():
     assert t2.tick() is FAILURE
     t3 = tree('<KeepRunningUntilFlgup key="DONE"><Scripted id="a"/></KeepRunningUntilFlgup>', a="S")
     t3.ctx.blackboard.set("DONE", "true")  # what built-in SetBlackboard writes
-    with pytest.raises(TreeRuntimeError, match="must be a bool"):
+    with pytest.raises(TreeRuntimeError, match=r"Unsupported type for key \[DONE\]: it holds std::string 'true'"):
         t3.tick()
 
 

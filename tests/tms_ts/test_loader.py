@@ -85,9 +85,11 @@ def test_legacy_set_local_blackboard_key_port_and_string_flag():
                   '<Action ID="SetLocalBlackboard" value="-12" output_key="I"/>'
                   '<Action ID="SetLocalBlackboard" value=".5" output_key="D"/>'
                   '<Action ID="SetLocalBlackboard" value="LOAD" output_key="S"/>'
-                  '<Action ID="SetLocalBlackboard" value="{I}" output_key="I2"/>'
+                  '<SetBlackboard value="-12" output_key="T"/>'
+                  '<Action ID="SetLocalBlackboard" value="{T}" output_key="I2"/>'
                   '</Sequence></BehaviorTree></root>')
     assert t.tick() is SUCCESS
-    assert t.ctx.blackboard.snapshot() == {"F": False, "I": -12, "D": 0.5, "S": "LOAD", "I2": -12}
+    # value is the original's InputPort<std::string>: {T} reads the text, which is then typed
+    assert t.ctx.blackboard.snapshot() == {"F": False, "I": -12, "D": 0.5, "S": "LOAD", "T": "-12", "I2": -12}
     assert "needs port 'value'" in _err('<root><BehaviorTree ID="B"><Action ID="SetLocalBlackboard" output_key="F"/>'
                                         '</BehaviorTree></root>')

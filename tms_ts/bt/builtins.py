@@ -13,6 +13,7 @@ synchronous loop cannot make the scheduler deaf to cancel and emergency stop.
 
 from __future__ import annotations
 
+from tms_ts.blackboard import STRING, BlackboardError
 from tms_ts.bt.core import (
     FAILURE,
     IDLE,
@@ -347,7 +348,7 @@ class RetryUntilSuccessful(_CountedLoop):
 class Delay(DecoratorNode):
     """RUNNING until ``delay_msec`` has passed since the first tick, then ticks the child."""
 
-    PORTS = {"delay_msec": Port("int", description="delay before the child is ticked [ms]")}
+    PORTS = {"delay_msec": Port("unsigned", description="delay before the child is ticked [ms]")}
 
     def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
         super().__init__(*args, **kwargs)
@@ -377,7 +378,7 @@ class Delay(DecoratorNode):
 class Timeout(DecoratorNode):
     """Halts the child and returns FAILURE if it is still RUNNING ``msec`` after the first tick."""
 
-    PORTS = {"msec": Port("int", description="time limit [ms]")}
+    PORTS = {"msec": Port("unsigned", description="time limit [ms]")}
 
     def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
         super().__init__(*args, **kwargs)
@@ -417,19 +418,43 @@ class AlwaysFailure(ActionNode):
 
 
 class SetBlackboard(ActionNode):
-    """Writes ``value`` as a *string* to ``output_key`` (BT.CPP 3.8: ``{other}`` copies it as text)."""
+    """BT.CPP 3.8.7's SetBlackboard (``actions/set_blackboard_node.h``): ``value`` written as a *string*.
 
-    PORTS = {"value": Port("str"), "output_key": Port("key")}
+    ``output_key`` is read with ``getInput<std::string>`` (``X`` names X; ``{X}`` names the entry whose name X
+    holds). A literal ``value`` is ``blackboard->set(output_key, std::string)``: a new key becomes an untyped
+    string entry (so ``value="true"`` is the text "true", which KeepRunningUntilFlgup refuses), an entry a typed
+    port declared gets the text parsed (``"true"`` -> bool), an entry set() made typed refuses it. ``value="{src}"``
+    copies entry src of this blackboard as it is (value and C++ type, no type check), creating ``output_key``
+    with src's port information when it does not exist.
+    """
+
+    PORTS = {"value": Port("any", typed=False), "output_key": Port("key", typed=False)}
 
     def _tick(self) -> Status:
-        self.set_output("output_key", self.get_input("value"))
+        output_key = self.port_key("output_key")
+        is_key, raw = self._ports["value"]
+        if not is_key:
+            self.bb_set(output_key, raw, STRING)
+            return SUCCESS
+        bb = self.ctx.blackboard
+        src = bb.local_entry(raw)
+        if src is None:
+            raise TreeRuntimeError(f"{self.describe()}: value '{{{raw}}}': no entry '{raw}' on this blackboard "
+                                   "(BT.CPP 3.8: \"Can't find the port referred by [value]\")")
+        dst = bb.local_entry(output_key)
+        if dst is None:
+            try:
+                dst = bb.create_entry(output_key, src.port_type, src.converter)
+            except BlackboardError as exc:
+                raise TreeRuntimeError(f"{self.describe()}: blackboard key '{output_key}': {exc}") from None
+        dst.value, dst.vtype = src.value, src.vtype
         return SUCCESS
 
 
 class Sleep(StatefulNode):
     """v4 action: RUNNING for ``msec``, then SUCCESS."""
 
-    PORTS = {"msec": Port("int")}
+    PORTS = {"msec": Port("unsigned")}
 
     def on_start(self) -> Status:
         self.deadline = self.ctx.task_time() + self.get_input("msec") / 1000.0

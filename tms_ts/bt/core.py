@@ -11,8 +11,10 @@ the py_trees display tools work on it) whose *execution* follows BT.CPP:
   node to a few microseconds.
 * :meth:`BtNode.halt` is BT.CPP's ``halt``: a RUNNING node is interrupted (``on_halted``) and every
   node ends IDLE (py_trees ``Status.INVALID``).
-* Ports are declared per class in ``PORTS``; literal values are converted once when the tree is
-  built, ``{key}`` values are read from the blackboard at every tick.
+* Ports are declared per class in ``PORTS`` with the C++ type the original declares them with; literal
+  values are converted once when the tree is built (``convertFromString``), ``{key}`` values are read from
+  the blackboard at every tick as BT.CPP's ``getInput<T>`` reads them, and a ``{key}`` port declares its
+  entry with that type when the tree is built (:mod:`tms_ts.blackboard` has the rules).
 
 Do not override ``execute_tick`` or ``halt`` in subclasses; fill ``_tick`` / ``on_halted`` (or the
 ``on_start`` / ``on_running`` pair of :class:`StatefulNode`).
@@ -28,7 +30,18 @@ from typing import Any, ClassVar
 from py_trees.behaviour import Behaviour
 from py_trees.common import Status
 
-from tms_ts.blackboard import MISSING, Blackboard, to_text
+from tms_ts.blackboard import (
+    BOOL,
+    DOUBLE,
+    INT,
+    STRING,
+    UINT,
+    Blackboard,
+    BlackboardError,
+    any_cast,
+    convert_from_string,
+    ctype_of,
+)
 from tms_ts.errors import TreeRuntimeError
 
 __all__ = [
@@ -55,62 +68,47 @@ RUNNING = Status.RUNNING
 _UNSET: Any = object()
 
 
+#: Port type -> the C++ type BT.CPP reads it as (``getInput<T>``); "any" = the node reads the raw value
+PORT_CPP_TYPES: dict[str, str | None] = {
+    "str": STRING, "key": STRING, "int": INT, "unsigned": UINT, "float": DOUBLE, "bool": BOOL, "any": None,
+}
+
+
 @dataclass(frozen=True)
 class Port:
-    """A declared port: ``type`` is str | int | float | bool | any | key; ``default`` _UNSET = required.
+    """A declared port: ``type`` is str | key | int | unsigned | float | bool | any; ``default`` _UNSET = required.
 
-    ``key`` ports name a blackboard entry: ``output_key="X"`` and ``output_key="{X}"`` both mean X,
-    as BT.CPP's ``setOutput`` treats them.
+    ``key`` ports name a blackboard entry and are read as ``std::string`` as the original reads them
+    (``getInput<std::string>``): ``key="X"`` names X, ``key="{X}"`` names the entry whose *name* is held in X.
+    ``typed=False`` is BT.CPP's untyped port (``InputPort("value")``, ``BidirectionalPort("output_key")``): a
+    ``{key}`` on it declares its entry untyped.
     """
 
     type: str = "str"
     default: Any = _UNSET
     description: str = ""
+    typed: bool = True
 
     @property
     def required(self) -> bool:
         return self.default is _UNSET
 
+    @property
+    def cpp_type(self) -> str | None:
+        """The type a ``{key}`` on this port declares its entry with (None: untyped)."""
+        return PORT_CPP_TYPES[self.type] if self.typed else None
+
 
 def convert(value: Any, type_: str) -> Any:
-    """Convert ``value`` (text or a typed blackboard value) to a port type; ValueError if it cannot."""
-    if type_ in ("any", "key"):
+    """A port's value as ``type_`` (text literal: ``convertFromString``; a typed value: ``Any::cast``); ValueError."""
+    target = PORT_CPP_TYPES.get(type_, _UNSET)
+    if target is _UNSET:
+        raise ValueError(f"unknown port type {type_!r}")
+    if target is None:
         return value
-    if type_ == "str":
-        return to_text(value)
-    if type_ == "bool":
-        if isinstance(value, bool):
-            return value
-        if isinstance(value, int) and value in (0, 1):
-            return bool(value)
-        if isinstance(value, str) and value.strip().lower() in ("true", "1", "false", "0"):
-            return value.strip().lower() in ("true", "1")
-        raise ValueError(f"expected a bool (true/false), got {value!r}")
-    if type_ == "int":
-        if isinstance(value, bool):
-            raise ValueError(f"expected an integer, got {value!r}")
-        if isinstance(value, int):
-            return value
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
-        if isinstance(value, str):
-            try:
-                return int(value.strip())
-            except ValueError:
-                pass
-        raise ValueError(f"expected an integer, got {value!r}")
-    if type_ == "float":
-        if isinstance(value, bool):
-            raise ValueError(f"expected a number, got {value!r}")
-        if isinstance(value, int | float):
-            return float(value)
-        if isinstance(value, str):
-            try:
-                return float(value.strip())
-            except ValueError:
-                pass
-        raise ValueError(f"expected a number, got {value!r}")
-    raise ValueError(f"unknown port type {type_!r}")
+    if isinstance(value, str):
+        return convert_from_string(value, target)
+    return any_cast(value, ctype_of(value), target)
 
 
 @dataclass
@@ -206,7 +204,12 @@ class BtNode(Behaviour):
 
     # -- ports ----------------------------------------------------------------------------------
     def get_input(self, port: str, default: Any = _UNSET) -> Any:
-        """The value of ``port``: the converted literal, or the blackboard entry for ``{key}``."""
+        """``getInput<T>`` (T from the port's type): the converted literal, or the ``{key}`` entry converted.
+
+        A ``{key}`` entry holding a string is ``convertFromString<T>`` of it (unless T is a string), any other
+        value is ``Any::cast<T>``; a missing or never-set entry, or a refused conversion, is a TreeRuntimeError
+        naming this node, its line, the port and the key.
+        """
         spec = self.PORTS.get(port)
         entry = self._ports.get(port)
         if entry is None:
@@ -218,34 +221,42 @@ class BtNode(Behaviour):
         is_key, value = entry
         if not is_key:
             return value
-        found = self.ctx.blackboard.get(value)
-        if found is MISSING:
+        found = self.ctx.blackboard.get_any(value)
+        if found is None or found.empty:
             if default is not _UNSET:
                 return default
-            raise TreeRuntimeError(f"{self.describe()}: port '{port}' reads blackboard key '{value}', which is not set")
-        type_ = spec.type if spec is not None else "any"
-        if type_ == "key":
-            type_ = "str"
-        try:
-            return convert(found, type_)
-        except ValueError as exc:
+            if found is None:
+                raise TreeRuntimeError(f"{self.describe()}: port '{port}' reads blackboard key '{value}', which is not set")
             raise TreeRuntimeError(
-                f"{self.describe()}: port '{port}' reads blackboard key '{value}' = {found!r}: {exc}"
-            ) from None
+                f"{self.describe()}: port '{port}' reads blackboard key '{value}', which a port declared ({found.port_type or 'untyped'}) "
+                "but nothing has set yet (BT.CPP 3.8: \"was found, but its content was not initialized correctly\")")
+        target = PORT_CPP_TYPES[spec.type] if spec is not None else None
+        if target is None:
+            return found.value
+        try:
+            if target != STRING and found.vtype == STRING:
+                return convert_from_string(found.value, target)
+            return any_cast(found.value, found.vtype or STRING, target)
+        except ValueError as exc:
+            how = "convertFromString" if target != STRING and found.vtype == STRING else "Any::cast"
+            raise TreeRuntimeError(
+                f"{self.describe()}: port '{port}' reads blackboard key '{value}' = {found.vtype} {found.value!r} as "
+                f"{target} (BT.CPP getInput: {how}): {exc}") from None
 
     def port_key(self, port: str) -> str:
-        """The blackboard key a ``key`` port names (literal ``X`` or ``{X}``)."""
-        entry = self._ports.get(port)
-        if entry is None:
-            spec = self.PORTS.get(port)
-            if spec is not None and not spec.required:
-                return str(spec.default)
-            raise TreeRuntimeError(f"{self.describe()}: port '{port}' is not set")
-        return str(entry[1])
+        """The blackboard key a ``key`` port names: its text (``X``), or the text held in entry X (``{X}``)."""
+        return self.get_input(port)
 
-    def set_output(self, port: str, value: Any) -> None:
-        """Write ``value`` to the blackboard entry named by ``port`` (``X`` or ``{X}``)."""
-        self.ctx.blackboard.set(self.port_key(port), value)
+    def bb_set(self, key: str, value: Any, ctype: str | None = None) -> None:
+        """``blackboard->set(key, value)``; what BT.CPP refuses is a TreeRuntimeError naming node, line and key."""
+        try:
+            self.ctx.blackboard.set(key, value, ctype)
+        except BlackboardError as exc:
+            raise TreeRuntimeError(f"{self.describe()}: blackboard key '{key}': {exc}") from None
+
+    def set_output(self, port: str, value: Any, ctype: str | None = None) -> None:
+        """Write ``value`` to the blackboard entry named by ``port`` (see :meth:`port_key`)."""
+        self.bb_set(self.port_key(port), value, ctype)
 
     # -- execution (BT.CPP executeTick / halt) --------------------------------------------------
     def execute_tick(self) -> Status:
