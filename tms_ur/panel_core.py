@@ -10,9 +10,11 @@ import hmac
 import ipaddress
 import json
 import math
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Any
+from urllib.parse import urlsplit
 
 import numpy as np
 
@@ -25,6 +27,14 @@ __all__ = [
     "Command",
     "parse_command",
     "authorize",
+    "check_origin",
+    "check_token",
+    "websocket_access",
+    "Access",
+    "INT32_MIN",
+    "INT32_MAX",
+    "TASK_ID_RANGE",
+    "check_int_range",
     "SiteState",
     "arm_side_view",
 ]
@@ -69,15 +79,122 @@ class PanelConfig:
             raise ConfigError(f"tms_ur_panel: rate_hz must be >= 5 (live view), got {self.rate_hz}")
 
 
+def _token_matches(token: str | None, expected: str) -> bool:
+    # compare_digest refuses str with non-ASCII characters (TypeError): compare the UTF-8 bytes instead,
+    # so a hostile ``?token=%C3%A9`` is a wrong token, not an exception in the handshake.
+    if not token:
+        return False
+    return hmac.compare_digest(token.encode("utf-8", "surrogatepass"), expected.encode("utf-8", "surrogatepass"))
+
+
 def authorize(config: PanelConfig, remote_host: str, token: str | None) -> tuple[bool, str]:
-    """Decide whether a request from ``remote_host`` carrying ``token`` may use the panel."""
+    """Decide whether a request from ``remote_host`` carrying ``token`` may reach the panel at all (HTTP level)."""
     if is_loopback(remote_host):
         return True, "local"
     if not config.token:
         return False, "non-local requests are refused: the panel has no token configured"
-    if token and hmac.compare_digest(token, config.token):
+    if _token_matches(token, config.token):
         return True, "token"
     return False, "non-local request without a valid token"
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr`` cut to ``limit`` characters: refusal messages stay one short line whatever a client sends."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _host_port(authority: str) -> tuple[str, int] | None:
+    """``host[:port]`` -> (lower-case host without IPv6 brackets, port; 80 when absent), None when malformed."""
+    try:
+        parts = urlsplit("http://" + authority)
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        return None
+    if not host or parts.path or parts.query or parts.fragment or parts.username is not None:
+        return None
+    return host, 80 if port is None else port
+
+
+def check_origin(config: PanelConfig, origins: list[str], host_header: str | None) -> tuple[bool, str]:
+    """May a websocket whose handshake carried these ``Origin`` headers command the machines?
+
+    The panel's own page opens ``ws://<the address in its URL bar>/ws``, so its Origin is ``http://`` + the
+    handshake's ``Host``. A page from anywhere else (another port, host or scheme, ``null`` from a sandbox or a
+    file) differs. Host == Origin alone would let a DNS-rebinding page (evil.example resolving to 127.0.0.1)
+    pass, so a loopback panel (no token) also requires the host to be a loopback name; off loopback the
+    token (``check_token``) is what a rebinding page cannot have. No Origin at all is a non-browser client
+    (browsers always send one on a websocket handshake, RFC 6455 4.1): a web page cannot omit it, and a local
+    program could publish on the ROS topics directly, so it is allowed, under the same token rule.
+    """
+    if not origins:
+        return True, "no Origin header: a non-browser client"
+    if len(origins) > 1:
+        return False, f"bad origin: {len(origins)} Origin headers"
+    origin = origins[0]
+    host_hp = _host_port(host_header) if host_header and host_header.isascii() else None
+    own = f"http://{host_header}" if host_hp else f"http://{config.host}:{config.port}"
+    parts = urlsplit(origin) if origin.isascii() else None
+    if parts is None or parts.scheme != "http" or not parts.netloc:
+        return False, f"bad origin {_short(origin)}: the panel's own page is {own}"
+    origin_hp = _host_port(parts.netloc)
+    if origin_hp is None or origin.rstrip("/") != f"{parts.scheme}://{parts.netloc}":
+        return False, f"bad origin {_short(origin)}: not scheme://host:port"
+    if host_hp is None:
+        return False, f"bad origin {_short(origin)}: the handshake has no valid Host header to compare it with"
+    if origin_hp != host_hp or origin_hp[1] != config.port:
+        return False, f"bad origin {_short(origin)}: the panel's own page is {own}"
+    if is_loopback(config.host) and not is_loopback(origin_hp[0]):
+        return False, f"bad origin {_short(origin)}: a loopback panel is addressed by a loopback name only"
+    return True, "own origin"
+
+
+def check_token(config: PanelConfig, token: str | None) -> tuple[bool, str]:
+    """Commands need the panel's token whenever one is configured (always the case off loopback)."""
+    if not config.token:
+        return True, "no token configured (loopback panel)"
+    if not token:
+        return False, "missing token: this panel takes commands only from a URL with ?token=..."
+    if _token_matches(token, config.token):
+        return True, "token"
+    return False, "wrong token"
+
+
+@dataclass(frozen=True)
+class Access:
+    """What one websocket connection may do, decided once at its handshake."""
+
+    commands: bool  # start, cancel, emergency stop, confirm: everything the websocket takes writes or commands
+    view: bool  # the live-view snapshots
+    refusal: str = ""  # why commands are refused (sent back with every refused command, logged once)
+    kind: str = ""  # "bad origin", "missing token" or "wrong token" when refused
+
+
+def websocket_access(config: PanelConfig, origins: list[str], host_header: str | None,
+                     token: str | None) -> Access:
+    """Origin and token rules together. A page from another origin gets neither commands nor the live view
+    (the site's state is not for other sites to read); the own page without the token gets the view only."""
+    origin_ok, origin_reason = check_origin(config, origins, host_header)
+    if not origin_ok:
+        return Access(commands=False, view=False, refusal=origin_reason, kind="bad origin")
+    token_ok, token_reason = check_token(config, token)
+    if token_ok:
+        return Access(commands=True, view=True)
+    return Access(commands=False, view=True, refusal=token_reason, kind="wrong token" if token else "missing token")
+
+
+#: Range of the ROS ``int32`` type: ``tms_msg/TaskIds.task_ids`` (int32[]), ``std_msgs/Int32`` (cancel) and the
+#: tms_msg_ts ``task_id`` fields. tests/tms_ur/test_panel_core.py checks them against the generated messages.
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+#: Task ids the panel accepts: positive int32 (a larger one would wrap when serialised, 4294967297 -> 1).
+TASK_ID_RANGE = (1, INT32_MAX)
+
+
+def check_int_range(field_name: str, value: int, lo: int, hi: int, type_name: str) -> int:
+    """``value`` if ``lo <= value <= hi``, else a CommandError naming the field, the value and the range."""
+    if not lo <= value <= hi:
+        raise CommandError(f"{field_name}: {_short(value, 40)} is out of range {lo}..{hi} ({type_name})")
+    return value
 
 
 @dataclass(frozen=True)
@@ -96,6 +213,12 @@ def parse_command(text: str) -> Command:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise CommandError(f"command is not JSON: {exc.msg}") from None
+    except RecursionError:
+        # json recurses per nesting level: '[' * 100000 fits in one frame
+        raise CommandError("command is not JSON the panel reads: nested too deep") from None
+    except ValueError as exc:
+        # an integer literal of more than 4300 digits (int conversion limit)
+        raise CommandError(f"command is not JSON the panel reads: {str(exc)[:80]}") from None
     if not isinstance(data, dict):
         raise CommandError("command must be a JSON object")
     op = data.get("op")
@@ -111,16 +234,21 @@ def parse_command(text: str) -> Command:
     return Command(op)
 
 
+_DECIMAL = re.compile(r"\s*[+-]?[0-9]{1,40}\s*", re.ASCII)
+
+
 def _task_id(value: Any, field_name: str) -> int:
+    """A task id from JSON (an integer, or a string of ASCII digits), checked against ``TASK_ID_RANGE``
+    before any message is built: int32 fields do not check on assignment, they wrap when serialised."""
     if isinstance(value, bool) or not isinstance(value, (int, str)):
-        raise CommandError(f"{field_name}: task id must be an integer, got {value!r}")
-    try:
-        task_id = int(value)
-    except ValueError:
-        raise CommandError(f"{field_name}: task id must be an integer, got {value!r}") from None
-    if task_id <= 0:
-        raise CommandError(f"{field_name}: task id must be positive, got {task_id}")
-    return task_id
+        raise CommandError(f"{field_name}: task id must be an integer, got {_short(value)}")
+    if isinstance(value, str):
+        # int() would also take '1_0', full-width and other Unicode digits, and 4000-digit strings
+        if not _DECIMAL.fullmatch(value):
+            raise CommandError(f"{field_name}: task id must be an integer, got {_short(value)}")
+        value = int(value)
+    lo, hi = TASK_ID_RANGE
+    return check_int_range(field_name, value, lo, hi, "task ids are positive int32")
 
 
 def arm_side_view(joints: dict[str, float], kin: ExcavatorKinematics) -> list[list[float]]:

@@ -11,6 +11,12 @@ default). The websocket pushes the site snapshot at ``rate_hz`` (>= 5 Hz) and ta
 | emergency stop | ``/emergency_signal`` (std_msgs/Bool true) |
 | confirm | ``/tms_ts/confirm`` (std_msgs/String "yes"), answers WaitForClick nodes |
 
+Commands are taken only from the panel's own page (the handshake's ``Origin`` is ``http://`` + its ``Host``;
+a loopback panel only under a loopback name) and, when a ``token`` is set (always off loopback), only with it
+(``/ws?token=...``); a refused command gets one ``ack`` naming why (bad origin / missing token), is logged once
+per connection and publishes nothing. Task ids are checked against int32 before a message is built
+(``tms_ur.panel_core``).
+
 Live view inputs: ``/tms_ts/status`` (tms_msg/TaskStatus), global-blackboard records read from tms_db
 (``flag_records``), machine poses (``pose_topics``: geometry_msgs/PoseStamped), the IC120 plan
 (``plan_topic``: nav_msgs/Path), ZX200 joints (``joint_states_topic``), soil (``soil_topic``: std_msgs/Float64MultiArray with comma-separated labels in layout.dim[0]).
@@ -38,7 +44,16 @@ from tms_common.params import startup_parameters
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.geometry import yaw_from_quaternion
 from tms_msg.msg import TaskIds, TaskStatus
-from tms_ur.panel_core import CommandError, PanelConfig, SiteState, arm_side_view, authorize, parse_command
+from tms_ur.panel_core import (
+    Access,
+    CommandError,
+    PanelConfig,
+    SiteState,
+    arm_side_view,
+    authorize,
+    parse_command,
+    websocket_access,
+)
 
 WEB_DIR = Path(__file__).parent.parent / "web"
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/panel.js": ("panel.js", "text/javascript"),
@@ -237,14 +252,40 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN00
                                                 ("Cache-Control", "no-store")]), body)
         return connection.respond(404, "404 Not Found\n")
 
+    def access_of(ws) -> Access:  # noqa: ANN001
+        request = ws.request
+        token = parse_qs(urlsplit(request.path).query).get("token", [None])[0]
+        return websocket_access(config, request.headers.get_all("Origin"), _one(request.headers, "Host"), token)
+
     async def handler(ws) -> None:  # noqa: ANN001
-        clients.add(ws)
+        access = access_of(ws)
+        peer = ws.remote_address[0] if ws.remote_address else "?"
+        origin = ", ".join(ws.request.headers.get_all("Origin")) or "none"
+        logged = False
+        if access.view:
+            clients.add(ws)
         try:
             async for text in ws:
+                if not access.commands:
+                    # Checked before the text is even parsed: nothing from this connection reaches ROS.
+                    # Logged once per connection, so a page looping on send cannot flood the log.
+                    if not logged:
+                        logged = True
+                        line = f"refused commands from {peer} (Origin: {origin[:80]}): {access.refusal}"
+                        node.get_logger().warning(line)
+                        with node.lock:
+                            node.site.event("error", line)
+                    reply = {"type": "ack", "ok": False, "refused": access.kind,
+                             "text": f"refused: {access.refusal}"}
+                    await ws.send(json.dumps(reply))
+                    continue
                 try:
                     reply = {"type": "ack", "ok": True, "text": node.execute(text)}
                 except CommandError as exc:
                     reply = {"type": "ack", "ok": False, "text": str(exc)}
+                except Exception as exc:  # noqa: BLE001 - one bad command must not end the operator's connection
+                    node.get_logger().error(f"command failed: {type(exc).__name__}: {exc}")
+                    reply = {"type": "ack", "ok": False, "text": f"internal error: {type(exc).__name__}: {exc}"}
                 with node.lock:
                     node.site.event("info" if reply["ok"] else "error", reply["text"])
                 await ws.send(json.dumps(reply))
@@ -261,13 +302,21 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN00
 
     async with serve(handler, config.host, config.port, process_request=process_request) as server:
         node.get_logger().info(f"panel on http://{config.host}:{config.port}/")
-        print(f"tms_ur_panel: serving http://{config.host}:{config.port}/", flush=True)
+        # The token itself is not printed: whoever set the parameter has it, log readers need not.
+        needs = " (commands need the configured token: open the page with ?token=...)" if config.token else ""
+        print(f"tms_ur_panel: serving http://{config.host}:{config.port}/{needs}", flush=True)
         broadcaster = asyncio.get_running_loop().create_task(broadcast())
         ready.set_result(True)
         try:
             await server.serve_forever()
         finally:
             broadcaster.cancel()
+
+
+def _one(headers, name: str) -> str | None:  # noqa: ANN001
+    """The header's value; None when absent or repeated (two Host headers name no single origin)."""
+    values = headers.get_all(name)
+    return values[0] if len(values) == 1 else None
 
 
 def main() -> int:

@@ -13,8 +13,9 @@ function connect() {
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);
     if (msg.type === "state") { last = msg; render(msg); }
-    // acks are also logged by the server and arrive with the next snapshot
-    else if (msg.type === "ack" && !msg.ok) { console.warn(msg.text); }
+    // acks are also logged by the server and arrive with the next snapshot; a refusal (bad origin, missing
+    // token) is logged there once per connection, so each one is also shown here
+    else if (msg.type === "ack" && !msg.ok) { console.warn(msg.text); if (msg.refused) addEvent("error", msg.text); }
   };
 }
 function setConn(ok) { const c = document.getElementById("conn"); c.textContent = ok ? "live" : "disconnected"; c.className = ok ? "ok" : "bad"; }
