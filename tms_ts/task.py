@@ -14,6 +14,7 @@ import logging
 from collections.abc import Callable
 
 from tms_ts.bt.core import FAILURE, SUCCESS
+from tms_ts.errors import TsError
 from tms_ts.leaf import poll_stops
 from tms_ts.loader import Tree
 
@@ -79,6 +80,10 @@ class TaskRun:
         self.ticks += 1
         try:
             status = self.tree.tick()
+        except TsError as exc:  # a tree's own error (as BehaviorTree.CPP's nodes throw): its message says it all
+            log.error("task %s: %s: %s", self.task_id, type(exc).__name__, exc)
+            self._stop(FAILED, f"{type(exc).__name__}: {exc}")
+            return
         except Exception as exc:  # noqa: BLE001 - any node error ends the task, never the manager
             log.exception("task %s: tick raised", self.task_id)
             self._stop(FAILED, f"{type(exc).__name__}: {exc}")

@@ -7,6 +7,7 @@ conditional_expression.hpp with the ExprTk it ships) did with the same tree; the
 
 from __future__ import annotations
 
+import logging
 import math
 
 import pytest
@@ -73,13 +74,16 @@ DEMO_SHAPE = """<root main_tree_to_execute="BehaviorTree">
 </root>"""
 
 
-def test_the_demo_trees_end_refused_by_keep_running_until_flgup_naming_node_line_key_and_rule(store):  # noqa: ANN001
+def test_the_demo_trees_end_refused_by_keep_running_until_flgup_naming_node_line_key_and_rule(store, caplog):  # noqa: ANN001
     # BT.CPP: the text "true" goes into a key no typed port declared -> untyped entry holding std::string;
     # KeepRunningUntilFlgup throws "Unsupported type for key [TERMINATE_FLG]" and the manager ends the task.
     tree = load_tree(DEMO_SHAPE, TreeContext(store=store), source="task 2")
     run = TaskRun(2, tree)
-    run.step()  # no leaves to wait for: starts and ticks at once
+    with caplog.at_level(logging.ERROR, logger="tms_ts.task"):
+        run.step()  # no leaves to wait for: starts and ticks at once
     assert run.state == FAILED
+    # a tree's own error is one log line naming it, no traceback (those are kept for the manager's bugs)
+    assert [r.exc_info for r in caplog.records] == [None] and "TERMINATE_FLG" in caplog.records[0].getMessage()
     entry = tree.ctx.blackboard.get_any("TERMINATE_FLG")
     assert (entry.vtype, entry.value, entry.port_type) == (STRING, "true", None)
     msg = run.message
