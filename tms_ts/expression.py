@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tms_ts.errors import ExpressionError
+from tms_ts.limits import MAX_EXPRESSION_PARENS, MAX_EXPRESSION_TOKENS
 
 __all__ = ["Expression", "compile_expression", "evaluate"]
 
@@ -54,7 +55,7 @@ class _Tok:
 
 def _tokenise(text: str) -> list[_Tok]:
     tokens: list[_Tok] = []
-    pos = 0
+    pos = depth = 0
     while True:
         while pos < len(text) and text[pos].isspace():
             pos += 1
@@ -72,6 +73,17 @@ def _tokenise(text: str) -> list[_Tok]:
             kind, tok = "op", tok.lower()
         tokens.append(_Tok(kind, tok, pos))
         pos = m.end()
+        # parsing and evaluating recurse: bound the text before they run (tms_ts.limits)
+        if len(tokens) > MAX_EXPRESSION_TOKENS:
+            raise ExpressionError(f"expression {text[:80]!r}...: more than {MAX_EXPRESSION_TOKENS} tokens "
+                                  "(tms_ts.limits.MAX_EXPRESSION_TOKENS)")
+        if tok == "(":
+            depth += 1
+            if depth > MAX_EXPRESSION_PARENS:
+                raise ExpressionError(f"expression {text[:80]!r}...: parentheses nested deeper than "
+                                      f"{MAX_EXPRESSION_PARENS} at position {pos} (tms_ts.limits.MAX_EXPRESSION_PARENS)")
+        elif tok == ")":
+            depth -= 1
     tokens.append(_Tok("end", "", len(text)))
     return tokens
 

@@ -7,6 +7,12 @@ is this one class; ``model_name`` and ``subtask_name`` are read once, as the ori
 or a ``{key}`` of the task's parameters (the task document's ``blackboard``), which the loader resolves when the
 tree is loaded (:mod:`tms_ts.loader`); ``record_name`` may be a ``{key}`` resolved at each start.
 
+Names are checked where they enter (:mod:`tms_ts.names`): ``model_name`` and ``subtask_name`` when the tree is
+loaded, as ROS names by rclpy's rules (a name rclpy would refuse when the client is created, e.g. the full-width
+underscore of ``d37pxi_24＿``, is a TreeLoadError naming the leaf and its line, so nothing can raise for it inside a
+tick); a literal ``record_name`` then too, and a ``{key}`` one when the leaf reads it: a bad one ends the task
+FAILURE (TreeRuntimeError) naming the leaf, its line, the key and the value.
+
 Protocol (reference §4.2, made non-blocking): first tick sends the goal -> RUNNING; not accepted
 within ``ctx.accept_timeout_s`` -> cancel, FAILURE; rejected (the server is stopping) -> FAILURE naming
 the action and the record; SUCCEEDED -> SUCCESS; ABORTED/CANCELED -> FAILURE (as the original's leaf reads
@@ -45,6 +51,7 @@ from typing import Protocol
 
 from tms_ts.bt.core import FAILURE, RUNNING, SUCCESS, Port, StatefulNode, Status
 from tms_ts.errors import TreeRuntimeError
+from tms_ts.names import leaf_names_problem, record_name_problem
 from tms_ts.outcomes import SERVER_LOST, code_name
 from tms_ts.subtask_specs import SUBTASKS
 
@@ -131,7 +138,20 @@ class LeafNode(StatefulNode):
                 return f"port '{port}' must be a literal or a task parameter, got {value!r}"
             if not value.strip():
                 return f"port '{port}' must not be empty"
+        model, subtask = attrs["model_name"].strip("/"), attrs["subtask_name"].strip("/")
+        problem = leaf_names_problem(model, subtask)
+        if problem:
+            return problem
+        record = attrs.get("record_name", "")
+        if not (record.startswith("{") and record.endswith("}")):  # a {key}: checked when the leaf reads it
+            return record_name_problem(record, required=cls._reads_record(subtask))
         return None
+
+    @staticmethod
+    def _reads_record(subtask_name: str) -> bool:
+        """The subtask reads a DB record (every subtask but those whose row says not; unknown ones: yes)."""
+        spec = SUBTASKS.get(subtask_name)
+        return spec is None or spec.reads_record
 
     def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
         super().__init__(*args, **kwargs)
@@ -158,6 +178,11 @@ class LeafNode(StatefulNode):
     def on_start(self) -> Status:
         self.goal = None
         self.record = self.get_input("record_name")
+        problem = record_name_problem(self.record, required=self._reads_record(self.subtask_name))
+        if problem:  # a {key} read now (a literal was checked at load): the task ends FAILURE naming it
+            is_key, key = self._ports.get("record_name", (False, ""))
+            source = f" (from blackboard key '{key}')" if is_key else ""
+            raise TreeRuntimeError(f"{self.describe()}: {problem}{source}")
         if self._previous_stop_pending():
             self.feedback_message = f"waiting for the previous goal of {self.action} to stop"
             return RUNNING

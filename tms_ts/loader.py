@@ -25,8 +25,12 @@ key, the node and its line. Other ``{key}`` ports read the blackboard at every t
 ``input_value="{machine}"`` writes the parameter to the DB.
 
 Everything is checked before anything runs: malformed XML, unknown node ids, unknown or missing
-ports, literals of the wrong type, child counts, unknown or recursive subtrees. Each error is a
-:class:`TreeLoadError` naming the node id and its line/column.
+ports, literals of the wrong type, child counts, unknown or recursive subtrees, a leaf's names (ROS names for
+``model_name`` / ``subtask_name``, :mod:`tms_ts.names`), and the limits of :mod:`tms_ts.limits` (size, depth and
+elements of the document while it is parsed, without recursion; depth and nodes of the built tree, SubTrees
+inlined, as it is built, so the build's recursion stops at ``MAX_TREE_DEPTH`` levels). Each error is a
+:class:`TreeLoadError` naming the node id and its line/column. :func:`check_tree` is the same load without ROS and
+DB (``tms-db task add`` refuses what the manager would refuse at start).
 """
 
 from __future__ import annotations
@@ -41,9 +45,10 @@ from tms_ts.bt.core import IDLE, RUNNING, BtNode, Status, TreeContext, convert
 from tms_ts.bt.custom import CUSTOM_NODES
 from tms_ts.errors import TreeLoadError
 from tms_ts.leaf import LeafNode
+from tms_ts.limits import MAX_TREE_DEPTH, MAX_TREE_NODES
 from tms_ts.xmldoc import Element, parse_xml
 
-__all__ = ["Tree", "load_tree", "check_task_blackboard", "node_class", "register_node", "known_ids"]
+__all__ = ["Tree", "load_tree", "check_tree", "check_task_blackboard", "node_class", "register_node", "known_ids"]
 
 _FAMILY_TAGS = frozenset({"Action", "Condition", "Control", "Decorator"})
 _SUBTREE_TAGS = frozenset({"SubTree", "SubTreePlus"})
@@ -128,6 +133,7 @@ class _Builder:
     def __init__(self, doc: Element, source: str, v4: bool) -> None:
         self.source = source
         self.v4 = v4
+        self.nodes = 0  # nodes built so far (SubTrees inlined): MAX_TREE_NODES
         self.trees: dict[str, Element] = {}
         for child in doc.children:
             if child.tag == "BehaviorTree":
@@ -151,7 +157,17 @@ class _Builder:
     def error(self, el: Element, what: str, problem: str) -> TreeLoadError:
         return TreeLoadError(f"{self.source}: {what} ({el.where}): {problem}")
 
-    def build(self, el: Element, ctx: TreeContext, stack: tuple[str, ...]) -> BtNode:
+    def build(self, el: Element, ctx: TreeContext, stack: tuple[str, ...], depth: int = 1) -> BtNode:
+        """Node ``el`` and its children; ``depth`` counts the built tree's levels (the root node is 1)."""
+        self.nodes += 1
+        if depth > MAX_TREE_DEPTH:
+            via = f" (SubTrees {' -> '.join(stack)})" if len(stack) > 1 else ""
+            raise self.error(el, el.attrib.get("ID", el.tag), f"the built tree is {depth} levels deep here{via}, over the "
+                             f"limit of {MAX_TREE_DEPTH} (tms_ts.limits.MAX_TREE_DEPTH)")
+        if self.nodes > MAX_TREE_NODES:
+            via = f" (SubTrees {' -> '.join(stack)})" if len(stack) > 1 else ""
+            raise self.error(el, el.attrib.get("ID", el.tag), f"the built tree has {self.nodes:,} nodes here{via}, over "
+                             f"the limit of {MAX_TREE_NODES:,} (tms_ts.limits.MAX_TREE_NODES)")
         tag = el.tag
         attrs = dict(el.attrib)
         if tag in _FAMILY_TAGS or tag in _SUBTREE_TAGS:
@@ -163,15 +179,18 @@ class _Builder:
             if "ID" in attrs and not self.v4:
                 attrs.pop("ID")
         if tag in _SUBTREE_TAGS:
-            return self.subtree(el, node_id, attrs, ctx, stack)
+            self.nodes -= 1  # a SubTree is no node of its own: its body's root takes its place
+            return self.subtree(el, node_id, attrs, ctx, stack, depth)
         cls = node_class(node_id)
         if cls is None:
             raise self.error(el, node_id, "unknown node ID")
         name = attrs.pop("name", node_id)
         where = f"{self.source} {el.where}" if self.source != "<xml>" else el.where
+        resolved: dict[str, str] = {}  # literal port -> the task parameter it was read from
         for port in getattr(cls, "LITERAL_PORTS", ()):
             m = _KEY_RE.match(attrs.get(port, ""))
             if m:
+                resolved[port] = m.group(1)
                 value = self.load_time_value(el, node_id, port, m.group(1), ctx)
                 self.declare(el, node_id, cls, port, m.group(1), ctx)
                 attrs[port] = value
@@ -199,6 +218,8 @@ class _Builder:
         if check is not None:
             problem = check(attrs)
             if problem:
+                if resolved:
+                    problem += " (read from task parameter " + ", ".join(f"'{k}' by port '{p}'" for p, k in resolved.items()) + ")"
                 raise self.error(el, _describe(el, node_id), problem)
         lo, hi = cls.CHILDREN
         n = len(el.children)
@@ -207,7 +228,7 @@ class _Builder:
             raise self.error(el, _describe(el, node_id), f"needs {want} children, has {n}")
         node = cls(name, node_id=node_id, ports=ports, ctx=ctx, where=where)
         for child_el in el.children:
-            child = self.build(child_el, ctx, stack)
+            child = self.build(child_el, ctx, stack, depth + 1)
             child.parent = node
             node.children.append(child)
         return node
@@ -232,7 +253,8 @@ class _Builder:
                              f"port '{port}' reads blackboard key '{key}' = {value!r}: expected a name (text)")
         return str(value)
 
-    def subtree(self, el: Element, tree_id: str, attrs: dict[str, str], ctx: TreeContext, stack: tuple[str, ...]) -> BtNode:
+    def subtree(self, el: Element, tree_id: str, attrs: dict[str, str], ctx: TreeContext, stack: tuple[str, ...],
+                depth: int) -> BtNode:
         if tree_id not in self.trees:
             raise self.error(el, f"SubTree '{tree_id}'", f"no BehaviorTree with ID '{tree_id}' in the document")
         if tree_id in stack:
@@ -255,7 +277,7 @@ class _Builder:
                 bb.set(key, value)
             sub_ctx = ctx.child(bb)
         body = self.trees[tree_id]
-        return self.build(body.children[0], sub_ctx, stack + (tree_id,))
+        return self.build(body.children[0], sub_ctx, stack + (tree_id,), depth)
 
     def main(self, doc: Element, ctx: TreeContext) -> BtNode:
         if not self.trees:
@@ -295,7 +317,7 @@ def load_tree(xml: str, ctx: TreeContext | None = None, *, source: str = "<xml>"
     """Build the main tree of a BT.CPP v3/v4 document; TreeLoadError names the culprit node.
 
     ``blackboard``: the task's initial entries (its parameters, :func:`check_task_blackboard`), set on the
-    tree's blackboard before the nodes are built.
+    tree's blackboard before the nodes are built. The limits of :mod:`tms_ts.limits` hold for every document.
     """
     entries = check_task_blackboard(blackboard, source)
     doc = parse_xml(xml, source)
@@ -308,5 +330,17 @@ def load_tree(xml: str, ctx: TreeContext | None = None, *, source: str = "<xml>"
     for key, value in entries.items():
         ctx.blackboard.set(key, value)
     builder = _Builder(doc, source, v4=fmt == "4")
-    root = builder.main(doc, ctx)
+    try:
+        root = builder.main(doc, ctx)
+    except RecursionError:  # pragma: no cover - the depth limit stops the build long before; never a crash though
+        raise TreeLoadError(f"{source}: the tree nests too deep to build (tms_ts.limits.MAX_TREE_DEPTH)") from None
     return Tree(root, ctx, source)
+
+
+def check_tree(xml: str, *, source: str = "<xml>", blackboard: Mapping[str, Any] | None = None) -> Tree:
+    """Load ``xml`` exactly as the manager does at start, without ROS or a DB: TreeLoadError for what it would refuse.
+
+    ``tms-db task add`` runs this on the user's own file before anything is stored, so its errors name that file's
+    lines and columns (the store keeps a one-line form). Nothing runs; the tree returned is for inspection.
+    """
+    return load_tree(xml, TreeContext(), source=source, blackboard=blackboard)

@@ -59,7 +59,31 @@ class TaskRun:
         return list(missing.values())
 
     def step(self) -> str:
-        """Advance one tick; returns the state afterwards."""
+        """Advance one tick; returns the state afterwards. Nothing it raises leaves it: an error of this task (its
+        servers' check, its stops, the ROS side) ends this task FAILURE, never another task or the manager."""
+        try:
+            return self._step()
+        except TsError as exc:
+            log.error("task %s: %s: %s", self.task_id, type(exc).__name__, exc)
+            self._abort(f"{type(exc).__name__}: {exc}")
+        except Exception as exc:  # noqa: BLE001 - one task's error must not end the manager's timer
+            log.exception("task %s: step raised", self.task_id)
+            self._abort(f"{type(exc).__name__}: {exc}")
+        return self.state
+
+    def _abort(self, message: str) -> None:
+        """End FAILURE after an error outside the tree's tick: halted as after a failed tick (halted goals still
+        confirm their stop), or, when the error came while stopping, at once."""
+        if self.state != STOPPING:
+            try:
+                self._stop(FAILED, message)
+                return
+            except Exception:  # noqa: BLE001 - the task ends anyway; the halt's error is logged
+                log.exception("task %s: halt after an error raised", self.task_id)
+        self.ctx.stops.clear()
+        self._finish(FAILED, message)
+
+    def _step(self) -> str:
         if self.state == STARTING:
             missing = self.missing_servers()
             if missing:

@@ -11,6 +11,12 @@ The original (irvs/ros2_tms_for_construction, ``tms_ts_manager``, node ``exec_ta
 Ours runs many tasks in one manager, so it reads both forms whatever ``task_id`` is: an XML runs
 under ``task_id`` (or, at -1, the id of the stored task with the same tree); a JSON runs its entry N,
 or at -1 every entry. What cannot start raises :class:`TaskSequenceError` naming the culprit.
+
+Limits (:mod:`tms_ts.limits`), checked before anything is parsed: the message at most ``MAX_TREE_BYTES``, a JSON
+nested at most ``MAX_JSON_DEPTH`` (checked without recursion; ``json.loads`` recurses once a level), every task id
+(a JSON entry's, or the ``task_id`` parameter's other than -1) in 1..2**31-1 (the interface types' int32), no lone
+surrogate (a JSON ``"\\udc00"`` is no character an XML can hold). Each tree is then loaded under the limits of the
+loader (size, depth, nodes).
 """
 
 from __future__ import annotations
@@ -22,7 +28,8 @@ from typing import Any
 
 from tms_db.errors import ValidationError
 from tms_db.schema import normalise_task_xml
-from tms_ts.errors import TaskSequenceError
+from tms_ts.errors import TaskSequenceError, TreeLoadError
+from tms_ts.limits import MAX_JSON_DEPTH, check_tree_size, json_depth_exceeds, task_id_problem
 
 __all__ = ["TASK_SEQUENCE_TOPIC", "NO_TASK_ID", "SequenceTask", "parse_task_sequence", "stored_task_id"]
 
@@ -45,17 +52,28 @@ def _is_id(value: Any) -> bool:
 
 def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTask]:
     """The trees a ``/task_sequence`` message starts, given the manager's ``task_id`` parameter."""
+    try:
+        check_tree_size(data, "/task_sequence: the message")
+    except TreeLoadError as exc:
+        raise TaskSequenceError(str(exc)) from None
+    if task_id != NO_TASK_ID and task_id_problem(task_id):
+        raise TaskSequenceError(f"/task_sequence: parameter task_id: {task_id_problem(task_id)} (or -1: none)")
     text = data.strip()
     if not text:
         raise TaskSequenceError("/task_sequence: empty message (expected a BehaviorTree XML or the JSON {\"tasks\": [...]})")
     if not text.startswith("{"):
         if not text.startswith("<"):
             raise TaskSequenceError(f"/task_sequence: neither XML nor JSON: {text[:60]!r}")
-        return [SequenceTask(None if task_id == NO_TASK_ID else task_id, text)]
+        return [SequenceTask(None if task_id == NO_TASK_ID else task_id, _checked_text(text, "the message"))]
+    if json_depth_exceeds(text):
+        raise TaskSequenceError(f"/task_sequence: the JSON nests deeper than the limit of {MAX_JSON_DEPTH} levels "
+                                "(tms_ts.limits.MAX_JSON_DEPTH; the form {\"tasks\": [{...}]} needs 3)")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise TaskSequenceError(f"/task_sequence: malformed JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    except RecursionError:  # pragma: no cover - json_depth_exceeds refuses these first
+        raise TaskSequenceError("/task_sequence: the JSON nests too deep (tms_ts.limits.MAX_JSON_DEPTH)") from None
     tasks = doc.get("tasks") if isinstance(doc, dict) else None
     if not isinstance(tasks, list):
         raise TaskSequenceError("/task_sequence: JSON without a 'tasks' array (expected {\"tasks\": [{\"task_id\", \"task_sequence\"}]})")
@@ -64,7 +82,10 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
         if not isinstance(entry, dict) or not _is_id(entry.get("task_id")) or not isinstance(entry.get("task_sequence"), str):
             raise TaskSequenceError(
                 f"/task_sequence: tasks[{i}] must be {{\"task_id\": <int>, \"task_sequence\": <XML string>}}, got {entry!r:.120}")
-        entries.append(SequenceTask(entry["task_id"], entry["task_sequence"]))
+        problem = task_id_problem(entry["task_id"])
+        if problem:
+            raise TaskSequenceError(f"/task_sequence: tasks[{i}]: {problem}")
+        entries.append(SequenceTask(entry["task_id"], _checked_text(entry["task_sequence"], f"tasks[{i}].task_sequence")))
     if task_id == NO_TASK_ID:
         if not entries:
             raise TaskSequenceError("/task_sequence: the JSON's 'tasks' array is empty")
@@ -74,6 +95,17 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
         raise TaskSequenceError(
             f"/task_sequence: task_id {task_id} (parameter task_id) is not in the JSON's tasks {[e.task_id for e in entries]}")
     return chosen[:1]
+
+
+def _checked_text(text: str, what: str) -> str:
+    """``text`` when it is all Unicode characters (a JSON string may hold a lone surrogate, which no XML parser or
+    ROS message takes), else TaskSequenceError naming where."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise TaskSequenceError(f"/task_sequence: {what}: character {exc.start + 1} ({text[exc.start]!r}) is a lone "
+                                "surrogate, no Unicode character") from None
+    return text
 
 
 def stored_task_id(xml: str, tasks: Iterable[Mapping[str, Any]]) -> int | None:

@@ -12,6 +12,10 @@ Topics: ``/tms_ts/confirm`` (std_msgs/String; WaitForClick answers, "yes" / "no"
 ``/tms_ts/subtask_heartbeat`` (std_msgs/String, model name of each living tms_ts_subtasks process),
 ``/<model_name>/emg_stop`` (std_msgs/Bool true, the escalation when a halted subtask never confirms
 its stop).
+
+Names: the loader refuses a leaf whose names are no ROS names (:mod:`tms_ts.names`); should one still get here,
+creating its client or publisher raises :class:`tms_ts.errors.TreeRuntimeError` naming the name (rclpy's
+``ValueError`` ended the manager's timer, and with it the process), which ends that task FAILURE only.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from tms_common.action_client import RaceFreeActionClient
 from tms_common.goals import OUTCOME_QOS
 from tms_msg.msg import SubtaskOutcome
 from tms_msg_ts.action import LeafNodeBase
+from tms_ts.errors import TreeRuntimeError
 from tms_ts.leaf import ABORTED, ACCEPTED, CANCELED, PENDING, REJECTED, SUCCEEDED
 from tms_ts.outcomes import OUTCOME_GRACE_S, SUBTASK_OUTCOME_TOPIC
 from tms_ts.subtask_specs import SUBTASKS
@@ -45,6 +50,12 @@ HEARTBEAT_PERIOD_S = 0.05
 #: a heartbeat older than this [s wall] counts as silent (the leaf then waits server_lost_s more)
 HEARTBEAT_STALE_S = 0.6
 _STATUS = {GoalStatus.STATUS_SUCCEEDED: SUCCEEDED, GoalStatus.STATUS_CANCELED: CANCELED, GoalStatus.STATUS_ABORTED: ABORTED}
+
+
+def _one_line(exc: Exception) -> str:
+    """rclpy's name errors span lines (name, caret): the first one."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    return lines[0].rstrip(":") if lines else type(exc).__name__
 
 
 class RosGoal:
@@ -144,11 +155,14 @@ class ManagerRosPort:
     def _client(self, model_name: str, subtask_name: str) -> RaceFreeActionClient:
         name = f"/{model_name}/{subtask_name}"
         client = self._clients.get(name)
-        if client is None:
-            client = self._clients[name] = RaceFreeActionClient(self.node, LeafNodeBase, name)
-        if model_name not in self._outcome_subs:
-            self._outcome_subs[model_name] = self.node.create_subscription(
-                SubtaskOutcome, f"/{model_name}/{SUBTASK_OUTCOME_TOPIC}", self._on_outcome, OUTCOME_QOS)
+        try:
+            if client is None:
+                client = self._clients[name] = RaceFreeActionClient(self.node, LeafNodeBase, name)
+            if model_name not in self._outcome_subs:
+                self._outcome_subs[model_name] = self.node.create_subscription(
+                    SubtaskOutcome, f"/{model_name}/{SUBTASK_OUTCOME_TOPIC}", self._on_outcome, OUTCOME_QOS)
+        except ValueError as exc:  # rclpy: "Failed to create action client due to invalid topic name"
+            raise TreeRuntimeError(f"action {name!r} (model_name {model_name!r}): {_one_line(exc)}") from None
         return client
 
     def _on_outcome(self, msg: SubtaskOutcome) -> None:
@@ -194,8 +208,12 @@ class ManagerRosPort:
         at the moment of the stop would drop its first message)."""
         if model_name not in self._emg:
             reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-            self._lock_pubs[model_name] = self.node.create_publisher(Bool, f"/{model_name}/lock", reliable)
-            self._emg[model_name] = self.node.create_publisher(Bool, f"/{model_name}/emg_stop", reliable)
+            try:
+                lock = self.node.create_publisher(Bool, f"/{model_name}/lock", reliable)
+                emg = self.node.create_publisher(Bool, f"/{model_name}/emg_stop", reliable)
+            except ValueError as exc:  # an invalid name (the loader refuses them; never a crash here)
+                raise TreeRuntimeError(f"machine topics of model_name {model_name!r}: {_one_line(exc)}") from None
+            self._lock_pubs[model_name], self._emg[model_name] = lock, emg
         return self._lock_pubs[model_name], self._emg[model_name]
 
     def emergency_stop(self, model_name: str, reason: str) -> None:
