@@ -2,6 +2,13 @@
 
 ``load_yaml`` returns plain Python data plus a :class:`Where` locator, so validators can report
 ``file:line: key: problem`` instead of a bare KeyError.
+
+Every YAML input (configuration files, seeds, ``tms-db param import``) is read under the same limits, checked on
+the parser's event stream before anything is built (the composer recurses on depth, and aliases share what they
+name, so an alias bomb of a few hundred bytes expands to millions of values once a consumer walks it):
+:data:`MAX_YAML_DEPTH` nesting levels, :data:`MAX_YAML_ALIASES` aliases and :data:`MAX_YAML_NODES` values with
+every alias expanded. A file must be UTF-8; anything else is a ConfigError naming the file and the byte offset.
+The project's own configuration files use at most depth 5, 845 values and no alias.
 """
 
 from __future__ import annotations
@@ -16,7 +23,15 @@ import yaml
 
 from tms_common.errors import ConfigError
 
-__all__ = ["Where", "load_yaml", "load_yaml_text", "repo_root", "config_path", "data_path", "data_root"]
+__all__ = ["Where", "load_yaml", "load_yaml_text", "read_utf8", "repo_root", "config_path", "data_path", "data_root",
+           "MAX_YAML_DEPTH", "MAX_YAML_ALIASES", "MAX_YAML_NODES"]
+
+#: nesting levels (mappings and sequences) a YAML document may have
+MAX_YAML_DEPTH = 64
+#: aliases (``*name``) a YAML document may use
+MAX_YAML_ALIASES = 100
+#: values (scalars, mappings, sequences) a YAML document may hold once every alias is expanded
+MAX_YAML_NODES = 200_000
 
 
 @dataclass(frozen=True)
@@ -52,9 +67,46 @@ def _collect_lines(node: yaml.Node, path: tuple[Any, ...], lines: dict[tuple[Any
             _collect_lines(item, path + (index,), lines)
 
 
+def _check_limits(text: str, file: str) -> None:
+    """Walk the parser's events (no recursion, nothing built) and refuse depth, alias count or expanded size past
+    the limits, naming the line."""
+    depth = aliases = total = 0
+    anchored: dict[str, int] = {}  # anchor -> expanded values of what it names
+    open_at: list[tuple[str | None, int]] = []  # per open collection: its anchor, ``total`` when it started
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        line = event.start_mark.line + 1 if event.start_mark is not None else 1
+        if isinstance(event, yaml.AliasEvent):
+            aliases += 1
+            if aliases > MAX_YAML_ALIASES:
+                raise ConfigError(f"{file}:{line}: more than {MAX_YAML_ALIASES} YAML aliases (limit MAX_YAML_ALIASES)")
+            total += anchored.get(event.anchor, 1)
+        elif isinstance(event, yaml.ScalarEvent):
+            total += 1
+            if event.anchor is not None:
+                anchored[event.anchor] = 1
+        elif isinstance(event, yaml.CollectionStartEvent):
+            total += 1
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                raise ConfigError(f"{file}:{line}: YAML nested deeper than {MAX_YAML_DEPTH} levels (limit MAX_YAML_DEPTH)")
+            open_at.append((event.anchor, total - 1))
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+            anchor, start = open_at.pop()
+            if anchor is not None:
+                anchored[anchor] = total - start
+        else:
+            continue
+        if total > MAX_YAML_NODES:
+            raise ConfigError(f"{file}:{line}: YAML expands to more than {MAX_YAML_NODES} values with its aliases "
+                              "expanded (limit MAX_YAML_NODES)")
+
+
 def load_yaml_text(text: str, file: str = "<string>") -> tuple[Any, Where]:
-    """Parse YAML text; a syntax error becomes a ConfigError naming ``file`` and the line."""
+    """Parse YAML text; a syntax error, or a document past the limits (depth, aliases, expanded size: module
+    docstring), becomes a ConfigError naming ``file`` and the line."""
     try:
+        _check_limits(text, file)
         node = yaml.compose(text, Loader=yaml.SafeLoader)
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:
@@ -66,20 +118,34 @@ def load_yaml_text(text: str, file: str = "<string>") -> tuple[Any, Where]:
         raise ConfigError(f"{file}:{line}: malformed YAML: {exc.problem or exc}{context}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{file}: malformed YAML: {exc}") from None
+    except RecursionError:  # a backstop: the depth limit above refuses such documents first
+        raise ConfigError(f"{file}: YAML nested too deep to read") from None
     lines: dict[tuple[Any, ...], int] = {}
     if node is not None:
         _collect_lines(node, (), lines)
     return data, Where(file=file, lines=lines)
 
 
-def load_yaml(path: str | Path) -> tuple[Any, Where]:
-    """Read and parse a YAML file; a missing file or a syntax error names the file."""
+def read_utf8(path: str | Path, what: str = "") -> str:
+    """A text file's content; one ConfigError naming the file for anything but readable UTF-8 (the byte offset
+    and line of the first byte that is not UTF-8)."""
     path = Path(path)
+    label = f"{what} {path}" if what else str(path)
     try:
-        text = path.read_text()
+        data = path.read_bytes()
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
-    return load_yaml_text(text, str(path))
+        raise ConfigError(f"{label}: cannot read: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(f"{label}:{line}: not UTF-8 text: byte 0x{data[exc.start]:02x} at byte offset {exc.start}") from None
+
+
+def load_yaml(path: str | Path) -> tuple[Any, Where]:
+    """Read and parse a YAML file; a missing file, a file that is not UTF-8 or a syntax error names the file."""
+    path = Path(path)
+    return load_yaml_text(read_utf8(path), str(path))
 
 
 def repo_root() -> Path:

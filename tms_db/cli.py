@@ -14,28 +14,51 @@
 
 The store is chosen as in :func:`tms_db.open_store`: ``--uri`` (default ``$TMS_DB_URI``) for MongoDB,
 else the embedded store at ``--path`` (default ``$TMS_DB_PATH`` else ``~/.local/share/tms/db``).
-Exit codes: 0 done, 1 store or input error (message names file / record / field; a restore that left out
-bad documents, each named by file and _id, after loading the others), 2 usage.
+
+``param import``, ``restore`` and ``seed`` are all or nothing: every document is checked first and with any
+refused nothing is stored; each refused one is named on its own line (file and line or document number, why).
+Every error ends with one line ``tms-db: error: ...`` on stderr, never a traceback, and the exit code says which
+kind (:data:`EXIT_CODES`, the table in tms_db/README.md).
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
 import sys
+import traceback
 from pathlib import Path
 from typing import Any
 
 from bson import json_util
 
-from tms_common.config import load_yaml, repo_root
+from tms_common.config import load_yaml, read_utf8, repo_root
 from tms_common.errors import TmsError
 from tms_db import dumpfmt
-from tms_db.errors import StoreError, ValidationError
-from tms_db.store import Store, open_store
+from tms_db.errors import (
+    InputRefusedError,
+    StorageFullError,
+    StorageReadOnlyError,
+    StoreError,
+    ValidationError,
+)
+from tms_db.schema import check_document_size, validate_parameter
+from tms_db.store import Store, build_task_doc, open_store, parameter_key
 
-__all__ = ["main", "import_parameters", "seed"]
+__all__ = ["main", "import_parameters", "check_parameters", "seed", "EXIT_CODES"]
+
+#: exit code -> meaning; the same table is in tms_db/README.md
+EXIT_CODES = {
+    0: "done",
+    1: "refused input or store error (the last line names file / record / field; nothing of a refused input is stored)",
+    2: "usage (unknown command or option, bad argument)",
+    3: "disk full (ENOSPC): nothing of the write that met it is stored",
+    4: "storage read-only or not permitted (database directory, file system)",
+    70: "internal error (a bug: the line names the exception; TMS_DEBUG=1 prints the traceback)",
+    130: "interrupted (Ctrl-C)",
+}
 
 _RELAXED = json_util.JSONOptions(json_mode=json_util.JSONMode.RELAXED, tz_aware=True)
 PAPER_SEED = Path("config/seeds/paper.yaml")
@@ -45,23 +68,48 @@ def _print_doc(doc: dict) -> None:
     print(json.dumps(json.loads(json_util.dumps(doc, json_options=_RELAXED)), indent=2, ensure_ascii=False))
 
 
+def check_parameters(path: str | Path, docs: Any, where: Any, key_path: tuple = ()) -> list[str]:
+    """Every problem of the parameter documents of one file, one line each naming ``file:line``: a document the
+    store refuses (shape, size: :data:`tms_db.schema.MAX_DOCUMENT_BYTES`) and two with the same (model_name,
+    record_name), naming both lines."""
+    if not isinstance(docs, list):
+        return [f"{path}:{where.line_of(key_path)}: expected a list of parameter documents"]
+    problems: list[str] = []
+    first: dict[tuple[str, str], int] = {}
+    for i, doc in enumerate(docs):
+        line = where.line_of(key_path + (i,))
+        try:
+            validate_parameter(doc)
+            check_document_size(doc, f"record {doc['record_name']!r}")
+        except ValidationError as exc:
+            problems.append(f"{path}:{line}: {exc}")
+            continue
+        key = parameter_key(doc)
+        if key in first:
+            problems.append(f"{path}:{line}: duplicate record {key[1]!r} of model {key[0]!r}: "
+                            f"also at line {first[key]} (one file names each record once)")
+        else:
+            first[key] = line
+    return problems
+
+
 def import_parameters(store: Store, path: str | Path, docs: Any = None, where: Any = None,
                       key_path: tuple = ()) -> int:
-    """Upsert the parameter documents of a YAML file; errors carry ``file:line``."""
+    """Upsert the parameter documents of a YAML file, all or nothing: every document is checked first
+    (:func:`check_parameters`) and with any refused, InputRefusedError lists each by ``file:line`` and nothing is
+    stored; then all are written in one transaction."""
     if docs is None:
         docs, where = load_yaml(path)
         if isinstance(docs, dict) and "parameters" in docs:
             docs, key_path = docs["parameters"], ("parameters",)
         elif isinstance(docs, dict):
             docs = [docs]
-    if not isinstance(docs, list):
-        raise StoreError(f"{path}:{where.line_of(key_path)}: expected a list of parameter documents")
-    for i, doc in enumerate(docs):
-        try:
-            store.upsert_parameter(doc)
-        except ValidationError as exc:
-            raise ValidationError(f"{path}:{where.line_of(key_path + (i,))}: {exc}") from None
-    return len(docs)
+    problems = check_parameters(path, docs, where, key_path)
+    if problems:
+        total = len(docs) if isinstance(docs, list) else 0
+        raise InputRefusedError(f"{path}: {len(problems)} problem(s) in {total} parameter document(s); "
+                                "nothing imported", problems)
+    return store.upsert_parameters(docs)
 
 
 def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
@@ -84,10 +132,18 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     tasks = data.get("tasks") or []
     if not isinstance(tasks, list):
         raise StoreError(f"{seed_file}:{where.line_of(('tasks',))}: 'tasks' must be a list")
+    # Everything is read and checked before anything is written: a bad parameter or task leaves the store as it was.
+    params = data.get("parameters") or []
+    problems = check_parameters(seed_file, params, where, ("parameters",))
+    if problems:
+        raise InputRefusedError(f"{seed_file}: {len(problems)} problem(s) in its parameters; nothing seeded", problems)
+    loaded: list[tuple[int, dict, str, Path]] = []
     for i, entry in enumerate(tasks):
         line = where.line_of(("tasks", i))
         if not isinstance(entry, dict) or "task_id" not in entry or "file" not in entry:
             raise StoreError(f"{seed_file}:{line}: each task needs 'task_id' and 'file'")
+        if not isinstance(entry["file"], str) or not entry["file"]:
+            raise StoreError(f"{seed_file}:{line}: 'file' must be a file name, got {entry['file']!r}")
         xml_path = Path(entry["file"])
         if not xml_path.is_absolute():
             candidates = [repo_root() / xml_path, seed_file.parent / xml_path]
@@ -96,15 +152,36 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
             xml = xml_path.read_text(encoding="utf-8")
         except OSError as exc:
             raise StoreError(f"{seed_file}:{line}: task file {entry['file']}: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            xml = read_utf8(xml_path, f"{seed_file}:{line}: task file")  # raises, naming the byte offset
+        try:
+            build_task_doc(xml, entry["task_id"], entry.get("description", ""), entry.get("model_name"),
+                           entry.get("blackboard"))
+        except ValidationError as exc:
+            raise ValidationError(f"{seed_file}:{line}: {xml_path}: {exc}") from None
+        loaded.append((line, entry, xml, xml_path))
+    for line, entry, xml, xml_path in loaded:
         try:
             store.add_task(xml, task_id=entry["task_id"], description=entry.get("description", ""),
                            model_name=entry.get("model_name"), replace=True, blackboard=entry.get("blackboard"))
         except ValidationError as exc:
             raise ValidationError(f"{seed_file}:{line}: {xml_path}: {exc}") from None
-    n_params = 0
-    if data.get("parameters"):
-        n_params = import_parameters(store, seed_file, data["parameters"], where, ("parameters",))
+    n_params = store.upsert_parameters(params) if params else 0
     return len(tasks), n_params
+
+
+def check_task_tree(doc: dict) -> None:
+    """Load a task document's tree as the task manager does at start (``tms_ts.loader.load_tree`` with a bare
+    context: no ROS, no store), so a restore refuses and ``check`` reports a tree the manager would refuse. Lives
+    here, in the command line, so that tms_db itself never imports tms_ts (which uses tms_db). Without tms_ts
+    installed only the store's own XML check applies."""
+    try:
+        from tms_ts.bt.core import TreeContext
+        from tms_ts.loader import load_tree
+    except ImportError:
+        return
+    load_tree(doc["task_sequence"], TreeContext(), source=f"task_id {doc.get('task_id')}",
+              blackboard=doc.get("blackboard"))
 
 
 def _parse_assignments(items: list[str]) -> dict[str, Any]:
@@ -120,8 +197,16 @@ def _parse_assignments(items: list[str]) -> dict[str, Any]:
     return fields
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a usage error on one line (exit 2), as every other error."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"tms-db: error: {message} (usage: {self.prog} --help)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="tms-db", description="The TMS document store (tasks, parameters, blackboard).")
+    p = _Parser(prog="tms-db", description="The TMS document store (tasks, parameters, blackboard).",
+                epilog="exit codes: " + "; ".join(f"{k} {v.split(' (')[0]}" for k, v in EXIT_CODES.items()))
     p.add_argument("--uri", default=os.environ.get("TMS_DB_URI") or None, help="mongodb://... (default $TMS_DB_URI)")
     p.add_argument("--path", default=None, help="embedded store directory (default $TMS_DB_PATH or ~/.local/share/tms/db)")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -201,13 +286,18 @@ def _run(args: argparse.Namespace) -> int:
             counts = dumpfmt.dump(store, args.dir)
             print(", ".join(f"{k}: {v}" for k, v in counts.items()) or "nothing to dump", f"-> {args.dir}")
         elif args.cmd == "restore":
-            result = dumpfmt.restore(store, args.dir, drop=args.drop)
-            print(", ".join(f"{k}: {v}" for k, v in result.counts.items()), "restored")
+            result = dumpfmt.restore(store, args.dir, drop=args.drop, check_task=check_task_tree)
             for line in result.rejected:
-                print(f"tms-db: left out: {line}", file=sys.stderr)
+                print(f"tms-db: refused: {line}", file=sys.stderr)
+            if result.partial:  # a MongoDB server without transactions failed midway: say exactly what is stored
+                for line in result.partial:
+                    print(f"tms-db: partly stored: {line}", file=sys.stderr)
+                raise StoreError(f"restore {args.dir}: the server failed midway (no transactions): "
+                                 + ", ".join(f"{k}: {v}" for k, v in result.counts.items()) + " stored, the rest not")
             if result.rejected:
-                print(f"tms-db: {len(result.rejected)} document(s) left out; the others are restored", file=sys.stderr)
-                return 1
+                raise InputRefusedError(f"restore {args.dir}: {len(result.rejected)} document(s) refused "
+                                        "(listed above); nothing restored", [])
+            print(", ".join(f"{k}: {v}" for k, v in result.counts.items()), "restored")
         elif args.cmd == "seed":
             seed_file = Path(args.file) if args.file else repo_root() / PAPER_SEED.with_name(f"{args.name}.yaml")
             if not args.file and not seed_file.is_file():
@@ -216,6 +306,13 @@ def _run(args: argparse.Namespace) -> int:
             print(f"seed {args.name}: {n_tasks} task(s), {n_params} parameter document(s) from {seed_file}")
         elif args.cmd == "check":
             problems = store.check()
+            for doc in store.list_tasks():  # the trees as the task manager loads them
+                if not isinstance(doc.get("task_sequence"), str):
+                    continue  # store.check() has named it
+                try:
+                    check_task_tree(doc)
+                except Exception as exc:  # noqa: BLE001 - whatever the loader raises, the task cannot start
+                    problems.append(f"task ({doc.get('task_id')}): {exc}")
             for line in problems:
                 print(line)
             print("consistent" if not problems else f"{len(problems)} problem(s)")
@@ -223,13 +320,45 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fail(code: int, text: str) -> int:
+    print(f"tms-db: error: {' '.join(str(text).split())}", file=sys.stderr)  # one line, whatever the message holds
+    return code
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         return _run(args)
+    except InputRefusedError as exc:
+        for line in exc.problems:
+            print(f"tms-db: refused: {' '.join(line.split())}", file=sys.stderr)
+        return _fail(1, str(exc))
+    except StorageFullError as exc:
+        return _fail(3, str(exc))
+    except StorageReadOnlyError as exc:
+        return _fail(4, str(exc))
     except TmsError as exc:
-        print(f"tms-db: error: {exc}", file=sys.stderr)
-        return 1
+        return _fail(1, str(exc))
+    except UnicodeDecodeError as exc:
+        name = getattr(args, "file", None) or getattr(args, "dir", None) or "input"
+        return _fail(1, f"{name}: not UTF-8 text: byte 0x{exc.object[exc.start]:02x} at byte offset {exc.start}")
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return _fail(3, f"{where}disk full (ENOSPC): {exc.strerror}")
+        if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+            return _fail(4, f"{where}read-only or not permitted: {exc.strerror}")
+        return _fail(1, f"{where}{exc.strerror or exc}")
+    except RecursionError:
+        return _fail(1, "input nested too deep to read")
+    except MemoryError:
+        return _fail(1, "out of memory reading the input")
+    except KeyboardInterrupt:
+        return _fail(130, "interrupted")
+    except Exception as exc:  # noqa: BLE001 - a bug still ends in one line, the traceback only on request
+        if os.environ.get("TMS_DEBUG"):
+            traceback.print_exc()
+        return _fail(70, f"internal error: {type(exc).__name__}: {exc}")
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from __future__ import annotations
 import base64
 import contextlib
 import datetime as _dt
+import errno
 import fcntl
 import json
 import os
@@ -35,21 +36,22 @@ from typing import Any, TypeVar
 
 from bson import Binary, Decimal128, ObjectId
 
-from tms_db.errors import RecordNotFound, StoreError, ValidationError
-from tms_db.schema import is_number, validate_fields, validate_parameter
+from tms_db.errors import RecordNotFound, StorageFullError, StorageReadOnlyError, StoreError, ValidationError
+from tms_db.schema import check_document_size, is_number, validate_fields, validate_parameter
 from tms_db.store import (
     _MISSING,
     ImportResult,
     Rejected,
     Store,
     build_task_doc,
-    check_import_document,
+    check_document,
     check_record_name,
     check_task_id,
     choose_task_id,
     document_label,
     now_utc,
     param_filter_text,
+    prevalidate_import,
     values_equal,
 )
 
@@ -61,6 +63,10 @@ BACKSTOP_CHECKPOINT_PAGES = 10_000
 LOCK_FILE = "write.lock"
 SCHEMA_VERSION = "1"
 T = TypeVar("T")
+
+
+class _RefusedError(Exception):
+    """Raised inside an import's transaction to roll it back once every document has been tried."""
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS documents (
@@ -151,10 +157,11 @@ class EmbeddedStore(Store):
             raise StoreError(f"synchronous {synchronous!r}: expected NORMAL or FULL")
         self._synchronous = synchronous.upper()
         self._busy_timeout_s = busy_timeout_s
+        self.file = self.directory / DB_FILE
         try:
             self.directory.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise StoreError(f"embedded store {self.directory}: cannot create directory: {exc.strerror}") from None
+            raise self._storage_error(exc, f"cannot create directory {self.directory}") from None
         self.file = self.directory / DB_FILE
         self._lock = threading.RLock()
         self._conn: sqlite3.Connection | None = None
@@ -168,9 +175,34 @@ class EmbeddedStore(Store):
         return f"EmbeddedStore({str(self.directory)!r})"
 
     # ---- connection ------------------------------------------------------------------------------
+    def _read_only(self) -> bool:
+        """True when the store's directory (or its file system, or its database file) cannot be written; checked by
+        the kernel, so a read-only mount or an immutable directory counts for root too."""
+        try:
+            if os.statvfs(self.directory).f_flag & os.ST_RDONLY:
+                return True
+            return not os.access(self.directory, os.W_OK) or (self.file.exists() and not os.access(self.file, os.W_OK))
+        except OSError:
+            return False
+
+    def _storage_error(self, exc: BaseException, doing: str = "") -> StoreError:
+        """One error naming the cause: disk full, read-only storage, else the backend's message."""
+        text = str(exc) if not isinstance(exc, OSError) or exc.errno is None else (exc.strerror or str(exc))
+        where = f"embedded store {self.file}" + (f": {doing}" if doing else "")
+        code = getattr(exc, "sqlite_errorcode", None)
+        if (isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)) or code == sqlite3.SQLITE_FULL \
+                or "database or disk is full" in text:
+            return StorageFullError(f"{where}: disk full (ENOSPC): {text}; nothing of this write was stored")
+        if (isinstance(exc, OSError) and exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM)) \
+                or code == sqlite3.SQLITE_READONLY or "readonly database" in text \
+                or (isinstance(exc, sqlite3.Error) and self._read_only()):
+            return StorageReadOnlyError(f"database directory {self.directory} is read-only ({text})")
+        return StoreError(f"{where}: {text}")
+
     def _connect(self) -> sqlite3.Connection:
         if self._conn is not None and self._pid == os.getpid():
             return self._conn
+        conn = None
         try:
             conn = sqlite3.connect(self.file, timeout=self._busy_timeout_s, isolation_level=None, check_same_thread=False)
             conn.execute("PRAGMA journal_mode=WAL")
@@ -181,9 +213,13 @@ class EmbeddedStore(Store):
             self._transaction(lambda c: c.executescript(_SCHEMA) and None, script=True)
             self._transaction(lambda c: c.execute(
                 "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema_version', ?)", (SCHEMA_VERSION,)))
-        except sqlite3.DatabaseError as exc:
+        except (sqlite3.Error, OSError, StoreError) as exc:
             self._conn = None
-            raise StoreError(f"embedded store {self.file}: cannot open: {exc}") from None
+            if conn is not None:
+                conn.close()
+            if isinstance(exc, StoreError):
+                raise
+            raise self._storage_error(exc, "cannot open") from None
         return conn
 
     @contextlib.contextmanager
@@ -196,27 +232,35 @@ class EmbeddedStore(Store):
             fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
 
     def _transaction(self, body: Callable[[sqlite3.Connection], T], *, script: bool = False) -> T:
-        """Run ``body`` in one BEGIN IMMEDIATE transaction under the cross-process write lock."""
+        """Run ``body`` in one BEGIN IMMEDIATE transaction under the cross-process write lock.
+
+        A failure rolls the whole transaction back; SQLite's own errors become one StoreError naming the cause
+        (disk full: SQLite has then already rolled back itself, and a second ROLLBACK would replace the cause with
+        "no transaction is active")."""
         with self._lock:
             conn = self._connect()
             with self._write_lock():
-                if script:  # executescript commits on its own
-                    return body(conn)
-                conn.execute("BEGIN IMMEDIATE")
                 try:
+                    if script:  # executescript commits on its own
+                        return body(conn)
+                    conn.execute("BEGIN IMMEDIATE")
                     result = body(conn)
-                except BaseException:
-                    conn.execute("ROLLBACK")
+                    conn.execute("COMMIT")
+                    return result
+                except BaseException as exc:
+                    if conn.in_transaction:
+                        with contextlib.suppress(sqlite3.Error):  # the cause is the exception on its way out
+                            conn.execute("ROLLBACK")
+                    if isinstance(exc, sqlite3.Error):
+                        raise self._storage_error(exc) from None
                     raise
-                conn.execute("COMMIT")
-                return result
 
     def _query(self, sql: str, args: tuple = ()) -> list[tuple]:
         with self._lock:
             try:
                 return self._connect().execute(sql, args).fetchall()
-            except sqlite3.DatabaseError as exc:
-                raise StoreError(f"embedded store {self.file}: {exc}") from None
+            except sqlite3.Error as exc:
+                raise self._storage_error(exc) from None
 
     # ---- tasks -----------------------------------------------------------------------------------
     def get_task(self, task_id: int) -> dict:
@@ -366,14 +410,18 @@ class EmbeddedStore(Store):
 
         return self._modify(record_name, model_name, change, fields=(field,))[0]
 
-    def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
+    @staticmethod
+    def _checked_parameter(doc: Mapping[str, Any]) -> dict:
         validate_parameter(doc)
-        doc = dict(doc)
-        _tid, model, record = _key_columns("parameter", doc)
+        check_document_size(doc, f"record {doc['record_name']!r}")
+        return dict(doc)
 
-        def put(conn: sqlite3.Connection) -> None:
-            row = conn.execute("SELECT seq, oid FROM documents WHERE collection='parameter' AND record_name=? "
-                               "AND model_name=?", (record, model)).fetchone()
+    @staticmethod
+    def _put_parameter(conn: sqlite3.Connection, doc: dict) -> None:
+        _tid, model, record = _key_columns("parameter", doc)
+        row = conn.execute("SELECT seq, oid FROM documents WHERE collection='parameter' AND record_name=? "
+                           "AND model_name=?", (record, model)).fetchone()
+        try:
             if row is not None:
                 doc.setdefault("_id", ObjectId(row[1]))
                 conn.execute("UPDATE documents SET oid=?, body=? WHERE seq=?", (str(doc["_id"]), encode_body(doc), row[0]))
@@ -381,8 +429,28 @@ class EmbeddedStore(Store):
                 oid = str(doc.get("_id") or ObjectId())
                 conn.execute("INSERT INTO documents (collection, oid, model_name, record_name, body) "
                              "VALUES ('parameter', ?, ?, ?, ?)", (oid, model, record, encode_body(doc)))
+        except sqlite3.IntegrityError:
+            raise ValidationError(f"{param_filter_text(record, model)}: _id {doc.get('_id')} is already another "
+                                  "document's") from None
 
-        self._transaction(put)
+    def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
+        doc = self._checked_parameter(doc)
+        self._transaction(lambda conn: self._put_parameter(conn, doc))
+
+    def upsert_parameters(self, docs: Iterable[Mapping[str, Any]]) -> int:
+        checked = []
+        for i, doc in enumerate(docs):
+            try:
+                checked.append(self._checked_parameter(doc))
+            except ValidationError as exc:
+                raise ValidationError(f"document {i}: {exc}") from None
+
+        def put(conn: sqlite3.Connection) -> int:
+            for doc in checked:
+                self._put_parameter(conn, doc)
+            return len(checked)
+
+        return self._transaction(put)
 
     def remove_parameter(self, record_name: str, *, model_name: str | None = None) -> None:
         check_record_name(record_name)
@@ -407,36 +475,50 @@ class EmbeddedStore(Store):
         for row in self._query("SELECT oid, body FROM documents WHERE collection=? ORDER BY seq", (name,)):
             yield decode_body(*row)
 
-    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> ImportResult:
-        if not isinstance(name, str) or not name or name.startswith("$"):
-            raise ValidationError(f"collection name {name!r}: must be a non-empty string")
-        docs = list(docs)
+    def import_collections(self, batches: Iterable[tuple[str, Iterable[Mapping[str, Any]]]], *,
+                           drop: bool = False) -> list[ImportResult]:
+        batches = [(name, list(docs)) for name, docs in batches]
+        for name, _docs in batches:
+            if not isinstance(name, str) or not name or name.startswith("$"):
+                raise ValidationError(f"collection name {name!r}: must be a non-empty string")
 
-        def put(conn: sqlite3.Connection) -> ImportResult:
+        def storable(doc: Mapping[str, Any]) -> None:
+            oid = doc.get("_id")
+            if oid is not None and not isinstance(oid, ObjectId):
+                raise ValidationError(f"_id {oid!r} is not an ObjectId (the embedded store keys documents by ObjectId)")
+            encode_body(doc)  # TypeError / ValueError: a value JSON cannot keep (a set, NaN)
+
+        results = [ImportResult(rejected=prevalidate_import(name, docs, storable)) for name, docs in batches]
+        if any(r.rejected for r in results):
+            return results
+
+        def put(conn: sqlite3.Connection) -> list[ImportResult]:
             if drop:
-                conn.execute("DELETE FROM documents WHERE collection=?", (name,))
-            result = ImportResult()
-            for i, doc in enumerate(docs):
-                label = document_label(doc)
-                try:
-                    check_import_document(name, doc)
-                    oid = doc.get("_id") or ObjectId()
-                    if not isinstance(oid, ObjectId):
-                        raise ValidationError(f"_id {oid!r} is not an ObjectId (the embedded store keys documents by ObjectId)")
+                for name in dict.fromkeys(n for n, _ in batches):
+                    conn.execute("DELETE FROM documents WHERE collection=?", (name,))
+            for (name, docs), result in zip(batches, results, strict=True):
+                for i, doc in enumerate(docs):
                     tid, model, record = _key_columns(name, doc)
-                    # A failed INSERT undoes only itself (SQLite's ABORT): the documents before and after stay.
-                    conn.execute("INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
-                                 "VALUES (?, ?, ?, ?, ?, ?)", (name, str(oid), tid, model, record, encode_body(doc)))
-                except (TypeError, ValueError) as exc:
-                    result.rejected.append(Rejected(i, label, str(exc)))
-                except sqlite3.IntegrityError:
-                    key = f"task_id {tid}" if name == "task" else f"record {record!r} of model {model!r}"
-                    result.rejected.append(Rejected(i, label, f"duplicate _id or {key}"))
-                else:
-                    result.loaded += 1
-            return result
+                    try:
+                        conn.execute("INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
+                                     "VALUES (?, ?, ?, ?, ?, ?)",
+                                     (name, str(doc.get("_id") or ObjectId()), tid, model, record, encode_body(doc)))
+                    except sqlite3.IntegrityError:
+                        key = f"task_id {tid}" if name == "task" else f"record {record!r} of model {model!r}"
+                        result.rejected.append(Rejected(i, document_label(doc), f"_id or {key} already in the store "
+                                                                                "or in another input"))
+                    else:
+                        result.loaded += 1
+            if any(r.rejected for r in results):
+                raise _RefusedError  # every document was tried, so each refusal is reported; now undo them all
+            return results
 
-        return self._transaction(put)
+        try:
+            return self._transaction(put)
+        except _RefusedError:
+            for result in results:
+                result.loaded = 0
+            return results
 
     def check(self) -> list[str]:
         problems: list[str] = []
@@ -458,6 +540,7 @@ class EmbeddedStore(Store):
                 continue
             if _key_columns(collection, doc) != (tid, model, record):
                 problems.append(f"{collection} row {seq} (_id {oid}): index columns do not match the document")
+            problems += check_document(collection, doc)
         return problems
 
     def checkpoint_in_background(self, period_s: float) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from tms_common.errors import TmsError
 
-__all__ = ["StoreError", "RecordNotFound", "ValidationError"]
+__all__ = ["StoreError", "RecordNotFound", "ValidationError", "InputRefusedError", "StorageFullError", "StorageReadOnlyError"]
 
 
 class StoreError(TmsError):
@@ -25,3 +25,20 @@ class RecordNotFound(StoreError, KeyError):  # noqa: N818 - name fixed by the cr
 
 class ValidationError(StoreError, ValueError):
     """A document, field or task XML has the wrong shape; the message names record and field."""
+
+
+class InputRefusedError(ValidationError):
+    """A whole input (an import file, a restore directory) refused and nothing of it stored: ``problems`` holds one
+    line per refused document, naming file and line (or document index) and why; the message is the summary."""
+
+    def __init__(self, summary: str, problems: list[str]) -> None:
+        super().__init__(summary)
+        self.problems = list(problems)
+
+
+class StorageFullError(StoreError):
+    """The store's disk is full (ENOSPC / SQLITE_FULL); nothing of the write that met it was stored."""
+
+
+class StorageReadOnlyError(StoreError):
+    """The store's directory (or file system) cannot be written."""

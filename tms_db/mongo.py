@@ -15,21 +15,25 @@ import bson
 import bson.errors
 
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
-from tms_db.schema import is_number, validate_fields, validate_parameter
+from tms_db.schema import check_document_size, is_number, validate_fields, validate_parameter
 from tms_db.store import (
     DATABASE,
     ImportResult,
     Rejected,
     Store,
     build_task_doc,
-    check_import_document,
+    check_document,
     check_record_name,
     check_task_id,
     choose_task_id,
     document_label,
     now_utc,
     param_filter_text,
+    prevalidate_import,
 )
+
+#: MongoDB's code for "Transaction numbers are only allowed on a replica set member or mongos" (a standalone server)
+_NO_TRANSACTIONS = 20
 
 __all__ = ["MongoStore"]
 
@@ -188,22 +192,58 @@ class MongoStore(Store):
             raise self._not_found(record_name, model_name, (field,))
         return doc[field]
 
-    def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
-        validate_parameter(doc)
-        doc = dict(doc)
+    def _put_parameter(self, doc: dict, session: Any = None) -> None:
         key = {"record_name": doc["record_name"], "model_name": doc.get("model_name")}
         if doc.get("model_name") is None:
             key["model_name"] = {"$in": [None, ""]}
-        current = self._params.find_one(key)
+        current = self._params.find_one(key, session=session)
         if current is not None:
             doc.setdefault("_id", current["_id"])
             if doc["_id"] != current["_id"]:
-                self._params.delete_one({"_id": current["_id"]})
-                self._params.insert_one(doc)
+                self._params.delete_one({"_id": current["_id"]}, session=session)
+                self._params.insert_one(doc, session=session)
             else:
-                self._params.replace_one({"_id": current["_id"]}, doc)
+                self._params.replace_one({"_id": current["_id"]}, doc, session=session)
         else:
-            self._params.insert_one(doc)
+            self._params.insert_one(doc, session=session)
+
+    @staticmethod
+    def _checked_parameter(doc: Mapping[str, Any]) -> dict:
+        validate_parameter(doc)
+        check_document_size(doc, f"record {doc['record_name']!r}")
+        return dict(doc)
+
+    def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
+        self._put_parameter(self._checked_parameter(doc))
+
+    def _in_transaction(self, write: Any) -> bool:
+        """Run ``write(session)`` in a transaction; False (nothing written) when the server has none (standalone)."""
+        try:
+            with self._client.start_session() as session:
+                session.with_transaction(write)
+            return True
+        except self._errors.OperationFailure as exc:
+            if exc.code == _NO_TRANSACTIONS or "Transaction numbers are only allowed" in str(exc):
+                return False
+            raise
+
+    def upsert_parameters(self, docs: Iterable[Mapping[str, Any]]) -> int:
+        checked = []
+        for i, doc in enumerate(docs):
+            try:
+                checked.append(self._checked_parameter(doc))
+            except ValidationError as exc:
+                raise ValidationError(f"document {i}: {exc}") from None
+        if self._in_transaction(lambda session: [self._put_parameter(dict(d), session) for d in checked]):
+            return len(checked)
+        # No transactions (a standalone server): validated above, so only the server can fail midway; say exactly where.
+        for i, doc in enumerate(checked):
+            try:
+                self._put_parameter(doc)
+            except self._errors.PyMongoError as exc:
+                raise StoreError(f"document {i}: write failed: {exc}; documents 0..{i - 1} are stored, {i}.."
+                                 f"{len(checked) - 1} are not (this MongoDB server has no transactions)") from None
+        return len(checked)
 
     def remove_parameter(self, record_name: str, *, model_name: str | None = None) -> None:
         check_record_name(record_name)
@@ -218,30 +258,68 @@ class MongoStore(Store):
     def export_collection(self, name: str) -> Iterator[dict]:
         yield from self._db[name].find({}).sort("_id", 1)
 
-    def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> ImportResult:
-        result = ImportResult()
-        good: list[tuple[int, dict]] = []
-        for i, doc in enumerate(docs):
+    def import_collections(self, batches: Iterable[tuple[str, Iterable[Mapping[str, Any]]]], *,
+                           drop: bool = False) -> list[ImportResult]:
+        batches = [(name, [dict(d) if isinstance(d, Mapping) else d for d in docs]) for name, docs in batches]
+
+        def storable(doc: Mapping[str, Any]) -> None:
             try:
-                check_import_document(name, doc)
                 bson.encode(doc)  # one unencodable document would otherwise fail the whole batch
-            except (ValidationError, bson.errors.BSONError, TypeError) as exc:
-                result.rejected.append(Rejected(i, document_label(doc), str(exc)))
+            except bson.errors.BSONError as exc:
+                raise ValidationError(str(exc)) from None
+
+        results = [ImportResult(rejected=prevalidate_import(name, docs, storable)) for name, docs in batches]
+        if any(r.rejected for r in results):
+            return results
+        failed: list[tuple[int, Exception]] = []
+
+        def write(session: Any) -> None:
+            if drop:
+                for name in dict.fromkeys(n for n, _ in batches):
+                    self._db[name].delete_many({}, session=session)
+            for k, (name, docs) in enumerate(batches):
+                if docs:
+                    try:
+                        self._db[name].insert_many(docs, ordered=True, session=session)
+                    except self._errors.BulkWriteError as exc:
+                        failed.append((k, exc))
+                        raise
+
+        try:
+            if self._in_transaction(write):
+                for result, (_name, docs) in zip(results, batches, strict=True):
+                    result.loaded = len(docs)
+                return results
+        except self._errors.BulkWriteError:  # the transaction is aborted: nothing stored
+            k, exc = failed[-1]
+            for err in exc.details.get("writeErrors", []):
+                doc = batches[k][1][err["index"]]
+                results[k].rejected.append(Rejected(err["index"], document_label(doc), err.get("errmsg", "write error")))
+            return results
+        # A standalone server (no transactions): validated above, so only a key already stored or the server can
+        # fail; ordered inserts stop at the first failure, and the result says exactly what is stored.
+        failed.clear()
+        stopped = False
+        for k, (name, docs) in enumerate(batches):
+            if stopped:
+                results[k].not_written = list(range(len(docs)))
                 continue
-            good.append((i, dict(doc)))
-        if drop:
-            self._db[name].delete_many({})
-        if good:
+            if drop:
+                self._db[name].delete_many({})
             try:
-                # unordered: MongoDB stores every document it can and reports the others by position
-                self._db[name].insert_many([d for _, d in good], ordered=False)
+                if docs:
+                    self._db[name].insert_many(docs, ordered=True)
+                results[k].loaded = len(docs)
             except self._errors.BulkWriteError as exc:
-                for err in exc.details.get("writeErrors", []):
-                    i, doc = good[err["index"]]
-                    result.rejected.append(Rejected(i, document_label(doc), err.get("errmsg", "write error")))
-        result.loaded = len(good) - sum(1 for r in result.rejected if r.index in {i for i, _ in good})
-        result.rejected.sort(key=lambda r: r.index)
-        return result
+                n = exc.details.get("nInserted", 0)
+                errs = exc.details.get("writeErrors", [])
+                index = errs[0]["index"] if errs else n
+                results[k].loaded = n
+                results[k].rejected.append(Rejected(index, document_label(docs[index]),
+                                                    errs[0].get("errmsg", "write error") if errs else "write error"))
+                results[k].not_written = list(range(index + 1, len(docs)))
+                stopped = True
+        return results
 
     def check(self) -> list[str]:
         problems = []
@@ -255,6 +333,8 @@ class MongoStore(Store):
                 continue
             if not result.get("valid", False):
                 problems.append(f"{name}: {result.get('errors')}")
+            for doc in self._db[name].find({}).sort("_id", 1):
+                problems += check_document(name, doc)
         return problems
 
     def close(self) -> None:

@@ -32,6 +32,9 @@ from tms_db.errors import ValidationError
 __all__ = [
     "META_FIELDS",
     "POSE_KEYS",
+    "MAX_DOCUMENT_BYTES",
+    "document_size",
+    "check_document_size",
     "is_number",
     "validate_parameter",
     "validate_field_name",
@@ -52,6 +55,9 @@ _FAMILIES = {
     "position_with_angle": ("x", "y", "z", "theta_w"),
 }
 _PORT_KEY_RE = re.compile(r"\{([^{}]+)\}")
+#: [bytes] the largest document (task or record) an import, a restore or ``upsert_parameter`` stores: MongoDB's own
+#: limit (16 MiB of BSON), so whatever loads here also loads into MongoDB. Measured by :func:`document_size`.
+MAX_DOCUMENT_BYTES = 16 * 1024 * 1024
 
 
 def is_number(value: Any) -> bool:
@@ -251,3 +257,24 @@ def detect_model_names(xml: str, blackboard: Mapping[str, Any] | None = None) ->
             if name and name not in seen:
                 seen.append(name)
     return ",".join(seen)
+
+
+def document_size(doc: Mapping[str, Any]) -> int:
+    """[bytes] a document's size as MongoDB counts it (its BSON); a document BSON cannot hold (an int past 64 bits,
+    which the embedded store keeps) is measured by its JSON text instead."""
+    import bson
+
+    try:
+        return len(bson.encode(doc))
+    except (bson.errors.BSONError, OverflowError, TypeError, ValueError):
+        import json
+
+        return len(json.dumps(doc, default=str, ensure_ascii=False).encode("utf-8", "surrogatepass"))
+
+
+def check_document_size(doc: Mapping[str, Any], where: str) -> None:
+    """ValidationError naming ``where`` when ``doc`` is over :data:`MAX_DOCUMENT_BYTES`."""
+    size = document_size(doc)
+    if size > MAX_DOCUMENT_BYTES:
+        raise ValidationError(f"{where}: document is {size:,} bytes, over the limit of {MAX_DOCUMENT_BYTES:,} "
+                              "(MAX_DOCUMENT_BYTES, MongoDB's 16 MiB)")

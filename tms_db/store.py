@@ -24,11 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from tms_db.errors import StoreError, ValidationError
-from tms_db.schema import is_number
+from tms_db.schema import check_document_size, is_number
 
 __all__ = [
     "Store", "open_store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS",
-    "ImportResult", "Rejected", "check_import_document", "document_label",
+    "ImportResult", "Rejected", "check_import_document", "document_label", "prevalidate_import", "import_key",
+    "parameter_key", "check_document",
 ]
 
 DATABASE = "rostmsdb"
@@ -83,17 +84,27 @@ class Rejected:
     index: int
     label: str
     reason: str
+    #: a duplicate: the position of the first document with the same key in the same input
+    first: int | None = None
 
     def __str__(self) -> str:
-        return f"document {self.index} ({self.label}): {self.reason}"
+        same = f" (the same as document {self.first})" if self.first is not None else ""
+        return f"document {self.index} ({self.label}): {self.reason}{same}"
 
 
 @dataclass
 class ImportResult:
-    """What :meth:`Store.import_documents` did: documents stored, and each refused one by its id."""
+    """What :meth:`Store.import_documents` did: documents stored, and each refused one by its id.
+
+    An import is all or nothing: with any document refused, ``loaded`` is 0 and nothing of the input is stored.
+    Only a MongoDB server without transactions can fail midway through writing a validated input: then
+    ``loaded`` documents (positions ``0 .. loaded-1``) are stored, ``rejected`` names the one that failed and
+    ``not_written`` the positions after it.
+    """
 
     loaded: int = 0
     rejected: list[Rejected] = field(default_factory=list)
+    not_written: list[int] = field(default_factory=list)
 
 
 def document_label(doc: Any) -> str:
@@ -107,13 +118,16 @@ def document_label(doc: Any) -> str:
 
 
 def check_import_document(collection: str, doc: Any) -> None:
-    """The minimum a document needs to be found again: ValidationError naming the field otherwise.
+    """The minimum a document needs to be found again and used: ValidationError naming the field otherwise.
 
     Imports store documents as they are (like ``mongoimport``): shapes are checked on the next write,
     not here, so the original's records load unchanged (parameter documents without ``record_name``
     included: its older ones are keyed by ``parameter_id``). A task needs its integer ``task_id`` and its
-    XML text, or no look-up finds it.
+    XML text, which must parse and hold a ``<BehaviorTree>``, or no look-up finds it and no start can run it.
+    No document over :data:`tms_db.schema.MAX_DOCUMENT_BYTES`.
     """
+    from tms_db.schema import normalise_task_xml
+
     if not isinstance(doc, Mapping):
         raise ValidationError(f"not a document ({type(doc).__name__})")
     if collection == "task":
@@ -122,6 +136,84 @@ def check_import_document(collection: str, doc: Any) -> None:
             raise ValidationError(f"field 'task_id' must be a positive integer, got {tid!r}")
         if not isinstance(doc.get("task_sequence"), str):
             raise ValidationError(f"field 'task_sequence' must be a string, got {type(doc.get('task_sequence')).__name__}")
+        normalise_task_xml(doc["task_sequence"], f"task_id {tid}")
+    check_document_size(doc, "document")
+
+
+def parameter_key(doc: Mapping[str, Any]) -> tuple[str, str] | None:
+    """(model_name, record_name) a parameter document is found by (a missing model_name is ""), None without a
+    record_name (the original's older documents, keyed by ``parameter_id``)."""
+    record = doc.get("record_name")
+    if not isinstance(record, str):
+        return None
+    model = doc.get("model_name")
+    return (model if isinstance(model, str) else "", record)
+
+
+def import_key(collection: str, doc: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """The unique keys of a document in the input of an import: its ``_id``, a task's ``task_id``, a parameter's
+    (model_name, record_name); as (text naming it, value)."""
+    keys: list[tuple[str, Any]] = []
+    if "_id" in doc:
+        keys.append((f"_id {doc['_id']}", ("_id", str(doc["_id"]))))
+    if collection == "task" and "task_id" in doc:
+        keys.append((f"task_id {doc['task_id']!r}", ("task_id", repr(doc["task_id"]))))
+    elif collection == "parameter":
+        key = parameter_key(doc)
+        if key is not None:
+            keys.append((f"record {key[1]!r} of model {key[0]!r}", key))
+    return keys
+
+
+def prevalidate_import(collection: str, docs: list[Any], check: Any = None) -> list[Rejected]:
+    """Every document of one import input that would be refused: :func:`check_import_document` (and ``check``, a
+    backend's own test raising ``ValidationError`` / ``TypeError`` / ``ValueError``), and duplicates inside the
+    input, each naming the first document with that key."""
+    rejected: list[Rejected] = []
+    seen: dict[Any, int] = {}
+    for i, doc in enumerate(docs):
+        label = document_label(doc)
+        try:
+            check_import_document(collection, doc)
+            if check is not None:
+                check(doc)
+        except (TypeError, ValueError, OverflowError) as exc:
+            rejected.append(Rejected(i, label, str(exc)))
+            continue
+        for text, key in import_key(collection, doc):
+            if key in seen:
+                rejected.append(Rejected(i, label, f"duplicate {text}", first=seen[key]))
+                break
+        else:
+            for _text, key in import_key(collection, doc):
+                seen[key] = i
+    return rejected
+
+
+def check_document(collection: str, doc: Mapping[str, Any]) -> list[str]:
+    """What ``check`` finds wrong with one stored document: a task whose id or XML is unusable; a record whose
+    ``type`` is not text, a ``static`` / ``dynamic`` record (the ones the stack reads by name) without its
+    ``record_name`` (``model_name`` is optional: the global blackboard's records have none), a record whose payload
+    breaks its family's shape
+    (:func:`tms_db.schema.validate_parameter`)."""
+    from tms_db.schema import validate_parameter
+
+    label = document_label(doc)
+    try:
+        if collection == "task":
+            check_import_document("task", doc)
+        elif collection == "parameter":
+            kind = doc.get("type")
+            if kind is not None and not isinstance(kind, str):
+                return [f"parameter ({label}): field 'type' must be a string, got {kind!r}"]
+            if kind in ("static", "dynamic") and (not isinstance(doc.get("record_name"), str) or not doc["record_name"]):
+                return [f"parameter ({label}): a {kind} record needs a non-empty 'record_name', got "
+                        f"{doc.get('record_name')!r}"]
+            if "record_name" in doc or kind in ("static", "dynamic"):
+                validate_parameter(doc)
+    except (ValidationError, TypeError, ValueError) as exc:
+        return [f"{collection} ({label}): {exc}"]
+    return []
 
 
 class Store(abc.ABC):
@@ -214,14 +306,27 @@ class Store(abc.ABC):
     def export_collection(self, name: str) -> Iterator[dict]:
         """Every document of a collection, unchanged (with ``_id``)."""
 
-    @abc.abstractmethod
     def import_documents(self, name: str, docs: Iterable[Mapping[str, Any]], *, drop: bool = False) -> ImportResult:
         """Insert documents as they are (like ``mongoimport``); ``drop`` empties the collection first.
 
-        One bad document (a duplicate key, a value the backend cannot store, a task without its id:
-        :func:`check_import_document`) is refused and reported by its ``_id`` in the result; the others
-        are stored.
+        All or nothing: every document is checked first (:func:`prevalidate_import`: a task without its id or with
+        XML that does not parse, a value the backend cannot store, a document over the size limit, two with the
+        same key); with any refused, each is reported by position and ``_id`` and nothing is stored. Then all are
+        written in one transaction (a key already in the store refuses the whole input too).
         """
+        return self.import_collections([(name, docs)], drop=drop)[0]
+
+    @abc.abstractmethod
+    def import_collections(self, batches: Iterable[tuple[str, Iterable[Mapping[str, Any]]]], *,
+                           drop: bool = False) -> list[ImportResult]:
+        """:meth:`import_documents` for several inputs (collection name, documents) at once, all or nothing
+        together; one result per input, in order."""
+
+    @abc.abstractmethod
+    def upsert_parameters(self, docs: Iterable[Mapping[str, Any]]) -> int:
+        """:meth:`upsert_parameter` for many documents, all or nothing: every one is validated first (the first
+        refusal raises ValidationError naming its position: ``document N: ...``), then all are written in one
+        transaction. Returns the number written."""
 
     @abc.abstractmethod
     def check(self) -> list[str]:

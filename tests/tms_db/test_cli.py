@@ -77,17 +77,19 @@ def test_restore_reads_mongodump_bson(tmp_path) -> None:
         assert list(store.export_collection("parameter")) == ORIGINAL_PARAMS
 
 
-def test_restore_reports_bad_lines_and_documents_and_loads_the_rest(tmp_path) -> None:
+def test_restore_reports_every_bad_line_and_document_and_loads_nothing(tmp_path) -> None:
+    # all or nothing: a malformed line and a duplicate (named with the line of the first) refuse the whole file
     src = tmp_path / "d" / "rostmsdb"
     src.mkdir(parents=True)
     (src / "parameter.json").write_text('{"record_name": "a"}\n{"record_name": \n{"record_name": "a"}\n{"record_name": "b"}\n')
     with open_store(path=tmp_path / "db") as store:
         result = restore(store, tmp_path / "d")
-        assert result.counts == {"parameter": 2}
+        assert result.counts == {"parameter": 0}
         assert len(result.rejected) == 2
         assert "parameter.json:2: malformed Extended JSON" in result.rejected[0]
-        assert re.search(r"parameter.json: line 3 \(record_name 'a'\): duplicate", result.rejected[1])
-        assert [d["record_name"] for d in store.list_parameters()] == ["a", "b"]
+        assert re.search(r"parameter.json: line 3 \(record_name 'a'\): duplicate record 'a' of model '' "
+                         r"\(the same as line 1\)", result.rejected[1])
+        assert store.list_parameters() == []
 
 
 def test_cli_task_and_param_commands(tmp_path) -> None:
