@@ -4,6 +4,7 @@
 
     tms-db [--uri mongodb://...] [--path DIR] COMMAND
       task add FILE.xml [--id N] [--description TEXT] [--model-name M] [--replace]
+                                      (checked as the task manager checks it at start: tms_ts.loader.check_tree)
       task list | task show ID | task remove ID
       param import FILE.yaml          (a list of documents, or {parameters: [...]})
       param get RECORD [--model-name M]
@@ -249,14 +250,40 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _checked_task_file(path: str, task_id: int | None) -> str:
+    """The text of the tree file ``path`` for ``task add``, checked as the task manager checks a tree at start.
+
+    Before the store is opened, so a refused tree stores nothing: the id in the interface types' int32 range
+    (1..2**31-1), the file at most ``tms_ts.limits.MAX_TREE_BYTES``, UTF-8, and the tree loaded by the manager's
+    own loader without ROS (``tms_ts.loader.check_tree``: limits, node ids, ports, SubTrees, leaf names). Errors name
+    the file and the line and column in it (the store keeps a one-line form; the user's text is checked here).
+    """
+    from tms_ts.limits import check_tree_size, task_id_problem
+    from tms_ts.loader import check_tree
+
+    if task_id is not None:
+        problem = task_id_problem(task_id)
+        if problem:
+            raise ValidationError(f"--id {task_id}: {problem}")
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise StoreError(f"{path}: {exc.strerror}") from None
+    check_tree_size(data, path)
+    try:
+        xml = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ValidationError(f"{path}:{line}: not UTF-8 (byte {exc.start + 1}: 0x{data[exc.start]:02x})") from None
+    check_tree(xml, source=path)
+    return xml
+
+
 def _run(args: argparse.Namespace) -> int:
+    xml = _checked_task_file(args.file, args.id) if args.cmd == "task" and args.task_cmd == "add" else None
     with open_store(uri=args.uri, path=args.path) as store:
         if args.cmd == "task":
             if args.task_cmd == "add":
-                try:
-                    xml = Path(args.file).read_text(encoding="utf-8")
-                except OSError as exc:
-                    raise StoreError(f"{args.file}: {exc.strerror}") from None
                 try:
                     tid = store.add_task(xml, task_id=args.id, description=args.description,
                                          model_name=args.model_name, replace=args.replace)

@@ -103,7 +103,7 @@ def test_cli_task_and_param_commands(tmp_path) -> None:
     bad = tmp_path / "bad.xml"
     bad.write_text("<root><BehaviorTree>\n<Sequence>\n</root>")
     r = tms_db(db, "task", "add", str(bad))
-    assert r.returncode == 1 and "bad.xml: new task: field 'task_sequence': XML does not parse at line 3" in r.stderr
+    assert r.returncode == 1 and "bad.xml: malformed XML at line 3, column 3: mismatched tag" in r.stderr
     params = tmp_path / "p.yaml"
     params.write_text("parameters:\n  - {record_name: BB, FLG: false, N: 3, V: 2.5}\n"
                       "  - {model_name: ic120, record_name: LOAD_PATH, x: [1.0], y: 0.0}\n")
