@@ -28,7 +28,7 @@ import pytest
 
 import tms_db
 import tms_ts.loader as tms_ts_loader
-from tests.tms_sp.test_protocol import DT, World
+from tests.tms_sp.test_protocol import DT, World, step_and_sense
 from tests.tms_sp.treeutil import ROOT
 from tms_db.cli import seed
 from tms_sp.config import load_sensing_config
@@ -65,10 +65,7 @@ def test_the_originals_2024_12_trees_load_dig_haul_and_end_as_the_original_ends_
     round_trips, stop_after = 0, 3
     for _ in range(3000):
         t += DT
-        world.step()
-        sensing.on_ic120_pose(t, world.ic120)
-        sensing.on_mound_points(world.mound_scan(rng))
-        sensing.on_vessel_points(world.vessel_scan(rng))
+        step_and_sense(world, sensing, t, rng)
         for name, tree in trees.items():
             if name not in outcome:
                 try:

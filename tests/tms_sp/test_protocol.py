@@ -133,6 +133,14 @@ class World:
         return syn.scan(heap, (spec.x_min, spec.x_max), (spec.y_min, spec.y_max), 3000, rng, noise=0.01, outliers=0.0)
 
 
+def step_and_sense(world: World, sensing: SiteSensing, t: float, rng) -> None:  # noqa: ANN001
+    """One world step at time ``t`` [s], then sensing's scans of it (as the node feeds them)."""
+    world.step()
+    sensing.on_ic120_pose(t, world.ic120)
+    sensing.on_mound_points(world.mound_scan(rng))
+    sensing.on_vessel_points(world.vessel_scan(rng))
+
+
 def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_path):
     cfg = load_sensing_config()
     cfg = dataclasses.replace(cfg, arrival=dataclasses.replace(cfg.arrival, hold_s=1.0))
@@ -153,10 +161,7 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
     status = {}
     for _ in range(4000):
         t += DT
-        world.step()
-        sensing.on_ic120_pose(t, world.ic120)
-        sensing.on_mound_points(world.mound_scan(rng))
-        sensing.on_vessel_points(world.vessel_scan(rng))
+        step_and_sense(world, sensing, t, rng)
         for name, tree in trees.items():
             if status.get(name) in (None, "RUNNING"):
                 status[name] = tree.tick().name
