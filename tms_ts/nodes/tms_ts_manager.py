@@ -8,7 +8,9 @@ topic                      type                   meaning
 ``/tms_ts/start``          tms_msg/TaskIds        start these task ids (tree loaded from tms_db)
 ``/tms_ts/cancel``         std_msgs/Int32         cancel one task id
 ``/emergency_signal``      std_msgs/Bool          ``true`` cancels every task
-``/tms_ts/status``         tms_msg/TaskStatus     every task: state, running leaves, message, tree
+``/tms_ts/status``         tms_msg/TaskStatus     every task: state, running leaves, message; its tree snapshot
+                                                  only when it changed (tms_ts.status)
+``/tms_ts/snapshot_request``  std_msgs/Int32      the next status carries this task's snapshot (-1: every task's)
 ``/tms_ts/tick_stats``     std_msgs/String        JSON: ticks, missed ticks, tick durations (1 Hz)
 ``/tms_ts/confirm``        std_msgs/String        WaitForClick answers (see tms_ts.nodes.ros_port)
 ``/task_sequence``         std_msgs/String        the original's start path: a tree XML, or its GUI's
@@ -37,6 +39,15 @@ stored task with that tree, else an ad-hoc negative id); read on every message, 
 (:mod:`tms_ts.task_sequence`).
 A task is ticked at the fixed rate; a tick that starts more than half a period late counts as missed.
 
+Loading off the tick: a start (``/tms_ts/start``, ``/task_sequence``) is handed to a worker thread
+(:mod:`tms_ts.tree_loading`) that reads the DB, parses, checks and builds the tree; the tick takes the built tree
+over and starts it. Meanwhile the task is reported RUNNING ``loading: ...``; a cancel or an emergency stop
+that comes while it loads ends it CANCELED as soon as the load finishes, without running it; a load that fails
+ends that start FAILURE naming why. ``max_pending_loads`` (16) starts may wait; more are refused.
+Status: ``finished_retention_s`` (60.0, wall seconds a finished task stays in ``/tms_ts/status``; always
+at least one message), ``finished_max`` (100, the last N finished tasks at most), ``snapshot_max_nodes``
+(2000, lines of a tree snapshot), :mod:`tms_ts.status`.
+
 Lost-server policy: when a task ends FAILURE because a subtask or planning server was lost mid-goal (its
 machine's ``emg_stop`` is then latched, see :mod:`tms_ts.leaf`), every other running task is cancelled
 ("stopped by policy"): the tasks cooperate through the global blackboard and the partner would wait
@@ -46,7 +57,9 @@ for flags that never come, or act on a machine state nobody supervises.
 from __future__ import annotations
 
 import json
+import threading
 import time
+from collections.abc import Iterator
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -60,12 +73,12 @@ from tms_ts.bt.core import TreeContext
 from tms_ts.errors import TsError
 from tms_ts.loader import load_tree
 from tms_ts.nodes.ros_port import ManagerRosPort
+from tms_ts.status import StatusBook
 from tms_ts.task import CANCELED, FAILED, SUCCEEDED, TaskRun
 from tms_ts.task_sequence import NO_TASK_ID, TASK_SEQUENCE_TOPIC, parse_task_sequence, stored_task_id
+from tms_ts.tree_loading import Loaded, LoadRequest, TreeLoadWorker
 
 __all__ = ["TaskManager", "main"]
-
-_STATE = {SUCCEEDED: TaskState.SUCCESS, FAILED: TaskState.FAILURE, CANCELED: TaskState.CANCELED}
 
 
 class TaskManager(Node):
@@ -98,8 +111,24 @@ class TaskManager(Node):
         if checkpoint_s > 0:
             self.store.checkpoint_in_background(checkpoint_s)
         self.ros = ManagerRosPort(self)
+        #: tasks being run (ended runs are retired into ``self.status`` at the next tick or status)
         self.runs: dict[int, TaskRun] = {}
-        self.finished: dict[int, TaskState] = {}
+        retention_s = float(p("finished_retention_s", 60.0).value)
+        keep_max = int(p("finished_max", 100).value)
+        snapshot_max = int(p("snapshot_max_nodes", 2000).value)
+        max_loads = int(p("max_pending_loads", 16).value)
+        for name, value, low in (("finished_retention_s", retention_s, 0), ("finished_max", keep_max, 1),
+                                 ("snapshot_max_nodes", snapshot_max, 1), ("max_pending_loads", max_loads, 1)):
+            if value < low:
+                raise ValueError(f"tms_ts_manager: parameter {name} must be >= {low}, got {value}")
+        self.status = StatusBook(retention_s=retention_s, keep_max=keep_max, snapshot_max_nodes=snapshot_max)
+        # trees load on a worker thread; the tick takes them over (module docstring, "Loading off the tick")
+        self.loader = TreeLoadWorker(self._load, max_pending=max_loads)
+        self._seq = 0  # numbers the load requests, in the order they came
+        self._loading: dict[int, int] = {}  # task id -> seq of its /tms_ts/start load
+        self._load_cancels: dict[int | None, tuple[int, str]] = {}  # id (None: every load) -> (up to seq, reason)
+        self._adhoc_lock = threading.Lock()
+        self._next_adhoc = NO_TASK_ID
         reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(TaskIds, "/tms_ts/start", self._on_start, reliable)
         # the original's start path; its task_id is read per message, so it stays writable
@@ -107,6 +136,7 @@ class TaskManager(Node):
         self.create_subscription(String, TASK_SEQUENCE_TOPIC, self._on_task_sequence, reliable)
         self.create_subscription(Int32, "/tms_ts/cancel", self._on_cancel, reliable)
         self.create_subscription(Bool, "/emergency_signal", self._on_emergency, reliable)
+        self.create_subscription(Int32, "/tms_ts/snapshot_request", self._on_snapshot_request, reliable)
         self.status_pub = self.create_publisher(TaskStatus, "/tms_ts/status", reliable)
         self.stats_pub = self.create_publisher(String, "/tms_ts/tick_stats", 10)
         self.period = 1.0 / self.tick_rate
@@ -127,26 +157,58 @@ class TaskManager(Node):
         self._publish_status()
 
     def _on_task_sequence(self, msg: String) -> None:
-        try:
-            wanted = parse_task_sequence(msg.data, int(self.get_parameter("task_id").value))
-            for task in wanted:
-                task_id = task.task_id
-                if task_id is None:
-                    task_id = stored_task_id(task.xml, self.store.list_tasks())
-                if task_id is None:  # a tree the DB does not hold: an id no stored task can have
-                    task_id = min([NO_TASK_ID + 1, *self.runs, *self.finished]) - 1
-                    self.get_logger().info(f"/task_sequence: tree not in the database, run as ad-hoc task {task_id}")
-                self.start_task(task_id, task.xml)
-        except TmsError as exc:  # TaskSequenceError, or the store failing to list the tasks
-            self.get_logger().error(str(exc))
-        self._publish_status()
+        # parsed, its ids resolved and its trees built on the loader's thread (_load)
+        self._submit(LoadRequest(self._next_seq(), data=msg.data,
+                                 param_task_id=int(self.get_parameter("task_id").value)), "/task_sequence")
 
     def start_task(self, task_id: int, xml: str | None = None) -> None:
-        """Start ``task_id`` with its tree from the DB, or with ``xml`` when given (``/task_sequence``)."""
+        """Start ``task_id`` with its tree from the DB, or with ``xml`` when given; the tree loads off the tick."""
         run = self.runs.get(task_id)
-        if run is not None and not run.done:
+        if (run is not None and not run.done) or task_id in self._loading:
             self.get_logger().warning(f"task {task_id} is already running; start ignored")
             return
+        seq = self._next_seq()
+        if self._submit(LoadRequest(seq, task_id=task_id, data=xml), f"task {task_id}"):
+            self._loading[task_id] = seq
+
+    def _next_seq(self) -> int:
+        self._seq += 1
+        return self._seq
+
+    def _submit(self, request: LoadRequest, what: str) -> bool:
+        if self.loader.submit(request):
+            return True
+        message = (f"cannot start {what}: {self.loader.max_pending} trees are already waiting to load "
+                   f"(parameter max_pending_loads)")
+        self.get_logger().error(message)
+        if request.task_id is not None:
+            self.status.record(request.task_id, TaskState.FAILURE, message)
+        return False
+
+    # runs on the loader's thread: nothing here touches the runs or the status
+    def _load(self, request: LoadRequest) -> Iterator[Loaded]:
+        if request.data is None or request.task_id is not None:  # /tms_ts/start, or start_task(id, xml)
+            yield self._load_one(request.seq, request.task_id, request.data)
+            return
+        try:
+            wanted = parse_task_sequence(request.data, request.param_task_id)
+        except TmsError as exc:  # TaskSequenceError naming what is wrong with the message
+            yield Loaded(request.seq, None, error=str(exc))
+            return
+        for task in wanted:
+            task_id = task.task_id
+            try:
+                if task_id is None:
+                    task_id = stored_task_id(task.xml, self.store.list_tasks())
+            except TmsError as exc:  # TaskSequenceError, or the store failing to list the tasks
+                yield Loaded(request.seq, None, error=str(exc))
+                continue
+            if task_id is None:  # a tree the DB does not hold: an id no stored task can have
+                task_id = self._adhoc_id()
+                self.get_logger().info(f"/task_sequence: tree not in the database, run as ad-hoc task {task_id}")
+            yield self._load_one(request.seq, task_id, task.xml)
+
+    def _load_one(self, seq: int, task_id: int, xml: str | None) -> Loaded:
         try:
             blackboard = None  # the task's parameters: its document's initial blackboard entries
             if xml is None:
@@ -160,15 +222,11 @@ class TaskManager(Node):
                               accept_timeout_s=self.accept_timeout_s, halt_timeout_s=self.halt_timeout_s,
                               server_lost_s=self.server_lost_s)
             tree = load_tree(xml, ctx, source=f"task {task_id}", blackboard=blackboard)
-        except (TsError, KeyError, ValueError) as exc:
-            message = f"cannot start task {task_id}: {exc}"
-            self.get_logger().error(message)
-            self.runs.pop(task_id, None)
-            self.finished[task_id] = TaskState(task_id=task_id, state=TaskState.FAILURE, message=message)
-            return
-        self.finished.pop(task_id, None)
-        self.runs[task_id] = TaskRun(task_id, tree, server_wait_s=self.server_wait_s)
-        self.get_logger().info(f"task {task_id} started ({len(tree.nodes)} nodes, {len(tree.leaves)} leaves)")
+        except (TsError, KeyError, ValueError) as exc:  # the tree's or the task's own error: its text names it
+            return Loaded(seq, task_id, error=f"cannot start task {task_id}: {exc}")
+        except Exception as exc:  # noqa: BLE001 - anything else (RecursionError, MemoryError, the store) too
+            return Loaded(seq, task_id, error=f"cannot start task {task_id}: {type(exc).__name__}: {exc}")
+        return Loaded(seq, task_id, tree=tree)
 
     def _stored_blackboard(self, task_id: int):  # noqa: ANN202
         from tms_db.errors import RecordNotFound
@@ -178,9 +236,64 @@ class TaskManager(Node):
         except RecordNotFound:
             return None
 
+    def _adhoc_id(self) -> int:
+        """A negative id no run, load or kept end has (called on the loader's thread; membership tests only)."""
+        with self._adhoc_lock:
+            while (self._next_adhoc in self.runs or self._next_adhoc in self._loading
+                   or self._next_adhoc in self.status.ended):
+                self._next_adhoc -= 1
+            task_id, self._next_adhoc = self._next_adhoc, self._next_adhoc - 1
+            return task_id
+
+    def _take_loads(self) -> bool:
+        """Start the trees the loader finished (on the tick's thread); True when a task's state changed."""
+        idle = self.loader.pending == 0  # read before take(): a load finishes (appends) before it stops counting
+        changed = False
+        done = self.loader.take()
+        if done:
+            self._retire_ended()
+        for loaded in done:
+            changed = True
+            task_id = loaded.task_id
+            if task_id is not None and self._loading.get(task_id) == loaded.seq:
+                del self._loading[task_id]
+            if task_id is None:  # a /task_sequence message or entry that names no task
+                self.get_logger().error(loaded.error)
+                continue
+            cancels = [c for c in (self._load_cancels.get(task_id), self._load_cancels.get(None))
+                       if c is not None and loaded.seq <= c[0]]
+            if loaded.error:
+                self.get_logger().error(loaded.error)
+                if task_id not in self.runs:  # else that run goes on, and reports its own end
+                    self.status.record(task_id, TaskState.FAILURE, loaded.error)
+            elif cancels:
+                cancel = cancels[0]
+                message = f"{cancel[1]} while its tree loaded (not started)"
+                self.get_logger().warning(f"task {task_id}: {message}")
+                self.status.record(task_id, TaskState.CANCELED, message)
+            elif (run := self.runs.get(task_id)) is not None and not run.done:
+                self.get_logger().warning(f"task {task_id} is already running; start ignored")
+            else:
+                tree = loaded.tree
+                self.status.forget(task_id)
+                self.runs[task_id] = TaskRun(task_id, tree, server_wait_s=self.server_wait_s)
+                self.get_logger().info(f"task {task_id} started ({len(tree.nodes)} nodes, {len(tree.leaves)} leaves; "
+                                       f"loaded in {loaded.seconds:.2f} s off the tick)")
+        if idle:
+            self._load_cancels.clear()  # no load asked before them is left
+        return changed
+
     def _on_cancel(self, msg: Int32) -> None:
-        run = self.runs.get(int(msg.data))
+        task_id = int(msg.data)
+        run = self.runs.get(task_id)
         if run is None or run.done:
+            if task_id in self._loading or self.loader.pending:
+                # a tree loading for it (a /task_sequence one's id is known only once it loaded): it never starts
+                self._load_cancels[task_id] = (self._seq, "canceled by /tms_ts/cancel")
+                self.get_logger().info(f"cancel: task {task_id} is not running; if a tree loading now is task {task_id}, "
+                                       f"it will not start")
+                self._publish_status()
+                return
             self.get_logger().warning(f"cancel: task {msg.data} is not running")
             return
         run.cancel("canceled by /tms_ts/cancel")
@@ -192,9 +305,16 @@ class TaskManager(Node):
         active = [r for r in self.runs.values() if not r.done]
         for run in active:
             run.cancel("canceled by /emergency_signal")
-        if active:
-            self.get_logger().warning(f"emergency signal: canceling tasks {[r.task_id for r in active]}")
+        if self.loader.pending:  # no tree loading now may start after the emergency stop
+            self._load_cancels[None] = (self._seq, "canceled by /emergency_signal")
+        if active or self.loader.pending:
+            self.get_logger().warning(f"emergency signal: canceling tasks {[r.task_id for r in active]}"
+                                      f" and {self.loader.pending} tree load(s) under way")
             self._publish_status()
+
+    def _on_snapshot_request(self, msg: Int32) -> None:
+        self.status.request(int(msg.data))
+        self._publish_status()
 
     # ticking -----------------------------------------------------------------------------------
     def _tick(self) -> None:
@@ -216,6 +336,7 @@ class TaskManager(Node):
                 self._log_end(run)
             if run.state == FAILED and before != FAILED and run.ctx.lost_servers:
                 self._stop_others(run)
+        changed |= self._take_loads()
         took = (time.monotonic() - start) * 1000.0
         self._stats["ticks"] += 1
         self._stats["sum_tick_ms"] += took
@@ -249,21 +370,20 @@ class TaskManager(Node):
         s["tick_rate_hz"] = self.tick_rate
         self.stats_pub.publish(String(data=json.dumps(s)))
 
+    def _retire_ended(self) -> None:
+        """Ended runs leave ``self.runs`` (tree, blackboard, goals dropped); their end stays in the status book."""
+        for task_id, run in list(self.runs.items()):
+            if run.done:
+                self.status.retire(run)
+                del self.runs[task_id]
+
     def _publish_status(self) -> None:
-        msg = TaskStatus()
-        msg.stamp = self.get_clock().now().to_msg()
-        for task_id, run in sorted(self.runs.items()):
-            state = TaskState(task_id=task_id, message=run.message)
-            state.state = _STATE.get(run.state, TaskState.RUNNING)
-            if not run.done:
-                state.message = f"{run.state}: {run.message}" if run.message else run.state
-            state.running_leaves = run.running_leaves()
-            state.tree_snapshot = run.tree.snapshot()
-            msg.tasks.append(state)
-        msg.tasks.extend(s for tid, s in sorted(self.finished.items()) if tid not in self.runs)
-        self.status_pub.publish(msg)
+        self._retire_ended()
+        loading = [(task_id, "tree being loaded off the tick") for task_id in self._loading]
+        self.status_pub.publish(self.status.build(self.runs, loading, stamp=self.get_clock().now().to_msg()))
 
     def destroy_node(self) -> None:
+        self.loader.close()  # a load under way finishes on its daemon thread; nothing starts it
         if any(not r.done for r in self.runs.values()):
             self.ros.wait_for_lock_listeners(timeout_s=1.0)  # the locks below must reach the converters
         for run in self.runs.values():
