@@ -33,10 +33,11 @@ __all__ = ["LoadRequest", "Loaded", "TreeLoadWorker"]
 
 @dataclass
 class LoadRequest:
-    """One start to load: ``/tms_ts/start``'s id (``data`` None) or a ``/task_sequence`` message (``data``)."""
+    """One start to load: ``/tms_ts/start``'s ids (``data`` None: their trees from the DB; else ``data`` is the tree),
+    or a ``/task_sequence`` message (``task_ids`` empty, ``data`` the message)."""
 
     seq: int
-    task_id: int | None = None
+    task_ids: tuple[int, ...] = ()
     data: str | None = None
     #: the manager's ``task_id`` parameter when the /task_sequence message came (it is read per message)
     param_task_id: int = -1
@@ -110,16 +111,20 @@ class TreeLoadWorker:
             request = self._requests.get()
             if request is None:
                 return
+            handed: set[int | None] = set()
             try:
                 start = time.monotonic()
                 for result in self._load(request):
                     result.seconds = time.monotonic() - start
+                    handed.add(result.task_id)
                     self._done.append(result)
                     start = time.monotonic()
             except BaseException as exc:  # noqa: BLE001 - whatever a load raises ends that start, not the worker
-                what = (f"task {request.task_id}" if request.task_id is not None else "/task_sequence")
-                self._done.append(Loaded(request.seq, request.task_id,
-                                         error=f"cannot start {what}: loading raised {type(exc).__name__}: {exc}"))
+                error = f"loading raised {type(exc).__name__}: {exc}"
+                left = [t for t in request.task_ids if t not in handed] or ([None] if not request.task_ids else [])
+                for task_id in left:
+                    what = f"task {task_id}" if task_id is not None else "/task_sequence"
+                    self._done.append(Loaded(request.seq, task_id, error=f"cannot start {what}: {error}"))
             finally:
                 with self._lock:
                     self._pending -= 1

@@ -120,19 +120,22 @@ def _wait(predicate, timeout: float = 10.0) -> None:  # noqa: ANN001
 
 def test_the_loader_thread_survives_whatever_a_load_raises_and_keeps_the_order():
     def load(request: LoadRequest):  # noqa: ANN202
-        if request.task_id == 1:
-            raise RecursionError("maximum recursion depth exceeded")
-        yield Loaded(request.seq, request.task_id, tree=f"tree {request.task_id}")
+        for task_id in request.task_ids:
+            if task_id in (1, 5):
+                raise RecursionError("maximum recursion depth exceeded")
+            yield Loaded(request.seq, task_id, tree=f"tree {task_id}")
 
     worker = TreeLoadWorker(load)
-    for seq, task_id in enumerate((1, 2, 3)):
-        assert worker.submit(LoadRequest(seq, task_id=task_id))
+    for seq, task_ids in enumerate(((1,), (2,), (3,), (4, 5, 6))):
+        assert worker.submit(LoadRequest(seq, task_ids=task_ids))
     got: list[Loaded] = []
-    _wait(lambda: got.extend(worker.take()) or len(got) == 3)
-    assert [g.task_id for g in got] == [1, 2, 3]
+    _wait(lambda: got.extend(worker.take()) or len(got) == 6)
+    assert [g.task_id for g in got] == [1, 2, 3, 4, 5, 6]
     assert got[0].tree is None and got[0].error == ("cannot start task 1: loading raised RecursionError: "
                                                     "maximum recursion depth exceeded")
-    assert [g.tree for g in got[1:]] == ["tree 2", "tree 3"] and worker.pending == 0
+    assert [g.tree for g in got[1:4]] == ["tree 2", "tree 3", "tree 4"] and worker.pending == 0
+    # the ids of a request after the one that raised end with its error too: none is left "loading" for ever
+    assert [g.error.split(":")[0] for g in got[4:]] == ["cannot start task 5", "cannot start task 6"]
     worker.close()
     assert worker.join(5.0)
 
@@ -144,17 +147,17 @@ def test_the_loader_refuses_beyond_max_pending_and_a_load_runs_on_its_own_thread
     def load(request: LoadRequest):  # noqa: ANN202
         threads.append(threading.current_thread().name)
         release.wait(10)
-        yield Loaded(request.seq, request.task_id)
+        yield Loaded(request.seq, request.task_ids[0])
 
     worker = TreeLoadWorker(load, max_pending=2)
-    assert worker.submit(LoadRequest(1, task_id=1)) and worker.submit(LoadRequest(2, task_id=2))
-    assert not worker.submit(LoadRequest(3, task_id=3))  # two wait already
+    assert worker.submit(LoadRequest(1, task_ids=(1,))) and worker.submit(LoadRequest(2, task_ids=(2,)))
+    assert not worker.submit(LoadRequest(3, task_ids=(3,)))  # two wait already
     assert worker.pending == 2 and worker.take() == []  # take() never blocks on a load under way
     release.set()
     _wait(lambda: worker.pending == 0)
     assert [r.task_id for r in worker.take()] == [1, 2]
     assert threads == ["tms_ts_tree_loader"] * 2 and threading.current_thread().name not in threads
     worker.close()
-    assert not worker.submit(LoadRequest(4, task_id=4))
+    assert not worker.submit(LoadRequest(4, task_ids=(4,)))
     with pytest.raises(ValueError):
         TreeLoadWorker(load, max_pending=0)

@@ -152,8 +152,7 @@ class TaskManager(Node):
 
     # commands ----------------------------------------------------------------------------------
     def _on_start(self, msg: TaskIds) -> None:
-        for task_id in msg.task_ids:
-            self.start_task(int(task_id))
+        self.start_tasks([int(task_id) for task_id in msg.task_ids])
         self._publish_status()
 
     def _on_task_sequence(self, msg: String) -> None:
@@ -163,13 +162,23 @@ class TaskManager(Node):
 
     def start_task(self, task_id: int, xml: str | None = None) -> None:
         """Start ``task_id`` with its tree from the DB, or with ``xml`` when given; the tree loads off the tick."""
-        run = self.runs.get(task_id)
-        if (run is not None and not run.done) or task_id in self._loading:
-            self.get_logger().warning(f"task {task_id} is already running; start ignored")
+        self.start_tasks([task_id], xml)
+
+    def start_tasks(self, task_ids: list[int], xml: str | None = None) -> None:
+        """Start these tasks (trees from the DB, or ``xml`` for each): one load request, its trees loaded in turn."""
+        wanted = []
+        for task_id in task_ids:
+            run = self.runs.get(task_id)
+            if (run is not None and not run.done) or task_id in self._loading or task_id in wanted:
+                self.get_logger().warning(f"task {task_id} is already running; start ignored")
+                continue
+            wanted.append(task_id)
+        if not wanted:
             return
         seq = self._next_seq()
-        if self._submit(LoadRequest(seq, task_id=task_id, data=xml), f"task {task_id}"):
-            self._loading[task_id] = seq
+        what = "task " + ", ".join(map(str, wanted))
+        if self._submit(LoadRequest(seq, task_ids=tuple(wanted), data=xml), what):
+            self._loading.update((task_id, seq) for task_id in wanted)
 
     def _next_seq(self) -> int:
         self._seq += 1
@@ -181,14 +190,15 @@ class TaskManager(Node):
         message = (f"cannot start {what}: {self.loader.max_pending} trees are already waiting to load "
                    f"(parameter max_pending_loads)")
         self.get_logger().error(message)
-        if request.task_id is not None:
-            self.status.record(request.task_id, TaskState.FAILURE, message)
+        for task_id in request.task_ids:
+            self.status.record(task_id, TaskState.FAILURE, message)
         return False
 
     # runs on the loader's thread: nothing here touches the runs or the status
     def _load(self, request: LoadRequest) -> Iterator[Loaded]:
-        if request.data is None or request.task_id is not None:  # /tms_ts/start, or start_task(id, xml)
-            yield self._load_one(request.seq, request.task_id, request.data)
+        if request.task_ids:  # /tms_ts/start, or start_task(id, xml)
+            for task_id in request.task_ids:
+                yield self._load_one(request.seq, task_id, request.data)
             return
         try:
             wanted = parse_task_sequence(request.data, request.param_task_id)
