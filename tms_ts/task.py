@@ -126,8 +126,13 @@ class TaskRun:
         if self.state == STARTING:
             self._finish(CANCELED, reason)
             return
-        self.lock_active_machines(reason)
-        self._stop(CANCELED, reason)
+        try:
+            self.lock_active_machines(reason)
+            self._stop(CANCELED, reason)
+        except Exception as exc:  # noqa: BLE001 - a cancel comes from a subscription callback: never end the manager
+            log.exception("task %s: cancel raised", self.task_id)
+            self.ctx.stops.clear()
+            self._finish(FAILED, f"{reason}; halting the tree raised {type(exc).__name__}: {exc}")
 
     def active_machines(self) -> list[str]:
         """Model names of the leaves with a goal in flight (sent, not finished)."""

@@ -62,3 +62,31 @@ def test_a_bad_name_past_the_loader_ends_its_task_only_and_a_run_time_record_is_
     assert "TreeRuntimeError" in runs[0].message and "d37pxi_24＿" in runs[0].message, runs[0].message
     assert "LeafNodeZx200 (task 2 line 1, column" in runs[1].message, runs[1].message
     assert "'pose '" in runs[1].message and "blackboard key 'rec'" in runs[1].message
+
+
+def test_a_cancel_whose_halt_raises_ends_that_task_and_returns() -> None:
+    # a cancel runs in the manager's subscription callback: an error while halting must end that task, not the node
+    from tms_ts.bt.core import RUNNING, Port, StatefulNode
+    from tms_ts.loader import register_node
+
+    class HaltRaises(StatefulNode):
+        PORTS: dict[str, Port] = {}
+
+        def on_start(self):  # noqa: ANN202
+            return RUNNING
+
+        def on_running(self):  # noqa: ANN202
+            return RUNNING
+
+        def on_halted(self) -> None:
+            raise RuntimeError("stuck actuator")
+
+    register_node("HaltRaisesForTest", HaltRaises)
+    run = TaskRun(5, load_tree(doc("<HaltRaisesForTest/>")), server_wait_s=1.0)
+    other = TaskRun(6, load_tree(doc('<Delay delay_msec="100"><AlwaysSuccess/></Delay>')), server_wait_s=1.0)
+    run.step()
+    other.step()
+    run.cancel("canceled by /tms_ts/cancel")  # raised RuntimeError out of the callback before
+    assert run.state == FAILED and "stuck actuator" in run.message and "canceled by /tms_ts/cancel" in run.message
+    step_all([other], 5.0, lambda: time.sleep(0.01))
+    assert other.state == SUCCEEDED
