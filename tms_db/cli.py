@@ -46,7 +46,7 @@ from tms_db.errors import (
     ValidationError,
 )
 from tms_db.schema import check_document_size, validate_parameter
-from tms_db.store import Store, build_task_doc, open_store, parameter_key
+from tms_db.store import Store, build_task_doc, check_import_document, open_store, parameter_key
 
 __all__ = ["main", "import_parameters", "check_parameters", "seed", "EXIT_CODES"]
 
@@ -172,17 +172,15 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
 
 
 def check_task_tree(doc: dict) -> None:
-    """Load a task document's tree as the task manager does at start (``tms_ts.loader.load_tree`` with a bare
-    context: no ROS, no store), so a restore refuses and ``check`` reports a tree the manager would refuse. Lives
+    """Load a task document's tree as the task manager does at start (``tms_ts.loader.check_tree``, as ``task add``:
+    no ROS, no store), so a restore refuses and ``check`` reports a tree the manager would refuse. Lives
     here, in the command line, so that tms_db itself never imports tms_ts (which uses tms_db). Without tms_ts
     installed only the store's own XML check applies."""
     try:
-        from tms_ts.bt.core import TreeContext
-        from tms_ts.loader import load_tree
+        from tms_ts.loader import check_tree
     except ImportError:
         return
-    load_tree(doc["task_sequence"], TreeContext(), source=f"task_id {doc.get('task_id')}",
-              blackboard=doc.get("blackboard"))
+    check_tree(doc["task_sequence"], source=f"task_id {doc.get('task_id')}", blackboard=doc.get("blackboard"))
 
 
 def _parse_assignments(items: list[str]) -> dict[str, Any]:
@@ -334,7 +332,9 @@ def _run(args: argparse.Namespace) -> int:
         elif args.cmd == "check":
             problems = store.check()
             for doc in store.list_tasks():  # the trees as the task manager loads them
-                if not isinstance(doc.get("task_sequence"), str):
+                try:
+                    check_import_document("task", doc)
+                except ValidationError:
                     continue  # store.check() has named it
                 try:
                     check_task_tree(doc)
@@ -343,7 +343,8 @@ def _run(args: argparse.Namespace) -> int:
             for line in problems:
                 print(line)
             print("consistent" if not problems else f"{len(problems)} problem(s)")
-            return 1 if problems else 0
+            if problems:
+                raise StoreError(f"check: {len(problems)} problem(s) in the store (listed on stdout)")
     return 0
 
 

@@ -89,7 +89,7 @@ def read_collection_file(path: Path, problems: list[str]) -> Iterator[tuple[str,
     if text.lstrip().startswith("["):
         try:
             docs = json_util.loads(text, json_options=_OPTS)
-        except (ValueError, TypeError, OverflowError) as exc:
+        except (ValueError, TypeError, OverflowError, bson.errors.BSONError) as exc:
             problems.append(f"{path}: malformed JSON array: {exc}")
             return
         except RecursionError:
@@ -109,7 +109,7 @@ def read_collection_file(path: Path, problems: list[str]) -> Iterator[tuple[str,
             continue
         try:
             doc = json_util.loads(line, json_options=_OPTS)
-        except (ValueError, TypeError, OverflowError) as exc:  # bson's own parsers raise TypeError on some shapes
+        except (ValueError, TypeError, OverflowError, bson.errors.BSONError) as exc:  # bson raises these on bad $-forms
             problems.append(f"{path}:{lineno}: malformed Extended JSON: {exc}")
             continue
         except RecursionError:
