@@ -185,13 +185,21 @@ class EmbeddedStore(Store):
         except OSError:
             return False
 
+    def _no_space(self) -> bool:
+        """True when the store's file system has no block left (SQLite reports some writes that meet a full disk,
+        growing its -shm file, as a plain I/O error)."""
+        try:
+            return os.statvfs(self.directory).f_bavail == 0
+        except OSError:
+            return False
+
     def _storage_error(self, exc: BaseException, doing: str = "") -> StoreError:
         """One error naming the cause: disk full, read-only storage, else the backend's message."""
         text = str(exc) if not isinstance(exc, OSError) or exc.errno is None else (exc.strerror or str(exc))
         where = f"embedded store {self.file}" + (f": {doing}" if doing else "")
         code = getattr(exc, "sqlite_errorcode", None)
         if (isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)) or code == sqlite3.SQLITE_FULL \
-                or "database or disk is full" in text:
+                or "database or disk is full" in text or (isinstance(exc, sqlite3.OperationalError) and self._no_space()):
             return StorageFullError(f"{where}: disk full (ENOSPC): {text}; nothing of this write was stored")
         if (isinstance(exc, OSError) and exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM)) \
                 or code == sqlite3.SQLITE_READONLY or "readonly database" in text \

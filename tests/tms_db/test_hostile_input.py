@@ -468,6 +468,16 @@ def test_disk_full_is_named_as_the_last_line_and_nothing_is_stored(small_disk: P
     assert r.returncode == 3 and "Traceback" not in r.stderr and "disk full (ENOSPC)" in last_line(r), r.stderr
     filler.unlink()
     assert snapshot(db) == before  # the failed transactions left nothing
+    # not a block left: even a one-record import meets the full disk, and says so
+    filler = fill(small_disk, 0)
+    small = tmp_path / "small.yaml"
+    small.write_text("- {record_name: ONE, x: 1}\n")
+    r = subprocess.run([str(EXE), "--path", str(db), "param", "import", str(small)], capture_output=True, text=True,
+                       timeout=120, cwd=ROOT)
+    TRIED["param import"] += 1
+    assert r.returncode == 3 and "Traceback" not in r.stderr and "disk full (ENOSPC)" in last_line(r), r.stderr
+    filler.unlink()
+    assert snapshot(db) == before
 
 
 @pytest.fixture
@@ -500,6 +510,30 @@ def test_read_only_storage_is_named(read_only_db: tuple[Path, Path], tmp_path: P
     # a store still to be created under a read-only directory
     r = run("param import", view / "new", "param", "import", str(f), source=source, expect=4)
     assert "read-only" in last_line(r) and str(view / "new") in last_line(r)
+
+
+# ---- concurrency: what held must keep holding --------------------------------------------------------------------
+def test_concurrent_imports_lose_nothing_and_readers_never_see_half_a_file(tmp_path: Path) -> None:
+    db = tmp_path / "db"
+    populate(db)
+    files = []
+    for k in range(4):  # four files of 300 records each, imported at once by four processes
+        f = tmp_path / f"p{k}.yaml"
+        f.write_text("".join(f"- {{model_name: m{k}, record_name: R{i}, x: {i}}}\n" for i in range(300)))
+        files.append(f)
+    procs = [subprocess.Popen([str(EXE), "--path", str(db), "param", "import", str(f)], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, cwd=ROOT) for f in files]
+    seen: set[int] = set()
+    with open_store(path=db) as store:  # a reader meanwhile: each file is stored whole or not at all
+        while any(p.poll() is None for p in procs):
+            per_model = Counter(d.get("model_name") for d in store.list_parameters())
+            seen |= {per_model.get(f"m{k}", 0) for k in range(4)}
+    for p in procs:
+        _out, err = p.communicate(timeout=120)
+        TRIED["param import"] += 1
+        assert p.returncode == 0 and "Traceback" not in err, err
+    assert seen <= {0, 300}, f"a reader saw part of a file: {sorted(seen)}"
+    assert stored_param_keys(db) >= {(f"m{k}", f"R{i}") for k in range(4) for i in range(300)}
 
 
 # ---- what was tried ---------------------------------------------------------------------------------------------
