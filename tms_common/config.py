@@ -7,7 +7,7 @@ Every YAML input (configuration files, seeds, ``tms-db param import``) is read u
 the parser's event stream before anything is built (the composer recurses on depth, and aliases share what they
 name, so an alias bomb of a few hundred bytes expands to millions of values once a consumer walks it):
 :data:`MAX_YAML_DEPTH` nesting levels, :data:`MAX_YAML_ALIASES` aliases and :data:`MAX_YAML_NODES` values with
-every alias expanded. A file must be UTF-8; anything else is a ConfigError naming the file and the byte offset.
+every alias expanded; a file of at most :data:`MAX_YAML_BYTES`. A file must be UTF-8; anything else is a ConfigError naming the file and the byte offset.
 The project's own configuration files use at most depth 5, 845 values and no alias.
 """
 
@@ -24,7 +24,7 @@ import yaml
 from tms_common.errors import ConfigError
 
 __all__ = ["Where", "load_yaml", "load_yaml_text", "read_utf8", "repo_root", "config_path", "data_path", "data_root",
-           "MAX_YAML_DEPTH", "MAX_YAML_ALIASES", "MAX_YAML_NODES"]
+           "MAX_YAML_DEPTH", "MAX_YAML_ALIASES", "MAX_YAML_NODES", "MAX_YAML_BYTES"]
 
 #: nesting levels (mappings and sequences) a YAML document may have
 MAX_YAML_DEPTH = 64
@@ -32,6 +32,8 @@ MAX_YAML_DEPTH = 64
 MAX_YAML_ALIASES = 100
 #: values (scalars, mappings, sequences) a YAML document may hold once every alias is expanded
 MAX_YAML_NODES = 200_000
+#: [bytes] the largest YAML file read (the parser is pure Python: 32 MiB take minutes already)
+MAX_YAML_BYTES = 32 * 1024 * 1024
 
 
 @dataclass(frozen=True)
@@ -126,15 +128,18 @@ def load_yaml_text(text: str, file: str = "<string>") -> tuple[Any, Where]:
     return data, Where(file=file, lines=lines)
 
 
-def read_utf8(path: str | Path, what: str = "") -> str:
+def read_utf8(path: str | Path, what: str = "", limit: int | None = None) -> str:
     """A text file's content; one ConfigError naming the file for anything but readable UTF-8 (the byte offset
-    and line of the first byte that is not UTF-8)."""
+    and line of the first byte that is not UTF-8) or, with ``limit``, a file of more bytes (never read further)."""
     path = Path(path)
     label = f"{what} {path}" if what else str(path)
     try:
-        data = path.read_bytes()
+        with path.open("rb") as fh:
+            data = fh.read() if limit is None else fh.read(limit + 1)
     except OSError as exc:
         raise ConfigError(f"{label}: cannot read: {exc.strerror or exc}") from None
+    if limit is not None and len(data) > limit:
+        raise ConfigError(f"{label}: more than {limit:,} bytes (limit MAX_YAML_BYTES)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -145,7 +150,7 @@ def read_utf8(path: str | Path, what: str = "") -> str:
 def load_yaml(path: str | Path) -> tuple[Any, Where]:
     """Read and parse a YAML file; a missing file, a file that is not UTF-8 or a syntax error names the file."""
     path = Path(path)
-    return load_yaml_text(read_utf8(path), str(path))
+    return load_yaml_text(read_utf8(path, limit=MAX_YAML_BYTES), str(path))
 
 
 def repo_root() -> Path:

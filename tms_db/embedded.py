@@ -63,6 +63,7 @@ BACKSTOP_CHECKPOINT_PAGES = 10_000
 LOCK_FILE = "write.lock"
 SCHEMA_VERSION = "1"
 T = TypeVar("T")
+_INT64_MAX = 2**63 - 1
 
 
 class _RefusedError(Exception):
@@ -273,6 +274,8 @@ class EmbeddedStore(Store):
     # ---- tasks -----------------------------------------------------------------------------------
     def get_task(self, task_id: int) -> dict:
         check_task_id(task_id)
+        if task_id > _INT64_MAX:  # no such row can exist (SQLite's integers are 64-bit)
+            raise RecordNotFound(f"task_id {task_id}: no such task in collection 'task'")
         rows = self._query("SELECT oid, body FROM documents WHERE collection='task' AND task_id=?", (task_id,))
         if not rows:
             raise RecordNotFound(f"task_id {task_id}: no such task in collection 'task'")
@@ -308,6 +311,8 @@ class EmbeddedStore(Store):
 
     def remove_task(self, task_id: int) -> None:
         check_task_id(task_id)
+        if task_id > _INT64_MAX:
+            raise RecordNotFound(f"task_id {task_id}: no such task in collection 'task'")
 
         def delete(conn: sqlite3.Connection) -> None:
             cur = conn.execute("DELETE FROM documents WHERE collection='task' AND task_id=?", (task_id,))
@@ -422,6 +427,9 @@ class EmbeddedStore(Store):
     def _checked_parameter(doc: Mapping[str, Any]) -> dict:
         validate_parameter(doc)
         check_document_size(doc, f"record {doc['record_name']!r}")
+        if doc.get("_id") is not None and not isinstance(doc["_id"], ObjectId):  # stored, no read could decode it
+            raise ValidationError(f"record {doc['record_name']!r}: field '_id' {doc['_id']!r} is not an ObjectId "
+                                  "(the embedded store keys documents by ObjectId; leave it out to get one)")
         return dict(doc)
 
     @staticmethod
