@@ -128,7 +128,7 @@ def load_yaml_text(text: str, file: str = "<string>") -> tuple[Any, Where]:
     return data, Where(file=file, lines=lines)
 
 
-def read_utf8(path: str | Path, what: str = "", limit: int | None = None) -> str:
+def read_utf8(path: str | Path, what: str = "", limit: int | None = None, limit_name: str = "MAX_YAML_BYTES") -> str:
     """A text file's content; one ConfigError naming the file for anything but readable UTF-8 (the byte offset
     and line of the first byte that is not UTF-8) or, with ``limit``, a file of more bytes (never read further)."""
     path = Path(path)
@@ -139,7 +139,7 @@ def read_utf8(path: str | Path, what: str = "", limit: int | None = None) -> str
     except OSError as exc:
         raise ConfigError(f"{label}: cannot read: {exc.strerror or exc}") from None
     if limit is not None and len(data) > limit:
-        raise ConfigError(f"{label}: more than {limit:,} bytes (limit MAX_YAML_BYTES)")
+        raise ConfigError(f"{label}: more than {limit:,} bytes (limit {limit_name})")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -153,16 +153,16 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
         if not xml_path.is_absolute():
             candidates = [repo_root() / xml_path, seed_file.parent / xml_path]
             xml_path = next((c for c in candidates if c.is_file()), candidates[0])
-        try:
-            xml = xml_path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise StoreError(f"{seed_file}:{line}: task file {entry['file']}: {exc.strerror}") from None
-        except UnicodeDecodeError:
-            xml = read_utf8(xml_path, f"{seed_file}:{line}: task file")  # raises, naming the byte offset
+        if not xml_path.exists():
+            raise StoreError(f"{seed_file}:{line}: task file {entry['file']}: No such file")
+        # at most a tree's size (never read further: a careless path to /dev/zero), UTF-8, named by byte offset
+        xml = read_utf8(xml_path, f"{seed_file}:{line}: task file", limit=_max_tree_bytes(), limit_name="MAX_TREE_BYTES")
         try:
             build_task_doc(xml, entry["task_id"], entry.get("description", ""), entry.get("model_name"),
                            entry.get("blackboard"))
-        except ValidationError as exc:
+            check_task_tree({"task_id": entry["task_id"], "task_sequence": xml, "blackboard": entry.get("blackboard")},
+                            source=str(xml_path))
+        except (TmsError, ValueError) as exc:
             raise ValidationError(f"{seed_file}:{line}: {xml_path}: {exc}") from None
         loaded.append((line, entry, xml, xml_path))
     for line, entry, xml, xml_path in loaded:
@@ -175,16 +175,28 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     return len(tasks), n_params
 
 
-def check_task_tree(doc: dict) -> None:
+def _max_tree_bytes() -> int:
+    try:
+        from tms_ts.limits import MAX_TREE_BYTES
+    except ImportError:
+        from tms_db.schema import MAX_DOCUMENT_BYTES as MAX_TREE_BYTES
+    return MAX_TREE_BYTES
+
+
+def check_task_tree(doc: dict, source: str | None = None) -> None:
     """Load a task document's tree as the task manager does at start (``tms_ts.loader.check_tree``, as ``task add``:
     no ROS, no store), so a restore refuses and ``check`` reports a tree the manager would refuse. Lives
     here, in the command line, so that tms_db itself never imports tms_ts (which uses tms_db). Without tms_ts
     installed only the store's own XML check applies."""
     try:
+        from tms_ts.limits import task_id_problem
         from tms_ts.loader import check_tree
     except ImportError:
         return
-    check_tree(doc["task_sequence"], source=f"task_id {doc.get('task_id')}", blackboard=doc.get("blackboard"))
+    problem = task_id_problem(doc.get("task_id"))  # the id a start message can name (int32)
+    if problem:
+        raise ValidationError(problem)
+    check_tree(doc["task_sequence"], source=source or f"task_id {doc.get('task_id')}", blackboard=doc.get("blackboard"))
 
 
 def _parse_assignments(items: list[str]) -> dict[str, Any]:

@@ -211,13 +211,15 @@ def test_restore_bson_with_a_corrupt_document_restores_nothing(tmp_path) -> None
 def test_restore_refuses_tasks_whose_xml_does_not_parse_or_load(tmp_path) -> None:
     tasks = [{"task_id": 5, "type": "task", "task_sequence": " ".join(TREE.split())},
              {"task_id": 6, "type": "task", "task_sequence": "<root><BehaviorTree><Sequence></root>"},
-             {"task_id": 7, "type": "task", "task_sequence": " ".join(UNKNOWN_NODE_TREE.split())}]
+             {"task_id": 7, "type": "task", "task_sequence": " ".join(UNKNOWN_NODE_TREE.split())},
+             {"task_id": 2**31, "type": "task", "task_sequence": " ".join(TREE.split())}]  # no start message names it
     src = dump_dir(tmp_path, {"task.json": "".join(dumps_doc(t) + "\n" for t in tasks).encode()})
     db = tmp_path / "db"
     populate(db)
     r = run("restore", db, "restore", str(src), expect=1)
     assert "task.json: line 2 (task_id 6): task_id 6: field 'task_sequence': XML does not parse" in r.stderr
     assert "task.json: line 3 (task_id 7):" in r.stderr and "Sequense" in r.stderr  # the manager's loader refuses it
+    assert "task.json: line 4 (task_id 2147483648): task id 2147483648 is out of range 1..2147483647" in r.stderr
     assert "task.json: line 1" not in r.stderr
     assert run("check", db, "check", expect=0).stdout.strip().endswith("consistent")
 
@@ -309,6 +311,25 @@ def test_seed_checks_everything_before_storing_anything(tmp_path, params: str, t
     f = seed_files(tmp_path, params, tree)
     r = run("seed", db, "seed", "paper", "--file", str(f), expect=1)
     assert needle in r.stderr  # and run() checked the task of the seed was not stored either
+
+
+@pytest.mark.parametrize(("task", "needle"), [
+    ("{task_id: 3, file: /dev/zero}", "task file /dev/zero: more than 1,048,576 bytes (limit MAX_TREE_BYTES)"),
+    ("{task_id: 99999999999999999999, file: TREE}", "task id 99999999999999999999 is out of range 1..2147483647"),
+    ("{task_id: 3, file: UNKNOWN}", "Sequense"),  # parses, but the manager's loader refuses it: as task add does
+    ("{task_id: 3, file: nowhere.xml}", "task file nowhere.xml: No such file"),
+])
+def test_seed_refuses_task_files_and_ids_as_task_add_does(tmp_path, task: str, needle: str) -> None:
+    db = tmp_path / "db"
+    populate(db)
+    (tmp_path / "good.xml").write_text(TREE)
+    (tmp_path / "unknown.xml").write_text(UNKNOWN_NODE_TREE)
+    f = tmp_path / "seed.yaml"
+    task = task.replace("TREE", str(tmp_path / "good.xml")).replace("UNKNOWN", str(tmp_path / "unknown.xml"))
+    f.write_text(f"tasks:\n  - {{task_id: 4, file: {tmp_path / 'good.xml'}}}\n  - {task}\n"
+                 "parameters:\n  - {record_name: A, x: 1}\n")
+    r = run("seed", db, "seed", "paper", "--file", str(f), expect=1)  # run(): task 4 and A not stored either
+    assert needle in r.stderr and f"{f}:3:" in last_line(r)
 
 
 def test_seed_that_is_fine_stores_its_tasks_and_parameters(tmp_path) -> None:
