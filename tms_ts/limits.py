@@ -79,8 +79,10 @@ def json_depth_exceeds(text: str, limit: int = MAX_JSON_DEPTH) -> bool:
     """
     import re
 
-    brackets = re.sub(r'"(?:[^"\\]|\\.)*"', "", text)
-    brackets = re.sub(r"[^\[\]{}]+", "", brackets).translate(_BRACKETS)
+    # escapes out first (so an escaped quote is no quote), then every other piece between quotes is a string: linear,
+    # where a regular expression for strings backtracks quadratically over unterminated ones
+    outside = "".join(re.sub(r"\\.", "", text, flags=re.DOTALL).split('"')[0::2])
+    brackets = re.sub(r"[^\[\]{}]+", "", outside).translate(_BRACKETS)
     passes = 0
     while brackets:
         shorter = brackets.replace("()", "")

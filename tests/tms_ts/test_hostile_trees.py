@@ -293,3 +293,37 @@ def test_check_tree_is_load_tree_without_ros_or_db() -> None:
     assert len(check_tree(doc(leaf()), source="t.xml").leaves) == 1
     with pytest.raises(TreeLoadError, match=r"^t\.xml: LeafNodeZx200 \(line 1, column \d+\)"):
         check_tree(doc(leaf(model="d37pxi_24＿")), source="t.xml")
+
+
+def _depth(value) -> int:  # noqa: ANN001
+    if isinstance(value, list):
+        return 1 + max((_depth(v) for v in value), default=0)
+    if isinstance(value, dict):
+        return 1 + max((_depth(v) for v in value.values()), default=0)
+    return 0
+
+
+NESTED_JSON = st.recursive(st.text(alphabet='[]{}"\\ab', max_size=6) | st.integers(),
+                           lambda inner: st.lists(inner, max_size=2) | st.dictionaries(st.text(alphabet='[]{}"\\', max_size=3), inner, max_size=2),
+                           max_leaves=40)
+
+
+@given(NESTED_JSON)
+@HYPO
+def test_the_json_depth_check_is_exact_for_valid_json_whatever_its_strings_hold(value) -> None:  # noqa: ANN001
+    # brackets, quotes and backslashes inside strings are no nesting; the check agrees with the real depth
+    from tms_ts.limits import json_depth_exceeds
+
+    TRIED["json depth"] += 1
+    assert json_depth_exceeds(json.dumps(value)) == (_depth(value) > MAX_JSON_DEPTH)
+
+
+def test_the_json_depth_check_is_linear_on_unterminated_strings() -> None:
+    # a string pattern backtracked quadratically over '"\' repeated (minutes for 600 KB): the check must stay fast
+    from tms_ts.limits import json_depth_exceeds
+
+    for text in ('"\\' * 300_000, '"' * 1_000_000, "\\" * 1_000_000, '"' + "[" * 1_000_000):
+        start = time.monotonic()
+        json_depth_exceeds(text)
+        assert time.monotonic() - start < 1.0
+    TRIED["json depth"] += 4
