@@ -386,6 +386,10 @@ def main(argv: list[str] | None = None) -> int:
     except UnicodeDecodeError as exc:
         name = getattr(args, "file", None) or getattr(args, "dir", None) or "input"
         return _fail(1, f"{name}: not UTF-8 text: byte 0x{exc.object[exc.start]:02x} at byte offset {exc.start}")
+    except BrokenPipeError:
+        # the reader of the output went away (`tms-db task list | head`): stop quietly, as Python's docs advise
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename else ""
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):

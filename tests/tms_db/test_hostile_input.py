@@ -572,3 +572,14 @@ def test_zz_inputs_tried_per_entry() -> None:
     if len(GENERATED) < 3:
         pytest.skip("only part of this file ran (-k / a single test): the generated tests did not all run")
     assert TRIED["param import"] >= EXAMPLES + 15 and TRIED["restore"] >= EXAMPLES + 10 and TRIED["seed"] >= EXAMPLES + 5
+
+
+def test_a_reader_that_closes_the_output_ends_the_run_quietly(tmp_path) -> None:
+    # `tms-db task list | head`: the pipe is closed before the CLI writes (its start-up takes far longer)
+    db = tmp_path / "db"
+    populate(db)
+    proc = subprocess.Popen([str(EXE), "--path", str(db), "task", "list"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=ROOT, text=True)
+    proc.stdout.close()
+    stderr = proc.stderr.read()
+    assert proc.wait(timeout=60) == 1 and stderr == "", stderr  # no traceback, no "Exception ignored" either
