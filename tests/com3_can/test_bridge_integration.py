@@ -48,6 +48,18 @@ def time_scale() -> float:
 SCALE = time_scale()
 
 
+def assert_commanded(frames: list, cmd_hex: str) -> None:
+    """Every Velocity_Cmd_1 frame while commands keep coming carries the command. Under emulation (SCALE > 1) the
+    test's own publisher can stall past the bridge's 0.5 s watchdog (seen in the VM), and the bridge then rightly
+    sends neutral: there neutral frames are allowed, any other bytes are not, and the command is most frames."""
+    seen = [bytes(m.data).hex() for _, m in frames]
+    if SCALE == 1:
+        assert set(seen) == {cmd_hex}, set(seen)
+        return
+    assert set(seen) <= {cmd_hex, NEUTRAL_V1.hex()}, set(seen)
+    assert seen.count(cmd_hex) >= 0.5 * len(seen), f"{seen.count(cmd_hex)} of {len(seen)} frames carry the command"
+
+
 def start_bridge(procs: Callable[..., Any], machine: str, cfg: dict[str, Any], **params: Any) -> Any:
     cmd = [executable("com3_can", "com3_bridge"), "--ros-args", "-r", f"__ns:=/{machine}",
            "-p", f"machine:={machine}", "-p", f"can_interface:={cfg['interface']}", "-p", f"can_channel:={cfg['channel']}"]
@@ -133,7 +145,7 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
     t1 = time.monotonic()
     v1 = [(t, m) for t, m in peer.since(t0, ZX.frame_id("Velocity_Cmd_1")) if t < t1]
     assert v1, bridge.output
-    assert {bytes(m.data).hex() for _, m in v1} == {"c87d707b007de880"}
+    assert_commanded(v1, "c87d707b007de880")
     rate = len(v1) / (t1 - t0)
     gaps = [b[0] - a[0] for a, b in zip(v1, v1[1:], strict=False)]
     # a slow clock lowers the rate and lengthens the period; it cannot make them faster than nominal
@@ -171,7 +183,7 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
     spin(ros_node, 0.4, (0.1, lambda: pub.publish(front([20.0, 0.0, 0.0, 0.0]))))
     assert bridge.wait_for("rejected: front_cmd:", 5), bridge.output
     assert "outside [-16, 16]" in bridge.output
-    assert {bytes(m.data).hex() for _, m in peer.since(t_bad, ZX.frame_id("Velocity_Cmd_1"))} == {"c87d707b007de880"}
+    assert_commanded(peer.since(t_bad, ZX.frame_id("Velocity_Cmd_1")), "c87d707b007de880")
 
     # 4. emg_stop -> neutral within one cycle, stays neutral while commands keep coming
     spin(ros_node, 0.2, (0.05, lambda: pub.publish(cmd)))
