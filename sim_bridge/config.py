@@ -33,7 +33,7 @@ from tms_model.machines import (
     machine_path,
     parse_machine,
 )
-from tms_model.reader import Reader
+from tms_common.schema import Reader
 from tms_model.site import Site, load_site
 
 __all__ = [

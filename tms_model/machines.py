@@ -29,7 +29,7 @@ from types import MappingProxyType
 
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_model.reader import Reader
+from tms_common.schema import Reader
 
 __all__ = [
     "Blade",

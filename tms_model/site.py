@@ -22,7 +22,7 @@ from pyproj import CRS, Transformer
 
 from tms_common.config import config_path, load_yaml
 from tms_model.geometry import Pose2D
-from tms_model.reader import Reader
+from tms_common.schema import Reader
 
 __all__ = ["Mound", "Projector", "Site", "SiteMachine", "Zone", "load_site"]
 
