@@ -44,7 +44,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from fnmatch import fnmatchcase
 from typing import Any
 
 from action_msgs.msg import GoalStatus
@@ -54,6 +55,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from com3_msgs.action import SetDumpAngle, SetSwingAngle
 from com3_msgs.srv import DumpUp
 from nav2_msgs.action import FollowWaypoints, NavigateThroughPoses, NavigateToPose
+from tms_common.errors import ConfigError
 from tms_if_opera.interface import (
     CHANGE_POSE,
     CHANGE_POSE_PLAN,
@@ -61,11 +63,25 @@ from tms_if_opera.interface import (
     EXCAVATE_SIMPLE_PLAN,
     RELEASE_SIMPLE,
 )
+from tms_model.fleet import vessel_swing_joint
 from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import Zx200ArmSegment
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_msg_rp.msg import TmsRpErrorCodes, TmsRpZx200PositionWithAngle
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
+from tms_ts.plans import (
+    JOINTS,
+    POSE,
+    POSITION_WITH_ANGLE,
+    AnglePlan,
+    ChangePosePlan,
+    ExcavatePlan,
+    Plan,
+    PosePlan,
+    PosesPlan,
+    SamplePlan,
+    SwingAlignPlan,
+)
 
 __all__ = ["SubtaskSpec", "SUBTASKS", "KIND_SUBTASKS", "subtasks_for", "travel_rows", "ZX200_JOINTS",
            "change_pose_goal", "change_pose_options", "zx200_ok", "nav2_ok", "dump_ok", "dump_up_ok", "swing_ok",
@@ -127,102 +143,93 @@ def _bool(doc: dict, record: str, field: str) -> bool:
     raise SubtaskRecordError(record, field, f"must be 0/1 or true/false, got {value!r}")
 
 
-def build_change_pose(doc: dict, record: str) -> dict:
-    out = _change_pose_target(doc, record)
-    out["pass_through"] = _bool(doc, record, "pass_through")
+def build_change_pose(doc: dict, record: str) -> ChangePosePlan:
+    target = _change_pose_target(doc, record)
     tolerance = _num(doc, record, "theta_w_tolerance", 0.0)
     if tolerance < 0:
         raise SubtaskRecordError(record, "theta_w_tolerance", f"must be >= 0 rad, got {tolerance}")
-    if tolerance > 0 and out["mode"] == "joints":
+    if tolerance > 0 and target.mode == JOINTS:
         raise SubtaskRecordError(record, "theta_w_tolerance", "applies to pose / position_with_angle targets, not joints")
-    out["theta_w_tolerance"] = tolerance
-    return out
+    return replace(target, pass_through=_bool(doc, record, "pass_through"), theta_w_tolerance=tolerance)
 
 
-def _change_pose_target(doc: dict, record: str) -> dict:
+def _change_pose_target(doc: dict, record: str) -> ChangePosePlan:
     if _flag(doc, "trajectory"):
-        return {"kind": "change_pose", "mode": "joints", "joints": {j: _num(doc, record, j) for j in ZX200_JOINTS}}
+        return ChangePosePlan(JOINTS, joints={j: _num(doc, record, j) for j in ZX200_JOINTS})
     if _flag(doc, "pose"):
         pose = {k: _num(doc, record, k) for k in ("x", "y", "z")}
         pose.update(_unit_quat(record, {k: _num(doc, record, k) for k in _QUAT}))
-        return {"kind": "change_pose", "mode": "pose", "pose": pose}
+        return ChangePosePlan(POSE, pose=pose)
     if _flag(doc, "position_with_angle"):
-        return {"kind": "change_pose", "mode": "position_with_angle",
-                "pwa": {k: _num(doc, record, k) for k in ("x", "y", "z", "theta_w")}}
+        return ChangePosePlan(POSITION_WITH_ANGLE, pwa={k: _num(doc, record, k) for k in ("x", "y", "z", "theta_w")})
     raise SubtaskRecordError(record, "trajectory|pose|position_with_angle", "no target kind selected (one must be 1)")
 
 
-def build_excavate(doc: dict, record: str) -> dict:
+def build_excavate(doc: dict, record: str) -> ExcavatePlan:
     if not _flag(doc, "position_with_angle"):
         raise SubtaskRecordError(record, "position_with_angle", "must be 1 for an excavation target")
     pwa = {k: _num(doc, record, k) for k in ("x", "y", "z", "theta_w")}
     pwa["offset"] = _num(doc, record, "offset", 0.0)
-    return {"kind": "excavate", "pwa": pwa}
+    return ExcavatePlan(pwa)
 
 
-def build_release(doc: dict, record: str) -> dict:
-    return {"kind": "release", "target_angle": _num(doc, record, "target_angle")}
+def build_angle(what: str) -> Callable[[dict, str], AnglePlan]:
+    """``target_angle`` [rad] of a release (bucket), dump (vessel) or swing (vessel swing) record."""
+    return lambda doc, record: AnglePlan(what, _num(doc, record, "target_angle"))
 
 
-def build_dump(doc: dict, record: str) -> dict:
-    return {"kind": "dump", "target_angle": _num(doc, record, "target_angle")}
+build_release, build_dump, build_swing = build_angle("release"), build_angle("dump"), build_angle("swing")
 
 
-def build_swing(doc: dict, record: str) -> dict:
-    return {"kind": "swing", "target_angle": _num(doc, record, "target_angle")}
-
-
-def build_swing_align(doc: dict, record: str) -> dict:
+def build_swing_align(doc: dict, record: str) -> SwingAlignPlan:
     """The original's align subtask reads no record: the target comes from joint_states (:func:`resolve_swing_align`)."""
-    return {"kind": "swing_align"}
+    return SwingAlignPlan()
 
 
-def resolve_swing_align(plan: dict, joints: dict[str, float], machine: Any) -> dict:
+def resolve_swing_align(plan: SwingAlignPlan, joints: dict[str, float], machine: Any) -> SwingAlignPlan:
     """0 or pi, whichever is nearer (wrapped) the position of the vessel's swing joint: the description's
     (:func:`tms_model.fleet.vessel_swing_joint`), else ``swing_joint`` as the original reads."""
-    from tms_model.fleet import vessel_swing_joint
-
     joint = vessel_swing_joint(machine) if machine is not None else None
     name = joint.name if joint is not None else "swing_joint"
     if name not in joints:
         raise SubtaskStateError(f"no {name} on joint_states (has {sorted(joints)})")
     q = joints[name]
     to_zero, to_pi = abs(math.remainder(q, 2 * math.pi)), abs(math.remainder(q - math.pi, 2 * math.pi))
-    return {**plan, "target_angle": 0.0 if to_zero <= to_pi else math.pi}
+    return SwingAlignPlan(0.0 if to_zero <= to_pi else math.pi)
 
 
-def build_sample(machine: str, joint: str) -> Callable[[dict, str], dict]:
+def build_sample(machine: str, joint: str) -> Callable[[dict, str], SamplePlan]:
     """The original's single-joint sample subtask: field ``<machine>_<joint>_goal_pos`` [deg] of ``<joint>_joint``."""
     field = f"{machine}_{joint}_goal_pos"
 
-    def build(doc: dict, record: str) -> dict:
-        return {"kind": "sample", "joint": f"{joint}_joint", "goal": math.radians(_num(doc, record, field))}
+    def build(doc: dict, record: str) -> SamplePlan:
+        return SamplePlan(f"{joint}_joint", math.radians(_num(doc, record, field)))
 
     return build
 
 
-def resolve_sample(plan: dict, joints: dict[str, float], machine: Any) -> dict:
+def resolve_sample(plan: SamplePlan, joints: dict[str, float], machine: Any) -> SamplePlan:
     """The four front joints: the sampled one at its goal, the others where joint_states has them."""
     missing = [j for j in ZX200_JOINTS if j not in joints]
     if missing:
         raise SubtaskStateError(f"no {', '.join(missing)} on joint_states (has {sorted(joints)})")
-    return {**plan, "joints": {j: plan["goal"] if j == plan["joint"] else joints[j] for j in ZX200_JOINTS}}
+    return replace(plan, joints={j: plan.goal if j == plan.joint else joints[j] for j in ZX200_JOINTS})
 
 
-def build_nav_pose(deg: bool) -> Callable[[dict, str], dict]:
-    def build(doc: dict, record: str) -> dict:
+def build_nav_pose(deg: bool) -> Callable[[dict, str], PosePlan]:
+    def build(doc: dict, record: str) -> PosePlan:
         pose = {"x": _num(doc, record, "x"), "y": _num(doc, record, "y"), "z": _num(doc, record, "z", 0.0)}
         if deg:
             pose.update(_yaw_quat(_num(doc, record, "yaw")))
         else:
             pose.update(_unit_quat(record, {k: _num(doc, record, k) for k in _QUAT}))
-        return {"kind": "navigate_to_pose", "pose": pose}
+        return PosePlan(pose)
 
     return build
 
 
-def build_poses(kind: str, deg: bool) -> Callable[[dict, str], dict]:
-    def build(doc: dict, record: str) -> dict:
+def build_poses(what: str, deg: bool) -> Callable[[dict, str], PosesPlan]:
+    def build(doc: dict, record: str) -> PosesPlan:
         xs, ys = _arr(doc, record, "x"), _arr(doc, record, "y")
         zs = _arr(doc, record, "z") if "z" in doc else [0.0] * len(xs)
         fields = ["yaw"] if deg else list(_QUAT)
@@ -241,7 +248,7 @@ def build_poses(kind: str, deg: bool) -> Callable[[dict, str], dict]:
             else:
                 pose.update(_unit_quat(record, {k: extra[k][i] for k in _QUAT}))
             poses.append(pose)
-        return {"kind": kind, "poses": poses}
+        return PosesPlan(what, tuple(poses))
 
     return build
 
@@ -266,29 +273,30 @@ def _pwa(d: dict) -> TmsRpZx200PositionWithAngle:
                                        offset=d.get("offset", 0.0))
 
 
-def change_pose_goal(plan: dict) -> TmsRpZx200ChangePose.Goal:
+def change_pose_goal(plan: ChangePosePlan) -> TmsRpZx200ChangePose.Goal:
     """The original's goal: exactly one of trajectory / pose_sequence / position_with_angle_sequence."""
     goal = TmsRpZx200ChangePose.Goal()
-    if plan["mode"] == "joints":
-        goal.trajectory = JointTrajectory(joint_names=list(plan["joints"]))
-        goal.trajectory.points = [JointTrajectoryPoint(positions=list(plan["joints"].values()))]
-    elif plan["mode"] == "pose":
-        goal.pose_sequence = [_pose(plan["pose"])]
+    if plan.mode == JOINTS and plan.joints is not None:
+        goal.trajectory = JointTrajectory(joint_names=list(plan.joints))
+        goal.trajectory.points = [JointTrajectoryPoint(positions=list(plan.joints.values()))]
+    elif plan.mode == POSE and plan.pose is not None:
+        goal.pose_sequence = [_pose(plan.pose)]
+    elif plan.mode == POSITION_WITH_ANGLE and plan.pwa is not None:
+        goal.position_with_angle_sequence = [_pwa(plan.pwa)]
     else:
-        goal.position_with_angle_sequence = [_pwa(plan["pwa"])]
+        raise ValueError(f"change_pose plan without the target of its mode {plan.mode!r}: {plan}")
     return goal
 
 
-def change_pose_options(plan: dict) -> dict | None:
+def change_pose_options(plan: ChangePosePlan) -> dict | None:
     """What the goal needs beyond the original's type (tms_msg/srv/Zx200ChangePoseOptions fields), or None
     when it needs nothing beyond it (then no options are sent and a planner without them serves it too)."""
-    options = {"pass_through": bool(plan.get("pass_through", False)),
-               "theta_w_tolerance": float(plan.get("theta_w_tolerance", 0.0))}
-    return options if options["pass_through"] or options["theta_w_tolerance"] > 0 else None
+    options = {"pass_through": plan.pass_through, "theta_w_tolerance": plan.theta_w_tolerance}
+    return options if plan.pass_through or plan.theta_w_tolerance > 0 else None
 
 
-def _poses_goal(action_type):  # noqa: ANN001, ANN202
-    return lambda plan: action_type.Goal(poses=[_stamped(p) for p in plan["poses"]])
+def _poses_goal(action_type: Any) -> Callable[[PosesPlan], Any]:
+    return lambda plan: action_type.Goal(poses=[_stamped(p) for p in plan.poses])
 
 
 # planning results -> (ok, detail for people) ---------------------------------------------------------
@@ -356,30 +364,30 @@ class SubtaskSpec:
     machine: str
     planning_action: str  # relative to /<model_name>
     action_type: Any  # the planning action's type, e.g. tms_msg_rp.action.TmsRpZx200ChangePose
-    build: Callable[[dict, str], dict]
-    goal: Callable[[dict], Any]
+    build: Callable[[dict, str], Plan]
+    goal: Callable[[Any], Any]  # the row's own Plan type -> its goal or request
     check: Callable[[Any], tuple[bool, str]]
     #: the original non-plan ZX200 change_pose / excavate_simple set LOCK_FLG=false when a result arrives
     clears_lock_flg: bool = False
     #: plan -> the goal's options beyond the planning type (None: none needed), sent to ``<planning>/options``
-    options: Callable[[dict], dict | None] | None = None
+    options: Callable[[Any], dict | None] | None = None
     #: the planning server publishes each goal's outcome text on /<model_name>/tms_rp_zx200_outcome
-    zx200_planning: bool = False
+    outcome_topic: bool = False
     #: "action" or "service" (``action_type`` is then the service type, ``goal`` builds its request and ``check``
     #: reads its response)
     downstream: str = "action"
     #: False: the row reads no record (the goal's record_name is not looked up)
     reads_record: bool = True
     #: (plan, joints {name: rad} from /<model_name>/joint_states, the machine's description or None) -> plan
-    resolve: Callable[[dict, dict[str, float], Any], dict] | None = None
+    resolve: Callable[[Any, dict[str, float], Any], Plan] | None = None
 
 
-def _excavate_goal(plan: dict) -> TmsRpZx200ExcavateSimple.Goal:
-    return TmsRpZx200ExcavateSimple.Goal(position_with_angle=_pwa(plan["pwa"]))
+def _excavate_goal(plan: ExcavatePlan) -> TmsRpZx200ExcavateSimple.Goal:
+    return TmsRpZx200ExcavateSimple.Goal(position_with_angle=_pwa(plan.pwa))
 
 
-def _nav_pose_goal(plan: dict) -> NavigateToPose.Goal:
-    return NavigateToPose.Goal(pose=_stamped(plan["pose"]))
+def _nav_pose_goal(plan: PosePlan) -> NavigateToPose.Goal:
+    return NavigateToPose.Goal(pose=_stamped(plan.pose))
 
 
 _FW, _NTP = _poses_goal(FollowWaypoints), _poses_goal(NavigateThroughPoses)
@@ -404,10 +412,10 @@ def travel_rows(prefix: str) -> list[SubtaskSpec]:
 
 def _swing_rows(prefix: str) -> list[SubtaskSpec]:
     """The vessel swing and the DumpUp release of an MST-type carrier (the vessel controller of tms_rc)."""
-    swing_goal = lambda plan: SetSwingAngle.Goal(target_angle=plan["target_angle"])  # noqa: E731
+    swing_goal = lambda plan: SetSwingAngle.Goal(target_angle=plan.target_angle)  # noqa: E731
     return [
         SubtaskSpec(f"st_{prefix}_release_soil", prefix, "vessel_target_pos", DumpUp, build_dump,
-                    lambda plan: DumpUp.Request(vessel_angle=plan["target_angle"]), dump_up_ok, downstream="service"),
+                    lambda plan: DumpUp.Request(vessel_angle=plan.target_angle), dump_up_ok, downstream="service"),
         SubtaskSpec(f"st_{prefix}_swing", prefix, "set_swing_angle", SetSwingAngle, build_swing, swing_goal, swing_ok),
         SubtaskSpec(f"st_{prefix}_swing_align_to_heading", prefix, "set_swing_angle", SetSwingAngle, build_swing_align,
                     swing_goal, swing_ok, reads_record=False, resolve=resolve_swing_align),
@@ -417,8 +425,8 @@ def _swing_rows(prefix: str) -> list[SubtaskSpec]:
 def _sample_rows(prefix: str) -> list[SubtaskSpec]:
     """The original's single-joint sample subtasks of an excavator, through its arm controller."""
     goal = lambda plan: Zx200ArmMove.Goal(segments=[Zx200ArmSegment(  # noqa: E731
-        kind=Zx200ArmSegment.JOINT, label=f"sample {plan['joint']}",
-        joint_positions=[plan["joints"][j] for j in ZX200_JOINTS])])
+        kind=Zx200ArmSegment.JOINT, label=f"sample {plan.joint}",
+        joint_positions=[plan.joints[j] for j in ZX200_JOINTS])])
     return [SubtaskSpec(f"st_{prefix}_sample_{j}", prefix, "arm_controller/move", Zx200ArmMove, build_sample(prefix, j),
                         goal, arm_ok, resolve=resolve_sample) for j in ("swing", "boom", "arm", "bucket")]
 
@@ -426,22 +434,22 @@ def _sample_rows(prefix: str) -> list[SubtaskSpec]:
 _SPECS = [
     SubtaskSpec("subtask_zx200_change_pose", "zx200", CHANGE_POSE, TmsRpZx200ChangePose,
                 build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
-                zx200_planning=True),
+                outcome_topic=True),
     SubtaskSpec("subtask_zx200_excavate_simple", "zx200", EXCAVATE_SIMPLE, TmsRpZx200ExcavateSimple,
-                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, zx200_planning=True),
+                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, outcome_topic=True),
     # the original's _plan variants: the same records; the planning server plans around the collision objects of
     # its DB record (collision_object_record_name) and refuses with FAILURE naming the object
     SubtaskSpec("subtask_zx200_change_pose_plan", "zx200", CHANGE_POSE_PLAN, TmsRpZx200ChangePose,
                 build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
-                zx200_planning=True),
+                outcome_topic=True),
     SubtaskSpec("subtask_zx200_excavate_simple_plan", "zx200", EXCAVATE_SIMPLE_PLAN, TmsRpZx200ExcavateSimple,
-                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, zx200_planning=True),
+                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, outcome_topic=True),
     SubtaskSpec("subtask_zx200_release_simple", "zx200", RELEASE_SIMPLE, TmsRpZx200ReleaseSimple,
-                build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan["target_angle"]), zx200_ok,
-                zx200_planning=True),
+                build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan.target_angle), zx200_ok,
+                outcome_topic=True),
     *travel_rows("ic120"),
     SubtaskSpec("st_ic120_release_soil", "ic120", "set_dump_angle", SetDumpAngle,
-                build_dump, lambda plan: SetDumpAngle.Goal(target_angle=plan["target_angle"]), dump_ok),
+                build_dump, lambda plan: SetDumpAngle.Goal(target_angle=plan.target_angle), dump_ok),
     *travel_rows("zx200"), *_sample_rows("zx200"),
     *travel_rows("zx120"), *_sample_rows("zx120"),  # the original has the ZX120's sample subtasks only
     *travel_rows("mst2200"), *_swing_rows("mst2200"),
@@ -462,10 +470,8 @@ KIND_SUBTASKS: dict[str, tuple[str, ...]] = {
 
 
 def subtasks_for(kind: str) -> list[SubtaskSpec]:
-    """Every subtask a machine of ``kind`` serves (``KIND_SUBTASKS``); ValueError naming the known kinds."""
-    from fnmatch import fnmatchcase
-
+    """Every subtask a machine of ``kind`` serves (``KIND_SUBTASKS``); ConfigError naming the known kinds."""
     patterns = KIND_SUBTASKS.get(kind)
     if patterns is None:
-        raise ValueError(f"unknown machine kind {kind!r}: expected one of {', '.join(sorted(KIND_SUBTASKS))}")
+        raise ConfigError(f"unknown machine kind {kind!r}: expected one of {', '.join(sorted(KIND_SUBTASKS))}")
     return [s for s in _SPECS if any(fnmatchcase(s.name, p) for p in patterns)]

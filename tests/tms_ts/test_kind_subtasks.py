@@ -10,6 +10,7 @@ import pytest
 from tms_model.fleet import load_named
 from tms_model.machines import Joint
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
+from tms_ts.plans import SamplePlan
 from tms_ts.subtask_specs import KIND_SUBTASKS, SUBTASKS, subtasks_for
 
 TRAVEL = [f"{base}{tail}" for base in ("follow_waypoints", "navigate_anywhere", "navigate_through_poses")
@@ -84,14 +85,14 @@ def test_swing_alignment_reads_no_record_and_turns_to_the_nearer_of_0_and_pi() -
     assert row.reads_record is False
     plan = row.build({}, "")
     for q, target in ((0.3, 0.0), (-1.5, 0.0), (1.7, math.pi), (-2.9, math.pi), (2 * math.pi + 0.1, 0.0)):
-        assert row.resolve(plan, {"swing_joint": q}, None)["target_angle"] == target, q
+        assert row.resolve(plan, {"swing_joint": q}, None).target_angle == target, q
     with pytest.raises(SubtaskStateError, match=r"no swing_joint on joint_states"):
         row.resolve(plan, {"vessel_joint": 0.0}, None)
     # a carrier whose description has a swing joint of another name: that joint is read
     ic = load_named("ic120")
     swinging = replace(ic, joints=(*ic.joints, Joint("rotate_joint", "body_link", "rotate_link", (0.0, 0.0, 0.0),
                                                      (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), None, None, 0.2, 0.2)))
-    assert row.resolve(plan, {"rotate_joint": 3.0, "swing_joint": 0.0}, swinging)["target_angle"] == math.pi
+    assert row.resolve(plan, {"rotate_joint": 3.0, "swing_joint": 0.0}, swinging).target_angle == math.pi
 
 
 def test_sample_subtasks_move_one_joint_to_its_goal_in_degrees_and_keep_the_others() -> None:
@@ -114,5 +115,4 @@ def test_sample_subtasks_move_one_joint_to_its_goal_in_degrees_and_keep_the_othe
     with pytest.raises(SubtaskStateError, match=r"no arm_joint"):
         row.resolve(plan, {"swing_joint": 0.0, "boom_joint": 0.0, "bucket_joint": 0.0}, None)
     zx120 = SUBTASKS["st_zx120_sample_swing"]
-    assert zx120.build({"zx120_swing_goal_pos": 45.0}, "s") == {"kind": "sample", "joint": "swing_joint",
-                                                                 "goal": pytest.approx(math.pi / 4)}
+    assert zx120.build({"zx120_swing_goal_pos": 45.0}, "s") == SamplePlan("swing_joint", pytest.approx(math.pi / 4))

@@ -72,7 +72,7 @@ def test_zx200_rows_speak_the_originals_planning_actions_and_send_options_only_w
     from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
     from tms_ts.subtask_specs import SUBTASKS
 
-    rows = {s.planning_action: s for s in SUBTASKS.values() if s.zx200_planning}
+    rows = {s.planning_action: s for s in SUBTASKS.values() if s.outcome_topic}
     assert {name: s.action_type for name, s in rows.items()} == {
         "tms_rp_zx200_change_pose": TmsRpZx200ChangePose, "tms_rp_zx200_excavate_simple": TmsRpZx200ExcavateSimple,
         "tms_rp_zx200_release_simple": TmsRpZx200ReleaseSimple,

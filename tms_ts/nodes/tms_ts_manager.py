@@ -61,13 +61,14 @@ import threading
 import time
 from collections.abc import Iterator
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Int32, String
 
 from tms_common.errors import TmsError
 from tms_common.node import realtime_thread, run_node
+from tms_common.params import StartupParams
+from tms_db import RecordNotFound, open_store
 from tms_msg.msg import TaskIds, TaskState, TaskStatus
 from tms_ts.bt.core import TreeContext
 from tms_ts.errors import TsError
@@ -86,41 +87,27 @@ class TaskManager(Node):
 
     def __init__(self, node_name: str = "tms_ts_manager", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
         super().__init__(node_name, **kwargs)
-        read_only = ParameterDescriptor(read_only=True)  # every parameter is read once, here
-
-        def p(name: str, default):  # noqa: ANN001, ANN202
-            return self.declare_parameter(name, default, read_only)
-        self.tick_rate = float(p("tick_rate_hz", 20.0).value)
-        status_rate = float(p("status_rate_hz", 2.0).value)
-        self.server_wait_s = float(p("server_wait_s", 5.0).value)
-        self.accept_timeout_s = float(p("accept_timeout_s", 1.0).value)
-        self.halt_timeout_s = float(p("halt_timeout_s", 5.0).value)
-        self.server_lost_s = float(p("server_lost_s", 3.0).value)
-        db_uri = str(p("db_uri", "").value)
-        db_path = str(p("db_path", "").value)
-        for name, value in (("tick_rate_hz", self.tick_rate), ("status_rate_hz", status_rate)):
-            if not value > 0:
-                raise ValueError(f"tms_ts_manager: parameter {name} must be > 0, got {value}")
-        from tms_db import open_store
-
-        self.store = open_store(uri=db_uri or None, path=db_path or None)
+        p = StartupParams(self)  # every parameter is read once, here (read-only)
+        self.tick_rate = p.number("tick_rate_hz", 20.0, lo=0.0, above=True)
+        status_rate = p.number("status_rate_hz", 2.0, lo=0.0, above=True)
+        self.server_wait_s = p.number("server_wait_s", 5.0, lo=0.0)
+        self.accept_timeout_s = p.number("accept_timeout_s", 1.0, lo=0.0)
+        self.halt_timeout_s = p.number("halt_timeout_s", 5.0, lo=0.0)
+        self.server_lost_s = p.number("server_lost_s", 3.0, lo=0.0)
+        db_uri = p.text("db_uri")
+        db_path = p.text("db_path")
         # flag writes happen inside the tick: the embedded store's WAL checkpoint goes to a thread of its own
-        checkpoint_s = float(p("db_checkpoint_period_s", 1.0).value)
-        if checkpoint_s < 0:
-            raise ValueError(f"tms_ts_manager: parameter db_checkpoint_period_s must be >= 0, got {checkpoint_s}")
+        checkpoint_s = p.number("db_checkpoint_period_s", 1.0, lo=0.0)
+        retention_s = p.number("finished_retention_s", 60.0, lo=0.0)
+        keep_max = p.integer("finished_max", 100, lo=1)
+        snapshot_max = p.integer("snapshot_max_nodes", 2000, lo=1)
+        max_loads = p.integer("max_pending_loads", 16, lo=1)
+        self.store = open_store(uri=db_uri or None, path=db_path or None)
         if checkpoint_s > 0:
             self.store.checkpoint_in_background(checkpoint_s)
         self.ros = ManagerRosPort(self)
         #: tasks being run (ended runs are retired into ``self.status`` at the next tick or status)
         self.runs: dict[int, TaskRun] = {}
-        retention_s = float(p("finished_retention_s", 60.0).value)
-        keep_max = int(p("finished_max", 100).value)
-        snapshot_max = int(p("snapshot_max_nodes", 2000).value)
-        max_loads = int(p("max_pending_loads", 16).value)
-        for name, value, low in (("finished_retention_s", retention_s, 0), ("finished_max", keep_max, 1),
-                                 ("snapshot_max_nodes", snapshot_max, 1), ("max_pending_loads", max_loads, 1)):
-            if value < low:
-                raise ValueError(f"tms_ts_manager: parameter {name} must be >= {low}, got {value}")
         self.status = StatusBook(retention_s=retention_s, keep_max=keep_max, snapshot_max_nodes=snapshot_max)
         # trees load on a worker thread; the tick takes them over (module docstring, "Loading off the tick")
         self.loader = TreeLoadWorker(self._load, max_pending=max_loads)
@@ -147,7 +134,7 @@ class TaskManager(Node):
         self.create_timer(1.0, self._publish_stats)
         # SCHED_FIFO for the thread that builds the node: the one that spins it, under run_node and in a container
         # (whose other nodes then share the priority)
-        realtime_thread(int(p("realtime_priority", 0).value), "tms_ts_manager", self.get_logger())
+        realtime_thread(p.integer("realtime_priority", 0), "tms_ts_manager", self.get_logger())
         self.get_logger().info(f"tms_ts_manager ready: {self.tick_rate:g} Hz, db {db_uri or db_path or 'default'}")
 
     # commands ----------------------------------------------------------------------------------
@@ -239,8 +226,6 @@ class TaskManager(Node):
         return Loaded(seq, task_id, tree=tree)
 
     def _stored_blackboard(self, task_id: int):  # noqa: ANN202
-        from tms_db.errors import RecordNotFound
-
         try:
             return self.store.get_task(task_id).get("blackboard")
         except RecordNotFound:

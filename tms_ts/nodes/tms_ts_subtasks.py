@@ -55,7 +55,6 @@ from collections import OrderedDict
 from collections.abc import Sequence
 
 from action_msgs.msg import GoalStatus
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
@@ -64,17 +63,22 @@ from std_msgs.msg import Bool, String
 from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
+from tms_common.errors import ConfigError
 from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
+from tms_common.params import StartupParams
 from tms_common.ticker import Ticker
+from tms_db import RecordNotFound, open_store
 from tms_if_opera.interface import OUTCOME_GRACE_S as PLANNING_OUTCOME_GRACE_S
 from tms_if_opera.interface import PLANNING_OUTCOME
+from tms_model.fleet import load_named
 from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_ts.action import LeafNodeBase
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
 from tms_ts.outcomes import SUBTASK_OUTCOME_TOPIC, code_name
+from tms_ts.plans import Plan
 from tms_ts.subtask_specs import SubtaskSpec, planning_verdict, subtasks_for
 
 __all__ = ["SubtaskServers", "main", "node_name_from_args"]
@@ -82,7 +86,6 @@ __all__ = ["SubtaskServers", "main", "node_name_from_args"]
 R = SubtaskOutcome
 TICK_S = 0.05  # [s wall] how often a running goal looks at cancel, stop, deadlines
 SERVER_CHECK_S = 0.2  # [s wall] how often a running goal looks for its planning server on the graph
-_READ_ONLY = ParameterDescriptor(read_only=True)
 
 
 def node_name_from_args(argv: Sequence[str]) -> str:
@@ -117,32 +120,27 @@ class SubtaskServers(Node):
     def __init__(self, node_name: str = "tms_ts_subtasks", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
         super().__init__(node_name, **kwargs)
 
-        def param(name: str, default):  # noqa: ANN001, ANN202
-            return self.declare_parameter(name, default, _READ_ONLY).value
-
-        machine = str(param("machine", ""))
-        self.model_name = str(param("model_name", machine)) or machine
-        if not machine and self.model_name:  # ic120_1 serves its kind's subtasks
-            from tms_model.fleet import machine_kind
-
-            machine = machine_kind(self.model_name)
-        self.planning_wait_s = float(param("planning_wait_s", 5.0))
-        self.stop_timeout_s = float(param("stop_timeout_s", 5.0))
-        self.server_lost_s = float(param("server_lost_s", 3.0))
-        self.service_timeout_s = float(param("service_timeout_s", 60.0))
-        self.joint_states_wait_s = float(param("joint_states_wait_s", 2.0))
-        db_uri = str(param("db_uri", ""))
-        db_path = str(param("db_path", ""))
-        specs = subtasks_for(machine)  # ValueError naming the known kinds
+        p = StartupParams(self)
+        machine = p.text("machine")  # the kind whose rows to serve; default: the kind of model_name
+        self.model_name = p.text("model_name", machine) or machine
         self.description = None  # the machine's description, for rows that resolve against it
-        try:
-            from tms_model.fleet import load_named
-
-            self.description = load_named(self.model_name)
-        except Exception as exc:  # noqa: BLE001 - a name not on the site: rows resolve without it
-            self.get_logger().debug(f"no description of {self.model_name}: {exc}")
-        from tms_db import open_store
-
+        if self.model_name:
+            try:
+                self.description = load_named(self.model_name)
+            except ConfigError as exc:  # a name not on the site: rows resolve without it, its kind must be given
+                if not machine:
+                    raise
+                self.get_logger().debug(f"no description of {self.model_name}: {exc}")
+        if not machine and self.description is not None:  # ic120_1 serves its kind's subtasks
+            machine = self.description.kind
+        self.planning_wait_s = p.number("planning_wait_s", 5.0, lo=0.0)
+        self.stop_timeout_s = p.number("stop_timeout_s", 5.0, lo=0.0)
+        self.server_lost_s = p.number("server_lost_s", 3.0, lo=0.0)
+        self.service_timeout_s = p.number("service_timeout_s", 60.0, lo=0.0)
+        self.joint_states_wait_s = p.number("joint_states_wait_s", 2.0, lo=0.0)
+        db_uri = p.text("db_uri")
+        db_path = p.text("db_path")
+        specs = subtasks_for(machine)  # ConfigError naming the known kinds
         self.store = open_store(uri=db_uri or None, path=db_path or None)
         group = ReentrantCallbackGroup()
         self._ticker = Ticker(self, TICK_S, callback_group=group)
@@ -158,7 +156,7 @@ class SubtaskServers(Node):
         self.options_clients: dict[str, object] = {}
         #: planning goal id -> Zx200PlanningOutcome (the ZX200 planner's text for its code), newest last
         self.planning_outcomes: OrderedDict[bytes, Zx200PlanningOutcome] = OrderedDict()
-        if any(spec.zx200_planning for spec in specs):
+        if any(spec.outcome_topic for spec in specs):
             self.create_subscription(Zx200PlanningOutcome, f"/{self.model_name}/{PLANNING_OUTCOME}",
                                      self._on_planning_outcome, OUTCOME_QOS, callback_group=group)
         self.action_servers = []
@@ -199,7 +197,7 @@ class SubtaskServers(Node):
         joints.update(zip(msg.name, (float(p) for p in msg.position), strict=False))
         self._joints, self._joints_t = joints, time.monotonic()
 
-    async def _resolve(self, gh, spec: SubtaskSpec, plan: dict) -> dict:  # noqa: ANN001
+    async def _resolve(self, gh, spec: SubtaskSpec, plan: Plan) -> Plan:  # noqa: ANN001
         """The plan finished against the machine's state (a fresh joint_states); SubtaskStateError when none."""
         asked = time.monotonic()
         deadline = asked + self.joint_states_wait_s
@@ -220,9 +218,7 @@ class SubtaskServers(Node):
             self.planning_outcomes.popitem(last=False)
         self._ticker.wake()
 
-    def _plan(self, goal: LeafNodeBase.Goal, spec: SubtaskSpec) -> dict:
-        from tms_db.errors import RecordNotFound
-
+    def _plan(self, goal: LeafNodeBase.Goal, spec: SubtaskSpec) -> Plan:
         if not spec.reads_record:
             return spec.build({}, goal.record_name)
         model = goal.model_name or self.model_name
@@ -388,11 +384,11 @@ class SubtaskServers(Node):
                                 f"{planning} canceled ({status})")
         if ok:
             return self._finish(gh, spec, R.NONE, f"{spec.name} '{record}' done")
-        if spec.zx200_planning:
+        if spec.outcome_topic:
             detail = f"{detail}: {await self._planning_text(goal_id)}"
         return self._finish(gh, spec, R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
 
-    async def _call_service(self, gh, spec: SubtaskSpec, plan: dict, service: str) -> LeafNodeBase.Result:  # noqa: ANN001
+    async def _call_service(self, gh, spec: SubtaskSpec, plan: Plan, service: str) -> LeafNodeBase.Result:  # noqa: ANN001
         """A row whose downstream is a service: wait for it, call it, read its reply (cannot be canceled)."""
         record = gh.request.record_name
         client = self.service_clients[service]
