@@ -24,6 +24,12 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+from tms_common.dds import use_platform_profiles
+from tms_common.errors import ConfigError, TmsError
+from tms_common.qos_events import defer_qos_incompatibility_events
+from tms_common.rclpy_compat import SlicedEventsExecutor, executor_thread_pool
+from tms_common.sim_clock import relay_clock
+
 if TYPE_CHECKING:  # pragma: no cover
     from rclpy.node import Node
 
@@ -49,8 +55,6 @@ def realtime_thread(priority: int, who: str, logger) -> bool:  # noqa: ANN001
     if priority <= 0:
         return False
     if priority > 99:
-        from tms_common.errors import ConfigError
-
         raise ConfigError(f"{who}: realtime_priority must be 0 (off) or 1-99, got {priority}")
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
@@ -78,8 +82,6 @@ def make_executor(kind: str | None = None, *, threads: int = 8, context=None):  
     if kind == "multi":
         return rclpy.executors.MultiThreadedExecutor(num_threads=threads, context=context)
     if kind == "events":
-        from tms_common.rclpy_compat import SlicedEventsExecutor
-
         return SlicedEventsExecutor(context=context)
     source = "" if named else " (from $TMS_EXECUTOR)"
     raise ValueError(f"unknown executor {kind!r}{source}: expected one of {', '.join(EXECUTORS)}")
@@ -89,8 +91,6 @@ def uses_wait_set(executor) -> bool:  # noqa: ANN001
     """True for rclpy's wait-set executors (single, multi): they honour callback groups, so
     :func:`tms_common.rclpy_compat.park` keeps an entity out of them (QoS event polling, the ``/clock``
     relay) and guard conditions work; False for ``events``."""
-    from tms_common.rclpy_compat import SlicedEventsExecutor
-
     return not isinstance(executor, SlicedEventsExecutor)
 
 
@@ -123,10 +123,6 @@ def run_node(
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
-    from tms_common.dds import use_platform_profiles
-    from tms_common.errors import TmsError
-    from tms_common.qos_events import defer_qos_incompatibility_events
-    from tms_common.sim_clock import relay_clock
 
     # Python logging of the cores (sim_bridge, com3_can) on stderr, prefixed with the executable's name
     logging.basicConfig(level=logging.WARNING,
@@ -276,7 +272,6 @@ def _wait_for_callback_threads(spinner, timeout_s: float, *, run_queued: bool) -
     """
     import threading
 
-    from tms_common.rclpy_compat import executor_thread_pool
 
     pool = executor_thread_pool(spinner)
     if pool is None:

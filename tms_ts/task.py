@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 from tms_ts.bt.core import FAILURE, SUCCESS
 from tms_ts.errors import TsError
-from tms_ts.leaf import poll_stops
+from tms_ts.leaf import TERMINAL, poll_stops
 from tms_ts.loader import Tree
 
 __all__ = ["TaskRun", "STARTING", "RUNNING", "STOPPING", "SUCCEEDED", "FAILED", "CANCELED", "FINAL"]
@@ -136,8 +136,6 @@ class TaskRun:
 
     def active_machines(self) -> list[str]:
         """Model names of the leaves with a goal in flight (sent, not finished)."""
-        from tms_ts.leaf import TERMINAL
-
         return sorted({leaf.model_name for leaf in self.ctx.leaves
                        if leaf.goal is not None and leaf.goal.state not in TERMINAL})
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
+from tms_db import RecordNotFound
 from tms_ts.blackboard import (
     BOOL,
     DOUBLE,
@@ -99,8 +100,6 @@ class BlackboardValueReaderMongo(ActionNode):
     }
 
     def _tick(self) -> Status:
-        from tms_db.errors import RecordNotFound
-
         inputs = _inputs(self, "output_port", "mongo_record_name", "mongo_param_name")
         if inputs is None:
             return FAILURE
@@ -143,8 +142,6 @@ class MongoValueWriter(StatefulNode):
     RETRY_S = 0.1
 
     def _attempt(self) -> Status:
-        from tms_db.errors import RecordNotFound
-
         inputs = _inputs(self, "input_value", "mongo_record_name", "mongo_param_name")
         if inputs is None:
             return FAILURE
