@@ -124,7 +124,7 @@ class LeafNode(StatefulNode):
     """Action client of ``/<model_name>/<subtask_name>``; see the module docstring."""
 
     PORTS = {
-        "model_name": Port("str", description="machine name = namespace, e.g. zx200 (literal, or a task parameter {key})"),
+        "model_name": Port("str", description="machine name = namespace of its subtask servers (literal, or a task parameter {key})"),
         "subtask_name": Port("str", description="subtask action name (literal, or a task parameter {key})"),
         "record_name": Port("str", description="DB record the subtask reads ({key} allowed)"),
     }
