@@ -2,8 +2,9 @@
 
 :class:`BridgeCore` holds everything the node does except ROS I/O, so unit tests and benchmarks drive
 it with plain numbers and an injected clock. It is the same for every machine type: what a type does
-(its channels, how a command becomes frames, how a state frame becomes outputs) is its profile,
-:mod:`com3_can.profiles`, chosen by the ``type`` of the machine description.
+(its channels, how a command becomes frames, how a state frame becomes outputs) is its profile
+(:mod:`com3_can.profiles`), which the caller picks from the registry by the ``type`` of the machine description
+and hands to the core; the core never looks a profile up itself.
 
 * Commands (``front_cmd``, ``tracks_cmd`` / ``track_cmd``, ``cmd_vel``, ``rot_dump_cmd``, ``blade_cmd``,
   ``machine_setting``) are
@@ -22,8 +23,8 @@ it with plain numbers and an injected clock. It is the same for every machine ty
   an explicit ``False``).
 * :meth:`BridgeCore.tick` returns the frames due now (scheduler), with the alive counter in
   ``Machine_Setting_Cmd`` advanced on every send.
-* :meth:`BridgeCore.on_frame` decodes a received frame into outputs (:class:`JointStateOut`,
-  :class:`OdomOut`, :class:`ImuOut`, :class:`FixOut`); unknown ids, wrong DLC, out-of-range values,
+* :meth:`BridgeCore.on_frame` decodes a received frame into outputs (:mod:`com3_can.outputs`: ``JointStateOut``,
+  ``OdomOut``, ``ImuOut``, ``FixOut``); unknown ids, wrong DLC, out-of-range values,
   error/remote/standard frames are counted per reason and dropped, never raised.
 
 Thread safety: every public method takes the core's lock; the node calls them from the executor thread
@@ -33,25 +34,24 @@ Thread safety: every public method takes the core's lock; the node calls them fr
 from __future__ import annotations
 
 import logging
-import math
 import threading
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
-from com3_can.bus import load_bus_config
+from com3_can.bridge_config import BridgeConfig
 from com3_can.codec import AliveCounter, Com3Codec, codec_for
 from com3_can.errors import Com3CommandError, Com3DecodeError, Com3EncodeError
-from com3_can.profiles import PROFILES, ConverterProfile
-from com3_can.registry import machine_type
+from com3_can.outputs import DiagSnapshot, FixOut, ImuOut, JointStateOut, OdomOut, Tx, finite
+from com3_can.profiles.base import ConverterProfile
 from com3_can.scheduler import FrameScheduler
 from com3_can.signal_map import PILOT_MAX_MPA
 from tms_common.errors import ConfigError
 from tms_model.com3 import CONTROL_NAMES, EFFORT, POSITION, VELOCITY
-from tms_model.fleet import load_named
-from tms_model.site import Projector, load_site
+from tms_model.site import Projector
 
+# the output types, BridgeConfig and the control types are re-exported: users of the core import them from here
 __all__ = [
     "BridgeConfig",
     "BridgeCore",
@@ -68,135 +68,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-# com3_msgs/JointCmd control_type values (named once in tms_model.com3; re-exported for the profiles)
-_CONTROL_NAMES = CONTROL_NAMES
-
 DIAG_OK, DIAG_WARN, DIAG_ERROR = 0, 1, 2
-
-@dataclass(frozen=True)
-class Tx:
-    """One frame to put on the bus."""
-
-    name: str
-    arbitration_id: int
-    data: bytes
-
-
-@dataclass(frozen=True)
-class JointStateOut:
-    """Content of a sensor_msgs/JointState (empty ``position`` means velocities only)."""
-
-    name: tuple[str, ...]
-    position: tuple[float, ...]
-    velocity: tuple[float, ...]
-
-
-@dataclass(frozen=True)
-class OdomOut:
-    """Content of a nav_msgs/Odometry: planar pose in ``frame_id`` and body twist."""
-
-    x: float
-    y: float
-    z: float
-    yaw: float
-    v: float
-    yaw_rate: float
-    frame_id: str = "odom"
-
-
-@dataclass(frozen=True)
-class ImuOut:
-    """Orientation (roll, pitch, yaw [rad], ROS conventions) and yaw rate if the frame carries it."""
-
-    roll: float
-    pitch: float
-    yaw: float
-    yaw_rate: float | None
-
-
-@dataclass(frozen=True)
-class FixOut:
-    """Content of a sensor_msgs/NavSatFix (status in NavSatStatus numbering: -1 no fix .. 2 GBAS)."""
-
-    latitude: float
-    longitude: float
-    altitude: float
-    status: int
-    horizontal_accuracy: float | None
-
-
-@dataclass(frozen=True)
-class DiagSnapshot:
-    """One diagnostic status: level (0 OK, 1 WARN, 2 ERROR), message and key/values."""
-
-    level: int
-    message: str
-    values: tuple[tuple[str, str], ...]
-
-
-@dataclass(frozen=True)
-class BridgeConfig:
-    """Settings of one converter (config/can/<machine>.yaml ``bridge`` + config/machines/<machine>.yaml).
-
-    ``machine`` is the model (``zx200``, ``zx120``, ``ic120``); ``type`` its profile name, read from the
-    machine description when not given.
-    """
-
-    machine: str
-    watchdog_s: float = 0.5
-    diagnostic_period_s: float = 0.5
-    default_setting: Mapping[str, float] = field(default_factory=dict)
-    effort_dead_zone: Mapping[str, float] = field(default_factory=dict)
-    track_gauge: float = 2.0
-    vessel_max_angle: float = 1.134464
-    #: a carrier's swing (rotate_joint) command range [rad]; None = no rotating upper body
-    swing_range: tuple[float, float] | None = None
-    #: a dozer's blade lift (lift_joint) command range [rad] and rate limit [rad/s]
-    blade_range: tuple[float, float] = (0.0, 0.0)
-    blade_velocity: float = 0.0
-    #: DBC file of the machine's bus (com3_can/dbc); "" = the type's default
-    dbc: str = ""
-    #: site map origin in the plane-rectangular CRS (excavator swing-centre -> map) and the CRS itself
-    map_origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    crs: str = "EPSG:6677"
-    machine_type: str = ""
-    #: no site heartbeat for this long (after a first one) -> emg_stop latched; 0 = no site watchdog
-    site_timeout_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not self.machine_type:
-            object.__setattr__(self, "machine_type", machine_type(self.machine))
-        PROFILES.get(self.machine_type)  # unknown type -> ConfigError naming the known ones
-        if not (math.isfinite(self.watchdog_s) and self.watchdog_s > 0):
-            raise ConfigError(f"com3_bridge: watchdog_s must be > 0 s, got {self.watchdog_s}")
-        if not (math.isfinite(self.site_timeout_s) and self.site_timeout_s >= 0):
-            raise ConfigError(f"com3_bridge: site_timeout_s must be >= 0 s (0 = off), got {self.site_timeout_s}")
-        if not self.track_gauge > 0:
-            raise ConfigError(f"com3_bridge: track gauge must be > 0 m, got {self.track_gauge}")
-
-    @classmethod
-    def load(cls, machine: str, can_config: Mapping[str, Any] | None = None, **overrides: Any) -> BridgeConfig:
-        """Build for the machine called ``machine`` from its kind's ``config/can/<kind>.yaml`` (as the site
-        changes it for this machine), the machine description and the site; ``overrides`` win."""
-        description = load_named(machine)
-        profile = PROFILES.get(description.type)
-        if can_config is None:
-            can_config = load_bus_config(machine)
-        bridge = dict((can_config or {}).get("bridge") or {})
-        known = {"watchdog_s", "diagnostic_period_s", "default_setting", "effort_dead_zone"}
-        unknown = sorted(set(bridge) - known)
-        if unknown:
-            raise ConfigError(f"config/can/{description.kind}.yaml: bridge: unknown key(s) {unknown}; known: {sorted(known)}")
-        from com3_can.codec import dbc_file
-
-        kwargs: dict[str, Any] = {"machine": machine, "machine_type": description.type,
-                                  "dbc": dbc_file(description.kind), **bridge}
-        kwargs.update(profile(machine).config_from_machine(description))
-        site = load_site()
-        kwargs["map_origin"] = site.origin_plane
-        kwargs["crs"] = site.crs
-        kwargs.update(overrides)
-        return cls(**kwargs)
 
 
 @dataclass
@@ -210,31 +82,26 @@ class _Channel:
     timed_out: bool = False
 
 
-def _finite(topic: str, what: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise Com3CommandError(f"{topic}: {what}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise Com3CommandError(f"{topic}: {what}: value {v} is not finite")
-    return v
-
-
 class BridgeCore:
     """Converter state of one machine; see the module docstring.
 
     Args:
         config: :class:`BridgeConfig`.
         now: time [s] of construction on the same monotonic clock later passed to the methods.
-        codec: the machine's codec (default :func:`load_codec`).
+        profile: what this machine's type does (channels, command and state handlers): the caller picks it from
+            the registry, :func:`com3_can.profiles.converter_profile`.
+        codec: the machine's codec (default: that of ``config.dbc``).
     """
 
-    def __init__(self, config: BridgeConfig, now: float, codec: Com3Codec | None = None) -> None:
+    def __init__(self, config: BridgeConfig, now: float, profile: ConverterProfile,
+                 codec: Com3Codec | None = None) -> None:
+        if profile.machine_type != config.machine_type:
+            raise ConfigError(f"com3_bridge: {config.machine} is a {config.machine_type}, but the profile given "
+                              f"serves {profile.machine_type!r}")
         self.config = config
         self.machine = config.machine
-        #: what this machine type does (channels, command and state handlers), see com3_can.profiles
-        self.profile: ConverterProfile = PROFILES.get(config.machine_type)(config.machine)
-        self.codec = codec or (codec_for(config.dbc, config.machine) if config.dbc else self.profile.codec())
+        self.profile = profile
+        self.codec = codec or codec_for(config.dbc, config.machine)
         self._lock = threading.RLock()
         self._alive = AliveCounter()
         self._values: dict[str, dict[str, float]] = {f: self.codec.neutral(f) for f in self.codec.command_frames}
@@ -318,7 +185,7 @@ class BridgeCore:
         """Validate a JointCmd (control type, names, lengths, finite, effort in [-1, 1]): joint -> value."""
         arrays = {VELOCITY: velocity, EFFORT: effort}
         if control_type not in (VELOCITY, EFFORT):
-            ctl_name = _CONTROL_NAMES.get(control_type, str(control_type))
+            ctl_name = CONTROL_NAMES.get(control_type, str(control_type))
             raise Com3CommandError(
                 f"{topic}: control_type {ctl_name} is not carried by COM3; use VELOCITY (1) or EFFORT (2)"
             )
@@ -333,7 +200,7 @@ class BridgeCore:
         label = "velocity" if control_type == VELOCITY else "effort"
         if len(values) != len(names):
             raise Com3CommandError(f"{topic}: {len(names)} joint names but {len(values)} {label} values")
-        out = {n: _finite(topic, f"{n} {label}", v) for n, v in zip(names, values, strict=True)}
+        out = {n: finite(topic, f"{n} {label}", v) for n, v in zip(names, values, strict=True)}
         if control_type == EFFORT:
             for n, v in out.items():
                 if not -1.0 <= v <= 1.0:
@@ -374,8 +241,8 @@ class BridgeCore:
         """``cmd_vel`` (Twist): body-centre velocity [m/s] and yaw rate [rad/s]."""
         with self._lock:
             try:
-                v = _finite("cmd_vel", "linear.x", linear_x)
-                w = _finite("cmd_vel", "angular.z", angular_z)
+                v = finite("cmd_vel", "linear.x", linear_x)
+                w = finite("cmd_vel", "angular.z", angular_z)
             except Com3CommandError as exc:
                 self._reject(exc)
                 raise
@@ -403,7 +270,7 @@ class BridgeCore:
                 for key, value in fields.items():
                     if key not in setting or key == "alive_counter":
                         raise Com3CommandError(f"machine_setting: unknown field {key!r}")
-                    setting[key] = _finite("machine_setting", key, value)
+                    setting[key] = finite("machine_setting", key, value)
                 try:
                     self.codec.encode("Machine_Setting_Cmd", setting)
                 except Com3EncodeError as exc:

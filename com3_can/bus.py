@@ -20,6 +20,8 @@ import can
 from com3_can.errors import Com3BusError
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_model.fleet import site_machine
+from tms_model.site import Site, SiteMachine, load_site
 
 __all__ = ["BACKENDS", "IN_PROCESS_ENV", "open_bus", "socketcan_available", "load_bus_config", "link_config",
            "in_process_machines"]
@@ -128,7 +130,7 @@ def link_config(machine: str, cfg: Mapping[str, Any], *, interface: str = "", ch
     return out
 
 
-def load_bus_config(machine: str, path: str | Path | None = None, site: Any = None) -> dict[str, Any]:
+def load_bus_config(machine: str, path: str | Path | None = None, site: Site | None = None) -> dict[str, Any]:
     """The bus + bridge configuration of the machine called ``machine``.
 
     Its kind's ``config/can/<kind>.yaml`` (or ``path``), with the site's ``can`` changes for this machine over
@@ -138,9 +140,6 @@ def load_bus_config(machine: str, path: str | Path | None = None, site: Any = No
     Raises:
         ConfigError: the machine is not on the site, or another machine of the site would share its link.
     """
-    from tms_model.fleet import site_machine
-    from tms_model.site import load_site
-
     site = site or load_site()
     entry = site_machine(machine, site)
     path = Path(path) if path else config_path("can", f"{entry.kind}.yaml")
@@ -158,8 +157,8 @@ def load_bus_config(machine: str, path: str | Path | None = None, site: Any = No
     return out
 
 
-def _named(data: Mapping[str, Any], entry: Any) -> dict[str, Any]:
-    """The kind's bus config as machine ``entry`` (a tms_model SiteMachine) uses it."""
+def _named(data: Mapping[str, Any], entry: SiteMachine) -> dict[str, Any]:
+    """The kind's bus config as machine ``entry`` uses it."""
     out = {**data, **entry.can}
     local = data.get("in_process")
     if isinstance(local, Mapping) and isinstance(local.get("channel"), str):

@@ -1,10 +1,9 @@
 """DBC-driven COM3 codecs (cantools) with strict range checks, neutral commands and the alive counter.
 
-:func:`load_codec` returns an immutable :class:`Com3Codec` for a machine KIND (``zx200``, ``ic120``, ``mst110cr``,
-``d37pxi``, ...): the DBC its machine description names (``can: {dbc: ...}`` of ``config/machines/<kind>.yaml``,
-e.g. the published COM3 excavator frames ``dbc/excavator_com3.dbc``, our crawler-carrier extension
-``dbc/crawler_carrier_com3.dbc`` or our dozer extension ``dbc/dozer_com3.dbc``), else its type's default DBC (the
-converter profile's ``dbc``). Encoding refuses any value outside the signal's DBC range (or its raw
+:func:`load_codec` returns an immutable :class:`Com3Codec` for a machine kind: the DBC its machine
+description names (``can: {dbc: ...}`` of ``config/machines/<kind>.yaml``, e.g. the published COM3 excavator
+frames ``dbc/excavator_com3.dbc``, our crawler-carrier extension ``dbc/crawler_carrier_com3.dbc`` or our dozer
+extension ``dbc/dozer_com3.dbc``). Encoding refuses any value outside the signal's DBC range (or its raw
 bit range where the DBC says ``[0|0]``, i.e. unspecified) instead of clipping or wrapping; decoding
 refuses unknown ids, wrong DLCs and values outside the DBC range. The tables are built once from the
 parsed DBC, so the per-frame cost is one cantools call plus one range loop.
@@ -24,6 +23,7 @@ import cantools.database
 
 from com3_can.errors import Com3DecodeError, Com3EncodeError
 from tms_common.errors import ConfigError
+from tms_model.machines import load_machine
 
 __all__ = [
     "SignalSpec",
@@ -95,7 +95,7 @@ class Com3Codec:
 
     Args:
         db: a parsed cantools database (strict mode).
-        machine: name used in messages (``zx200`` / ``ic120``).
+        machine: name used in messages (the machine's or its kind's).
         command_sender: DBC node that sends commands (frames it sends are command frames).
     """
 
@@ -288,21 +288,16 @@ def dbc_files() -> tuple[str, ...]:
 
 
 def dbc_file(kind: str) -> str:
-    """The DBC file (in ``com3_can/dbc``) of machine kind ``kind``: its description's ``can.dbc``, else the default of
-    its type (the converter profile's ``dbc``).
+    """The DBC file (in ``com3_can/dbc``) of machine kind ``kind``: the one its description names (``can.dbc``).
 
     Raises:
         ConfigError: unknown kind (naming the known ones), or a DBC named that is not shipped (naming the file).
     """
-    from com3_can.profiles import PROFILES
-    from tms_model.machines import load_machine
-
     description = load_machine(kind)
-    name = description.dbc or PROFILES.get(description.type).dbc
-    if name not in dbc_files():
-        raise ConfigError(f"{description.source}: can.dbc: no DBC file {name!r} in com3_can/dbc "
+    if description.dbc not in dbc_files():
+        raise ConfigError(f"{description.source}: can.dbc: no DBC file {description.dbc!r} in com3_can/dbc "
                           f"(shipped: {', '.join(dbc_files())})")
-    return name
+    return description.dbc
 
 
 def dbc_text(machine: str) -> str:

@@ -1,10 +1,10 @@
 """Name -> implementation registries, as python-can finds its interfaces (``can.interfaces.BACKENDS``).
 
-A machine type (``excavator``, ``crawler_dump``) is a name; the converter and the plant each keep a
+A machine type (a type constant of :mod:`tms_model.machines`) is a name; the converter and the plant each keep a
 :class:`Registry` of what serves that type on their side. Registering a name twice is an error (two
 modules claiming one type is a packaging mistake, not something to resolve silently), and looking up an
-unknown name names the known ones. :func:`machine_type` says which type a machine model is, from its
-machine description ``config/machines/<model>.yaml`` (key ``type``).
+unknown name names the known ones. :func:`machine_type` says which type a machine is, from its kind's
+machine description ``config/machines/<kind>.yaml`` (key ``type``).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from typing import Generic, TypeVar
 
 from tms_common.errors import ConfigError
+from tms_model.fleet import load_named
 
 __all__ = ["Registry", "machine_type"]
 
@@ -52,9 +53,7 @@ class Registry(Generic[T]):
         return iter(self.names())
 
 
-def machine_type(model: str) -> str:
-    """The type (profile name) of the machine called ``model``: ``type`` of its kind's description
+def machine_type(name: str) -> str:
+    """The type (profile name) of the machine called ``name``: ``type`` of its kind's description
     (:func:`tms_model.fleet.load_named`)."""
-    from tms_model.fleet import load_named
-
-    return load_named(model).type
+    return load_named(name).type

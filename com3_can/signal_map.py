@@ -21,6 +21,7 @@ __all__ = [
     "TrackSignals",
     "EXCAVATOR_FRONT",
     "EXCAVATOR_FRAMES",
+    "TRACK_SIGNALS",
     "EXCAVATOR_TRACKS",
     "CARRIER_FRAMES",
     "CARRIER_VESSEL",
@@ -82,7 +83,8 @@ TRACKS: tuple[str, str] = ("left_track", "right_track")
 
 @dataclass(frozen=True)
 class TrackSignals:
-    """Travel signals: per-track and centre velocity commands and the per-track pilot pair."""
+    """Travel signals of every tracked machine (all DBCs name them alike): per-track and centre velocity commands
+    and the per-track pilot pair (the excavator's ``Pilot_Pressure_Cmd_2``)."""
 
     left_velocity_cmd: str = "target_travel_left_velocity"
     right_velocity_cmd: str = "target_travel_right_velocity"
@@ -94,7 +96,9 @@ class TrackSignals:
     right_backward: str = "right_track_backward"
 
 
-EXCAVATOR_TRACKS = TrackSignals()
+#: the travel signals of every machine on tracks (excavator, crawler carrier, dozer)
+TRACK_SIGNALS = TrackSignals()
+EXCAVATOR_TRACKS = TRACK_SIGNALS  # deprecated alias of TRACK_SIGNALS, kept until sim_bridge's profiles use the new name
 
 #: Frame roles of the excavator DBC (``dbc/excavator_com3.dbc``).
 EXCAVATOR_FRAMES: Mapping[str, str] = MappingProxyType({

@@ -1,7 +1,8 @@
 """``com3_bridge``: the ROS 2 <-> COM3 CAN converter of one machine (thin rclpy wrapper of BridgeCore).
 
-Run in the machine namespace, e.g. ``com3_bridge --ros-args -r __ns:=/zx200 -p machine:=zx200``.
-Parameters: ``machine`` (a config/machines/<machine>.yaml: zx200, zx120, ic120, mst110cr, mst2200vd, d37pxi), ``can_config`` (YAML, default config/can/<machine>.yaml),
+Run in the machine's namespace, e.g. ``com3_bridge --ros-args -r __ns:=/<name>`` for a machine ``<name>`` of the
+site (``machines:`` of config/site.yaml). Parameters: ``machine`` (its name; default the last segment of the
+namespace), ``can_config`` (YAML, default config/can/<kind>.yaml of its kind),
 ``can_interface`` / ``can_channel`` / ``can_port`` (override the YAML; empty/0 = keep; the link is chosen by
 :func:`com3_can.bus.link_config`, in-process when the plant shares this process), ``watchdog_s``,
 ``joint_states_period_s``, ``odom_period_s`` and ``imu_period_s`` (publish ``joint_states`` / ``odom_pose`` /
@@ -52,15 +53,19 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus
 from std_msgs.msg import Bool, String
 
-from com3_can.bridge_core import BridgeConfig, BridgeCore, FixOut, ImuOut, JointStateOut, OdomOut, Tx
+from com3_can.bridge_config import BridgeConfig
+from com3_can.bridge_core import BridgeCore
 from com3_can.bus import link_config, load_bus_config, open_bus
 from com3_can.errors import Com3CommandError
+from com3_can.outputs import FixOut, ImuOut, JointStateOut, OdomOut, Tx
 from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
 from com3_can.pilot_cutoff import CutoffSender
+from com3_can.profiles import PROFILES
 from com3_msgs.msg import CrawlerCarrierCom3MachineSetting, ExcavatorCom3MachineSetting, JointCmd
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
+from tms_model.fleet import machine_name
 
 __all__ = ["main", "Com3Bridge"]
 
@@ -80,7 +85,7 @@ class Com3Bridge(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("com3_bridge", **kwargs)
-        machine = str(declare_startup(self, "machine", "zx200").value)
+        machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace())
         can_config = str(declare_startup(self, "can_config", "").value)
         interface = str(declare_startup(self, "can_interface", "").value)
         channel = str(declare_startup(self, "can_channel", "").value)
@@ -106,7 +111,9 @@ class Com3Bridge(Node):
         cfg = load_bus_config(machine, can_config or None)
         self.config = BridgeConfig.load(machine, cfg, watchdog_s=watchdog, site_timeout_s=site_timeout)
         bus_cfg = link_config(machine, cfg, interface=interface, channel=channel, port=port)
-        self.core = BridgeCore(self.config, time.monotonic())
+        # the registry is consulted here, not by the core: the core runs the profile it is given
+        profile = PROFILES.get(self.config.machine_type)(machine)
+        self.core = BridgeCore(self.config, time.monotonic(), profile)
         self.bus = open_bus(bus_cfg)
         self._log = self.get_logger()
         self._log.info(f"{machine}: CAN {bus_cfg} watchdog {self.config.watchdog_s:g} s")
@@ -132,7 +139,6 @@ class Com3Bridge(Node):
             self.create_subscription(String, site_topic, self._on_site_heartbeat, qos_profile_sensor_data)
             self.create_timer(SITE_CHECK_S, self._site_check, clock=Clock(clock_type=ClockType.STEADY_TIME))
         # the machine type's profile names the topics it takes (com3_ros's names for that type)
-        profile = self.core.profile
         self.create_subscription(JointCmd, profile.tracks_topic, self._on_tracks, depth)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, depth)
         if "front_cmd" in self.core.topics:

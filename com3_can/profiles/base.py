@@ -1,18 +1,41 @@
-"""Base class of converter profiles (see :mod:`com3_can.profiles`)."""
+"""Base class of converter profiles (see :mod:`com3_can.profiles`) and :class:`Core`, what a profile may use of the
+converter core that runs it (:class:`com3_can.bridge_core.BridgeCore` is one)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
+from com3_can.bridge_config import BridgeConfig
 from com3_can.codec import Com3Codec, codec_for
 from com3_can.errors import Com3CommandError
+from com3_can.outputs import ImuOut, Tx
 
-if TYPE_CHECKING:
-    from com3_can.bridge_core import BridgeCore, Tx
-    from tms_model.machines import Machine
+# codec_for is re-exported: sim_bridge's plant profiles import it from here
+__all__ = ["ConverterProfile", "Core", "codec_for"]
 
-__all__ = ["ConverterProfile", "codec_for"]
+
+class Core(Protocol):
+    """The converter core as its profile sees it: settings, codec, latest state frames, and the steps every type
+    shares (validate a JointCmd, accept a command, set a switch of ``Machine_Setting_Cmd``)."""
+
+    config: BridgeConfig
+    codec: Com3Codec
+    #: latest decoded values of every state frame (profiles combine frames through it)
+    state: dict[str, dict[str, float]]
+
+    def accept(self, topic: str, channel: str, updates: Mapping[str, Mapping[str, float]], now: float) -> list[Tx]: ...
+
+    def set_switch(self, signal: str, value: float) -> None: ...
+
+    def check_joint_cmd(self, topic: str, allowed: Sequence[str], names: Sequence[str], control_type: int,
+                        velocity: Sequence[float], effort: Sequence[float]) -> dict[str, float]: ...
+
+    def pilot(self, effort: float, dead_zone: float) -> float: ...
+
+    def plane_to_geodetic(self, easting: float, northing: float) -> tuple[float, float]: ...
+
+    def check_machine_alive(self, alive: int) -> None: ...
 
 
 class ConverterProfile:
@@ -20,15 +43,16 @@ class ConverterProfile:
 
     Class attributes a profile sets:
 
-    * ``type``: registry name; ``dbc``: the type's default DBC file in ``com3_can/dbc`` (a machine description's
-      ``can.dbc`` overrides it, :func:`com3_can.codec.dbc_file`);
+    * ``machine_type``: registry name (a type constant of :mod:`tms_model.machines`); ``dbc``: the DBC file in
+      ``com3_can/dbc`` the type speaks (deprecated: the converter uses the one the machine description names,
+      ``Machine.dbc``; kept while sim_bridge's plant profiles read it);
     * ``channels``: channel name -> command frames it feeds (one watchdog per channel);
     * ``topics``: the ROS command topics the type takes, named as OPERA's com3_ros names them for that type
       (excavator ``front_cmd``, ``tracks_cmd``; crawler carrier ``track_cmd``, ``rot_dump_cmd``; dozer ``track_cmd``,
       ``blade_cmd`` (ours: OPERA has none public); all ``cmd_vel``);
       ``tracks_topic``: which of them carries the per-track JointCmd; ``setting_topic``: the machine-setting topic;
     * ``state_handlers``: state frame name -> method name; the method gets ``(core, values, stamp)`` and
-      returns outputs (:class:`~com3_can.bridge_core.JointStateOut`, ``OdomOut``, ...).
+      returns outputs (:class:`~com3_can.outputs.JointStateOut`, ``OdomOut``, ...).
 
     A command the type does not take raises :class:`Com3CommandError`; the core counts it as rejected.
     """
@@ -44,14 +68,7 @@ class ConverterProfile:
     def __init__(self, machine: str) -> None:
         self.machine = machine
 
-    def codec(self) -> Com3Codec:
-        return codec_for(self.dbc, self.machine)
-
-    def config_from_machine(self, description: Machine) -> dict[str, Any]:
-        """:class:`~com3_can.bridge_core.BridgeConfig` fields taken from the machine description."""
-        return {"track_gauge": description.tracks.gauge}
-
-    def handler(self, frame: str) -> Callable[[BridgeCore, dict[str, float], float], list[Any]] | None:
+    def handler(self, frame: str) -> Callable[[Core, dict[str, float], float], list[Any]] | None:
         name = self.state_handlers.get(frame)
         return None if name is None else getattr(self, name)
 
@@ -60,34 +77,32 @@ class ConverterProfile:
                                 f"it takes {', '.join(sorted(self.topics))}")
 
     # ROS commands -> frames (``core.accept`` validates, commits and returns the frames to send)
-    def front_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+    def front_cmd(self, core: Core, names: Sequence[str], control_type: int, velocity: Sequence[float],
                   effort: Sequence[float], now: float) -> list[Tx]:
         raise self._refuse("front_cmd")
 
-    def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+    def tracks_cmd(self, core: Core, names: Sequence[str], control_type: int, velocity: Sequence[float],
                    effort: Sequence[float], now: float) -> list[Tx]:
         raise self._refuse(self.tracks_topic)
 
-    def cmd_vel(self, core: BridgeCore, linear_x: float, angular_z: float, now: float) -> list[Tx]:
+    def cmd_vel(self, core: Core, linear_x: float, angular_z: float, now: float) -> list[Tx]:
         raise self._refuse("cmd_vel")
 
-    def rot_dump_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+    def rot_dump_cmd(self, core: Core, names: Sequence[str], control_type: int, position: Sequence[float],
                      now: float) -> list[Tx]:
         raise self._refuse("rot_dump_cmd")
 
-    def blade_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+    def blade_cmd(self, core: Core, names: Sequence[str], control_type: int, position: Sequence[float],
                   velocity: Sequence[float], now: float) -> list[Tx]:
         raise self._refuse("blade_cmd")
 
     # state handlers shared by the types (both DBCs carry these frames)
-    def roll_pitch(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
-        from com3_can.bridge_core import ImuOut
-
+    def roll_pitch(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         az = core.state.get("Vehicle_Azimuth", {})
         yaw = -az.get("track_body_azimuth", 0.0)
         rate = az.get("yaw_rate")  # clockwise-positive like the azimuth -> ROS angular z = -yaw_rate
         return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, None if rate is None else -rate)]
 
-    def machine_state(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
+    def machine_state(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         core.check_machine_alive(int(values["alive_counter"]))
         return []

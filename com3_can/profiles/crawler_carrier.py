@@ -16,19 +16,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from com3_can.errors import Com3CommandError
-from com3_can.profiles.base import ConverterProfile
+from com3_can.outputs import FixOut, JointStateOut, OdomOut, Tx, finite
+from com3_can.profiles.base import ConverterProfile, Core
 from com3_can.signal_map import CARRIER_FRAMES as F
 from com3_can.signal_map import CARRIER_SWING as S
 from com3_can.signal_map import CARRIER_VESSEL as V
-from com3_can.signal_map import EXCAVATOR_TRACKS as T
+from com3_can.signal_map import TRACK_SIGNALS as T
 from com3_can.signal_map import TRACKS
-
-if TYPE_CHECKING:
-    from com3_can.bridge_core import BridgeCore, Tx
-    from tms_model.machines import Machine
+from tms_model.com3 import POSITION, VELOCITY
+from tms_model.machines import CRAWLER_DUMP
 
 __all__ = ["CrawlerCarrierProfile", "TrackedProfile"]
 
@@ -48,10 +47,8 @@ class TrackedProfile(ConverterProfile):
         self._stamp: float | None = None
         self._track_pos = [0.0, 0.0]
 
-    def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+    def tracks_cmd(self, core: Core, names: Sequence[str], control_type: int, velocity: Sequence[float],
                    effort: Sequence[float], now: float) -> list[Tx]:
-        from com3_can.bridge_core import VELOCITY
-
         vals = core.check_joint_cmd(self.tracks_topic, TRACKS, names, control_type, velocity, effort)
         if control_type != VELOCITY:
             raise Com3CommandError(f"{self.tracks_topic}: the {self.machine} takes VELOCITY track commands only")
@@ -61,21 +58,19 @@ class TrackedProfile(ConverterProfile):
         core.set_switch("velocity_mode", 1.0)
         return txs
 
-    def cmd_vel(self, core: BridgeCore, linear_x: float, angular_z: float, now: float) -> list[Tx]:
+    def cmd_vel(self, core: Core, linear_x: float, angular_z: float, now: float) -> list[Tx]:
         frame = core.codec.neutral(self.travel_frame)
         frame.update({T.centre_velocity_cmd: linear_x, T.yaw_rate_cmd: angular_z})
         txs = core.accept("cmd_vel", "travel", {self.travel_frame: frame}, now)
         core.set_switch("velocity_mode", 0.0)
         return txs
 
-    def joints(self, core: BridgeCore) -> tuple[tuple[str, ...], tuple[float, ...], tuple[float, ...]]:
+    def joints(self, core: Core) -> tuple[tuple[str, ...], tuple[float, ...], tuple[float, ...]]:
         """Names, positions and velocities of the machine's own joints (bus order) for ``joint_states``."""
         return (), (), ()
 
     # state frames
-    def tracks(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
-        from com3_can.bridge_core import JointStateOut, OdomOut
-
+    def tracks(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         vl, vr = values[V.left_track_velocity], values[V.right_track_velocity]
         dt = 0.0 if self._stamp is None else min(max(stamp - self._stamp, 0.0), 0.1)
         self._stamp = stamp
@@ -98,9 +93,7 @@ class TrackedProfile(ConverterProfile):
         )
         return [OdomOut(self._x, self._y, 0.0, self._yaw, v, w), joints]
 
-    def gnss(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
-        from com3_can.bridge_core import FixOut
-
+    def gnss(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         try:
             lat = core.state["GNSS_Latitude"]["latitude"]
             lon = core.state["GNSS_Longitude"]["longitude"]
@@ -111,8 +104,8 @@ class TrackedProfile(ConverterProfile):
 
 
 class CrawlerCarrierProfile(TrackedProfile):
-    machine_type = "crawler_dump"
-    dbc = "crawler_carrier_com3.dbc"
+    machine_type = CRAWLER_DUMP
+    dbc = "crawler_carrier_com3.dbc"  # deprecated (see ConverterProfile)
     channels = {"travel": (F["travel_velocity"],), "vessel": (F["vessel"],), "swing": (F["swing"],)}
     topics = frozenset({"track_cmd", "cmd_vel", "rot_dump_cmd"})
     setting_topic = "crawler_carrier_machine_setting"
@@ -123,18 +116,8 @@ class CrawlerCarrierProfile(TrackedProfile):
         "Machine_State": "machine_state",
     }
 
-    def config_from_machine(self, description: Machine) -> dict[str, Any]:
-        assert description.vessel is not None  # tms_model: every crawler dump has one
-        out = {**super().config_from_machine(description), "vessel_max_angle": description.vessel.max_angle}
-        if description.swing is not None:
-            s = description.swing
-            out["swing_range"] = (-math.pi, math.pi) if s.lower is None or s.upper is None else (s.lower, s.upper)
-        return out
-
-    def rot_dump_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+    def rot_dump_cmd(self, core: Core, names: Sequence[str], control_type: int, position: Sequence[float],
                      now: float) -> list[Tx]:
-        from com3_can.bridge_core import POSITION, _finite
-
         topic = "rot_dump_cmd"
         swing = core.config.swing_range
         allowed = [V.command_joint] if swing is None else [V.rotate_joint, V.command_joint]
@@ -150,7 +133,7 @@ class CrawlerCarrierProfile(TrackedProfile):
         if len(position) != len(names):
             raise Com3CommandError(f"{topic}: {len(names)} joint name{'s' if len(names) > 1 else ''} but "
                                    f"{len(position)} position values")
-        targets = {n: _finite(topic, f"{n} position", p) for n, p in zip(names, position, strict=True)}
+        targets = {n: finite(topic, f"{n} position", p) for n, p in zip(names, position, strict=True)}
         updates: list[tuple[str, str, dict[str, float]]] = []
         if V.command_joint in targets:
             angle, top = targets[V.command_joint], core.config.vessel_max_angle
@@ -174,7 +157,7 @@ class CrawlerCarrierProfile(TrackedProfile):
             txs += core.accept(topic, channel, {frame: values}, now)
         return txs
 
-    def joints(self, core: BridgeCore) -> tuple[tuple[str, ...], tuple[float, ...], tuple[float, ...]]:
+    def joints(self, core: Core) -> tuple[tuple[str, ...], tuple[float, ...], tuple[float, ...]]:
         vessel = core.state.get(F["vessel_angle"], {})
         names: tuple[str, ...] = (V.joint,)
         pos: tuple[float, ...] = (vessel.get(V.angle, 0.0),)

@@ -12,24 +12,23 @@ GNSS fix, IMU, as the carrier's.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
 
 from com3_can.errors import Com3CommandError
+from com3_can.outputs import Tx, finite
+from com3_can.profiles.base import Core
 from com3_can.profiles.crawler_carrier import TrackedProfile
 from com3_can.signal_map import BLADE_ANGLE, BLADE_VELOCITY
 from com3_can.signal_map import DOZER_BLADE as B
 from com3_can.signal_map import DOZER_FRAMES as F
-
-if TYPE_CHECKING:
-    from com3_can.bridge_core import BridgeCore, Tx
-    from tms_model.machines import Machine
+from tms_model.com3 import CONTROL_NAMES, POSITION, VELOCITY
+from tms_model.machines import DOZER
 
 __all__ = ["DozerProfile"]
 
 
 class DozerProfile(TrackedProfile):
-    machine_type = "dozer"
-    dbc = "dozer_com3.dbc"
+    machine_type = DOZER
+    dbc = "dozer_com3.dbc"  # deprecated (see ConverterProfile)
     channels = {"travel": (F["travel_velocity"],), "blade": (F["blade"],)}
     topics = frozenset({"track_cmd", "cmd_vel", "blade_cmd"})
     setting_topic = "machine_setting"
@@ -40,16 +39,8 @@ class DozerProfile(TrackedProfile):
         "Machine_State": "machine_state",
     }
 
-    def config_from_machine(self, description: Machine) -> dict[str, Any]:
-        lift = description.joint(B.joint)
-        assert lift.lower is not None and lift.upper is not None  # tms_model: the lift joint has limits
-        return {**super().config_from_machine(description), "blade_range": (lift.lower, lift.upper),
-                "blade_velocity": lift.velocity}
-
-    def blade_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, position: Sequence[float],
+    def blade_cmd(self, core: Core, names: Sequence[str], control_type: int, position: Sequence[float],
                   velocity: Sequence[float], now: float) -> list[Tx]:
-        from com3_can.bridge_core import CONTROL_NAMES, POSITION, VELOCITY, _finite
-
         topic = "blade_cmd"
         if list(names) != [B.joint]:
             raise Com3CommandError(f"{topic}: joint_name {list(names)}; expected [{B.joint!r}]")
@@ -57,7 +48,7 @@ class DozerProfile(TrackedProfile):
         if control_type == POSITION:
             if len(position) != 1:
                 raise Com3CommandError(f"{topic}: 1 joint name but {len(position)} position values")
-            angle = _finite(topic, f"{B.joint} position", position[0])
+            angle = finite(topic, f"{B.joint} position", position[0])
             lo, hi = core.config.blade_range
             if not lo <= angle <= hi:
                 raise Com3CommandError(f"{topic}: {B.joint} angle {angle:g} rad outside [{lo:g}, {hi:g}] rad "
@@ -66,7 +57,7 @@ class DozerProfile(TrackedProfile):
         elif control_type == VELOCITY:
             if len(velocity) != 1:
                 raise Com3CommandError(f"{topic}: 1 joint name but {len(velocity)} velocity values")
-            rate = _finite(topic, f"{B.joint} velocity", velocity[0])
+            rate = finite(topic, f"{B.joint} velocity", velocity[0])
             top = core.config.blade_velocity
             if abs(rate) > top:
                 raise Com3CommandError(f"{topic}: {B.joint} velocity {rate:g} rad/s outside [-{top:g}, {top:g}] rad/s "
@@ -77,6 +68,6 @@ class DozerProfile(TrackedProfile):
                                    "carried; use POSITION (0) or VELOCITY (1)")
         return core.accept(topic, "blade", {F["blade"]: frame}, now)
 
-    def joints(self, core: BridgeCore) -> tuple[tuple[str, ...], tuple[float, ...], tuple[float, ...]]:
+    def joints(self, core: Core) -> tuple[tuple[str, ...], tuple[float, ...], tuple[float, ...]]:
         blade = core.state.get(F["blade_angle"], {})
         return (B.joint,), (blade.get(B.angle, 0.0),), (blade.get(B.angular_velocity, 0.0),)

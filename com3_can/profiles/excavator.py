@@ -11,14 +11,14 @@ centre, ``Roll_Pitch_Angle`` -> IMU.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from com3_can.profiles.base import ConverterProfile
+from com3_can.outputs import FixOut, JointStateOut, OdomOut, Tx
+from com3_can.profiles.base import ConverterProfile, Core
 from com3_can.signal_map import EXCAVATOR_FRAMES as F
-from com3_can.signal_map import EXCAVATOR_FRONT, EXCAVATOR_TRACKS, TRACKS
-
-if TYPE_CHECKING:
-    from com3_can.bridge_core import BridgeCore, Tx
+from com3_can.signal_map import EXCAVATOR_FRONT, TRACK_SIGNALS, TRACKS
+from tms_model.com3 import VELOCITY
+from tms_model.machines import EXCAVATOR
 
 __all__ = ["ExcavatorProfile"]
 
@@ -26,8 +26,8 @@ _FRONT = {j.joint: j for j in EXCAVATOR_FRONT}
 
 
 class ExcavatorProfile(ConverterProfile):
-    machine_type = "excavator"
-    dbc = "excavator_com3.dbc"
+    machine_type = EXCAVATOR
+    dbc = "excavator_com3.dbc"  # deprecated (see ConverterProfile)
     channels = {
         "front": (F["front_velocity"], F["front_pilot"]),
         "travel": (F["travel_velocity"], F["travel_pilot"]),
@@ -40,10 +40,8 @@ class ExcavatorProfile(ConverterProfile):
         "Machine_State": "machine_state",
     }
 
-    def front_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+    def front_cmd(self, core: Core, names: Sequence[str], control_type: int, velocity: Sequence[float],
                   effort: Sequence[float], now: float) -> list[Tx]:
-        from com3_can.bridge_core import VELOCITY
-
         vals = core.check_joint_cmd("front_cmd", tuple(_FRONT), names, control_type, velocity, effort)
         if control_type == VELOCITY:
             frame = core.codec.neutral(F["front_velocity"])
@@ -62,11 +60,9 @@ class ExcavatorProfile(ConverterProfile):
         core.set_switch("front_signal_switch_command", 1.0)
         return txs
 
-    def tracks_cmd(self, core: BridgeCore, names: Sequence[str], control_type: int, velocity: Sequence[float],
+    def tracks_cmd(self, core: Core, names: Sequence[str], control_type: int, velocity: Sequence[float],
                    effort: Sequence[float], now: float) -> list[Tx]:
-        from com3_can.bridge_core import VELOCITY
-
-        t = EXCAVATOR_TRACKS
+        t = TRACK_SIGNALS
         vals = core.check_joint_cmd("tracks_cmd", TRACKS, names, control_type, velocity, effort)
         left, right = vals.get("left_track", 0.0), vals.get("right_track", 0.0)
         if control_type == VELOCITY:
@@ -83,8 +79,8 @@ class ExcavatorProfile(ConverterProfile):
         core.set_switch("travel_signal_switch_command", 1.0)
         return txs
 
-    def cmd_vel(self, core: BridgeCore, linear_x: float, angular_z: float, now: float) -> list[Tx]:
-        t = EXCAVATOR_TRACKS
+    def cmd_vel(self, core: Core, linear_x: float, angular_z: float, now: float) -> list[Tx]:
+        t = TRACK_SIGNALS
         frame = core.codec.neutral(F["travel_velocity"])
         frame.update({t.centre_velocity_cmd: linear_x, t.yaw_rate_cmd: angular_z})
         txs = core.accept("cmd_vel", "travel", {F["travel_velocity"]: frame}, now)
@@ -92,9 +88,7 @@ class ExcavatorProfile(ConverterProfile):
         return txs
 
     # state frames
-    def front_angle(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
-        from com3_can.bridge_core import JointStateOut
-
+    def front_angle(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         vel = core.state.get(F["front_angular_velocity"], {})
         return [JointStateOut(
             tuple(_FRONT),
@@ -102,9 +96,7 @@ class ExcavatorProfile(ConverterProfile):
             tuple(vel.get(s.angular_velocity, 0.0) for s in EXCAVATOR_FRONT),
         )]
 
-    def swing_centre(self, core: BridgeCore, values: dict[str, float], stamp: float) -> list[Any]:
-        from com3_can.bridge_core import FixOut, OdomOut
-
+    def swing_centre(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         try:
             x = core.state["Swing_Center_Position_1"]["swing_center_position_x"]
             y = core.state["Swing_Center_Position_2"]["swing_center_position_y"]

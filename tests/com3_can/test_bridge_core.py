@@ -19,17 +19,18 @@ from com3_can.bridge_core import (
 )
 from com3_can.codec import load_codec
 from com3_can.errors import Com3CommandError
+from com3_can.profiles import converter_profile
 from com3_can.scheduler import FrameScheduler
 
 FRONT = ["swing_joint", "boom_joint", "arm_joint", "bucket_joint"]
 
 
 def zx(now: float = 0.0) -> BridgeCore:
-    return BridgeCore(BridgeConfig.load("zx200"), now)
+    return BridgeCore(BridgeConfig.load("zx200"), now, converter_profile("zx200"))
 
 
 def ic(now: float = 0.0) -> BridgeCore:
-    return BridgeCore(BridgeConfig.load("ic120"), now)
+    return BridgeCore(BridgeConfig.load("ic120"), now, converter_profile("ic120"))
 
 
 def by_name(txs):  # noqa: ANN001, ANN202
@@ -196,7 +197,7 @@ def test_scheduler_event_send_restarts_period_and_late_frames_do_not_burst() -> 
 
 @pytest.mark.parametrize("machine", ["zx200", "ic120"])
 def test_fuzz_10000_garbled_frames_never_crash_and_are_counted(machine: str) -> None:
-    core = BridgeCore(BridgeConfig.load(machine), 0.0)
+    core = BridgeCore(BridgeConfig.load(machine), 0.0, converter_profile(machine))
     codec = core.codec
     rng = random.Random(1234)
     ids = [codec.frame_id(f) for f in codec.state_frames]
@@ -285,4 +286,4 @@ def test_machine_setting_and_bad_config() -> None:
     with pytest.raises(ConfigError, match=r"site.yaml: no machine 'd61' in machines \(known: .*ic120.*zx200"):
         BridgeConfig.load("d61")
     with pytest.raises(ConfigError, match=r"default_setting.turbo"):
-        BridgeCore(BridgeConfig.load("zx200", default_setting={"turbo": 1}), 0.0)
+        BridgeCore(BridgeConfig.load("zx200", default_setting={"turbo": 1}), 0.0, converter_profile("zx200"))

@@ -144,10 +144,10 @@ def test_each_kind_finds_its_dbc_through_its_machine_description() -> None:
 def test_a_description_naming_an_unshipped_dbc_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
     import dataclasses
 
-    import tms_model.machines as machines
+    import com3_can.codec as codec
 
-    real = machines.load_machine("ic120")
-    monkeypatch.setattr(machines, "load_machine", lambda kind, path=None: dataclasses.replace(real, dbc="nope.dbc"))
+    real = codec.load_machine("ic120")
+    monkeypatch.setattr(codec, "load_machine", lambda kind, path=None: dataclasses.replace(real, dbc="nope.dbc"))
     with pytest.raises(ConfigError, match=r"ic120.yaml: can.dbc: no DBC file 'nope.dbc' in com3_can/dbc"):
         dbc_file("ic120")
 

@@ -12,12 +12,12 @@ import pytest
 
 from com3_can.bridge_core import EFFORT, POSITION, VELOCITY, BridgeConfig, BridgeCore, JointStateOut
 from com3_can.errors import Com3CommandError
-from com3_can.profiles import PROFILES, profile_for
+from com3_can.profiles import PROFILES, converter_profile, profile_for
 from com3_can.profiles.dozer import DozerProfile
 
 
 def _core(kind: str) -> BridgeCore:
-    return BridgeCore(BridgeConfig.load(kind), 0.0)
+    return BridgeCore(BridgeConfig.load(kind), 0.0, converter_profile(kind))
 
 
 def _frame(core: BridgeCore, txs, name: str) -> dict[str, float]:  # noqa: ANN001

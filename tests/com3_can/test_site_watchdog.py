@@ -10,13 +10,14 @@ import pytest
 
 from com3_can.bridge_core import VELOCITY, BridgeConfig, BridgeCore
 from com3_can.errors import Com3CommandError
+from com3_can.profiles import converter_profile
 from tms_common.errors import ConfigError
 
 NEUTRAL_VELOCITY_CMD_1 = "007d" * 4
 
 
 def zx(site_timeout_s: float) -> BridgeCore:
-    return BridgeCore(BridgeConfig.load("zx200", site_timeout_s=site_timeout_s), 0.0)
+    return BridgeCore(BridgeConfig.load("zx200", site_timeout_s=site_timeout_s), 0.0, converter_profile("zx200"))
 
 
 def velocity_frame(txs) -> str | None:  # noqa: ANN001
