@@ -1,6 +1,6 @@
-"""The arrival processor: SENSING_ARRIVAL_FLG from the measured IC120 pose.
+"""The arrival processor: SENSING_ARRIVAL_FLG from the measured pose of the sensed carrier.
 
-The flag rises when the IC120 has stood within ``position_tolerance`` and ``yaw_tolerance`` of the
+The flag rises when the carrier has stood within ``position_tolerance`` and ``yaw_tolerance`` of the
 loading point, slower than ``max_speed``, for ``hold_s`` seconds of (simulated) time; it falls as
 soon as any of these stops holding. The speed is the displacement over the last ``speed_window_s``
 (not between two consecutive poses): at a 50 Hz pose rate a millimetre of contact jitter of a

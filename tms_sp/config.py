@@ -1,212 +1,312 @@
 """Sensing configuration: config/tms_sp/sensing.yaml + the site and machine descriptions (tms_model).
 
-:func:`load_sensing_config` returns a frozen :class:`SensingConfig`; any missing or wrong key raises
-``ConfigError`` with ``file:line: key: problem``.
+:func:`load_sensing_config` returns a frozen :class:`SensingConfig`. The sensing YAML is read through
+:mod:`tms_common.schema` (the private dataclasses below are its schema): a missing, unknown or wrong key raises
+``ConfigError`` with ``file:line: key.path: problem``.
+
+Machines are known by their site names (config/site.yaml ``machines``): ``excavator`` digs and loads,
+``carriers`` are the crawler carriers it loads. Their facts come from their kinds' descriptions
+(config/machines/<kind>.yaml): the bucket's capacity and width, the swing axis, each carrier's vessel
+(inner size, capacity, hinge). The vessel floor and rim heights above the hinge are no part of the descriptions
+yet, so sensing.yaml ``vessel.heights`` gives them per kind; a carrier of a kind without an entry is refused.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import MappingProxyType
 
-from tms_common.config import Where, config_path, load_yaml
+from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_common.schema import Reader, read_schema, setting
+from tms_model.fleet import load_named
 from tms_model.geometry import Pose2D
-from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, load_machine
-from tms_model.site import Mound, load_site
+from tms_model.machines import CRAWLER_DUMP, EXCAVATOR
+from tms_model.site import Mound, Site, load_site
 from tms_sp.arrival import ArrivalParams
 from tms_sp.heightgrid import GridSpec
 from tms_sp.mound import ExcavationParams
 from tms_sp.vessel import VesselGeometry, VesselParams
 
-__all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry"]
+__all__ = ["SensingConfig", "VesselHeights", "load_sensing_config", "carrier_vessel_geometry"]
 
 
+# ---- the schema of config/tms_sp/sensing.yaml (documented inline there) -----------------------------------------
+@dataclass(frozen=True)
+class _Excavation:
+    record: str
+    approach_record: str | None  # null = none (the original's trees have no approach record)
+    approach_height: float = setting(lo=0.0)
+    roi_margin: float = setting(lo=0.0)
+    reach_min: float = setting(lo=0.0)
+    reach_max: float = setting(lo=0.0)
+    penetration_depth: float = setting(lo=0.0)
+    max_penetration_depth: float = setting(lo=0.0)
+    depth_steps: int = setting(lo=1)
+    drag_length: float = setting(lo=0.0)
+    attack_angle_deg: float = setting(lo=0.0, hi=90.0)
+    theta_w_min_deg: float = setting(lo=-90.0, hi=180.0)
+    theta_w_max_deg: float = setting(lo=-90.0, hi=180.0)
+    distance_penalty: float = setting(lo=0.0)
+    min_height: float = setting(lo=0.0)
+    min_volume: float = setting(lo=0.0)
+    depleted_hysteresis: float = setting(lo=0.0)
+    min_cut: float = setting(lo=0.0)
+    update_threshold: float = setting(lo=0.0)
+    target_hysteresis: float = setting(lo=0.0)
+
+
+@dataclass(frozen=True)
+class VesselHeights:
+    """A vessel's floor and side rim above its hinge [m] (sensing.yaml ``vessel.heights.<kind>``)."""
+
+    floor_above_hinge: float
+    rim_above_hinge: float
+
+    def __post_init__(self) -> None:
+        if not self.rim_above_hinge > self.floor_above_hinge:
+            raise ValueError(f"rim_above_hinge {self.rim_above_hinge} must be above floor_above_hinge "
+                             f"{self.floor_above_hinge}")
+
+
+@dataclass(frozen=True)
+class _Vessel:
+    release_record: str
+    angle_record: str
+    heights: dict[str, VesselHeights]
+    wall_margin: float
+    clearance: float
+    carry_theta_w_deg: float
+    target_fill: float
+    loaded_hysteresis: float
+    update_threshold: float = setting(lo=0.0)
+    release_hysteresis: float = setting(lo=0.0)
+
+
+@dataclass(frozen=True)
+class _Arrival:
+    point: str
+    position_tolerance: float
+    yaw_tolerance_deg: float
+    max_speed: float
+    speed_window_s: float
+    hold_s: float
+
+
+@dataclass(frozen=True)
+class _Sensing:
+    blackboard_records: tuple[str, ...]
+    grid_resolution: float = setting(lo=0.001)
+    excavator: str = setting(doc="site machine name of the excavator")
+    excavator_base: str = setting(doc="site.yaml points key of the excavator's base_link pose")
+    carriers: tuple[str, ...] = setting(doc="site machine names of the carriers it loads")
+    excavation: _Excavation = setting()
+    vessel: _Vessel = setting()
+    arrival: _Arrival = setting()
+
+    def __post_init__(self) -> None:
+        for key in ("blackboard_records", "carriers"):
+            names = getattr(self, key)
+            if not names or len(set(names)) != len(names):
+                raise ValueError(f"{key}: expected a non-empty list of distinct names, got {list(names)}")
+
+
+# ---- the configuration the processors and the node use ---------------------------------------------------------
 @dataclass(frozen=True)
 class SensingConfig:
     """Everything the sensing processors and node need."""
 
     blackboard_records: tuple[str, ...]  # global-blackboard records the SENSING_* flags go to (the first is read too)
     resolution: float
-    points: dict[str, Pose2D]
+    site: Site
+    points: Mapping[str, Pose2D]
     mound: Mound
     mound_grid: GridSpec
+    excavator: str  # site name of the excavator: model_name of the records sensing writes
+    excavator_base_point: str  # its base pose in ``points`` (used until a measured pose arrives)
     excavation: ExcavationParams
-    excavation_model: str
     excavation_record: str
-    approach_record: str
+    approach_record: str  # "" = none
     approach_height: float
     excavation_update_threshold: float
-    vessel_geom: VesselGeometry
+    carriers: tuple[str, ...]
+    vessels: Mapping[str, VesselGeometry]  # per carrier name: its kind's vessel
+    vessel_heights: Mapping[str, VesselHeights]  # per carrier kind
     vessel: VesselParams
-    vessel_model: str
     release_record: str
     angle_record: str
     vessel_update_threshold: float
     arrival: ArrivalParams
     arrival_point: str
     swing_axis_in_base: tuple[float, float]
+    source: str = dataclasses.field(default="", compare=False)
 
     @property
-    def zx200_base(self) -> Pose2D:
-        return self.points["zx200_base"]
+    def excavator_base(self) -> Pose2D:
+        return self.points[self.excavator_base_point]
+
+    @property
+    def vessel_geom(self) -> VesselGeometry:
+        """The first carrier's vessel (the paper's single carrier)."""
+        return self.vessels[self.carriers[0]]
+
+    #: the former name, still read by tests/paper and tests/bench
+    zx200_base = excavator_base
 
     def swing_axis_map(self) -> tuple[float, float]:
-        p = self.zx200_base.to_map([self.swing_axis_in_base[0], self.swing_axis_in_base[1], 0.0])
+        p = self.excavator_base.to_map([self.swing_axis_in_base[0], self.swing_axis_in_base[1], 0.0])
         return float(p[0]), float(p[1])
 
-
-def _get(data: Any, where: Where, path: tuple[Any, ...], kind: type | tuple[type, ...] = (int, float)) -> Any:
-    node = data
-    for i, key in enumerate(path):
-        if not isinstance(node, dict) or key not in node:
-            raise where.error(path[:i], f"{'.'.join(map(str, path))}: missing key {key!r}")
-        node = node[key]
-    if kind in ((int, float), float) and isinstance(node, bool):
-        raise where.error(path, f"{'.'.join(map(str, path))}: expected a number, got {node!r}")
-    if not isinstance(node, kind):
-        names = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
-        raise where.error(path, f"{'.'.join(map(str, path))}: expected {names}, got {node!r}")
-    return node
+    def vessel_geometry(self, name: str) -> VesselGeometry:
+        """The vessel of the site's carrier ``name``: that of one of ``carriers``, else read from its kind's
+        description and ``vessel.heights``."""
+        if name in self.vessels:
+            return self.vessels[name]
+        try:
+            return _vessel_geometry(name, self.site, self.vessel_heights, self.source)
+        except ConfigError as exc:
+            raise ConfigError(f"carrier {name!r}: {exc}") from None
 
 
-def _records(data: Any, where: Where) -> tuple[str, ...]:
-    """``blackboard_records``: a non-empty list of distinct record names."""
-    names = _get(data, where, ("blackboard_records",), list)
-    if not names or not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
-        raise where.error(("blackboard_records",),
-                          f"blackboard_records: expected a non-empty list of distinct record names, got {names!r}")
-    return tuple(names)
+def _vessel_geometry(name: str, site: Site, heights: Mapping[str, VesselHeights], source: str) -> VesselGeometry:
+    m = load_named(name, site=site).require(CRAWLER_DUMP)
+    assert m.vessel is not None
+    if m.kind not in heights:
+        raise ConfigError(f"{source + ': ' if source else ''}vessel.heights: no entry for kind {m.kind!r} of carrier {name!r} (its description "
+                          f"{m.source} gives no floor and rim heights; kinds given: {sorted(heights)})")
+    h = heights[m.kind]
+    return VesselGeometry(inner_length=m.vessel.inner_length, inner_width=m.vessel.inner_width,
+                          capacity=m.vessel.capacity, hinge_xyz=m.vessel.hinge_xyz,
+                          floor_above_hinge=h.floor_above_hinge, rim_above_hinge=h.rim_above_hinge)
 
 
 def load_sensing_config(
     sensing: str | Path | None = None,
     site: str | Path | None = None,
-    ic120: str | Path | None = None,
-    zx200: str | Path | None = None,
+    *,
+    excavator: str = "",
+    carriers: tuple[str, ...] | list[str] = (),
 ) -> SensingConfig:
-    """Load and validate the sensing configuration (defaults: the project's config/ files)."""
-    s, sw = load_yaml(sensing or config_path("tms_sp", "sensing.yaml"))
+    """Load and validate the sensing configuration (defaults: the project's config/ files).
+
+    ``excavator`` and ``carriers`` (site machine names) replace the YAML's when given (node parameters).
+    """
+    data, where = load_yaml(sensing or config_path("tms_sp", "sensing.yaml"))
+    s = read_schema(_Sensing, data, where)
+    top = Reader(data, where)
     the_site = load_site(site)
-    ic = load_machine("ic120", ic120).require(CRAWLER_DUMP)
-    zx = load_machine("zx200", zx200).require(EXCAVATOR)
-    assert ic.vessel is not None and zx.bucket is not None
+
+    def fail(path: tuple[str, ...], problem: str) -> ConfigError:
+        return top.error(path, problem)
+
+    excavator = excavator or s.excavator
+    carriers = tuple(carriers) or s.carriers
+    if len(set(carriers)) != len(carriers):
+        raise fail(("carriers",), f"a carrier is named twice: {list(carriers)}")
+    try:
+        zx = load_named(excavator, site=the_site).require(EXCAVATOR)
+    except ConfigError as exc:
+        raise fail(("excavator",), f"{excavator!r}: {exc}") from None
+    vessels = {}
+    for c in carriers:
+        try:
+            vessels[c] = _vessel_geometry(c, the_site, s.vessel.heights, "")
+        except ConfigError as exc:
+            raise fail(("carriers",), f"{c!r}: {exc}") from None
+    assert zx.bucket is not None
 
     points = dict(the_site.points)
-    for needed in ("zx200_base", "P1", "P2", "P3", "P4", "P5"):
-        if needed not in points:
-            raise ConfigError(f"{the_site.source}: points: missing pose {needed!r} (x, y, yaw)")
+    for key, name in (("excavator_base", s.excavator_base), ("arrival", s.arrival.point)):
+        if name not in points:
+            path = (key,) if key == "excavator_base" else ("arrival", "point")
+            raise fail(path, f"{name!r} is not a pose in {the_site.source} points ({sorted(points)})")
     mound = the_site.mound
 
-    res = float(_get(s, sw, ("grid_resolution",)))
-    if res <= 0:
-        raise sw.error(("grid_resolution",), f"grid_resolution: must be > 0, got {res}")
-    e = ("excavation",)
-    margin = float(_get(s, sw, e + ("roi_margin",)))
-    half = mound.base_radius + margin
-    grid = GridSpec(mound.cx - half, mound.cy - half, mound.cx + half, mound.cy + half, res)
-
-    def ex(key: str) -> float:
-        return float(_get(s, sw, e + (key,)))
-
+    e = s.excavation
+    half = mound.base_radius + e.roi_margin
+    grid = GridSpec(mound.cx - half, mound.cy - half, mound.cx + half, mound.cy + half, s.grid_resolution)
     try:
         excavation = ExcavationParams(
-            reach_min=ex("reach_min"),
-            reach_max=ex("reach_max"),
-            bucket_radius=ex("bucket_radius"),
-            penetration_depth=ex("penetration_depth"),
-            max_penetration_depth=ex("max_penetration_depth"),
+            reach_min=e.reach_min,
+            reach_max=e.reach_max,
+            bucket_radius=zx.bucket.width / 2.0,  # the scored footprint is the bucket's cutting edge
+            penetration_depth=e.penetration_depth,
+            max_penetration_depth=e.max_penetration_depth,
             bucket_volume=zx.bucket.capacity,
-            depth_steps=int(ex("depth_steps")),
-            drag_length=ex("drag_length"),
-            attack_angle=math.radians(ex("attack_angle_deg")),
-            theta_w_min=math.radians(ex("theta_w_min_deg")),
-            theta_w_max=math.radians(ex("theta_w_max_deg")),
-            distance_penalty=ex("distance_penalty"),
-            min_height=ex("min_height"),
-            min_volume=ex("min_volume"),
+            depth_steps=e.depth_steps,
+            drag_length=e.drag_length,
+            attack_angle=math.radians(e.attack_angle_deg),
+            theta_w_min=math.radians(e.theta_w_min_deg),
+            theta_w_max=math.radians(e.theta_w_max_deg),
+            distance_penalty=e.distance_penalty,
+            min_height=e.min_height,
+            min_volume=e.min_volume,
             ground_z=mound.ground_z,
-            target_hysteresis=ex("target_hysteresis"),
-            depleted_hysteresis=ex("depleted_hysteresis"),
-            min_cut=ex("min_cut"),
+            target_hysteresis=e.target_hysteresis,
+            depleted_hysteresis=e.depleted_hysteresis,
+            min_cut=e.min_cut,
         )
     except ValueError as exc:
-        raise sw.error(e, str(exc)) from None
+        raise fail(("excavation",), str(exc)) from None
 
-    if ex("approach_height") < 0:
-        raise sw.error(e + ("approach_height",), f"approach_height: must be >= 0, got {ex('approach_height')}")
-    v = ("vessel",)
-    geom = VesselGeometry(
-        inner_length=ic.vessel.inner_length,
-        inner_width=ic.vessel.inner_width,
-        capacity=ic.vessel.capacity,
-        hinge_xyz=ic.vessel.hinge_xyz,
-        floor_above_hinge=float(_get(s, sw, v + ("floor_above_hinge",))),
-        rim_above_hinge=float(_get(s, sw, v + ("rim_above_hinge",))),
-    )
+    v = s.vessel
     try:
         vparams = VesselParams(
-            wall_margin=float(_get(s, sw, v + ("wall_margin",))),
-            clearance=float(_get(s, sw, v + ("clearance",))),
-            carry_theta_w=math.radians(float(_get(s, sw, v + ("carry_theta_w_deg",)))),
-            target_fill=float(_get(s, sw, v + ("target_fill",))),
-            release_hysteresis=float(_get(s, sw, v + ("release_hysteresis",))),
-            loaded_hysteresis=float(_get(s, sw, v + ("loaded_hysteresis",))),
+            wall_margin=v.wall_margin,
+            clearance=v.clearance,
+            carry_theta_w=math.radians(v.carry_theta_w_deg),
+            target_fill=v.target_fill,
+            release_hysteresis=v.release_hysteresis,
+            loaded_hysteresis=v.loaded_hysteresis,
         )
     except ValueError as exc:
-        raise sw.error(v, str(exc)) from None
+        raise fail(("vessel",), str(exc)) from None
 
-    a = ("arrival",)
-    point = _get(s, sw, a + ("point",), str)
-    if point not in points:
-        raise sw.error(a + ("point",), f"arrival.point: {point!r} is not a pose in site.yaml points ({sorted(points)})")
+    a = s.arrival
     try:
         arrival = ArrivalParams(
-            position_tolerance=float(_get(s, sw, a + ("position_tolerance",))),
-            yaw_tolerance=math.radians(float(_get(s, sw, a + ("yaw_tolerance_deg",)))),
-            max_speed=float(_get(s, sw, a + ("max_speed",))),
-            hold_s=float(_get(s, sw, a + ("hold_s",))),
-            speed_window_s=float(_get(s, sw, a + ("speed_window_s",))),
+            position_tolerance=a.position_tolerance,
+            yaw_tolerance=math.radians(a.yaw_tolerance_deg),
+            max_speed=a.max_speed,
+            hold_s=a.hold_s,
+            speed_window_s=a.speed_window_s,
         )
     except ValueError as exc:
-        raise sw.error(a, str(exc)) from None
+        raise fail(("arrival",), str(exc)) from None
 
-    swing_origin = zx.joints[0].origin_xyz
+    swing_origin = zx.joints[0].origin_xyz  # the swing joint comes first in bus order
     return SensingConfig(
-        blackboard_records=_records(s, sw),
-        resolution=res,
-        points=points,
+        blackboard_records=s.blackboard_records,
+        resolution=s.grid_resolution,
+        site=the_site,
+        points=MappingProxyType(points),
         mound=mound,
         mound_grid=grid,
+        excavator=excavator,
+        excavator_base_point=s.excavator_base,
         excavation=excavation,
-        excavation_model=_get(s, sw, e + ("model_name",), str),
-        excavation_record=_get(s, sw, e + ("record",), str),
-        excavation_update_threshold=ex("update_threshold"),
-        approach_record=_get(s, sw, e + ("approach_record",), str),  # "" = none (the original's trees have none)
-        approach_height=ex("approach_height"),
-        vessel_geom=geom,
+        excavation_record=e.record,
+        approach_record=e.approach_record or "",
+        approach_height=e.approach_height,
+        excavation_update_threshold=e.update_threshold,
+        carriers=carriers,
+        vessels=MappingProxyType(vessels),
+        vessel_heights=v.heights,
         vessel=vparams,
-        vessel_model=_get(s, sw, v + ("model_name",), str),
-        release_record=_get(s, sw, v + ("release_record",), str),
-        angle_record=_get(s, sw, v + ("angle_record",), str),
-        vessel_update_threshold=float(_get(s, sw, v + ("update_threshold",))),
+        release_record=v.release_record,
+        angle_record=v.angle_record,
+        vessel_update_threshold=v.update_threshold,
         arrival=arrival,
-        arrival_point=point,
+        arrival_point=a.point,
         swing_axis_in_base=(float(swing_origin[0]), float(swing_origin[1])),
+        source=str(where.file),
     )
 
 
 def carrier_vessel_geometry(cfg: SensingConfig, name: str) -> VesselGeometry:
-    """The vessel of the site's machine ``name`` (config/site.yaml ``machines``; its kind's description): inner
-    size, capacity and hinge from the description, floor and rim heights above the hinge from sensing.yaml (the
-    IC120 mesh's figures: no other kind publishes them)."""
-    import dataclasses
-
-    from tms_model.fleet import load_named
-
-    m = load_named(name).require(CRAWLER_DUMP)
-    assert m.vessel is not None
-    return dataclasses.replace(cfg.vessel_geom, inner_length=m.vessel.inner_length, inner_width=m.vessel.inner_width,
-                               capacity=m.vessel.capacity, hinge_xyz=m.vessel.hinge_xyz)
+    """The vessel of the site's carrier ``name`` (:meth:`SensingConfig.vessel_geometry`)."""
+    return cfg.vessel_geometry(name)

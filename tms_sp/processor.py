@@ -3,20 +3,23 @@
 The node (:mod:`tms_sp.nodes.tms_sp_sensing`) feeds it sensor data; it runs the pure cores and writes what
 changed through a tms_db store (``open_store``), as the original tms_sp updaters did:
 
-* the excavation target -> ``(zx200, target_excavate_pose)`` (position_with_angle:1 + x,y,z,theta_w,offset,
-  ZX200 base frame), skipped while the record's ``LOCK_FLG`` is true, rewritten only when it moved
-  more than ``update_threshold``; with it ``(zx200, target_excavate_approach_pose)``, the same point
+* the excavation target -> ``(<excavator>, target_excavate_pose)`` (position_with_angle:1 + x,y,z,theta_w,offset,
+  excavator base frame), skipped while the record's ``LOCK_FLG`` is true, rewritten only when it moved
+  more than ``update_threshold``; with it ``(<excavator>, target_excavate_approach_pose)``, the same point
   ``approach_height`` higher (the paper tree returns the arm there after a release);
-* the release target -> ``(zx200, target_release_pose)`` and the swing angle -> ``(zx200, release_angle)``,
-  only while the IC120 stands at the loading point (elsewhere the vessel is not where the ZX200 releases);
+* the release target -> ``(<excavator>, target_release_pose)`` and the swing angle -> ``(<excavator>,
+  release_angle)``, only while the sensed carrier stands at the loading point (elsewhere its vessel is not where
+  the excavator releases);
 * the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> every global-blackboard
   record of ``blackboard_records`` (the records the running tasks read them from: the paper's trees name
   GLOBAL_BLACKBOARD_EARTHWORK, the original's 2024-12 trees SAMPLE_BLACKBOARD_SHIMIZU), written whenever a
   record holds another value than the assessment (also after a tree reset the flag). Meanings as the seed paper's Table 7: SENSING_CHECK_MOUND_FLG is true
   when there is *not* enough soil in the mound (initially false).
 
+``<excavator>`` is the configuration's excavator name (sensing.yaml ``excavator``).
+
 Several carriers (the fleet experiment): the pose and vessel inputs are those of one carrier, ``carrier``
-(default ``ic120``). :meth:`SiteSensing.follow_holder` reads the carrier's name from a field of the
+(default: the configuration's first carrier). :meth:`SiteSensing.follow_holder` reads the carrier's name from a field of the
 global-blackboard record (``LOADAREA_MACHINE``: the carrier that claimed the loading point writes it) and
 :meth:`select_carrier` switches to it: a new arrival detector, that carrier's vessel geometry (``vessels``), and
 the release target and SENSING_LOADED_FLG assessed afresh from its own vessel.
@@ -36,13 +39,14 @@ from typing import Any
 
 import numpy as np
 
+from tms_db.errors import RecordNotFound
 from tms_model.geometry import Pose2D
 from tms_sp.arrival import ArrivalDetector
 from tms_sp.config import SensingConfig
 from tms_sp.heightgrid import rasterize
 from tms_sp.ingest import SensingWriter
 from tms_sp.mound import MoundAssessment, assess_mound
-from tms_sp.vessel import VesselAssessment, VesselGeometry, assess_vessel, release_in_zx200
+from tms_sp.vessel import VesselAssessment, VesselGeometry, assess_vessel, release_in_excavator
 
 __all__ = ["SiteSensing", "FLAGS"]
 
@@ -56,8 +60,8 @@ class SiteSensing:
 
     cfg: SensingConfig
     store: Any
-    ic120_pose: Pose2D | None = None
-    zx200_pose: Pose2D | None = None
+    carrier_pose: Pose2D | None = None
+    excavator_pose: Pose2D | None = None
     mound: MoundAssessment | None = None
     vessel: VesselAssessment | None = None
     flags: dict[str, bool] = field(default_factory=dict)
@@ -68,19 +72,24 @@ class SiteSensing:
     _release_spot: tuple[float, float] | None = None  # vessel frame x, y of the written release target
     _arrival: ArrivalDetector | None = None
     _writer: SensingWriter | None = None
-    #: the carrier whose pose and vessel are sensed (the one at or coming to the loading point)
-    carrier: str = "ic120"
-    #: vessel geometry per carrier name (default: the configuration's, the IC120's)
+    #: the carrier whose pose and vessel are sensed (the one at or coming to the loading point; "" = the
+    #: configuration's first carrier)
+    carrier: str = ""
+    #: vessel geometry per carrier name (those of the configuration's carriers, and any selected since)
     vessels: dict[str, VesselGeometry] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self.carrier = self.carrier or self.cfg.carriers[0]
+        self.vessels = {**self.cfg.vessels, **self.vessels}
         self._arrival = ArrivalDetector(self.cfg.points[self.cfg.arrival_point], self.cfg.arrival)
         self._writer = SensingWriter(self.store)
 
     @property
     def vessel_geom(self) -> VesselGeometry:
-        """The vessel geometry of the sensed carrier."""
-        return self.vessels.get(self.carrier, self.cfg.vessel_geom)
+        """The vessel geometry of the sensed carrier (its kind's)."""
+        if self.carrier not in self.vessels:
+            self.vessels[self.carrier] = self.cfg.vessel_geometry(self.carrier)
+        return self.vessels[self.carrier]
 
     # ---- carriers ---------------------------------------------------------------------------------
     def select_carrier(self, name: str) -> bool:
@@ -89,7 +98,7 @@ class SiteSensing:
             return False
         log.info("sensing carrier %s (was %s)", name, self.carrier)
         self.carrier = name
-        self.ic120_pose = None
+        self.carrier_pose = None
         self.vessel = None
         self._arrival = ArrivalDetector(self.cfg.points[self.cfg.arrival_point], self.cfg.arrival)
         self._last_release = None
@@ -100,8 +109,6 @@ class SiteSensing:
     def follow_holder(self, field_name: str, known: set[str] | None = None) -> str:
         """Select the carrier named in ``field_name`` of the global-blackboard record (when it names one of
         ``known``, or any non-empty name when ``known`` is None); returns the sensed carrier."""
-        from tms_db.errors import RecordNotFound
-
         try:
             name = self.store.get_record(self.cfg.blackboard_records[0]).get(field_name)
         except RecordNotFound:
@@ -114,10 +121,10 @@ class SiteSensing:
     def check_records(self) -> None:
         """Every record this processor writes exists and is dynamic; else SensingError naming it."""
         wanted = [(None, record) for record in self.cfg.blackboard_records] + [
-            (self.cfg.excavation_model, self.cfg.excavation_record),
-            (self.cfg.excavation_model, self.cfg.approach_record),
-            (self.cfg.vessel_model, self.cfg.release_record),
-            (self.cfg.vessel_model, self.cfg.angle_record),
+            (self.cfg.excavator, self.cfg.excavation_record),
+            (self.cfg.excavator, self.cfg.approach_record),
+            (self.cfg.excavator, self.cfg.release_record),
+            (self.cfg.excavator, self.cfg.angle_record),
         ]
         for model, record in wanted:
             if not record:  # an optional record switched off ("")
@@ -125,20 +132,20 @@ class SiteSensing:
             self._writer.record(record, model)
 
     # ---- inputs -----------------------------------------------------------------------------------
-    def on_ic120_pose(self, t: float, pose: Pose2D) -> bool:
-        """Measured IC120 pose at time ``t`` [s] -> SENSING_ARRIVAL_FLG."""
-        self.ic120_pose = pose
+    def on_carrier_pose(self, t: float, pose: Pose2D) -> bool:
+        """Measured pose of the sensed carrier at time ``t`` [s] -> SENSING_ARRIVAL_FLG."""
+        self.carrier_pose = pose
         arrived = self._arrival.update(t, pose)
         self._set_flag("SENSING_ARRIVAL_FLG", arrived)
         return arrived
 
-    def on_zx200_pose(self, pose: Pose2D) -> None:
-        """Measured ZX200 base pose (default: ``points.zx200_base`` of site.yaml)."""
-        self.zx200_pose = pose
+    def on_excavator_pose(self, pose: Pose2D) -> None:
+        """Measured excavator base pose (default: its ``excavator_base`` point of site.yaml)."""
+        self.excavator_pose = pose
 
     @property
     def base(self) -> Pose2D:
-        return self.zx200_pose or self.cfg.zx200_base
+        return self.excavator_pose or self.cfg.excavator_base
 
     def on_mound_points(self, points: np.ndarray) -> MoundAssessment:
         """Mound points (map frame) -> excavation target + SENSING_CHECK_MOUND_FLG (true: not enough soil)."""
@@ -151,15 +158,15 @@ class SiteSensing:
             fields = a.target.record_fields(self.base)
             xyz = (fields["x"], fields["y"], fields["z"])
             if self._moved(self._last_target, xyz, self.cfg.excavation_update_threshold):
-                doc = self._writer.record(self.cfg.excavation_record, self.cfg.excavation_model)
+                doc = self._writer.record(self.cfg.excavation_record, self.cfg.excavator)
                 if doc.get("LOCK_FLG") is True:
                     log.debug("excavation target locked (LOCK_FLG): not updated")
                 else:
-                    self._writer.write(self.cfg.excavation_record, fields, model_name=self.cfg.excavation_model,
+                    self._writer.write(self.cfg.excavation_record, fields, model_name=self.cfg.excavator,
                                        strict=True)
                     if self.cfg.approach_record:
                         approach = a.target.approach_record_fields(self.base, self.cfg.approach_height)
-                        self._writer.write(self.cfg.approach_record, approach, model_name=self.cfg.excavation_model,
+                        self._writer.write(self.cfg.approach_record, approach, model_name=self.cfg.excavator,
                                            strict=True)
                     self.writes += 1
                     self._last_target = xyz
@@ -175,15 +182,15 @@ class SiteSensing:
         v = assess_vessel(grid, geom, self.cfg.vessel, previous_xy=self._release_spot,
                           was_loaded=self.flags.get("SENSING_LOADED_FLG", False))
         self.vessel = v
-        if self.ic120_pose is not None and self._at_loading_point():
-            pose, angle = release_in_zx200(
-                v.release_xyz, self.ic120_pose, self.base, geom,
+        if self.carrier_pose is not None and self._at_loading_point():
+            pose, angle = release_in_excavator(
+                v.release_xyz, self.carrier_pose, self.base, geom,
                 self.cfg.swing_axis_in_base, self.cfg.vessel.carry_theta_w,
             )
             xyz = (pose["x"], pose["y"], pose["z"])
             if self._moved(self._last_release, xyz, self.cfg.vessel_update_threshold):
-                self._writer.write(self.cfg.release_record, pose, model_name=self.cfg.vessel_model, strict=True)
-                self._writer.write(self.cfg.angle_record, angle, model_name=self.cfg.vessel_model, strict=True)
+                self._writer.write(self.cfg.release_record, pose, model_name=self.cfg.excavator, strict=True)
+                self._writer.write(self.cfg.angle_record, angle, model_name=self.cfg.excavator, strict=True)
                 self.writes += 2
                 self._last_release = xyz
                 self._release_spot = (v.release_xyz[0], v.release_xyz[1])
@@ -193,7 +200,7 @@ class SiteSensing:
     # ---- helpers ----------------------------------------------------------------------------------
     def _at_loading_point(self) -> bool:
         target = self.cfg.points[self.cfg.arrival_point]
-        p = self.ic120_pose
+        p = self.carrier_pose
         return math.hypot(p.x - target.x, p.y - target.y) <= self.cfg.arrival.position_tolerance
 
     @staticmethod

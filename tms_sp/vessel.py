@@ -1,7 +1,7 @@
-"""The vessel processor: load volume, SENSING_LOADED_FLG and the release target in the IC120 vessel.
+"""The vessel processor: load volume, SENSING_LOADED_FLG and the release target in a carrier's vessel.
 
 Input is the vessel's height grid in the **vessel frame**: origin at the centre of the vessel floor,
-x towards the IC120's front, y to its left, z up, vessel lowered (angle 0). The grid covers the inner
+x towards the carrier's front, y to its left, z up, vessel lowered (angle 0). The grid covers the inner
 rectangle ``inner_length x inner_width``; heights are soil surface above the floor (0 = bare floor).
 
 * load volume = sum of heights x cell area; fill = volume / heaped capacity; the vessel is *loaded*
@@ -10,7 +10,7 @@ rectangle ``inner_length x inner_width``; heights are soil surface above the flo
   least ``wall_margin`` from the walls, ties broken towards the vessel centre; the bucket tip goes
   ``clearance`` above the higher of the rim and the heap top, so successive passes spread the soil.
 
-:func:`release_in_zx200` turns that vessel-frame point into the ZX200 base-frame record
+:func:`release_in_excavator` turns that vessel-frame point into the excavator's base-frame record
 (``position_with_angle`` + ``theta_w``) and the swing angle (``target_angle``) of release_simple.
 """
 
@@ -25,26 +25,26 @@ from scipy import ndimage
 from tms_model.geometry import Pose2D
 from tms_sp.heightgrid import GridSpec, HeightGrid
 
-__all__ = ["VesselGeometry", "VesselParams", "VesselAssessment", "assess_vessel", "release_in_zx200"]
+__all__ = ["VesselGeometry", "VesselParams", "VesselAssessment", "assess_vessel", "release_in_excavator"]
 
 
 @dataclass(frozen=True)
 class VesselGeometry:
-    """IC120 vessel geometry (config/machines/ic120.yaml ``vessel`` + sensing.yaml ``vessel``)."""
+    """A carrier's vessel: its description's ``vessel`` + sensing.yaml ``vessel.heights`` of its kind."""
 
-    inner_length: float = 3.6
-    inner_width: float = 1.75
-    capacity: float = 4.5                  # [m^3] heaped
-    hinge_xyz: tuple[float, float, float] = (-3.0153, 0.0, 0.94605)
-    floor_above_hinge: float = 0.53
-    rim_above_hinge: float = 1.18
+    inner_length: float
+    inner_width: float
+    capacity: float                        # [m^3] heaped
+    hinge_xyz: tuple[float, float, float]  # in the carrier's base_link
+    floor_above_hinge: float
+    rim_above_hinge: float
 
     @property
     def rim_above_floor(self) -> float:
         return self.rim_above_hinge - self.floor_above_hinge
 
     def origin_in_base(self) -> np.ndarray:
-        """Vessel-frame origin (floor centre) in IC120 base_link, vessel lowered."""
+        """Vessel-frame origin (floor centre) in the carrier's base_link, vessel lowered."""
         hx, hy, hz = self.hinge_xyz
         return np.array([hx + self.inner_length / 2.0, hy, hz + self.floor_above_hinge])
 
@@ -132,28 +132,32 @@ def assess_vessel(grid: HeightGrid, geom: VesselGeometry, params: VesselParams,
     )
 
 
-def release_in_zx200(
+def release_in_excavator(
     release_xyz: tuple[float, float, float],
-    ic120: Pose2D,
-    zx200: Pose2D,
+    carrier: Pose2D,
+    excavator: Pose2D,
     geom: VesselGeometry,
     swing_axis_in_base: tuple[float, float] = (0.0, 0.0),
     carry_theta_w: float = math.radians(85.0),
 ) -> tuple[dict[str, float | int], dict[str, float]]:
     """Vessel-frame release point -> (``target_release_pose`` fields, ``release_angle`` fields).
 
-    The first dict is ``position_with_angle:1`` + x,y,z (ZX200 base frame) + theta_w; the second is
+    The first dict is ``position_with_angle:1`` + x,y,z (excavator base frame) + theta_w; the second is
     ``{"target_angle": swing angle [rad]}`` pointing the front at the release point (swing + = CCW).
     """
-    in_base_ic = geom.origin_in_base() + np.asarray(release_xyz, dtype=float)
-    in_map = ic120.to_map(in_base_ic)
-    in_zx = zx200.from_map(in_map)
-    swing = math.atan2(in_zx[1] - swing_axis_in_base[1], in_zx[0] - swing_axis_in_base[0])
+    in_carrier = geom.origin_in_base() + np.asarray(release_xyz, dtype=float)
+    in_map = carrier.to_map(in_carrier)
+    in_ex = excavator.from_map(in_map)
+    swing = math.atan2(in_ex[1] - swing_axis_in_base[1], in_ex[0] - swing_axis_in_base[0])
     pose = {
         "position_with_angle": 1,
-        "x": float(in_zx[0]),
-        "y": float(in_zx[1]),
-        "z": float(in_zx[2]),
+        "x": float(in_ex[0]),
+        "y": float(in_ex[1]),
+        "z": float(in_ex[2]),
         "theta_w": float(carry_theta_w),
     }
     return pose, {"target_angle": float(swing)}
+
+
+#: the former name, still called by tests/paper and tests/bench
+release_in_zx200 = release_in_excavator

@@ -14,7 +14,7 @@ from tms_sp.config import load_sensing_config
 from tms_sp.errors import SensingError
 from tms_sp.heightgrid import GridSpec, HeightGrid, rasterize
 from tms_sp.mound import assess_mound
-from tms_sp.vessel import assess_vessel, release_in_zx200
+from tms_sp.vessel import assess_vessel, release_in_excavator
 
 CFG = load_sensing_config()
 
@@ -179,10 +179,10 @@ def test_release_target_goes_to_the_empty_end_of_the_vessel():
     assert abs(empty.release_xyz[0]) < 0.6 and abs(empty.release_xyz[1]) < 0.5  # centre when empty
 
 
-def test_release_in_zx200_frame_and_swing_angle_at_loading_point():
+def test_release_in_excavator_frame_and_swing_angle_at_loading_point():
     g = CFG.vessel_geom
     p1 = CFG.points["P1"]
-    pose, angle = release_in_zx200((0.0, 0.0, 1.0), p1, CFG.zx200_base, g, CFG.swing_axis_in_base, CFG.vessel.carry_theta_w)
+    pose, angle = release_in_excavator((0.0, 0.0, 1.0), p1, CFG.excavator_base, g, CFG.swing_axis_in_base, CFG.vessel.carry_theta_w)
     centre = p1.to_map(g.origin_in_base())
     assert (pose["x"], pose["y"]) == pytest.approx((centre[0], centre[1]))  # zx200 base at the map origin
     assert pose["z"] == pytest.approx(g.hinge_xyz[2] + g.floor_above_hinge + 1.0)
@@ -234,15 +234,29 @@ def test_bad_parameters_name_the_key(tmp_path):
     from tms_common.config import config_path
     from tms_common.errors import ConfigError
 
-    text = config_path("tms_sp", "sensing.yaml").read_text().replace("reach_min: 4.0", "reach_min: 9.5")
+    good = config_path("tms_sp", "sensing.yaml").read_text()
     bad = tmp_path / "sensing.yaml"
-    bad.write_text(text)
-    with pytest.raises(ConfigError, match=r"sensing.yaml:\d+: ExcavationParams: reach_min 9.5"):
-        load_sensing_config(sensing=bad)
-    text = config_path("tms_sp", "sensing.yaml").read_text().replace("point: P1", "point: P9")
-    bad.write_text(text)
-    with pytest.raises(ConfigError, match=r"arrival.point: 'P9' is not a pose"):
-        load_sensing_config(sensing=bad)
+    for old, new, message in (
+        ("reach_min: 4.0", "reach_min: 9.5", r"sensing.yaml:\d+: excavation: ExcavationParams: reach_min 9.5"),
+        ("point: P1", "point: P9", r"sensing.yaml:\d+: arrival.point: 'P9' is not a pose"),
+        ("  min_cut: 0.2", "  min_cut: 0.2\n  bucket_radius: 0.5", r"sensing.yaml:\d+: excavation.bucket_radius: unknown key"),
+        ("depth_steps: 5", "depth_steps: five", r"sensing.yaml:\d+: excavation.depth_steps: expected an integer"),
+        ("carriers: [ic120]", "carriers: [ic120, nobody]", r"sensing.yaml:\d+: carriers: 'nobody': .*no machine 'nobody'"),
+        ("carriers: [ic120]", "carriers: [zx120]", r"sensing.yaml:\d+: carriers: 'zx120': .*is a excavator, expected a crawler_dump"),
+        ("excavator: zx200 ", "excavator: ic120 ", r"sensing.yaml:\d+: excavator: 'ic120': .*expected a excavator"),
+        ("    mst110cr: {", "    mst110cr_off: {", None),
+    ):
+        assert old in good, old
+        bad.write_text(good.replace(old, new))
+        if message is None:  # a kind without vessel heights: refused when a carrier of it is sensed
+            cfg = load_sensing_config(sensing=bad)
+            with pytest.raises(ConfigError, match=r"carrier 'mst110cr_2': .*vessel.heights: no entry for kind 'mst110cr'"):
+                cfg.vessel_geometry("mst110cr_2")
+            with pytest.raises(ConfigError, match=r"sensing.yaml:\d+: carriers: 'mst110cr_2': vessel.heights: no entry"):
+                load_sensing_config(sensing=bad, carriers=["ic120_1", "mst110cr_2"])
+            continue
+        with pytest.raises(ConfigError, match=message):
+            load_sensing_config(sensing=bad)
 
 
 def test_release_spot_holds_against_scan_noise_and_moves_for_a_real_heap():

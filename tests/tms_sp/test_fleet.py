@@ -99,7 +99,7 @@ class FleetWorld:
                 if goal.record == "LEAVE_PATH":
                     self.inside.discard(goal.model)
         elif goal.subtask == "subtask_zx200_excavate_simple":
-            tx, ty, tz = self.cfg.zx200_base.to_map(np.array([doc["x"], doc["y"], doc["z"]]))
+            tx, ty, tz = self.cfg.excavator_base.to_map(np.array([doc["x"], doc["y"], doc["z"]]))
             xg, yg = self.spec.centres()
             disk = np.hypot(xg - tx, yg - ty) <= 0.8
             lowered = np.where(disk, np.minimum(self.surface, max(tz, self.cfg.mound.ground_z)), self.surface)
@@ -178,7 +178,7 @@ def test_fleet_trees_load_each_carrier_in_turn_and_sensing_follows_the_holder(tm
         carrier = sensing.follow_holder("LOADAREA_MACHINE", set(CARRIERS))
         if not sensed or sensed[-1] != carrier:
             sensed.append(carrier)
-        sensing.on_ic120_pose(t, world.pose[carrier])
+        sensing.on_carrier_pose(t, world.pose[carrier])
         sensing.on_mound_points(world.mound_scan(rng))
         sensing.on_vessel_points(world.vessel_scan(carrier, rng))
         for name, tree in trees.items():

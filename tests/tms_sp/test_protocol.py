@@ -97,7 +97,7 @@ class World:
                 self.dumped += self.vessel
                 self.vessel = 0.0
         elif goal.subtask == "subtask_zx200_excavate_simple":
-            base = self.cfg.zx200_base
+            base = self.cfg.excavator_base
             tx, ty, tz = base.to_map(np.array([doc["x"], doc["y"], doc["z"]]))
             xg, yg = self.spec.centres()
             disk = np.hypot(xg - tx, yg - ty) <= 0.8
@@ -136,7 +136,7 @@ class World:
 def step_and_sense(world: World, sensing: SiteSensing, t: float, rng) -> None:  # noqa: ANN001
     """One world step at time ``t`` [s], then sensing's scans of it (as the node feeds them)."""
     world.step()
-    sensing.on_ic120_pose(t, world.ic120)
+    sensing.on_carrier_pose(t, world.ic120)
     sensing.on_mound_points(world.mound_scan(rng))
     sensing.on_vessel_points(world.vessel_scan(rng))
 

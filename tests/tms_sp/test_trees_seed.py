@@ -325,14 +325,14 @@ def test_dynamic_targets_seeded_as_sensing_computes_them_for_the_seeded_site():
     from tms_sp.heightgrid import rasterize
     from tms_sp.mound import assess_mound
     from tms_sp.synthetic import truncated_cone
-    from tms_sp.vessel import assess_vessel, release_in_zx200
+    from tms_sp.vessel import assess_vessel, release_in_excavator
 
     params = _params()
     m = CFG.mound
     xg, yg = CFG.mound_grid.centres()
     z = truncated_cone(m.cx, m.cy, m.base_radius, m.top_radius, m.height, m.ground_z)(xg, yg)
     grid = rasterize(np.column_stack([xg.ravel(), yg.ravel(), z.ravel()]), CFG.mound_grid)
-    target = assess_mound(grid, CFG.swing_axis_map(), CFG.excavation).target.record_fields(CFG.zx200_base)
+    target = assess_mound(grid, CFG.swing_axis_map(), CFG.excavation).target.record_fields(CFG.excavator_base)
     seeded = params[("zx200", CFG.excavation_record)]
     for key in ("x", "y", "z", "theta_w", "offset"):
         assert seeded[key] == pytest.approx(target[key], abs=0.02), key
@@ -340,7 +340,7 @@ def test_dynamic_targets_seeded_as_sensing_computes_them_for_the_seeded_site():
     xv, yv = spec.centres()
     empty = rasterize(np.column_stack([xv.ravel(), yv.ravel(), 0 * xv.ravel()]), spec)
     va = assess_vessel(empty, CFG.vessel_geom, CFG.vessel)
-    pose, angle = release_in_zx200(va.release_xyz, CFG.points["P1"], CFG.zx200_base, CFG.vessel_geom,
+    pose, angle = release_in_excavator(va.release_xyz, CFG.points["P1"], CFG.excavator_base, CFG.vessel_geom,
                                    CFG.swing_axis_in_base, CFG.vessel.carry_theta_w)
     seeded = params[("zx200", CFG.release_record)]
     for key in ("x", "y", "z", "theta_w"):
