@@ -20,8 +20,15 @@ positions (truth) whenever at least one of them is within ``near_radius`` of ``l
 The **leaf times** are how long each task's leaves (its subtask calls, waits and flag reads, named as in
 the tree) ran, from the ``running_leaves`` of ``/tms_ts/status``: where a load pass's time goes.
 
+Any list of machines: every machine's truth pose (by name) gives its path; every estimate that comes is compared
+with its own machine's truth (the travelling machines' localisation); every excavator's bucket tip (by name) with
+its truth. The site map draws each machine by its type (:mod:`tms_ur.site_map`).
+
 ``report(directory)`` writes ``metrics.json``, ``site_map.png``, ``soil.png``, ``flags.png`` and
 ``index.html`` (one page linking them).
+
+:func:`tree_actions`: the action servers a task's tree calls (its leaves' subtasks and their planning actions),
+what the supervisor waits for before it starts the tasks.
 """
 
 from __future__ import annotations
@@ -29,16 +36,19 @@ from __future__ import annotations
 import json
 import math
 import statistics
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tms_model.excavator.kinematics import ExcavatorKinematics, load_kinematics
-from tms_model.machines import Machine, load_machine
+from tms_model.fleet import load_named
+from tms_model.machines import Machine
 from tms_model.site import Site, load_site
+from tms_ts.subtask_specs import SUBTASKS
 from tms_ur.site_map import render_site_map
 
-__all__ = ["AlignedError", "ExperimentRecorder", "Sample", "tasks_to_cancel_after_failure", "TASK_DONE"]
+__all__ = ["AlignedError", "ExperimentRecorder", "Sample", "tasks_to_cancel_after_failure", "tree_actions",
+           "TASK_DONE"]
 
 #: task states (tms_msg/TaskState names) after which a task runs no more
 TASK_DONE = frozenset({"SUCCESS", "FAILURE", "CANCELED"})
@@ -47,12 +57,44 @@ TASK_DONE = frozenset({"SUCCESS", "FAILURE", "CANCELED"})
 def tasks_to_cancel_after_failure(task_ids: list[int], states: dict[int, str]) -> list[int]:
     """The supervisor's policy when a task FAILED: every started task that has not ended yet, in order.
 
-    Its partner would otherwise wait for a flag that never comes (the IC120 task waits for MOVING_FLG from
-    a ZX200 task that failed). ``states`` maps task id -> state name; returns [] when no task FAILED.
+    Its partner would otherwise wait for a flag that never comes (a carrier's task waits for MOVING_FLG from
+    an excavator's task that failed). ``states`` maps task id -> state name; returns [] when no task FAILED.
     """
     if not any(state == "FAILURE" for state in states.values()):
         return []
     return [tid for tid in task_ids if states.get(tid) not in TASK_DONE]
+
+
+_TIP = "tip:"  # key prefix of an excavator's bucket-tip error series
+
+
+def tree_actions(tree: str, blackboard: dict[str, Any] | None = None) -> list[str]:
+    """The action servers task ``tree`` (its XML) calls, in order of first use: every leaf's ``/<model_name>/<subtask_name>``
+    and, for a subtask of :data:`tms_ts.subtask_specs.SUBTASKS` whose downstream is an action, its planning action
+    ``/<model_name>/<planning_action>``. A ``{key}`` port is read from the task's ``blackboard``; one it does not
+    give (set by the tree itself) is left out."""
+    blackboard = blackboard or {}
+
+    def port(value: str) -> str | None:
+        if value.startswith("{") and value.endswith("}"):
+            got = blackboard.get(value[1:-1])
+            return str(got) if isinstance(got, str) and got else None
+        return value.strip("/")
+
+    actions: list[str] = []
+    for el in ET.fromstring(tree).iter():
+        model, subtask = el.get("model_name"), el.get("subtask_name")
+        if model is None or subtask is None:
+            continue
+        model, subtask = port(model), port(subtask)
+        if not model or not subtask:
+            continue
+        names = [f"/{model}/{subtask}"]
+        spec = SUBTASKS.get(subtask)
+        if spec is not None and spec.downstream != "service":
+            names.append(f"/{model}/{spec.planning_action}")
+        actions += [n for n in names if n not in actions]
+    return actions
 
 
 @dataclass
@@ -196,7 +238,8 @@ class ExperimentRecorder:
     _dumps: _Episodes | None = None
     _aligned: dict[str, AlignedError] = field(default_factory=dict)
     _leaf_starts: dict[int, dict[str, float]] = field(default_factory=dict)
-    #: the carriers by name (fleet); empty for the paper's single IC120
+    #: the carriers whose soil comes by name (:meth:`on_carrier_soil`, the fleet); empty when the one vessel of
+    #: ``on_soil`` is the load (the paper's single carrier)
     carriers: list[str] = field(default_factory=list)
     #: (x, y) of the loading point and the radius around it in which carrier distances count
     loading_point: tuple[float, float] | None = None
@@ -207,6 +250,8 @@ class ExperimentRecorder:
     #: task id -> machine name (for the report)
     task_machines: dict[int, str] = field(default_factory=dict)
     _last_pose: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: machine name -> its first truth pose (t, x, y, yaw): where the site map draws a machine with no site pose
+    first_pose: dict[str, tuple[float, float, float, float]] = field(default_factory=dict)
 
     # -- inputs -------------------------------------------------------------------------------
     def on_soil(self, t: float, mound: float, bucket: float, vessel: float, dumped: float) -> None:
@@ -234,20 +279,18 @@ class ExperimentRecorder:
                 self.pass_times.append(t - self.pass_events[-1])
             self.pass_events.append(t)
 
-    def _is_located(self, machine: str) -> bool:
-        """A machine whose localisation estimate is compared with its truth: the paper's IC120, the carriers."""
-        return machine == "ic120" or machine in self.carriers
-
     def _error_series(self, key: str) -> AlignedError:
+        """The aligned series of ``key``: a machine's name (its localisation) or ``tip:<name>`` (an excavator's tip)."""
         if key not in self._aligned:
-            self._aligned[key] = AlignedError(self.tip_errors if key == "tip" else self.loc_errors)
+            self._aligned[key] = AlignedError(self.tip_errors if key.startswith(_TIP) else self.loc_errors)
         return self._aligned[key]
 
-    def on_truth_pose(self, t: float, machine: str, x: float, y: float, yaw: float) -> None:  # noqa: ARG002 - yaw: API
+    def on_truth_pose(self, t: float, machine: str, x: float, y: float, yaw: float) -> None:
         """Truth pose stamped ``t`` (the plant's simulated time)."""
         self._clock(t)
-        if self._is_located(machine):
-            self._error_series(machine).truth(t, x, y)
+        # every machine's truth: whichever sends estimates (a travelling machine's localisation) is compared with it
+        self._error_series(machine).truth(t, x, y)
+        self.first_pose.setdefault(machine, (t, x, y, yaw))
         path = self.paths.setdefault(machine, [])
         if not path or math.hypot(path[-1][1] - x, path[-1][2] - y) > 0.1:
             path.append((t, x, y))
@@ -267,21 +310,21 @@ class ExperimentRecorder:
         series = self.carrier_soil.setdefault(machine, [])
         if not series or series[-1][1:] != (vessel, loaded, dumped):
             series.append((t, vessel, loaded, dumped))
-        # every carrier's landed total together: one ZX200 loads one carrier at a time
+        # every carrier's landed total together: one excavator loads one carrier at a time
         self._on_load(t, sum(s[-1][2] for s in self.carrier_soil.values()))
 
     def on_estimated_pose(self, t: float, machine: str, x: float, y: float) -> None:
         """Localisation estimate stamped ``t``; compared with the truth at ``t`` (:class:`AlignedError`)."""
-        if self._is_located(machine):
-            self._error_series(machine).estimate(t, x, y)
+        self._error_series(machine).estimate(t, x, y)
 
-    def on_truth_tip(self, t: float, x: float, y: float) -> None:
-        """The bucket tip's true position (map frame, horizontal) stamped ``t``."""
-        self._error_series("tip").truth(t, x, y)
+    def on_truth_tip(self, t: float, x: float, y: float, machine: str = "") -> None:
+        """Excavator ``machine``'s bucket tip, true position (map frame, horizontal) stamped ``t``."""
+        self._error_series(_TIP + machine).truth(t, x, y)
 
-    def on_estimated_tip(self, t: float, x: float, y: float) -> None:
-        """The bucket tip from the measured joint angles stamped ``t``; compared with the truth at ``t``."""
-        self._error_series("tip").estimate(t, x, y)
+    def on_estimated_tip(self, t: float, x: float, y: float, machine: str = "") -> None:
+        """Excavator ``machine``'s bucket tip from its measured joint angles stamped ``t``; compared with its
+        truth at ``t``. Every excavator's errors go into one ``end_effector_error_m``."""
+        self._error_series(_TIP + machine).estimate(t, x, y)
 
     def on_flags(self, t: float, flags: dict[str, Any]) -> None:
         for key, value in flags.items():
@@ -335,9 +378,10 @@ class ExperimentRecorder:
             "wall_time_s": round(wall, 2),
             "real_time_factor": round(sim / wall, 2) if wall > 0 else None,
             "localisation_error_m": {"rms": _rms(self.loc_errors), **(_stats(self.loc_errors) or {}),
-                                     "unmatched": sum(self._unmatched(k) for k in self._aligned if k != "tip")},
+                                     "unmatched": sum(self._unmatched(k) for k in self._aligned
+                                                      if not k.startswith(_TIP))},
             "end_effector_error_m": {"rms": _rms(self.tip_errors), **(_stats(self.tip_errors) or {}),
-                                     "unmatched": self._unmatched("tip")},
+                                     "unmatched": sum(self._unmatched(k) for k in self._aligned if k.startswith(_TIP))},
             "flags_timeline": {k: [[round(t, 2), v] for t, v in series] for k, series in self.flags.items()},
             "task_states": {str(k): [[round(t, 2), s] for t, s in v] for k, v in self.task_states.items()},
             "leaf_time_s": {
@@ -378,13 +422,14 @@ class ExperimentRecorder:
         directory: Path,
         *,
         site: Site | None = None,
-        zx200: ExcavatorKinematics | None = None,
-        ic120: Machine | None = None,
+        machines: list[Machine] | None = None,
+        loading_point: str = "P1",
         title: str = "Earthwork run",
     ) -> Path:
         """Write metrics.json, three PNG plots and index.html into ``directory``; returns index.html.
 
-        ``site``, ``zx200`` and ``ic120`` default to the project's models (config/site.yaml, machines/).
+        ``site`` defaults to config/site.yaml; ``machines`` (the descriptions the site map draws) to those of the
+        machines recorded (a path), as named on the site.
         """
         import matplotlib
 
@@ -395,8 +440,11 @@ class ExperimentRecorder:
         metrics = self.metrics()
         (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
 
-        render_site_map(directory / "site_map.png", site or load_site(), zx200=zx200 or load_kinematics("zx200"),
-                        ic120=ic120 or load_machine("ic120"), paths=self.paths)
+        site = site or load_site()
+        if machines is None:
+            machines = [load_named(name, site=site) for name in self.paths if name in site.machines]
+        render_site_map(directory / "site_map.png", site, machines=machines, paths=self.paths,
+                        loading_point=loading_point)
 
         fig, ax = plt.subplots(figsize=(8, 4))
         if self.soil:

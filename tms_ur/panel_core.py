@@ -20,6 +20,7 @@ import numpy as np
 
 from tms_common.errors import ConfigError, TmsError
 from tms_model.excavator.kinematics import ExcavatorKinematics
+from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR, LIFT_JOINT, ROTATE_JOINT, VESSEL_JOINT, Machine
 
 __all__ = [
     "PanelConfig",
@@ -37,6 +38,7 @@ __all__ = [
     "check_int_range",
     "SiteState",
     "arm_side_view",
+    "machine_info",
 ]
 
 
@@ -260,21 +262,61 @@ def arm_side_view(joints: dict[str, float], kin: ExcavatorKinematics) -> list[li
     return [[round(float(x), 3), round(float(z), 3)] for x, z in kin.side_view(q)]
 
 
+def machine_info(machine: Machine) -> dict[str, Any]:
+    """What the page needs of a machine's description to draw it: name, kind, type and footprint [m]."""
+    return {"name": machine.model_name, "kind": machine.kind, "type": machine.type,
+            "length": machine.footprint.length, "width": machine.footprint.width}
+
+
+def _angle(joints: dict[str, float], name: str) -> float | None:
+    return round(float(joints[name]), 4) if name in joints else None
+
+
 @dataclass
 class SiteState:
-    """Latest values for the live view; every setter is cheap, ``snapshot()`` builds the JSON message."""
+    """Latest values for the live view; every setter is cheap, ``snapshot()`` builds the JSON message.
+
+    Per machine by name, after its description's type (:meth:`set_joints`): an excavator's arm side view and swing
+    (``arms``), a carrier's vessel (``vessels``: tip angle, slew angle of a rotating upper body, load), a dozer's blade
+    (``blades``: lift angle). ``machines`` are the machines shown (:func:`machine_info`), in the order the page
+    colours them.
+    """
 
     tasks: list[dict[str, Any]] = field(default_factory=list)
     task_catalogue: list[dict[str, Any]] = field(default_factory=list)
     flags: dict[str, dict[str, Any]] = field(default_factory=dict)
+    machines: list[dict[str, Any]] = field(default_factory=list)
     poses: dict[str, dict[str, float]] = field(default_factory=dict)
     trails: dict[str, list[list[float]]] = field(default_factory=dict)
-    plan: list[list[float]] = field(default_factory=list)
-    arm: list[list[float]] = field(default_factory=list)
-    swing: float = 0.0
+    plans: dict[str, list[list[float]]] = field(default_factory=dict)
+    arms: dict[str, dict[str, Any]] = field(default_factory=dict)
+    vessels: dict[str, dict[str, float | None]] = field(default_factory=dict)
+    blades: dict[str, dict[str, float | None]] = field(default_factory=dict)
     soil: dict[str, float] = field(default_factory=dict)
     events: list[dict[str, Any]] = field(default_factory=list)
     max_trail: int = 2000
+
+    def set_joints(self, machine: Machine, joints: dict[str, float], kin: ExcavatorKinematics | None = None) -> None:
+        """Machine ``machine``'s measured joints (name -> position) into the view its type has; an excavator needs
+        its ``kin`` (the side view is its forward kinematics)."""
+        name = machine.model_name
+        if machine.type == EXCAVATOR and kin is not None:
+            self.arms[name] = {"side": arm_side_view(joints, kin), "swing": _angle(joints, kin.joints[0]) or 0.0}
+        elif machine.type == CRAWLER_DUMP:
+            vessel = self.vessels.setdefault(name, {})
+            vessel["angle"] = _angle(joints, VESSEL_JOINT)
+            if machine.swing is not None:
+                vessel["swing"] = _angle(joints, ROTATE_JOINT)
+        elif machine.type == DOZER:
+            self.blades[name] = {"lift": _angle(joints, LIFT_JOINT)}
+
+    def set_load(self, machine: str, volume: float) -> None:
+        """Soil in carrier ``machine``'s vessel [m^3]."""
+        self.vessels.setdefault(machine, {})["load"] = round(float(volume), 3)
+
+    def set_plan(self, machine: str, points: list[list[float]]) -> None:
+        """Machine ``machine``'s planned path, thinned to at most about 400 points."""
+        self.plans[machine] = points[:: max(1, len(points) // 400)]
 
     def set_pose(self, machine: str, x: float, y: float, yaw: float) -> None:
         self.poses[machine] = {"x": round(x, 3), "y": round(y, 3), "yaw": round(yaw, 4)}
@@ -295,11 +337,13 @@ class SiteState:
             "tasks": self.tasks,
             "catalogue": self.task_catalogue,
             "flags": self.flags,
+            "machines": self.machines,
             "poses": self.poses,
             "trails": self.trails,
-            "plan": self.plan,
-            "arm": self.arm,
-            "swing": self.swing,
+            "plans": self.plans,
+            "arms": self.arms,
+            "vessels": self.vessels,
+            "blades": self.blades,
             "soil": self.soil,
             "events": self.events[-20:],
         }

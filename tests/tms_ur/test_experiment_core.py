@@ -1,15 +1,19 @@
 """The experiment recorder: events, metrics and report files from a scripted run."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tms_db.store import build_task_doc
 from tms_model.excavator.kinematics import load_kinematics
-from tms_model.machines import load_machine
+from tms_model.fleet import load_named
 from tms_model.site import load_site
-from tms_ur.experiment_core import ExperimentRecorder
+from tms_ur.experiment_core import ExperimentRecorder, tree_actions
 from tms_ur.site_map import render_site_map
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _scripted_run() -> ExperimentRecorder:
@@ -159,10 +163,13 @@ def _route_run() -> ExperimentRecorder:
 
 
 def test_site_map_labels_do_not_overlap_and_the_plot_fills_the_figure(tmp_path):
+    """The paper's two machines, as the report draws them: the excavator at its base with its reach, the carrier
+    at the loading point; colours blue and orange as before the site map took a list."""
     site = load_site()
     kin = load_kinematics("zx200")
-    info = render_site_map(tmp_path / "site_map.png", site, zx200=kin, ic120=load_machine("ic120"),
-                           paths=_route_run().paths)
+    rec = _route_run()
+    machines = [load_named(name, site=site) for name in rec.paths]
+    info = render_site_map(tmp_path / "site_map.png", site, machines=machines, paths=rec.paths)
     assert (tmp_path / "site_map.png").stat().st_size > 10_000
     texts = [t for t, _ in info["labels"]]
     # every pose is labelled once; poses at one position share one label; the dump zone is named
@@ -174,6 +181,31 @@ def test_site_map_labels_do_not_overlap_and_the_plot_fills_the_figure(tmp_path):
             assert not a.overlaps(boxes[j]), (texts[i], texts[j])
     assert info["axes_fraction"] > 0.6, info["axes_fraction"]
     assert info["reach"] == pytest.approx(kin.envelope()["max_reach"])
+    assert info["drawn"] == ["zx200", "ic120"]
+    assert info["colors"] == {"zx200": "tab:blue", "ic120": "tab:orange"}
+    assert {f"zx200 swing reach ({info['reach']:.1f} m)", "zx200", "ic120 at loading", "ic120 vessel"} <= set(info["legend"])
+
+
+def test_site_map_draws_any_list_of_machines_by_type(tmp_path):
+    """Three carriers (two of one kind) and an excavator, and a dozer with a path: each drawn after its type."""
+    site = load_site()
+    names = ["ic120", "ic120_1", "mst110cr", "zx200", "d37pxi_24"]
+    machines = [load_named(name, site=site) for name in names]
+    paths = {"ic120_1": [(0.0, 20.0, 10.0), (1.0, 12.0, 8.5), (2.0, 1.2, 6.5)],
+             "d37pxi_24": [(0.0, 30.0, 0.0), (1.0, 34.0, 0.0)]}
+    info = render_site_map(tmp_path / "site_map.png", site, machines=machines, paths=paths)
+    assert (tmp_path / "site_map.png").stat().st_size > 10_000
+    # excavators first (their colours do not depend on how many carriers follow), then carriers, then dozers
+    assert info["drawn"] == ["zx200", "ic120", "ic120_1", "mst110cr", "d37pxi_24"]
+    assert list(info["colors"]) == info["drawn"] and len(set(info["colors"].values())) == 5
+    assert set(info["reaches"]) == {"zx200"}
+    legend = set(info["legend"])
+    for carrier in ("ic120", "ic120_1 (ic120)", "mst110cr"):
+        assert {f"{carrier} at loading", f"{carrier} vessel"} <= legend, legend
+    assert {"d37pxi_24 (d37pxi) (last pose)", "d37pxi_24 (d37pxi) blade", "ic120_1 path", "d37pxi_24 path"} <= legend
+    # an excavator with no base point on the site and no path has nowhere to be drawn
+    lone = render_site_map(tmp_path / "lone.png", site, machines=[load_named("zx120", site=site)])
+    assert lone["drawn"] == [] and lone["reach"] is None
 
 
 def test_fleet_passes_count_every_carrier_and_localisation_is_per_carrier():
@@ -206,3 +238,60 @@ def test_fleet_passes_count_every_carrier_and_localisation_is_per_carrier():
     assert m["localisation_error_m"]["max"] == pytest.approx(0.3, abs=1e-6)
     assert m["localisation_error_m"]["unmatched"] == 0
     assert {c: f["soil_moved_m3"] for c, f in m["carriers"].items()} == dict.fromkeys(carriers, 1.5)
+
+
+def test_any_machines_errors_per_machine_and_excavator_and_the_report_draws_them(tmp_path):
+    """Three carriers and an excavator (names, not the paper's two): every machine's estimate is compared with its
+    own truth, the excavator's tip with its own; the report's site map draws the machines recorded."""
+    carriers = ["ic120", "ic120_1", "mst110cr"]
+    rec = ExperimentRecorder(carriers=carriers)
+    rec.wall_start, rec.wall_end = 0.0, 10.0
+    rec.on_soil(0.0, 20.0, 0.0, 0.0, 0.0)
+    for k in range(20):
+        t = k * 0.5
+        for i, c in enumerate(carriers):
+            rec.on_truth_pose(t, c, 10.0 + t, 5.0 * i, 0.0)
+            rec.on_estimated_pose(t, c, 10.0 + t, 5.0 * i + 0.1 * (i + 1))  # 0.1, 0.2, 0.3 m off
+        rec.on_truth_pose(t, "zx200", 0.0, 0.0, 0.0)
+        rec.on_truth_tip(t, 8.0, 0.0, "zx200")
+        rec.on_estimated_tip(t, 8.0, 0.05, "zx200")
+    m = rec.metrics()
+    assert m["localisation_error_m"]["n"] == 60 and m["localisation_error_m"]["max"] == pytest.approx(0.3)
+    assert m["end_effector_error_m"]["n"] == 20 and m["end_effector_error_m"]["max"] == pytest.approx(0.05)
+    assert m["localisation_error_m"]["unmatched"] == 0 and m["end_effector_error_m"]["unmatched"] == 0
+    assert set(m["carriers"]) == set(carriers)
+    rec.report(tmp_path)
+    assert (tmp_path / "site_map.png").stat().st_size > 10_000
+
+
+def test_the_paper_figures_do_not_depend_on_the_machines_watched():
+    """The paper's run recorded with extra machines watched (no messages from them) gives the same figures."""
+    paper = _scripted_run().metrics()
+    rec = _scripted_run()
+    for name in ("zx120", "ic120_1", "mst110cr", "d37pxi_24"):
+        rec.on_truth_pose(rec.sim_end, name, 50.0, 50.0, 0.0)  # a pose, no estimate: no error, no pass
+    m = rec.metrics()
+    for key in ("cycles", "load_passes", "soil_moved_m3", "load_pass_time_s", "haul_cycle_time_s",
+                "localisation_error_m", "end_effector_error_m", "task_states"):
+        assert m[key] == paper[key], key
+
+
+def test_tree_actions_are_the_leaves_subtasks_and_their_planning_actions():
+    """The paper's trees call the action servers the supervisor used to list by hand; a fleet tree's {machine}
+    comes from the task's blackboard."""
+    paper = []
+    for tree in ("trees/paper_ic120_haul.xml", "trees/paper_zx200_load.xml"):
+        doc = build_task_doc((ROOT / tree).read_text(), 1, "", None)
+        paper += tree_actions(doc["task_sequence"], doc.get("blackboard"))
+    assert sorted(paper) == sorted([
+        "/zx200/tms_rp_zx200_change_pose", "/zx200/tms_rp_zx200_excavate_simple", "/zx200/tms_rp_zx200_release_simple",
+        "/ic120/follow_waypoints", "/ic120/navigate_to_pose", "/ic120/set_dump_angle",
+        "/zx200/subtask_zx200_change_pose", "/zx200/subtask_zx200_excavate_simple",
+        "/zx200/subtask_zx200_release_simple", "/ic120/st_ic120_follow_waypoints",
+        "/ic120/st_ic120_navigate_anywhere", "/ic120/st_ic120_release_soil"])
+    doc = build_task_doc((ROOT / "trees/fleet_mst110cr_haul.xml").read_text(), 14, "", None, {"machine": "mst110cr_2"})
+    fleet = tree_actions(doc["task_sequence"], doc["blackboard"])
+    assert "/mst110cr_2/st_mst110cr_follow_waypoints" in fleet and "/mst110cr_2/follow_waypoints" in fleet
+    assert all(a.startswith("/mst110cr_2/") for a in fleet), fleet
+    # a {key} the blackboard does not give is left out, not waited for under its literal name
+    assert tree_actions(doc["task_sequence"], {}) == []

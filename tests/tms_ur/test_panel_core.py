@@ -1,9 +1,15 @@
 """Pure core of the web panel: config, access control, commands, arm geometry."""
 
+import json
+from pathlib import Path
+
 import pytest
 
 from tms_common.errors import ConfigError
-from tms_model.excavator.kinematics import load_kinematics
+from tms_model.excavator.kinematics import ExcavatorKinematics, load_kinematics
+from tms_model.fleet import load_named
+from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR
+from tms_model.site import load_site
 from tms_ur.panel_core import (
     INT32_MAX,
     INT32_MIN,
@@ -15,9 +21,11 @@ from tms_ur.panel_core import (
     authorize,
     check_origin,
     check_token,
+    machine_info,
     parse_command,
     websocket_access,
 )
+from tms_ur.site_map import order_machines
 
 
 def test_non_loopback_bind_requires_a_token():
@@ -61,8 +69,6 @@ def test_arm_side_view_zero_pose_matches_reference_geometry():
 
 
 def test_site_state_trail_thins_close_points_and_snapshot_is_json_ready():
-    import json
-
     s = SiteState()
     s.set_pose("ic120", 0, 0, 0)
     s.set_pose("ic120", 0.05, 0, 0)
@@ -70,6 +76,64 @@ def test_site_state_trail_thins_close_points_and_snapshot_is_json_ready():
     assert s.trails["ic120"] == [[0, 0], [1.0, 0]]
     s.event("error", "task 99: FAILURE: task 99 not found")
     assert json.loads(json.dumps(s.snapshot()))["events"][0]["text"].startswith("task 99")
+
+
+def _machines(names):  # noqa: ANN001, ANN202
+    site = load_site()
+    return [load_named(name, site=site) for name in names]
+
+
+@pytest.mark.parametrize("names", [["zx200", "ic120"], ["ic120", "ic120_1", "mst110cr", "zx200", "d37pxi_24"]],
+                         ids=["paper", "three_carriers_excavator_dozer"])
+def test_site_state_shows_each_machine_after_its_type(names):
+    """The paper's two, and three carriers (two of one kind, one with a rotating upper body), an excavator and a
+    dozer: the snapshot names them (what the page draws them with) and gives each the view its type has."""
+    machines = order_machines(_machines(names))
+    s = SiteState(machines=[machine_info(m) for m in machines])
+    for i, m in enumerate(machines):
+        kin = ExcavatorKinematics(m) if m.type == EXCAVATOR else None
+        joints = {"swing_joint": 0.3, "boom_joint": -0.5, "arm_joint": 1.2, "bucket_joint": 0.4,
+                  "vessel_joint": -0.2, "rotate_joint": 1.5, "lift_joint": 0.1}
+        s.set_joints(m, {j: v for j, v in joints.items() if j in m.joint_names}, kin)
+        s.set_pose(m.model_name, float(i), 0.0, 0.0)
+        if m.type == CRAWLER_DUMP:
+            s.set_load(m.model_name, 0.25 * i)
+    snap = json.loads(json.dumps(s.snapshot()))
+    assert [m["name"] for m in snap["machines"]] == [m.model_name for m in machines]
+    assert snap["machines"][0]["type"] == EXCAVATOR  # excavators first: the page colours them first
+    excavators = {m.model_name for m in machines if m.type == EXCAVATOR}
+    carriers = {m.model_name for m in machines if m.type == CRAWLER_DUMP}
+    dozers = {m.model_name for m in machines if m.type == DOZER}
+    assert set(snap["arms"]) == excavators and set(snap["vessels"]) == carriers and set(snap["blades"]) == dozers
+    for name in excavators:
+        assert snap["arms"][name]["swing"] == pytest.approx(0.3) and len(snap["arms"][name]["side"]) == 4
+    for m in machines:
+        if m.type == CRAWLER_DUMP:
+            vessel = snap["vessels"][m.model_name]
+            assert vessel["angle"] == pytest.approx(-0.2) and "load" in vessel
+            # a carrier whose vessel rides a rotating upper body shows its slew angle too
+            assert ("swing" in vessel) == (m.swing is not None)
+            if m.swing is not None:
+                assert vessel["swing"] == pytest.approx(1.5)
+    for name in dozers:
+        assert snap["blades"][name]["lift"] == pytest.approx(0.1)
+    sizes = {m["name"]: (m["length"], m["width"]) for m in snap["machines"]}
+    assert all(length > 0 and width > 0 for length, width in sizes.values())
+
+
+def test_site_state_plans_per_machine_are_thinned():
+    s = SiteState()
+    s.set_plan("ic120_1", [[float(i), 0.0] for i in range(2000)])
+    assert 400 <= len(s.snapshot()["plans"]["ic120_1"]) <= 800
+
+
+def test_panel_assets_name_no_machine():
+    """The page draws whatever machines the server sends: no machine name in its script or markup."""
+    web = Path(__file__).resolve().parents[2] / "tms_ur" / "web"
+    names = set(load_site().machines) | {m.kind for m in load_site().machines.values()}
+    for asset in ("panel.js", "index.html", "panel.css"):
+        text = (web / asset).read_text().lower()
+        assert not [n for n in names if n in text], asset
 
 
 # -- websocket access: origin and token ---------------------------------------------------------------------

@@ -97,7 +97,7 @@ def test_start_see_running_and_moving_then_emergency_stop_cancels_both(procs, do
     page.wait_for_selector("#catalogue td:has-text('IC120 drives 12 m east')", timeout=30000)
     _wait(lambda: page.query_selector("#pose-ic120 td.x") is not None, 60, "the IC120 pose on the map", launcher)
     # Both machines report over CAN before anything is started (joint states reach the arm controller).
-    _wait(lambda: "ZX200 swing" in page.inner_text("#arm-state"), 60, "the ZX200 joint states", launcher)
+    _wait(lambda: "zx200 swing" in page.inner_text("#arm-state"), 60, "the ZX200 joint states", launcher)
     time.sleep(2.0)
     x0 = float(page.inner_text("#pose-ic120 td.x"))
     page.check("#catalogue input[value='11']")

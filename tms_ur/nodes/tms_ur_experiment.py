@@ -21,10 +21,15 @@ carrier the soil it moved (load passes: rises of the carriers' landed totals; lo
 ends the work after that many vessel loads (the ZX200 tree counts them in the record's ``LOAD_COUNT``) instead of
 ``cycles`` dumps: a carrier queues again as soon as it has dumped, so counting dumps would let one more in.
 
-Inputs: ``/clock`` (as the node clock: ``use_sim_time`` must be true), ``/tms_ts/status``, ``/sim/truth/soil``, ``/sim/truth/<machine>/pose``,
-``/sim/truth/zx200/bucket_tip``, ``/zx200/joint_states`` (measured, for the end-effector error),
-``/ic120/odometry/global`` (the estimate, for the localisation error), and the flags of
-``blackboard_record`` from tms_db.
+Any list of machines (``machines``, names; default the site's list, ``machines`` of config/site.yaml): per machine
+``/sim/truth/<name>/pose`` (its path) and ``/<name>/odometry/global`` (the estimate, for the localisation error of
+every machine that has one); per excavator (the type of its description) ``/sim/truth/<name>/bucket_tip`` and
+``/<name>/joint_states`` (measured, its forward kinematics for the end-effector error). The tasks start once every
+action server their trees call is up (``wait_for_actions``; default read from the tasks' trees in tms_db:
+:func:`tms_ur.experiment_core.tree_actions`).
+
+Inputs besides: ``/clock`` (as the node clock: ``use_sim_time`` must be true), ``/tms_ts/status``,
+``/sim/truth/soil``, and the flags of ``blackboard_record`` from tms_db.
 """
 
 from __future__ import annotations
@@ -48,20 +53,17 @@ from tms_common.config import repo_root
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import startup_parameters
+from tms_db import open_store
+from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.fleet import load_named
 from tms_model.geometry import yaw_from_quaternion
+from tms_model.machines import EXCAVATOR
 from tms_model.site import load_site
 from tms_msg.msg import TaskIds, TaskStatus
-from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure
+from tms_ur.experiment_core import TASK_DONE, ExperimentRecorder, tasks_to_cancel_after_failure, tree_actions
 
 STATE_NAMES = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
 DONE = TASK_DONE
-# Action servers the paper trees need (contracts D and E): planning and subtask servers of both machines.
-DEFAULT_ACTIONS = (
-    "/zx200/tms_rp_zx200_change_pose", "/zx200/tms_rp_zx200_excavate_simple", "/zx200/tms_rp_zx200_release_simple",
-    "/ic120/follow_waypoints", "/ic120/navigate_to_pose", "/ic120/set_dump_angle",
-    "/zx200/subtask_zx200_change_pose", "/zx200/subtask_zx200_excavate_simple", "/zx200/subtask_zx200_release_simple",
-    "/ic120/st_ic120_follow_waypoints", "/ic120/st_ic120_navigate_anywhere", "/ic120/st_ic120_release_soil",
-)
 
 
 class ExperimentNode(Node):
@@ -78,13 +80,15 @@ class ExperimentNode(Node):
         flags_period = float(d("flags_period_s", 0.05).value)
         # Tasks start only once every planning and subtask action server is on the graph: with the
         # launcher's parallel start-up a leaf sent before its server exists fails the task at once.
-        self.wait_for_actions = [str(a) for a in d("wait_for_actions", list(DEFAULT_ACTIONS)).value]
+        # Empty: the servers the tasks' trees call, read from tms_db before the start.
+        waits = [str(a) for a in d("wait_for_actions", [""]).value if str(a)]
+        self.wait_for_actions: list[str] | None = waits or None
         runs = Path(d("runs_dir", "runs").value)
         self.run_dir = (runs if runs.is_absolute() else repo_root() / runs) / datetime.now().strftime("%Y%m%d-%H%M%S")
         self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
         self.carriers = [str(c) for c in d("carriers", [""]).value if str(c)]
         self.loads_target = int(d("loads", 0).value)
-        loading_point = str(d("loading_point", "P1").value)
+        self.loading_point = loading_point = str(d("loading_point", "P1").value)
         near_radius = float(d("near_radius_m", 12.0).value)
         self.title = str(d("title", "Paper experiment: two-machine earthwork").value)
         self.rec = ExperimentRecorder(carriers=self.carriers, near_radius=near_radius)
@@ -98,13 +102,12 @@ class ExperimentNode(Node):
         self.exit_code: int | None = None
         self._last_progress = 0.0
         self._t0 = (time.monotonic(), 0.0)  # (wall, sim) when the tasks were started
-        self._zx200_base: tuple[float, float, float] | None = None
-        self._joints: dict[str, float] = {}
-        from tms_model.excavator.kinematics import JOINTS, load_kinematics
-
-        self._kin, self._joint_order = load_kinematics(), JOINTS
-        self._np = np
         self.site = load_site()
+        # the machines watched, by name; what is watched of each follows its description's type
+        self.machines = [str(m) for m in d("machines", [""]).value if str(m)] or list(self.site.machines)
+        descriptions = {name: load_named(name, site=self.site) for name in self.machines}
+        self._kin = {name: ExcavatorKinematics(m) for name, m in descriptions.items() if m.type == EXCAVATOR}
+        self._base: dict[str, tuple[float, float, float]] = {}  # excavator -> its truth base pose (x, y, yaw)
         if self.carriers:
             lp = self.site.point(loading_point)
             self.rec.loading_point = (lp.x, lp.y)
@@ -115,15 +118,16 @@ class ExperimentNode(Node):
         self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", reliable)
         self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
         self.create_subscription(Float64MultiArray, "/sim/truth/soil", self._on_soil, 10)
-        for m in (self.carriers or ["ic120"]) + ["zx200"]:
+        for m in dict.fromkeys(self.machines + self.carriers):
             self.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: self._on_pose(m, msg), 10)
+            # each machine's localisation estimate, against its truth pose (a machine without one sends none)
+            self.create_subscription(Odometry, f"/{m}/odometry/global", lambda msg, m=m: self._on_estimate(m, msg), 10)
         for m in self.carriers:
             self.create_subscription(Float64MultiArray, f"/sim/truth/{m}/soil",
                                      lambda msg, m=m: self._on_carrier_soil(m, msg), 10)
-        self.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", self._on_tip, 10)
-        self.create_subscription(JointState, "/zx200/joint_states", self._on_joints, 10)
-        for m in self.carriers or ["ic120"]:  # each carrier's localisation estimate, against its truth pose
-            self.create_subscription(Odometry, f"/{m}/odometry/global", lambda msg, m=m: self._on_estimate(m, msg), 10)
+        for m in self._kin:
+            self.create_subscription(PointStamped, f"/sim/truth/{m}/bucket_tip", lambda msg, m=m: self._on_tip(m, msg), 10)
+            self.create_subscription(JointState, f"/{m}/joint_states", lambda msg, m=m: self._on_joints(m, msg), 10)
         self.create_timer(flags_period, self._sample_flags)
         self.create_timer(0.2, self._tick)
 
@@ -164,36 +168,34 @@ class ExperimentNode(Node):
         p = msg.pose.position
         yaw = yaw_from_quaternion(msg.pose.orientation)
         self.rec.on_truth_pose(self._stamp(msg.header), machine, p.x, p.y, yaw)
-        if machine == "zx200":
-            self._zx200_base = (p.x, p.y, yaw)
+        if machine in self._kin:
+            self._base[machine] = (p.x, p.y, yaw)
 
     def _on_estimate(self, machine: str, msg: Odometry) -> None:
         p = msg.pose.pose.position
         self.rec.on_estimated_pose(self._stamp(msg.header), machine, p.x, p.y)
 
-    def _on_joints(self, msg: JointState) -> None:
-        """End-effector estimate: FK of the joint angles measured over CAN, at their stamp.
+    def _on_joints(self, machine: str, msg: JointState) -> None:
+        """End-effector estimate of excavator ``machine``: FK of the joint angles measured over CAN, at their stamp.
 
         Only a message carrying every front joint counts: the converter publishes its joint sets
         separately, and another set's stamp is not the time of the front angles."""
-        self._joints = dict(zip(msg.name, msg.position, strict=False))
-        if self._zx200_base is None or not all(j in self._joints for j in self._joint_order):
+        joints = dict(zip(msg.name, msg.position, strict=False))
+        base = self._base.get(machine)
+        if base is None or not all(j in joints for j in JOINTS):
             return
-        q = self._np.array([self._joints[j] for j in self._joint_order])
-        local = self._kin.tip_position(q)
-        bx, by, byaw = self._zx200_base
+        local = self._kin[machine].tip_position(np.array([joints[j] for j in JOINTS]))
+        bx, by, byaw = base
         c, s = math.cos(byaw), math.sin(byaw)
         self.rec.on_estimated_tip(self._stamp(msg.header), bx + c * local[0] - s * local[1],
-                                  by + s * local[0] + c * local[1])
+                                  by + s * local[0] + c * local[1], machine)
 
-    def _on_tip(self, msg: PointStamped) -> None:
-        self.rec.on_truth_tip(self._stamp(msg.header), msg.point.x, msg.point.y)
+    def _on_tip(self, machine: str, msg: PointStamped) -> None:
+        self.rec.on_truth_tip(self._stamp(msg.header), msg.point.x, msg.point.y, machine)
 
     # -- supervision ----------------------------------------------------------------------
     def _db(self):  # noqa: ANN202
         if self._store is None:
-            from tms_db import open_store
-
             self._store = open_store(uri=self.db_uri or None, path=self.db_path or None)
         return self._store
 
@@ -258,7 +260,21 @@ class ExperimentNode(Node):
                 continue
             self.rec.task_machines[tid] = str((doc.get("blackboard") or {}).get("machine") or doc.get("model_name", ""))
 
+    def _tree_actions(self) -> list[str]:
+        """The action servers the tasks' trees call (from tms_db); a task not in the DB adds none."""
+        actions: list[str] = []
+        for tid in self.task_ids:
+            try:
+                doc = self._db().get_task(tid)
+            except KeyError:
+                continue
+            actions += [a for a in tree_actions(str(doc.get("task_sequence", "")), doc.get("blackboard"))
+                        if a not in actions]
+        return actions
+
     def _missing_actions(self) -> list[str]:
+        if self.wait_for_actions is None:
+            self.wait_for_actions = self._tree_actions()
         # the server publishes <action>/_action/status (clients only subscribe to it)
         missing = [a for a in self.wait_for_actions if self.count_publishers(f"{a}/_action/status") == 0]
         if missing and time.monotonic() - self._last_progress >= self.progress_period:
@@ -295,7 +311,7 @@ class ExperimentNode(Node):
         self.rec.wall_end, self.rec.sim_end = time.monotonic(), self.sim_t
         self.rec.ended = "stopped" if stopped else "timeout" if timed_out else "done"
         title = self.title + (" (stopped before the end)" if stopped else "")
-        index = self.rec.report(self.run_dir, site=self.site, title=title)
+        index = self.rec.report(self.run_dir, site=self.site, loading_point=self.loading_point, title=title)
         metrics = self.rec.metrics()
         if stopped:
             self.exit_code = 0

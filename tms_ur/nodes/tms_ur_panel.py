@@ -18,8 +18,11 @@ per connection and publishes nothing. Task ids are checked against int32 before 
 (``tms_ur.panel_core``).
 
 Live view inputs: ``/tms_ts/status`` (tms_msg/TaskStatus), global-blackboard records read from tms_db
-(``flag_records``), machine poses (``pose_topics``: geometry_msgs/PoseStamped), the IC120 plan
-(``plan_topic``: nav_msgs/Path), ZX200 joints (``joint_states_topic``), soil (``soil_topic``: std_msgs/Float64MultiArray with comma-separated labels in layout.dim[0]).
+(``flag_records``), soil (``soil_topic``: std_msgs/Float64MultiArray with comma-separated labels in
+layout.dim[0]), and per machine of ``machines`` (names; default the site's list, ``machines`` of config/site.yaml):
+its pose (``pose_topics``, default ``/sim/truth/<name>/pose``: geometry_msgs/PoseStamped), its plan
+(``/<name>/plan``: nav_msgs/Path) and its joints (``/<name>/joint_states``), shown after its description's type: an
+excavator's arm side view, a carrier's vessel (and its load, ``/sim/truth/<name>/soil``), a dozer's blade.
 """
 
 from __future__ import annotations
@@ -41,19 +44,24 @@ from std_msgs.msg import Bool, Float64MultiArray, Int32, String
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import startup_parameters
-from tms_model.excavator.kinematics import load_kinematics
+from tms_db import open_store
+from tms_model.excavator.kinematics import ExcavatorKinematics
+from tms_model.fleet import load_named
 from tms_model.geometry import yaw_from_quaternion
+from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
+from tms_model.site import load_site
 from tms_msg.msg import TaskIds, TaskStatus
 from tms_ur.panel_core import (
     Access,
     CommandError,
     PanelConfig,
     SiteState,
-    arm_side_view,
     authorize,
+    machine_info,
     parse_command,
     websocket_access,
 )
+from tms_ur.site_map import order_machines
 
 WEB_DIR = Path(__file__).parent.parent / "web"
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/panel.js": ("panel.js", "text/javascript"),
@@ -78,10 +86,15 @@ class PanelNode(Node):
             db_uri=d("db_uri", "").value,
             db_path=d("db_path", "").value,
         )
-        pose_topics = d("pose_topics", ["ic120:/sim/truth/ic120/pose", "zx200:/sim/truth/zx200/pose"]).value
+        site = load_site()
+        names = [str(m) for m in d("machines", [""]).value if str(m)] or list(site.machines)
+        # the page colours them in this order (excavators first, as the report's site map)
+        machines = order_machines([load_named(name, site=site) for name in names])
+        pose_topics = [str(e) for e in d("pose_topics", [""]).value if str(e)] or [
+            f"{m.model_name}:/sim/truth/{m.model_name}/pose" for m in machines]
         self.lock = threading.Lock()
-        self.site = SiteState()
-        self.kin = load_kinematics("zx200")
+        self.site = SiteState(machines=[machine_info(m) for m in machines])
+        self.kin = {m.model_name: ExcavatorKinematics(m) for m in machines if m.type == EXCAVATOR}
         self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
         self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", 10)
         self.pub_emergency = self.create_publisher(Bool, "/emergency_signal", 10)
@@ -92,8 +105,13 @@ class PanelNode(Node):
             if not topic:
                 raise ConfigError(f"tms_ur_panel: pose_topics entry {entry!r} must be 'machine:/topic'")
             self.create_subscription(PoseStamped, topic, lambda m, name=machine: self._on_pose(name, m), 10)
-        self.create_subscription(PathMsg, d("plan_topic", "/ic120/plan").value, self._on_plan, 10)
-        self.create_subscription(JointState, d("joint_states_topic", "/zx200/joint_states").value, self._on_joints, 10)
+        for m in machines:
+            name = m.model_name
+            self.create_subscription(PathMsg, f"/{name}/plan", lambda msg, name=name: self._on_plan(name, msg), 10)
+            self.create_subscription(JointState, f"/{name}/joint_states", lambda msg, m=m: self._on_joints(m, msg), 10)
+            if m.type == CRAWLER_DUMP:
+                self.create_subscription(Float64MultiArray, f"/sim/truth/{name}/soil",
+                                         lambda msg, name=name: self._on_carrier_soil(name, msg), 10)
         self.create_subscription(Float64MultiArray, d("soil_topic", "/sim/truth/soil").value, self._on_soil, 10)
         self._store = None
         self._last_messages: dict[int, str] = {}
@@ -119,16 +137,22 @@ class PanelNode(Node):
         with self.lock:
             self.site.set_pose(machine, p.x, p.y, yaw_from_quaternion(msg.pose.orientation))
 
-    def _on_plan(self, msg: PathMsg) -> None:
+    def _on_plan(self, machine: str, msg: PathMsg) -> None:
         pts = [[round(ps.pose.position.x, 2), round(ps.pose.position.y, 2)] for ps in msg.poses]
         with self.lock:
-            self.site.plan = pts[:: max(1, len(pts) // 400)]
+            self.site.set_plan(machine, pts)
 
-    def _on_joints(self, msg: JointState) -> None:
+    def _on_joints(self, machine: Machine, msg: JointState) -> None:
         joints = dict(zip(msg.name, msg.position, strict=False))
         with self.lock:
-            self.site.arm = arm_side_view(joints, self.kin)
-            self.site.swing = float(joints.get("swing_joint", 0.0))
+            self.site.set_joints(machine, joints, self.kin.get(machine.model_name))
+
+    def _on_carrier_soil(self, machine: str, msg: Float64MultiArray) -> None:
+        labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+        values = dict(zip(labels, msg.data, strict=False))
+        if "vessel" in values:
+            with self.lock:
+                self.site.set_load(machine, values["vessel"])
 
     def _on_soil(self, msg: Float64MultiArray) -> None:
         """Soil volumes [m^3]; labels come from ``layout.dim[0].label`` (comma-separated)."""
@@ -140,8 +164,6 @@ class PanelNode(Node):
         """Task catalogue and global-blackboard flags from tms_db (2 Hz)."""
         try:
             if self._store is None:
-                from tms_db import open_store
-
                 self._store = open_store(uri=self.config.db_uri or None, path=self.config.db_path or None)
             catalogue = [{"task_id": t["task_id"], "description": t.get("description", ""),
                           "model_name": t.get("model_name", "")} for t in self._store.list_tasks()]
