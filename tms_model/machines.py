@@ -9,9 +9,10 @@ and the UI all see one description of a machine. Three types of machine exist to
   an upper body that carries the vessel and rotates on a slew ring (the MSTs' ``rotate_joint``);
 * ``dozer`` (D37PXi): tracks and a blade on a lift arm (``lift_joint``, as OPERA's d37pxi_description names it).
 
-Every kind may name the DBC its COM3 bus speaks (``can: {dbc: <file in com3_can/dbc>}``).
+Every kind names the DBC its COM3 bus speaks (``can: {dbc: <file in com3_can/dbc>}``, required).
 
-The ``type:`` key of the YAML names the type; sections another package owns alone (e.g. ``sim``) are
+The ``type:`` key of the YAML names the type, and :data:`PARSERS` the parser of each type (the one place the
+types are listed: a new type is a constant, a parser and a row there); sections another package owns alone (e.g. ``sim``) are
 left to it, but inside the sections read here an unknown key is an error (a typo must not silently fall
 back to a default).
 """
@@ -22,7 +23,7 @@ import dataclasses
 import functools
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -46,6 +47,8 @@ __all__ = [
     "EXCAVATOR",
     "CRAWLER_DUMP",
     "DOZER",
+    "PARSERS",
+    "TYPES",
     "ROTATE_JOINT",
     "VESSEL_JOINT",
     "LIFT_JOINT",
@@ -53,10 +56,10 @@ __all__ = [
     "machine_path",
 ]
 
+# the machine types; PARSERS (below) is the one table of them, TYPES its keys in order
 EXCAVATOR = "excavator"
 CRAWLER_DUMP = "crawler_dump"
 DOZER = "dozer"
-TYPES = (EXCAVATOR, CRAWLER_DUMP, DOZER)
 
 #: joint names of our interfaces (joint_states): a carrier's vessel and rotating upper body (com3_ros's MST name),
 #: a dozer's blade lift arm (OPERA d37pxi_description's name)
@@ -217,7 +220,7 @@ class Machine:
     tf_prefix: str = ""  # frames of this machine on /tf are "<tf_prefix>/<link>" ("" = bare link names)
     swing: Swing | None = None  # crawler_dump: the rotating upper body, when it has one
     blade: Blade | None = None  # dozer
-    dbc: str = ""  # DBC file of its COM3 bus in com3_can/dbc ("" = the type's default)
+    dbc: str = ""  # DBC file of its COM3 bus in com3_can/dbc (can.dbc of the YAML)
     source: str = field(default="", compare=False)
     #: the machine's name on the site (its namespace; :func:`tms_model.fleet.load_named`); "" = the kind itself
     name: str = ""
@@ -335,14 +338,12 @@ def _tf_prefix(top: Reader) -> str:
         return ""
     prefix = top.string("tf_prefix")
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", prefix):
-        raise top.key_error("tf_prefix", f"expected a frame name prefix such as ic120_tf (no leading or trailing '/'), got {prefix!r}")
+        raise top.key_error("tf_prefix", f"expected a frame name prefix such as <kind>_tf (no leading or trailing '/'), got {prefix!r}")
     return prefix
 
 
 def _dbc(top: Reader) -> str:
-    """``can.dbc``: the DBC file of the machine's COM3 bus (a file name in com3_can/dbc); "" when not given."""
-    if not top.has("can"):
-        return ""
+    """``can.dbc``: the DBC file of the machine's COM3 bus (a file name in com3_can/dbc)."""
     c = top.sub("can")
     c.only({"dbc"})
     name = c.string("dbc")
@@ -562,6 +563,16 @@ def _dozer(top: Reader, kind: str, source: str) -> Machine:
     )
 
 
+#: machine type -> parser of its description (``(reader of the file, kind, source) -> Machine``)
+PARSERS: Mapping[str, Callable[[Reader, str, str], Machine]] = MappingProxyType({
+    EXCAVATOR: _excavator,
+    CRAWLER_DUMP: _crawler_dump,
+    DOZER: _dozer,
+})
+#: the machine types, in the order of :data:`PARSERS`
+TYPES: tuple[str, ...] = tuple(PARSERS)
+
+
 def parse_machine(path: str | Path, kind: str | None = None) -> Machine:
     """Parse one machine YAML (uncached; tests feed malformed files through this)."""
     path = Path(path)
@@ -572,13 +583,10 @@ def parse_machine(path: str | Path, kind: str | None = None) -> Machine:
     if name != kind:
         raise top.key_error("model_name", f"expected {kind!r} (the file's kind), got {name!r}")
     mtype = top.string("type")
-    if mtype == EXCAVATOR:
-        return _excavator(top, kind, str(path))
-    if mtype == CRAWLER_DUMP:
-        return _crawler_dump(top, kind, str(path))
-    if mtype == DOZER:
-        return _dozer(top, kind, str(path))
-    raise top.key_error("type", f"unknown machine type {mtype!r}; expected one of {list(TYPES)}")
+    parser = PARSERS.get(mtype)
+    if parser is None:
+        raise top.key_error("type", f"unknown machine type {mtype!r}; expected one of {list(TYPES)}")
+    return parser(top, kind, str(path))
 
 
 @functools.lru_cache(maxsize=16)

@@ -21,8 +21,8 @@ from types import MappingProxyType
 from pyproj import CRS, Transformer
 
 from tms_common.config import config_path, load_yaml
-from tms_model.geometry import Pose2D
 from tms_common.schema import Reader
+from tms_model.geometry import Pose2D
 
 __all__ = ["Mound", "Projector", "Site", "SiteMachine", "Zone", "load_site"]
 
@@ -41,7 +41,7 @@ class Zone:
 
 @dataclass(frozen=True)
 class Mound:
-    """The soil mound the excavator digs: a (truncated) cone on flat ground; all in metres, map frame."""
+    """The soil mound to dig: a (truncated) cone on flat ground; all in metres, map frame."""
 
     shape: str  # "truncated_cone" | "cone"
     cx: float

@@ -29,6 +29,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
 
+from tms_model.fleet import load_named
 from tms_model.machines import (
     CRAWLER_DUMP,
     DOZER,
@@ -253,6 +254,4 @@ def machine_tree(machine: Machine) -> MachineTree:
 
 def load_tree(name: str) -> MachineTree:
     """The tree of the machine called ``name`` on the site (its kind's, with its own /tf prefix)."""
-    from tms_model.fleet import load_named
-
     return machine_tree(load_named(name))

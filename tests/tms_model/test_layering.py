@@ -35,3 +35,17 @@ def test_tms_model_imports_only_what_is_below_it() -> None:
     stdlib = {"math", "functools", "dataclasses", "pathlib", "types", "typing", "collections", "re", "xml"}
     bad = {f: sorted(n - allowed - stdlib) for f, n in _imports("tms_model").items() if n - allowed - stdlib}
     assert bad == {}
+
+
+def test_tms_model_has_no_project_import_inside_a_function() -> None:
+    project = {p.parent.name for p in ROOT.glob("*/__init__.py")}
+    bad = []
+    for path in sorted((ROOT / "tms_model").rglob("*.py")):
+        for fn in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+                for node in ast.walk(fn):
+                    if isinstance(node, ast.ImportFrom | ast.Import):
+                        name = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+                        if name and name.split(".")[0] in project:
+                            bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {name}")
+    assert bad == []

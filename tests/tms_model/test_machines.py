@@ -9,7 +9,8 @@ import pytest
 
 from tms_common.config import config_path
 from tms_common.errors import ConfigError
-from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR, load_machine, parse_machine
+from tms_model.excavator.kinematics import load_kinematics, site_excavator_kind
+from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR, PARSERS, TYPES, load_machine, parse_machine
 
 
 def test_zx200_description() -> None:
@@ -151,3 +152,18 @@ def test_blade_and_can_section_errors(tmp_path: Path) -> None:
     path = _copy_with(tmp_path, "can: {dbc: dozer_com3.dbc}", "can: {dbc: dozer_com3.dbc, bus: x}", "d37pxi.yaml")
     with pytest.raises(ConfigError, match=r"d37pxi.yaml:\d+: can.bus: unknown key"):
         parse_machine(path)
+    path = _copy_with(tmp_path, "can: {dbc: dozer_com3.dbc}", "", "d37pxi.yaml")
+    with pytest.raises(ConfigError, match=r"d37pxi.yaml:\d+: can: missing required key"):
+        parse_machine(path)
+
+
+def test_types_are_the_parser_table() -> None:
+    assert TYPES == tuple(PARSERS) == (EXCAVATOR, CRAWLER_DUMP, DOZER)
+    kinds = [p.stem for p in config_path("machines", "zx200.yaml").parent.glob("*.yaml")]
+    assert {load_machine(k).type for k in kinds} == set(TYPES)
+
+
+def test_default_kinematics_are_the_site_first_excavator() -> None:
+    kind = site_excavator_kind()
+    assert load_machine(kind).type == EXCAVATOR
+    assert load_kinematics().kind == kind

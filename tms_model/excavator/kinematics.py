@@ -30,8 +30,9 @@ import pinocchio as pin
 from tms_common.errors import ConfigError
 from tms_model.excavator.codes import InvalidGoalError, JointLimitError, OutOfReachError
 from tms_model.machines import EXCAVATOR, Machine, load_machine
+from tms_model.site import load_site
 
-__all__ = ["JOINTS", "ExcavatorKinematics", "JointLimits", "load_kinematics"]
+__all__ = ["JOINTS", "ExcavatorKinematics", "JointLimits", "load_kinematics", "site_excavator_kind"]
 
 # The front joints of every excavator kind, in COM3 bus / joint_states order (the names the URDF and the
 # COM3 relay use; a kind's YAML lists them in this order under front_joints).
@@ -59,7 +60,7 @@ class ExcavatorKinematics:
     """Pinocchio model of an excavator front plus closed-form IK; joint order is the kind's front joints.
 
     Args:
-        machine: the kind's description (``load_machine("zx200")``); must be an excavator.
+        machine: the kind's description (``load_machine(kind)``); must be an excavator.
     """
 
     def __init__(self, machine: Machine) -> None:
@@ -283,9 +284,19 @@ class ExcavatorKinematics:
         return pos, theta_w
 
 
-def load_kinematics(kind: str = "zx200", path: str | Path | None = None) -> ExcavatorKinematics:
-    """A new model of excavator ``kind`` (from ``config/machines/<kind>.yaml`` or ``path``).
+def load_kinematics(kind: str | None = None, path: str | Path | None = None) -> ExcavatorKinematics:
+    """A new model of excavator ``kind`` (from ``config/machines/<kind>.yaml`` or ``path``); no kind: the kind of
+    the site's first excavator (:func:`site_excavator_kind`).
 
     The description is parsed once per file; the pinocchio data is per instance (not thread-safe to share).
     """
-    return ExcavatorKinematics(load_machine(kind, path))
+    return ExcavatorKinematics(load_machine(kind or site_excavator_kind(), path))
+
+
+def site_excavator_kind() -> str:
+    """The kind of the first machine of ``config/site.yaml`` ``machines:`` whose description is an excavator."""
+    site = load_site()
+    for machine in site.machines.values():
+        if load_machine(machine.kind).type == EXCAVATOR:
+            return machine.kind
+    raise ConfigError(f"{site.source}: machines: no excavator on the site")
