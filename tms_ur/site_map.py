@@ -86,7 +86,7 @@ def machine_colors(machines: Sequence[Machine]) -> dict[str, str]:
 
 
 def _label(machine: Machine) -> str:
-    """``ic120_1 (ic120)`` for a machine whose name is not its kind, else the name."""
+    """``<name> (<kind>)`` for a machine whose name is not its kind, else the name."""
     return machine.model_name if machine.model_name == machine.kind else f"{machine.model_name} ({machine.kind})"
 
 

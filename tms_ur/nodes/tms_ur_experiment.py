@@ -18,8 +18,9 @@ comes from ``/sim/truth/<name>/soil`` and its pose from ``/sim/truth/<name>/pose
 carrier the soil it moved (load passes: rises of the carriers' landed totals; localisation error: each carrier's
 ``/<name>/odometry/global`` against its truth), the smallest distance between two carriers near the loading point
 (``loading_point``, a site point, and ``near_radius_m``) and each task's machine and end state. ``loads`` > 0
-ends the work after that many vessel loads (the ZX200 tree counts them in the record's ``LOAD_COUNT``) instead of
-``cycles`` dumps: a carrier queues again as soon as it has dumped, so counting dumps would let one more in.
+ends the work after that many vessel loads (the excavator's tree counts them in the record's ``LOAD_COUNT``)
+instead of ``cycles`` dumps: a carrier queues again as soon as it has dumped, so counting dumps would let one more
+in.
 
 Any list of machines (``machines``, names; default the site's list, ``machines`` of config/site.yaml): per machine
 ``/sim/truth/<name>/pose`` (its path) and ``/<name>/odometry/global`` (the estimate, for the localisation error of
