@@ -48,6 +48,12 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
 
+from tms_common.dds import use_platform_profiles
+from tms_common.errors import TmsError
+from tms_common.node import make_executor, signals_to, uses_wait_set
+from tms_common.qos_events import defer_qos_incompatibility_events
+from tms_common.sim_clock import on_simulated_time, relay_clock, share_time_source
+
 __all__ = ["node_class", "main"]
 
 _SETTLE_S = 0.2  # [s] spin left to the container after a node's stop hook, before the node is destroyed
@@ -128,8 +134,6 @@ class _CallSoon:
 
 def _signals_to(guard_holder: list[Any]):  # noqa: ANN202
     """SIGINT/SIGTERM trigger the stop guard condition once it exists. No callback is cut in half."""
-    from tms_common.node import signals_to
-
     def trigger() -> None:
         if guard_holder:
             guard_holder[0].trigger()
@@ -146,12 +150,6 @@ def run_container(name: str, members: list[_Member]) -> int:
     from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
-
-    from tms_common.dds import use_platform_profiles
-    from tms_common.errors import TmsError
-    from tms_common.node import make_executor, uses_wait_set
-    from tms_common.qos_events import defer_qos_incompatibility_events
-    from tms_common.sim_clock import on_simulated_time, relay_clock, share_time_source
 
     logging.basicConfig(level=logging.WARNING, format=f"[{name}] %(levelname)s %(name)s: %(message)s")
     use_platform_profiles()
@@ -257,8 +255,6 @@ def _exit_through_executor(node: Any, executor: Any) -> None:
 
 def _stop_members(built: list[_Member], executor: Any, relay: Any, relay_owner: _Member | None) -> None:
     """Stop the nodes last-built first: stop hook (spinning), settle, leave the executor, destroy."""
-    from tms_common.node import uses_wait_set
-
     events = executor is not None and not uses_wait_set(executor)
     for member in reversed(built):
         node = member.node
@@ -309,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     exit_code = main()
     # Every node is destroyed and the context shut down; what is left is interpreter teardown, where the garbage
-    # collection of rclpy's remaining handles was seen to hang (a stopped ic120_pc container sat "Garbage-collecting"
+    # collection of rclpy's remaining handles was seen to hang (a stopped machine-PC container sat "Garbage-collecting"
     # until SIGTERM). Nothing needs finalising, so leave at once.
     sys.stdout.flush()
     sys.stderr.flush()

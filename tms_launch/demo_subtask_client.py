@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 import time
 
+from tms_common.dds import use_platform_profiles
+
 
 def main() -> int:
     """Send one goal to ``--action NAME`` (default demo_subtask); ``--cancel-after S`` cancels it.
@@ -26,8 +28,6 @@ def main() -> int:
     parser.add_argument("--cancel-after", type=float, default=None)
     parser.add_argument("--timeout", type=float, default=20.0)
     opts, ros_args = parser.parse_known_args()
-    from tms_common.dds import use_platform_profiles
-
     use_platform_profiles()
     rclpy.init(args=[sys.argv[0], *ros_args])
     node = rclpy.create_node("demo_subtask_client")

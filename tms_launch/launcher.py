@@ -41,6 +41,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tms_common.dds import use_platform_profiles
 from tms_common.errors import ConfigError
 from tms_launch.launch_file import (
     LAYOUT_ENV,
@@ -148,8 +149,6 @@ class Launcher:
         if self._graph_node is None:
             import rclpy
             from rclpy.signals import SignalHandlerOptions
-
-            from tms_common.dds import use_platform_profiles
 
             use_platform_profiles()
             # The launcher owns SIGINT/SIGTERM (to stop its children in order), not rclpy.
