@@ -59,6 +59,54 @@ def test_buttons_publish_start_cancel_confirm_and_escape_is_emergency(procs, ros
     assert len(got["start"]) == 1
 
 
+@pytest.mark.parametrize("machines", [["zx200", "ic120"], ["ic120", "ic120_1", "mst110cr", "zx200"]],
+                         ids=["paper", "three_carriers_and_excavator"])
+def test_the_page_shows_the_machines_the_server_names(procs, ros_node, browser_page, tmp_path, machines):
+    """The machine list is a node parameter; the page draws and describes whatever machines the snapshot names:
+    each one's pose, the excavator's arm, each carrier's vessel (the MST's upper body too) and load."""
+    from geometry_msgs.msg import PoseStamped
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    port = free_port()
+    panel = procs([executable("tms_ur", "tms_ur_panel"), "--ros-args", "-p", f"port:={port}",
+                   "-p", f"db_path:={tmp_path / 'db'}", "-p", f"machines:={machines!r}".replace("'", '"')])
+    assert panel.wait_for("serving http://127.0.0.1", timeout=60), panel.output
+    poses = {m: ros_node.create_publisher(PoseStamped, f"/sim/truth/{m}/pose", 10) for m in machines}
+    joints = {m: ros_node.create_publisher(JointState, f"/{m}/joint_states", 10) for m in machines}
+    soil = {m: ros_node.create_publisher(Float64MultiArray, f"/sim/truth/{m}/soil", 10) for m in machines}
+    assert _spin_until(ros_node, lambda: all(p.get_subscription_count() > 0 for p in poses.values()), 30)
+    page = browser_page
+    page.goto(f"http://127.0.0.1:{port}/")
+    page.wait_for_selector("#conn.ok", timeout=20000)
+
+    def publish() -> None:
+        for i, m in enumerate(machines):
+            pose = PoseStamped()
+            pose.pose.position.x, pose.pose.orientation.w = 5.0 * i, 1.0
+            poses[m].publish(pose)
+            js = JointState(name=["swing_joint", "boom_joint", "arm_joint", "bucket_joint", "vessel_joint",
+                                  "rotate_joint"], position=[0.3, -0.5, 1.2, 0.4, -0.2, 1.5])
+            joints[m].publish(js)
+            load = Float64MultiArray(data=[0.5 * i, 0.5 * i, 0.0])
+            load.layout.dim = [MultiArrayDimension(label="vessel,loaded,dumped", size=3, stride=3)]
+            soil[m].publish(load)
+
+    def shown() -> bool:
+        publish()
+        return all(page.query_selector(f"#pose-{m}") and page.query_selector(f"#state-{m}") for m in machines)
+
+    assert _spin_until(ros_node, shown, 30), page.inner_text("body")
+    assert "zx200 swing 0.30 rad" in page.inner_text("#state-zx200")
+    for m in machines:
+        if m != "zx200":
+            assert page.inner_text(f"#state-{m}").startswith(f"{m} vessel -0.20 rad"), page.inner_text(f"#state-{m}")
+            assert "load" in page.inner_text(f"#state-{m}")
+    if "mst110cr" in machines:  # its vessel rides a rotating upper body
+        assert "upper body 1.50 rad" in page.inner_text("#state-mst110cr")
+    assert "upper body" not in page.inner_text(f"#state-{machines[1]}")
+
+
 @pytest.fixture
 def netns_client():
     """A second host in a network namespace (veth 10.231.x.0/24); yields (host_ip, run_in_ns)."""
