@@ -1,7 +1,7 @@
-"""zx200 fixtures: the whole arm stack in separate processes, driven over ROS and COM3 CAN.
+"""The whole ZX200 arm stack in separate processes, driven over ROS and COM3 CAN (fixture and helpers).
 
 ``arm_stack(ic120_pose=...)`` starts ``sim_plant`` (MuJoCo plant, CAN only), ``com3_bridge`` (machine
-zx200), ``zx200_arm_controller`` and ``zx200_planner`` on this test's ROS domain and its own
+zx200), ``excavator_arm_controller`` and ``zx200_planner`` on this test's ROS domain and its own
 udp_multicast group/port (or vcan0 with ``TMS_CAN_TEST_BACKEND=socketcan``), all with ``use_sim_time``.
 The returned :class:`ArmStack` sends planning goals and reads the plant's truth (bucket tip, soil).
 """
@@ -201,11 +201,11 @@ def arm_stack(procs, domain: int, ros_node, tmp_path: Path) -> Iterator[Callable
         assert sim.wait_for("sim_plant: running", 90), sim.output
         bridge = procs(bridge_args, name="com3_bridge")
         assert bridge.wait_for("com3_bridge ready", 60), bridge.output
-        ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200",
-                     "-p", "use_sim_time:=true", "-p", f"rate_hz:={rate_hz}"], name="zx200_arm_controller")
+        ctl = procs([str(executable("tms_rc", "excavator_arm_controller")), "--ros-args", "-r", "__ns:=/zx200",
+                     "-p", "use_sim_time:=true", "-p", f"rate_hz:={rate_hz}"], name="excavator_arm_controller")
         planner = procs([str(executable("tms_if_opera", "zx200_planner")), "--ros-args", "-r", "__ns:=/zx200",
                          "-p", "use_sim_time:=true", *planner_args], name="zx200_planner")
-        assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+        assert ctl.wait_for("excavator_arm_controller ready", 60), ctl.output
         assert planner.wait_for("zx200_planner ready", 60), planner.output
         stack = ArmStack(ros_node)
         stack.procs = {"sim": sim, "bridge": bridge, "controller": ctl, "planner": planner}

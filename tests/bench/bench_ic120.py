@@ -29,8 +29,8 @@ from tests.bench.stats import percentile, summary_ms  # noqa: E402
 
 
 def bench_planner() -> None:
-    from tms_rp.ic120.costmap import Costmap, Footprint, OccupancyMap
-    from tms_rp.ic120.planner import GridPlanner
+    from tms_rp.tracked.costmap import Costmap, Footprint, OccupancyMap
+    from tms_rp.tracked.planner import GridPlanner
 
     rng = np.random.default_rng(0)
     g = np.zeros((2000, 2000), np.int8)
@@ -59,8 +59,8 @@ def bench_planner() -> None:
 
 
 def bench_controller() -> None:
-    from tms_rp.ic120.config import load_nav_config
-    from tms_rp.ic120.controller import TrackedPurePursuit
+    from tms_rp.tracked.config import load_nav_config
+    from tms_rp.tracked.controller import TrackedPurePursuit
 
     cfg = load_nav_config()
     ctl = TrackedPurePursuit(cfg.controller, cfg.limits)
@@ -82,9 +82,9 @@ def bench_controller() -> None:
 
 
 def bench_ekf() -> None:
-    from tms_rp.ic120.ekf import Ic120Ekf
+    from tms_rp.tracked.ekf import Ic120Ekf
 
-    from tests.ic120.synth import simulate
+    from tests.tms_rp.synth import simulate
 
     samples = simulate(120.0)
     ekf = Ic120Ekf()
@@ -103,7 +103,7 @@ def bench_ekf() -> None:
     print(f"EKF GNSS update (gated): {summary_ms(t_gnss)}")
     print(f"EKF azimuth update: {summary_ms(t_az)}")
     # accuracy on synthetic data (same cases as tests/ic120/test_localization_core.py)
-    from tests.ic120.test_localization_core import _run
+    from tests.tms_rp.test_localization_core import _run
 
     _, err, _, _ = _run(simulate(120.0, gnss_sigma=0.02, slip=0.04))
     print(f"synthetic localisation RMS (2 cm GNSS, 4 % slip): {math.sqrt(float(np.mean(err[10:] ** 2))) * 100:.2f} cm")
@@ -115,11 +115,11 @@ def bench_ekf() -> None:
 
 def _ekf_loop_route(seed: int):  # noqa: ANN202
     """One paper cycle with the EKF in the loop on the kinematic model; returns final errors and collisions."""
-    from tms_rp.ic120.config import load_nav_config
-    from tms_rp.ic120.ekf import Ic120Ekf
+    from tms_rp.tracked.config import load_nav_config
+    from tms_rp.tracked.ekf import Ic120Ekf
 
-    from tests.ic120.harness import paper_legs, site_points
-    from tests.ic120.kinematics import TrackedModel
+    from tests.tms_rp.harness import paper_legs, site_points
+    from tests.tms_rp.kinematics import TrackedModel
 
     rng = np.random.default_rng(seed)
     cfg = load_nav_config()
@@ -242,12 +242,12 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import NavSatFix
-    from tms_rp.ic120.config import load_nav_config
+    from tms_rp.tracked.config import load_nav_config
 
     from nav2_msgs.action import NavigateThroughPoses
-    from tests.ic120.harness import paper_legs, site_points
-    from tests.ic120.rosutil import ActionCall, Truth, pose_stamped, spin_for, spin_until, yaw_of
-    from tests.ic120.stack import start_ours, start_plant_and_bridge
+    from tests.tms_rp.harness import paper_legs, site_points
+    from tests.rosutil import ActionCall, Truth, pose_stamped, spin_for, spin_until, yaw_of
+    from tests.tracked_stack import start_ours, start_plant_and_bridge
     from tests.rosproc import Proc, isolated_domain, ros_env
 
     pts = site_points()

@@ -37,7 +37,7 @@ from tms_common.config import config_path
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.geometry import Pose2D
-from tms_rc.zx200.controller import ArmController, load_controller_config
+from tms_rc.excavator.controller import ArmController, load_controller_config
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp.config import load_sensing_config
 from tms_sp.heightgrid import HeightGrid
@@ -70,10 +70,10 @@ class PassRig:
     def __init__(self) -> None:
         self.plant = Plant(load_plant(config_path("sim", "paper_plant.yaml")))
         self.kin = load_kinematics()
-        cfg = load_controller_config()
+        cfg = load_controller_config(self.kin.machine)
         cfg.rate_hz = RATE_HZ
         self.ctl_cfg = cfg
-        # one controller for every action, as zx200_arm_controller keeps one: a goal that ends at a
+        # one controller for every action, as excavator_arm_controller keeps one: a goal that ends at a
         # pass-through point leaves commands in flight, and the next goal starts from their prediction
         self.ctl = ArmController(self.kin, cfg)
         self.planner = Zx200Planner(self.kin, load_planner_config(), ground_min_z=cfg.ground_min_z)

@@ -1,5 +1,5 @@
 """ZX200 arm benchmark: (1) the pure core against the first-order-lag + dead-time model, (2) the whole
-stack (sim_plant MuJoCo + com3_bridge + zx200_arm_controller + zx200_planner, separate processes, COM3
+stack (sim_plant MuJoCo + com3_bridge + excavator_arm_controller + zx200_planner, separate processes, COM3
 CAN over udp_multicast) with goals sent over ROS and accuracy from the plant's truth.
 
 Prints for each: success rate of 100 random reachable targets of each kind (joint / pose / position+theta_w)
@@ -29,8 +29,8 @@ from tests.bench.stats import summary_ms
 from tms_model.excavator import codes
 from tms_model.excavator.codes import PlanningError
 from tms_model.excavator.kinematics import load_kinematics
-from tms_rc.zx200.controller import ArmController, load_controller_config
-from tms_rc.zx200.plant import LagDeadTimePlant
+from tms_rc.excavator.controller import ArmController, load_controller_config
+from tms_rc.excavator.plant import LagDeadTimePlant
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 #: at most this many control steps of QP problems are recorded for the solve-alone replay
@@ -120,7 +120,7 @@ def _run(kin, cfg, q0, targets, solve_times, max_steps=8000, cpu_times=None, rec
 
 def core() -> None:
     kin = load_kinematics()
-    cfg = load_controller_config()
+    cfg = load_controller_config(kin.machine)
     planner = Zx200Planner(kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
     n = int(os.environ.get("ZX200_BENCH_N", "100"))
     rng = np.random.default_rng(7)
@@ -211,11 +211,11 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
 
     from com3_msgs.msg import JointCmd
     from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
-    from tests.zx200.conftest import ArmStack
-    from tests.zx200.test_plant_integration import joint_goal, pose_goal, pwa_goal
+    from tests.arm_stack import ArmStack
+    from tests.tms_if_opera.test_plant_integration import joint_goal, pose_goal, pwa_goal
 
     kin = load_kinematics()
-    cfg = load_controller_config()
+    cfg = load_controller_config(kin.machine)
     n = int(os.environ.get("ZX200_BENCH_PLANT_N", os.environ.get("ZX200_BENCH_N", "100")))
     speed = float(os.environ.get("ZX200_BENCH_SPEED", "1.0"))
     rng = np.random.default_rng(11)
@@ -235,10 +235,10 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
                                "-p", "use_sim_time:=true"], env, name="bridge"))
             # the planner's waits are wall time; on /clock it would wake every plant step for nothing (as in
             # config/launch/paper_experiment.yaml)
-            for pkg, exe, sim_time in (("tms_rc", "zx200_arm_controller", "true"), ("tms_if_opera", "zx200_planner", "false")):
+            for pkg, exe, sim_time in (("tms_rc", "excavator_arm_controller", "true"), ("tms_if_opera", "zx200_planner", "false")):
                 procs.append(Proc([str(executable(pkg, exe)), "--ros-args", "-r", "__ns:=/zx200", "-p", f"use_sim_time:={sim_time}"],
                                   env, name=exe))
-            for p, text in zip(procs[1:], ("com3_bridge ready", "zx200_arm_controller ready", "zx200_planner ready"), strict=True):
+            for p, text in zip(procs[1:], ("com3_bridge ready", "excavator_arm_controller ready", "zx200_planner ready"), strict=True):
                 assert p.wait_for(text, 60), p.output
             os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
             ctx = Context()

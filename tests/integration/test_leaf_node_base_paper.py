@@ -78,7 +78,7 @@ def test_leaf_node_base_client_cancels_an_excavation_and_the_stop_is_confirmed(p
         assert rest is not None and rest <= REST_WITHIN_S, f"arm at rest {rest} s after the cancel\n{tail()}"
         # confirmed: reported CANCELED only once the arm is at rest by the controller's own criterion (its
         # rest_speed on the measured joints), and from the truth's rest on nothing moves
-        rest_speed = load_yaml(config_path("tms_rc", "zx200_arm_controller.yaml"))[0]["rest_speed"]
+        rest_speed = load_yaml(config_path("tms_rc", "excavator_arm_controller.yaml"))[0]["rest_speed"]
         assert after["zx_joint"] < rest_speed, (after, rest_speed)
         assert max_speed(series, t_cancel + rest, t_end)["zx_joint"] < REST_JOINT
         assert any(f.startswith("CANCELED: canceled; planning /zx200/tms_rp_zx200_excavate_simple confirmed stop")

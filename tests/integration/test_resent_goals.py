@@ -87,7 +87,7 @@ def test_twenty_resent_change_pose_goals_to_the_held_pose_all_end_with_a_result(
         probe.wait(lambda: len(subtask) >= RESENDS and len(planning) >= RESENDS, 5.0)
         with lock:
             results, plans = list(subtask), list(planning)
-        goals = [ln for ln in stack["zx200/zx200_arm_controller"].output.splitlines() if "goal ended" in ln]
+        goals = [ln for ln in stack["zx200/excavator_arm_controller"].output.splitlines() if "goal ended" in ln]
         span = results[-1][0] - results[0][0] if results else 0.0
         print(f"\n{len(results)} change_pose results re-sent to the held pose in {ended - started:.1f} s of wall time "
               f"from the start (first to last result {span:.1f} s; plant at {SPEED:g}x); task {state}; "

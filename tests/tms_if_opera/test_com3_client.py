@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from tests.rosproc import executable
-from tests.zx200.conftest import _zx_bus
+from tests.arm_stack import _zx_bus
 
 pytestmark = [pytest.mark.integration]
 

@@ -1,6 +1,6 @@
 """The ZX200 arm stack in the MuJoCo plant over COM3 CAN, every node its own process.
 
-sim_plant (CAN only) <-> com3_bridge (zx200) <-> zx200_arm_controller <-> zx200_planner <- this test.
+sim_plant (CAN only) <-> com3_bridge (zx200) <-> excavator_arm_controller <-> zx200_planner <- this test.
 Accuracy is checked against the plant's ground truth (``/sim/truth/zx200/bucket_tip``, ZX200 base at
 the map origin, see config/site.yaml ``points.zx200_base``) and soil against ``/sim/truth/soil``.
 """

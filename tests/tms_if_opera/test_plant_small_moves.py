@@ -4,7 +4,7 @@ The paper demo's ZX200 excavate failed "approach: segment 1 not reached within 2
 swing_joint +0.0079 rad": the controller's integrator wound up during the move (dead-time tracking
 lag) and held the swing millimetres..centimetres off, and late sim-time ticks corrupted the Smith
 prediction. Here: sim_plant (paper_plant.yaml, speed 3, /clock every 20 ms) + com3_bridge (20 ms
-joint_states) + zx200_arm_controller at 50 Hz + zx200_planner, every one its own process; small swing
+joint_states) + excavator_arm_controller at 50 Hz + zx200_planner, every one its own process; small swing
 moves must END SUCCEEDED with the plant's truth tip within the controller's 2 cm goal tolerance, and a
 two-point change_pose passes its first point as a via point.
 """
@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from tests.zx200.test_plant_integration import SUCCEEDED, joint_goal, settled_tip
+from tests.tms_if_opera.test_plant_integration import SUCCEEDED, joint_goal, settled_tip
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import load_kinematics
 

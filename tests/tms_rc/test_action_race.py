@@ -7,7 +7,7 @@ the goal future never completes (the controller ran the goal and went idle; the 
 Here the window is forced deterministically: the client handle's send blocks until an executor thread
 has *taken* the goal response. The stock ActionClient then loses the response (what the paper runs hit,
 shown so this test fails if the mechanism is ever misdiagnosed); RaceFreeActionClient must not.
-The server is the real ``zx200_arm_controller`` process, fed joint_states by this test.
+The server is the real ``excavator_arm_controller`` process, fed joint_states by this test.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import pytest
 
 from tests.action_handle import ClientHandleProxy
 from tests.rosproc import executable
-from tests.zx200.conftest import joint_states_held_at
+from tests.arm_stack import joint_states_held_at
 
 pytestmark = pytest.mark.integration
 
@@ -84,9 +84,9 @@ def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node)
 
     from tms_common.action_client import RaceFreeActionClient
 
-    ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
-                name="zx200_arm_controller")
-    assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+    ctl = procs([str(executable("tms_rc", "excavator_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
+                name="excavator_arm_controller")
+    assert ctl.wait_for("excavator_arm_controller ready", 60), ctl.output
     # joint_states at the goal pose (the controller holds it: the goal ends SUCCESS after settling)
     with joint_states_held_at(rclpy.create_node("js_feed", context=ros_node.context), Q):
         # the response is taken before send returns: it is handled at once or never (10 s is plenty)

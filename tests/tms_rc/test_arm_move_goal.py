@@ -1,6 +1,6 @@
 """The controller's internal action ``arm_controller/move`` (Zx200ArmMove): one goal of labelled segments.
 
-The real ``zx200_arm_controller`` process, fed joint_states by this test (the arm "holds" pose Q):
+The real ``excavator_arm_controller`` process, fed joint_states by this test (the arm "holds" pose Q):
 a malformed segment rejects the whole goal before any motion, naming the segment; a goal of several
 segments runs them in order as one motion and its feedback names the running segment.
 """
@@ -12,7 +12,7 @@ import time
 import pytest
 
 from tests.rosproc import executable
-from tests.zx200.conftest import joint_states_held_at
+from tests.arm_stack import joint_states_held_at
 from tms_model.excavator import codes
 
 pytestmark = pytest.mark.integration
@@ -28,9 +28,9 @@ def controller(procs, ros_node):  # noqa: ANN001, ANN201
 
     from com3_msgs.msg import JointCmd
 
-    ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
-                name="zx200_arm_controller")
-    assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+    ctl = procs([str(executable("tms_rc", "excavator_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
+                name="excavator_arm_controller")
+    assert ctl.wait_for("excavator_arm_controller ready", 60), ctl.output
     node = rclpy.create_node("arm_move_probe", context=ros_node.context)
     cmds: list[list[float]] = []
     node.create_subscription(JointCmd, "/zx200/front_cmd", lambda m: cmds.append(list(m.velocity)), 100)
@@ -119,9 +119,9 @@ def test_a_goal_sent_before_the_first_joint_states_waits_for_them(procs, ros_nod
 
     from tms_msg.action import Zx200ArmMove
 
-    ctl = procs([str(executable("tms_rc", "zx200_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
-                name="zx200_arm_controller")
-    assert ctl.wait_for("zx200_arm_controller ready", 60), ctl.output
+    ctl = procs([str(executable("tms_rc", "excavator_arm_controller")), "--ros-args", "-r", "__ns:=/zx200"],
+                name="excavator_arm_controller")
+    assert ctl.wait_for("excavator_arm_controller ready", 60), ctl.output
     node = rclpy.create_node("arm_move_early_probe", context=ros_node.context)
     executor = SingleThreadedExecutor(context=ros_node.context)
     executor.add_node(node)

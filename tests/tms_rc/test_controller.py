@@ -10,8 +10,8 @@ import pytest
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
-from tms_rc.zx200.controller import ArmController, load_controller_config
-from tms_rc.zx200.plant import LagDeadTimePlant
+from tms_rc.excavator.controller import ArmController, load_controller_config
+from tms_rc.excavator.plant import LagDeadTimePlant
 
 
 @pytest.fixture(scope="module")
@@ -20,8 +20,8 @@ def kin():
 
 
 @pytest.fixture(scope="module")
-def cfg():
-    return load_controller_config()
+def cfg(kin):
+    return load_controller_config(kin.machine)
 
 
 def run(kin, cfg, q0, targets, *, steps=4000, stop_at=None, plant_cfg=None):

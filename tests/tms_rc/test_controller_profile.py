@@ -10,8 +10,8 @@ import pytest
 
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import JointTarget
-from tms_rc.zx200.controller import ArmController, TrapezoidSegment, load_controller_config
-from tms_rc.zx200.plant import LagDeadTimePlant
+from tms_rc.excavator.controller import ArmController, TrapezoidSegment, load_controller_config
+from tms_rc.excavator.plant import LagDeadTimePlant
 
 
 def test_trapezoid_timing_is_triangular_below_top_speed_and_trapezoidal_above() -> None:
@@ -50,7 +50,7 @@ def test_predictor_with_velocities_knows_where_a_braking_swing_stops() -> None:
     # still moves by the commands in its dead time and by what its lag holds (lag x velocity). The
     # prediction with measured velocities says where it stops; without, the lag counts as dead time.
     kin = load_kinematics()
-    cfg = load_controller_config()
+    cfg = load_controller_config(kin.machine)
     ctl = ArmController(kin, cfg)
     q0 = kin.home
     plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q0)

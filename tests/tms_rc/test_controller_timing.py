@@ -23,8 +23,8 @@ from tms_common.errors import ConfigError
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import JointTarget
-from tms_rc.zx200.controller import ArmController, load_controller_config
-from tms_rc.zx200.plant import LagDeadTimePlant
+from tms_rc.excavator.controller import ArmController, load_controller_config, load_controller_settings
+from tms_rc.excavator.plant import LagDeadTimePlant
 
 PLANT_DT = 0.01  # [s] the MuJoCo plant's step
 # The MuJoCo plant's hydraulics (config/machines/zx200.yaml) + CAN/DDS transport.
@@ -38,9 +38,9 @@ def kin():
 
 
 @pytest.fixture(scope="module")
-def cfg50():
+def cfg50(kin):
     """The paper launch's controller: 50 Hz, the repository's YAML otherwise."""
-    return dataclasses.replace(load_controller_config(), rate_hz=50.0)
+    return dataclasses.replace(load_controller_config(kin.machine), rate_hz=50.0)
 
 
 def run_timed(kin, cfg, q0, targets, ticks, *, hold=1, max_s=40.0, stamps=True):
@@ -153,7 +153,7 @@ def _stuck_swing_run(kin, cfg, targets, q0):
 def test_via_segments_use_the_via_tolerance(kin):
     # goal tolerance pinned at 2 cm: with the swing stuck, the prediction keeps the swing commands in flight
     # that never act, and this test is about the via tolerance, not about how close that prediction gets
-    cfg = dataclasses.replace(load_controller_config(), segment_timeout_margin_s=3.0, stop_timeout_s=3.0,
+    cfg = dataclasses.replace(load_controller_config(kin.machine), segment_timeout_margin_s=3.0, stop_timeout_s=3.0,
                               goal_tolerance_m=0.02)
     assert cfg.via_tolerance_m == 0.05 and cfg.via_tolerance_rad == 0.05  # the YAML's values
     q0 = np.array(kin.home, dtype=float)
@@ -174,17 +174,17 @@ def test_via_segments_use_the_via_tolerance(kin):
 def test_via_tolerance_must_be_positive(tmp_path):
     from tms_common.config import config_path
 
-    text = config_path("tms_rc", "zx200_arm_controller.yaml").read_text()
+    text = config_path("tms_rc", "excavator_arm_controller.yaml").read_text()
     bad = tmp_path / "ctl.yaml"
     bad.write_text(text.replace("via_tolerance_m: 0.05", "via_tolerance_m: -0.05"))
-    with pytest.raises(ConfigError, match="via_tolerance_m"):
-        load_controller_config(bad)
+    with pytest.raises(ConfigError, match=r"ctl.yaml:\d+: via_tolerance_m: must be >= "):
+        load_controller_settings(bad)
 
 
 def test_a_target_marked_via_uses_the_via_tolerance_alone(kin):
     # The planner marks excavate's lift and release's open "via" (Zx200ArmSegment.via on the internal
     # action): the next goal goes on from them, so even as a run's last segment it is held to via_tolerance_*.
-    cfg = dataclasses.replace(load_controller_config(), segment_timeout_margin_s=3.0, stop_timeout_s=3.0)
+    cfg = dataclasses.replace(load_controller_config(kin.machine), segment_timeout_margin_s=3.0, stop_timeout_s=3.0)
     q0 = np.array(kin.home, dtype=float)
     reach = float(np.linalg.norm(kin.tip_position(q0)[:2] - kin.swing_origin[:2]))
     via = q0.copy()
@@ -230,22 +230,22 @@ def test_joint_speed_scale_is_one_number_or_per_joint_and_paces_each_joint(tmp_p
 
     from tms_common.config import config_path
 
-    text = config_path("tms_rc", "zx200_arm_controller.yaml").read_text()
+    text = config_path("tms_rc", "excavator_arm_controller.yaml").read_text()
     line = re.compile(r"^joint_speed_scale:.*$", re.M)
     path = tmp_path / "ctl.yaml"
     path.write_text(line.sub("joint_speed_scale: 0.5", text))
-    assert load_controller_config(path).joint_speed_scale.tolist() == [0.5] * 4
+    assert load_controller_config(kin.machine, path).joint_speed_scale.tolist() == [0.5] * 4
     path.write_text(line.sub("joint_speed_scale: {swing_joint: 1.2, boom_joint: 0.8, arm_joint: 0.8, bucket_joint: 0.8}", text))
-    with pytest.raises(ConfigError, match="joint_speed_scale must be <= 1"):
-        load_controller_config(path)
+    with pytest.raises(ConfigError, match="joint_speed_scale: expected a fraction in"):
+        load_controller_settings(path)
     path.write_text(line.sub("joint_speed_scale: {swing_joint: 0.9, boom_joint: 0.8}", text))
-    with pytest.raises(ConfigError, match="joint_speed_scale: missing joint 'arm_joint'"):
-        load_controller_config(path)
+    with pytest.raises(ConfigError, match="joint_speed_scale: expected a value for each of"):
+        load_controller_settings(path)
     # A swing-only move is paced by the swing's own scale: its time goes as 1/sqrt(scale) (triangular profile).
-    cfg = load_controller_config()
+    cfg = load_controller_config(kin.machine)
     times = []
     for swing_scale in (0.8, 0.9):
-        cfg.joint_speed_scale = np.array([swing_scale, 0.8, 0.8, 0.8])
+        cfg = dataclasses.replace(cfg, joint_speed_scale=np.array([swing_scale, 0.8, 0.8, 0.8]))
         dur, _ = ArmController(kin, cfg)._profile(np.array([1.5, 0.0, 0.0, 0.0]), 1.0)
         times.append(dur)
     assert times[1] == pytest.approx(times[0] * (0.8 / 0.9) ** 0.5, rel=1e-6), times

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tms_rc.zx200.hqp import HierarchicalQP, LevelSpec
+from tms_rc.excavator.hqp import HierarchicalQP, LevelSpec
 
 BOX = (np.vstack([np.eye(2), -np.eye(2)]), np.ones(4))  # |x_i| <= 1
 

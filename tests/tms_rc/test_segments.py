@@ -1,4 +1,4 @@
-"""tms_rc.zx200.segments: an arm_controller/move goal's segments -> controller targets (no ROS)."""
+"""tms_rc.excavator.segments: an arm_controller/move goal's segments -> controller targets (no ROS)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tms_model.excavator.targets import CartesianTarget, JointTarget
-from tms_rc.zx200.segments import CARTESIAN, JOINT, targets_from_segments
+from tms_rc.excavator.segments import CARTESIAN, JOINT, targets_from_segments
 
 
 def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5), theta_w=1.0, scale=0.0, via=False):  # noqa: ANN001, ANN201

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tms_rc.zx200.tick_stats import TickStats
+from tms_rc.excavator.tick_stats import TickStats
 
 
 def test_late_ticks_longest_gap_and_measurement_age_are_counted():
@@ -30,14 +30,14 @@ def test_no_stamp_and_a_bad_period():
 
 
 def test_segment_spans_of_a_goal_that_ended_before_any_tick_read_at_once():
-    from tms_rc.zx200.tick_stats import SegmentSpans
+    from tms_rc.excavator.tick_stats import SegmentSpans
 
     # a goal to the pose already held can end on its first tick, a preempted one before it: no span recorded
     assert SegmentSpans().summary(12.0) == "at once"
 
 
 def test_segment_spans_end_where_the_next_begins_and_repeat_labels_extend_a_span():
-    from tms_rc.zx200.tick_stats import SegmentSpans
+    from tms_rc.excavator.tick_stats import SegmentSpans
 
     spans = SegmentSpans()
     for label, t in (("approach", 1.0), ("approach", 1.5), ("penetrate", 3.0), ("stopping", 4.0)):

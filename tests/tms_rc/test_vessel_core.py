@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from tms_rc.ic120.vessel import VesselController, VesselError, VesselParams
+from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams
 
 
 def _run(ctl, angle, target_rate=0.3, t_end=20.0, dt=0.05, cancel_at=None):

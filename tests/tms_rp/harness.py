@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 
-from tms_rp.ic120.navigator import NavigatorCore
+from tms_rp.tracked.navigator import NavigatorCore
 
-from tests.ic120.kinematics import TrackedModel
+from tests.tms_rp.kinematics import TrackedModel
 from tms_model.site import load_site
 
 

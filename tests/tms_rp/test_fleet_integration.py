@@ -16,14 +16,14 @@ import time
 import pytest
 import yaml
 
-from tests.ic120.rosutil import ActionCall, pose_stamped, spin_until, yaw_of
+from tests.rosutil import ActionCall, pose_stamped, spin_until, yaw_of
 from tms_common.config import config_path, load_yaml
 
 pytestmark = pytest.mark.integration
 
 #: the generic node classes, through the executables the venv has (tms_launch.container.node_class)
 STACK = {"localization": ("tms_rp", "tracked_localization"), "navigator": ("tms_rp", "tracked_navigator"),
-         "vessel": ("tms_rc", "vessel_controller"), "arm": ("tms_rc", "zx200_arm_controller")}
+         "vessel": ("tms_rc", "vessel_controller"), "arm": ("tms_rc", "excavator_arm_controller")}
 
 
 def _plant_yaml(tmp_path, machines: dict[str, str], poses: dict[str, object]) -> str:
@@ -54,7 +54,7 @@ def _stack(machine: str, *, vessel: bool = False, arm: bool = False) -> list[dic
     if vessel:
         nodes.append(_node("vessel_controller", *STACK["vessel"], machine, machine=machine))
     if arm:
-        nodes.append(_node("zx200_arm_controller", *STACK["arm"], machine))
+        nodes.append(_node("excavator_arm_controller", *STACK["arm"], machine))
     return nodes
 
 

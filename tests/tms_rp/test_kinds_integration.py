@@ -16,8 +16,8 @@ import time
 
 import pytest
 
-from tests.ic120.rosutil import ActionCall, spin_until
-from tests.tracked.test_fleet_integration import (
+from tests.rosutil import ActionCall, spin_until
+from tests.tms_rp.test_fleet_integration import (
     _container,
     _err,
     _node,

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from tms_rp.ic120.ekf import EkfParams, Ic120Ekf
+from tms_rp.tracked.ekf import EkfParams, Ic120Ekf
 
-from tests.ic120.synth import simulate
+from tests.tms_rp.synth import simulate
 from tms_model.geometry import wrap_angle
 
 

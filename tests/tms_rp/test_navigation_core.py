@@ -8,15 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tms_rp.ic120.config import load_nav_config
-from tms_rp.ic120.controller import ControllerParams, Limits, TrackedPurePursuit
-from tms_rp.ic120.costmap import INSCRIBED, LETHAL, Costmap, Footprint, OccupancyMap, load_map, save_map
-from tms_rp.ic120.errors import GoalOccupiedError, InvalidGoalError, NoValidPathError
-from tms_rp.ic120.navigator import GoalChecker, leg_direction, validate_pose
-from tms_rp.ic120.planner import GridPlanner, PlannerParams
+from tms_rp.tracked.config import load_nav_config
+from tms_rp.tracked.controller import ControllerParams, Limits, TrackedPurePursuit
+from tms_rp.tracked.costmap import INSCRIBED, LETHAL, Costmap, Footprint, OccupancyMap, load_map, save_map
+from tms_rp.tracked.errors import GoalOccupiedError, InvalidGoalError, NoValidPathError
+from tms_rp.tracked.navigator import GoalChecker, leg_direction, validate_pose
+from tms_rp.tracked.planner import GridPlanner, PlannerParams
 
-from tests.ic120.harness import drive, paper_legs, pose_error, site_points
-from tests.ic120.kinematics import TrackedModel
+from tests.tms_rp.harness import drive, paper_legs, pose_error, site_points
+from tests.tms_rp.kinematics import TrackedModel
 from tms_common.errors import ConfigError
 
 CFG = load_nav_config()
@@ -280,8 +280,8 @@ def test_nav_config_errors_name_file_and_key(tmp_path):
 
 def test_brake_decelerates_within_limits_to_rest():
     """What the navigator node commands while the pose is stale: a ramp to rest, not a step."""
-    from tms_rp.ic120.config import load_nav_config
-    from tms_rp.ic120.controller import TrackedPurePursuit
+    from tms_rp.tracked.config import load_nav_config
+    from tms_rp.tracked.controller import TrackedPurePursuit
 
     cfg = load_nav_config()
     ctl = TrackedPurePursuit(cfg.controller, cfg.limits)

@@ -10,7 +10,7 @@ goal ends; the original's result carries only ``error_code``). Each goal is plan
 and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
 goal ends at once (no motion) with ``error_code.val`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT
 (Zx200PlanningOutcome classes) and an outcome ``message`` naming the joint or distance. A valid goal's phases go to the arm controller's action
-``arm_controller/move`` (node ``zx200_arm_controller``, tms_msg/action/Zx200ArmMove) as one goal of
+``arm_controller/move`` (node ``excavator_arm_controller``, tms_msg/action/Zx200ArmMove) as one goal of
 segments, so the arm passes the via phases without stopping; feedback ``state`` is the running phase
 (approach, penetrate, drag, curl, lift / swing, open / ...), forwarded from the controller. Cancel is
 forwarded; the goal ends CANCELED once the controller reports the arm at rest.
@@ -76,7 +76,7 @@ from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
-from tms_rc.zx200.controller import load_controller_config
+from tms_rc.excavator.controller import load_controller_settings
 from tms_rp.zx200.collision import (
     ArmCollisionModel,
     CollisionRecordError,
@@ -110,8 +110,8 @@ class Zx200PlannerNode(Node):
 
         kin = load_kinematics("zx200", path=path("machine_config"))
         pcfg = load_planner_config(path("planner_config"))
-        ccfg = load_controller_config(path("controller_config"))
-        self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.ground_min_z)
+        ccfg = load_controller_settings(path("controller_config"))
+        self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.collision.ground_min_z)
         # the _plan actions: collision objects from the DB, as the original's planning servers read them
         self.collision = CollisionPlanner(self.planner, ArmCollisionModel(kin, load_collision_config(
             path("collision_config"))), via_tolerance_rad=ccfg.via_tolerance_rad)

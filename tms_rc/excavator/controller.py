@@ -1,7 +1,7 @@
 """The ZX200 arm controller: HEAP-style hierarchical inverse kinematics at 100 Hz.
 
 Every control step turns the measured joint angles into joint-velocity commands by solving
-:class:`~tms_rc.zx200.hqp.HierarchicalQP` with these priorities, highest first:
+:class:`~tms_rc.excavator.hqp.HierarchicalQP` with these priorities, highest first:
 
 1. pump flow: ``sum_i flow_i |dq_i| <= pump_flow`` (16 linear rows, one per sign pattern);
 2. joint (cylinder) velocity limits, rate-limited by the acceleration limits;
@@ -22,31 +22,41 @@ state + what the lag still moves + commands still in flight), joints' delays are
 output, and each reference starts at the predicted state, so the machine follows it one predictor
 horizon (``preview_s``) later.
 
-Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.nodes.zx200_arm_controller`.
+Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.nodes.excavator_arm_controller`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from tms_common.config import config_path, load_yaml
+from tms_common.config import config_path
 from tms_common.errors import ConfigError
+from tms_common.schema import load_schema, setting
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import JointTarget, Target
 from tms_model.geometry import wrap_angle
-from tms_rc.zx200.hqp import HierarchicalQP, LevelSpec
+from tms_model.machines import EXCAVATOR, Machine
+from tms_rc.excavator.hqp import HierarchicalQP, LevelSpec
 
 __all__ = [
     "ControllerConfig",
+    "ControllerSettings",
+    "controller_config",
+    "flow_per_rad_s",
     "load_controller_config",
+    "load_controller_settings",
+    "settings_path",
     "TrapezoidSegment",
     "ControllerStatus",
     "ArmController",
@@ -55,120 +65,217 @@ __all__ = [
 N = len(JOINTS)
 #: [s] shortest segment: a near-zero move still gets a smooth reference the PID can follow
 MIN_SEGMENT_S = 0.5
+#: fraction of the pump flow a segment's timing plans with (the rest is the PID's margin)
+PLANNED_PUMP_SHARE = 0.8
+SETTINGS_FILE = "excavator_arm_controller.yaml"
 
 
-def _per_joint(data: Any, key: str, source: str) -> np.ndarray:
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: {key}: expected a mapping joint -> value, got {data!r}")
-    try:
-        return np.array([float(data[j]) for j in JOINTS])
-    except KeyError as exc:
-        raise ConfigError(f"{source}: {key}: missing joint {exc}") from None
-    except (TypeError, ValueError):
-        raise ConfigError(f"{source}: {key}: values must be numbers, got {data!r}") from None
+def _per_joint_values(name: str, values: Mapping[str, float]) -> None:
+    """ValueError unless ``values`` names exactly the excavator's joints."""
+    if set(values) != set(JOINTS):
+        raise ValueError(f"{name}: expected a value for each of {list(JOINTS)}, got {sorted(values)}")
 
 
-def _scalar_or_per_joint(data: Any, key: str, source: str) -> np.ndarray:
-    """One number for every joint, or a mapping joint -> number."""
-    if isinstance(data, int | float) and not isinstance(data, bool):
-        return np.full(N, float(data))
-    return _per_joint(data, key, source)
+@dataclass(frozen=True)
+class PidGains:
+    """One PID of the task rows: gains and the conditional integration's clamp and zone."""
+
+    kp: float = setting(lo=0.0, doc="[1/s] proportional gain")
+    ki: float = setting(lo=0.0, doc="[1/s^2] integral gain")
+    kd: float = setting(lo=0.0, doc="[-] derivative gain")
+    i_limit: float = setting(lo=0.0, doc="[m or rad] clamp of the integral")
+    i_zone: float = setting(lo=0.0, doc="[m or rad] the integral accumulates only while the error is inside")
 
 
-@dataclass
+@dataclass(frozen=True)
+class PidSettings:
+    """The PIDs of the tasks: tip position, bucket-edge angle theta_w, joint-space reference."""
+
+    position: PidGains
+    theta_w: PidGains
+    joint: PidGains
+
+
+@dataclass(frozen=True)
+class CollisionSettings:
+    """Ground and self-collision avoidance of the bucket tip and pin, base_link frame [m]."""
+
+    ground_min_z: float = setting(doc="[m] bucket tip and pin never below this height")
+    body_min_radius: float = setting(lo=0.0, doc="[m] tip and pin keep this distance from the swing axis")
+    gain: float = setting(lo=0.0, doc="[1/s] approach gain of the linearised distance constraints")
+
+
+@dataclass(frozen=True)
+class IdentifiedDelays:
+    """Per joint command dead time and first-order lag [s] identified on the machine driven (an estimate, used by
+    the Smith predictor instead of the description's hydraulics plus ``transport_delay_s``)."""
+
+    dead_time_s: dict[str, float] = setting(lo=0.0)
+    lag_s: dict[str, float] = setting(lo=0.0)
+
+    def __post_init__(self) -> None:
+        _per_joint_values("dead_time_s", self.dead_time_s)
+        _per_joint_values("lag_s", self.lag_s)
+
+
+@dataclass(frozen=True)
+class OsqpSettings:
+    """OSQP settings of every level of the hierarchical QP."""
+
+    eps: float = setting(1.0e-5, lo=0.0)
+    max_iter: int = setting(1000, lo=1)
+    polish: bool = False
+    regularisation: float = setting(1.0e-4, lo=0.0)
+    fix_tolerance: float = setting(1.0e-4, lo=0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControllerSettings:
+    """The control choices of ``config/tms_rc/excavator_arm_controller.yaml``; the machine's figures (joint limits,
+    pump flow, flow drawn per joint, hydraulic delays) come from its description (:func:`controller_config`)."""
+
+    rate_hz: float = setting(lo=1.0, doc="[Hz] control rate")
+    position_limit_gain: dict[str, float] = setting(lo=0.0, doc="[1/s] approach gain towards a position limit")
+    position_limit_margin: float = setting(lo=0.0, doc="[rad] kept inside the URDF limits")
+    use_acceleration_limits: bool = setting(True, doc="rate-limit |ddq| to the joints' acceleration limits")
+    collision: CollisionSettings = setting(doc="ground and self-collision avoidance")
+    pid: PidSettings = setting(doc="task PIDs")
+    max_tip_speed: float = setting(lo=1e-6, doc="[m/s] Cartesian segments' peak tip speed")
+    max_theta_w_rate: float = setting(lo=1e-6, doc="[rad/s] Cartesian segments' peak edge-angle rate")
+    max_tip_accel: float = setting(lo=1e-6, doc="[m/s^2]")
+    max_theta_w_accel: float = setting(lo=1e-6, doc="[rad/s^2]")
+    #: one fraction for every joint or a mapping joint -> fraction (a value-dependent shape: checked below)
+    joint_speed_scale: Any = setting(doc="fraction of each joint's velocity and acceleration limits")
+    transport_delay_s: float = setting(0.0, lo=0.0, hi=1.0, doc="[s] command transport added to the dead times")
+    identified_delays: IdentifiedDelays | None = setting(None, doc="measured delays instead of the description's")
+    goal_tolerance_m: float = setting(lo=1e-6)
+    goal_tolerance_rad: float = setting(lo=1e-6)
+    via_tolerance_m: float = setting(0.05, lo=1e-6)
+    via_tolerance_rad: float = setting(0.05, lo=1e-6)
+    rest_speed: float = setting(lo=0.0, doc="[rad/s] joints at rest below this")
+    settle_s: float = setting(lo=0.0, doc="[s] at rest this long before a goal succeeds")
+    segment_timeout_margin_s: float = setting(lo=1e-3, doc="[s] a segment times out after its duration + this")
+    stop_timeout_s: float = setting(15.0, lo=1e-3, doc="[s] stopping ends after this even if never at rest")
+    osqp: OsqpSettings = setting(default_factory=OsqpSettings)
+
+    def __post_init__(self) -> None:
+        _per_joint_values("position_limit_gain", self.position_limit_gain)
+        scale = self.joint_speed_scale
+        if isinstance(scale, dict):
+            _per_joint_values("joint_speed_scale", scale)
+            values = list(scale.values())
+        else:
+            values = [scale]
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) and 0.0 < v <= 1.0 for v in values):
+            raise ValueError(f"joint_speed_scale: expected a fraction in (0, 1] or a mapping joint -> fraction "
+                             f"(of the joint limits), got {scale!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
 class ControllerConfig:
-    """Parameters of :class:`ArmController` (see ``config/tms_rc/zx200_arm_controller.yaml``)."""
+    """Parameters of :class:`ArmController`: the settings file's choices with one machine's figures
+    (:func:`controller_config`); per-joint arrays in :data:`JOINTS` order."""
 
-    rate_hz: float = 100.0
-    pump_flow_lpm: float = 424.0
-    flow_per_rad_s: np.ndarray = field(default_factory=lambda: np.array([200.0, 660.0, 270.0, 170.0]))
-    position_limit_gain: np.ndarray = field(default_factory=lambda: np.array([0.3, 1.4, 2.5, 3.5]))
-    position_limit_margin: float = 0.01
-    use_acceleration_limits: bool = True
-    ground_min_z: float = -2.5
-    body_min_radius: float = 3.2
-    collision_gain: float = 2.0
-    pid: dict[str, dict[str, float]] = field(
-        default_factory=lambda: {k: {"kp": 1.2, "ki": 0.1, "kd": 0.0, "i_limit": 0.05} for k in ("position", "theta_w", "joint")}
-    )
-    max_tip_speed: float = 0.35
-    max_theta_w_rate: float = 0.35
-    max_tip_accel: float = 1.0
-    max_theta_w_accel: float = 1.0
-    joint_speed_scale: np.ndarray = field(default_factory=lambda: np.full(N, 0.6))  # per joint
-    dead_time_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.1))
-    lag_s: np.ndarray = field(default_factory=lambda: np.full(N, 0.15))
-    goal_tolerance_m: float = 0.02
-    goal_tolerance_rad: float = 0.02
-    via_tolerance_m: float = 0.05
-    via_tolerance_rad: float = 0.05
-    rest_speed: float = 0.01
-    settle_s: float = 0.3
-    segment_timeout_margin_s: float = 20.0
-    stop_timeout_s: float = 15.0
-    osqp: dict[str, float] = field(default_factory=dict)
+    rate_hz: float
+    pump_flow_lpm: float
+    flow_per_rad_s: np.ndarray
+    position_limit_gain: np.ndarray
+    position_limit_margin: float
+    use_acceleration_limits: bool
+    ground_min_z: float
+    body_min_radius: float
+    collision_gain: float
+    pid: Mapping[str, PidGains]
+    max_tip_speed: float
+    max_theta_w_rate: float
+    max_tip_accel: float
+    max_theta_w_accel: float
+    joint_speed_scale: np.ndarray
+    dead_time_s: np.ndarray
+    lag_s: np.ndarray
+    goal_tolerance_m: float
+    goal_tolerance_rad: float
+    via_tolerance_m: float
+    via_tolerance_rad: float
+    rest_speed: float
+    settle_s: float
+    segment_timeout_margin_s: float
+    stop_timeout_s: float
+    osqp: OsqpSettings
+    machine: str = ""  # the description's model name, for messages
 
     @property
     def dt(self) -> float:
         return 1.0 / self.rate_hz
 
 
-def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
-    """Read ``config/tms_rc/zx200_arm_controller.yaml`` (or ``path``); errors name the file and key."""
-    path = Path(path) if path is not None else config_path("tms_rc", "zx200_arm_controller.yaml")
-    data, where = load_yaml(path)
-    src = str(path)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{src}: expected a mapping")
-    try:
-        cfg = ControllerConfig(
-            rate_hz=float(data["rate_hz"]),
-            pump_flow_lpm=float(data["pump_flow_lpm"]),
-            flow_per_rad_s=_per_joint(data["flow_per_rad_s"], "flow_per_rad_s", src),
-            position_limit_gain=_per_joint(data["position_limit_gain"], "position_limit_gain", src),
-            position_limit_margin=float(data["position_limit_margin"]),
-            use_acceleration_limits=bool(data["use_acceleration_limits"]),
-            ground_min_z=float(data["collision"]["ground_min_z"]),
-            body_min_radius=float(data["collision"]["body_min_radius"]),
-            collision_gain=float(data["collision"]["gain"]),
-            pid={k: {kk: float(vv) for kk, vv in v.items()} for k, v in data["pid"].items()},
-            max_tip_speed=float(data["max_tip_speed"]),
-            max_theta_w_rate=float(data["max_theta_w_rate"]),
-            max_tip_accel=float(data["max_tip_accel"]),
-            max_theta_w_accel=float(data["max_theta_w_accel"]),
-            joint_speed_scale=_scalar_or_per_joint(data["joint_speed_scale"], "joint_speed_scale", src),
-            dead_time_s=_per_joint(data["plant_model"]["dead_time_s"], "plant_model.dead_time_s", src),
-            lag_s=_per_joint(data["plant_model"]["lag_s"], "plant_model.lag_s", src),
-            goal_tolerance_m=float(data["goal_tolerance_m"]),
-            goal_tolerance_rad=float(data["goal_tolerance_rad"]),
-            via_tolerance_m=float(data.get("via_tolerance_m", data["goal_tolerance_m"])),
-            via_tolerance_rad=float(data.get("via_tolerance_rad", data["goal_tolerance_rad"])),
-            rest_speed=float(data["rest_speed"]),
-            settle_s=float(data["settle_s"]),
-            segment_timeout_margin_s=float(data["segment_timeout_margin_s"]),
-            stop_timeout_s=float(data.get("stop_timeout_s", 15.0)),
-            osqp=dict(data.get("osqp", {})),
-        )
-    except KeyError as exc:
-        raise ConfigError(f"{src}: missing key {exc}") from None
-    except (TypeError, ValueError, AttributeError) as exc:
-        raise ConfigError(f"{src}: bad value: {exc}") from None
-    for key in ("position", "theta_w", "joint"):
-        if key not in cfg.pid:
-            raise where.error(("pid",), f"pid: missing gains for {key!r}")
-    limits = ("rate_hz", "pump_flow_lpm", "max_tip_speed", "max_theta_w_rate", "max_tip_accel", "max_theta_w_accel",
-              "joint_speed_scale")
-    if not all(np.all(np.asarray(getattr(cfg, key)) > 0) for key in limits):
-        raise ConfigError(f"{src}: {', '.join(limits)} must be > 0")
-    if np.any(cfg.joint_speed_scale > 1.0):
-        raise where.error(("joint_speed_scale",), f"joint_speed_scale must be <= 1 (a fraction of the joint limits), "
-                          f"got {cfg.joint_speed_scale.tolist()}")
-    for key in ("goal_tolerance_m", "goal_tolerance_rad", "via_tolerance_m", "via_tolerance_rad"):
-        if not getattr(cfg, key) > 0:
-            raise where.error((key,), f"{key} must be > 0, got {getattr(cfg, key)}")
-    if cfg.segment_timeout_margin_s <= 0 or cfg.stop_timeout_s <= 0:
-        raise ConfigError(f"{src}: segment_timeout_margin_s and stop_timeout_s must be > 0")
-    return cfg
+def settings_path() -> Path:
+    """``config/tms_rc/excavator_arm_controller.yaml``."""
+    return Path(config_path("tms_rc", SETTINGS_FILE))
+
+
+def load_controller_settings(path: str | Path | None = None) -> ControllerSettings:
+    """The control choices of ``path`` (default :func:`settings_path`); errors ``file:line: key: problem``."""
+    return load_schema(ControllerSettings, path if path is not None else settings_path())
+
+
+def flow_per_rad_s(machine: Machine) -> np.ndarray:
+    """[L/min per rad/s] per joint: the flow a joint draws at its velocity limit over that limit (the description's
+    ``hydraulics.flow_at_limit_lpm``, linear in the speed); 0 for a joint on its own circuit."""
+    return np.array([machine.drives[j].flow_at_limit / machine.joint(j).velocity for j in JOINTS])
+
+
+def controller_config(settings: ControllerSettings, machine: Machine) -> ControllerConfig:
+    """The controller of ``machine`` (an excavator description) with the choices ``settings``."""
+    machine.require(EXCAVATOR)
+    if machine.pump_flow is None:
+        raise ConfigError(f"{machine.source}: hydraulics.pump_flow_lpm: the arm controller needs the pump flow")
+    scale = settings.joint_speed_scale
+    if isinstance(scale, dict):
+        speed_scale = np.array([float(scale[j]) for j in JOINTS])
+    else:
+        speed_scale = np.full(N, float(scale))
+    if settings.identified_delays is not None:
+        dead = np.array([settings.identified_delays.dead_time_s[j] for j in JOINTS])
+        lag = np.array([settings.identified_delays.lag_s[j] for j in JOINTS])
+    else:
+        dead = np.array([machine.drives[j].dead_time for j in JOINTS]) + settings.transport_delay_s
+        lag = np.array([machine.drives[j].time_constant for j in JOINTS])
+    col, pid = settings.collision, settings.pid
+    return ControllerConfig(
+        rate_hz=settings.rate_hz,
+        pump_flow_lpm=float(machine.pump_flow),
+        flow_per_rad_s=flow_per_rad_s(machine),
+        position_limit_gain=np.array([settings.position_limit_gain[j] for j in JOINTS]),
+        position_limit_margin=settings.position_limit_margin,
+        use_acceleration_limits=settings.use_acceleration_limits,
+        ground_min_z=col.ground_min_z,
+        body_min_radius=col.body_min_radius,
+        collision_gain=col.gain,
+        pid=MappingProxyType({"position": pid.position, "theta_w": pid.theta_w, "joint": pid.joint}),
+        max_tip_speed=settings.max_tip_speed,
+        max_theta_w_rate=settings.max_theta_w_rate,
+        max_tip_accel=settings.max_tip_accel,
+        max_theta_w_accel=settings.max_theta_w_accel,
+        joint_speed_scale=speed_scale,
+        dead_time_s=dead,
+        lag_s=lag,
+        goal_tolerance_m=settings.goal_tolerance_m,
+        goal_tolerance_rad=settings.goal_tolerance_rad,
+        via_tolerance_m=settings.via_tolerance_m,
+        via_tolerance_rad=settings.via_tolerance_rad,
+        rest_speed=settings.rest_speed,
+        settle_s=settings.settle_s,
+        segment_timeout_margin_s=settings.segment_timeout_margin_s,
+        stop_timeout_s=settings.stop_timeout_s,
+        osqp=settings.osqp,
+        machine=machine.model_name,
+    )
+
+
+def load_controller_config(machine: Machine, path: str | Path | None = None) -> ControllerConfig:
+    """:func:`controller_config` of ``machine`` with the settings file ``path`` (default :func:`settings_path`)."""
+    return controller_config(load_controller_settings(path), machine)
 
 
 # ---------------------------------------------------------------------------------------------- references
@@ -240,10 +347,10 @@ class ControllerStatus:
 
 
 class _Pid:
-    def __init__(self, gains: dict[str, float], dim: int, dt: float) -> None:
-        self.kp, self.ki, self.kd = gains.get("kp", 0.0), gains.get("ki", 0.0), gains.get("kd", 0.0)
-        self.limit = gains.get("i_limit", math.inf)
-        self.zone = gains.get("i_zone", math.inf)  # integrate only components with |error| <= i_zone
+    def __init__(self, gains: PidGains, dim: int, dt: float) -> None:
+        self.kp, self.ki, self.kd = gains.kp, gains.ki, gains.kd
+        self.limit = gains.i_limit
+        self.zone = gains.i_zone  # integrate only components with |error| <= i_zone
         self.dt = dt
         self.integral = np.zeros(dim)
         self.prev: np.ndarray | None = None
@@ -284,13 +391,7 @@ class ArmController:
         self.cfg = cfg
         self.dt = cfg.dt
         lim = kin.limits
-        osqp_cfg = dict(
-            eps=float(cfg.osqp.get("eps", 1e-5)),
-            max_iter=int(cfg.osqp.get("max_iter", 1000)),
-            regularisation=float(cfg.osqp.get("regularisation", 1e-4)),
-            fix_tolerance=float(cfg.osqp.get("fix_tolerance", 1e-4)),
-            polish=bool(cfg.osqp.get("polish", False)),
-        )
+        osqp_cfg = dataclasses.asdict(cfg.osqp)
         self.hqp_cartesian = HierarchicalQP(
             N,
             [*self.SAFETY_LEVELS, LevelSpec("theta_w", "eq", 1), LevelSpec("position", "eq", 3), LevelSpec("least_motion", "eq", N)],
@@ -438,8 +539,9 @@ class ArmController:
         cfg, lim = self.cfg, self.kin.limits
         scale = np.minimum(1.0, cfg.joint_speed_scale * speed_scale)  # per joint; never beyond the joint limits
         dq = np.maximum(np.abs(dq), 1e-9)
+        flow = float(np.sum(cfg.flow_per_rad_s * dq))  # 0: only joints on their own circuits move
         speed = min((float(np.min(scale * lim.velocity / dq)),
-                     0.8 * cfg.pump_flow_lpm / float(np.sum(cfg.flow_per_rad_s * dq)), *speed_caps))
+                     PLANNED_PUMP_SHARE * cfg.pump_flow_lpm / flow if flow > 0 else math.inf, *speed_caps))
         accel = min((float(np.min(scale * lim.acceleration / dq)), *accel_caps))
         return TrapezoidSegment.timing(speed, accel, MIN_SEGMENT_S)
 

@@ -16,7 +16,7 @@ hierarchical optimisation it builds on). One OSQP instance per level is created 
 dense sparsity pattern and kept between control steps, so every solve is warm-started from the
 previous step's solution.
 
-Exact shortcuts keep a 100 Hz step cheap (measured figures: tms_rc/zx200/README.md):
+Exact shortcuts keep a 100 Hz step cheap (measured figures: tms_rc/excavator/README.md):
 
 - an inequality level whose rows already hold at x = 0 (and every level above it was satisfied at
   x = 0) has optimal slack 0, so it is not solved; an equality level met by the current x likewise;

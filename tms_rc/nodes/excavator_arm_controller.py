@@ -1,11 +1,11 @@
-"""``zx200_arm_controller``: the 100 Hz hierarchical arm controller as a ROS 2 node.
+"""``excavator_arm_controller``: the 100 Hz hierarchical arm controller of any excavator kind as a ROS 2 node.
 
-In the machine namespace (``/zx200``): subscribes ``joint_states`` (sensor_msgs/JointState, the four
+In the machine namespace (``/zx200``, ``/zx120``): subscribes ``joint_states`` (sensor_msgs/JointState, the four
 front joints), publishes ``front_cmd`` (com3_msgs/JointCmd, VELOCITY: OPERA com3_ros's type and topic) every period
 to the COM3 converter, and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
 that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
 joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
-malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.zx200.segments`). Cancel decelerates within the
+malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.excavator.segments`). Cancel decelerates within the
 limits and the goal ends CANCELED only when the arm is at rest. One goal drives the arm at a time: a new goal
 preempts the running one, which ends ABORTED with FAILURE "preempted by a newer goal" (a result, never rclpy's
 empty one); a goal to the pose the arm already holds ends SUCCESS once it is confirmed there.
@@ -15,13 +15,15 @@ every ``FEEDBACK_PERIOD_S``), so the node spins on a SingleThreadedExecutor. On 
 it had, the control step was 3.7 % of the node's py-spy samples and rclpy's dispatch most of the rest; the
 node took about a third more CPU in the paper demo than on one thread.
 
-Parameters: ``config`` (controller YAML, default config/tms_rc/zx200_arm_controller.yaml), ``machine`` (the
-excavator on the site it drives, e.g. zx120; default the namespace's last segment, else zx200),
-``machine_config`` (default the machine kind's config/machines/<kind>.yaml).
+Parameters: ``config`` (the control choices, default config/tms_rc/excavator_arm_controller.yaml), ``machine`` (the
+excavator on the site it drives, e.g. zx120; default the namespace's last segment), ``machine_config`` (default
+the machine kind's config/machines/<kind>.yaml: joint limits, pump flow, flow per joint, hydraulic delays),
+``rate_hz`` (0 = the config file's).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import traceback
 from dataclasses import dataclass
@@ -41,12 +43,13 @@ from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_model.com3 import VELOCITY
 from tms_model.excavator import codes
-from tms_model.excavator.kinematics import JOINTS, load_kinematics
-from tms_model.fleet import machine_kind, machine_name
+from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.fleet import load_named, machine_name
+from tms_model.machines import EXCAVATOR
 from tms_msg.action import Zx200ArmMove
-from tms_rc.zx200.controller import ArmController, load_controller_config
-from tms_rc.zx200.segments import targets_from_segments
-from tms_rc.zx200.tick_stats import SegmentSpans, TickStats
+from tms_rc.excavator.controller import ArmController, load_controller_config
+from tms_rc.excavator.segments import targets_from_segments
+from tms_rc.excavator.tick_stats import SegmentSpans, TickStats
 
 __all__ = ["ArmControllerNode", "main"]
 
@@ -67,19 +70,19 @@ class ArmControllerNode(Node):
     """joint_states -> hierarchical QP -> front_cmd at ``rate_hz``; goals through ``arm_controller/move``."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__("zx200_arm_controller", **kwargs)
+        super().__init__("excavator_arm_controller", **kwargs)
         cfg_path = declare_startup(self, "config", "").value or None
         machine_path = declare_startup(self, "machine_config", "").value or None
-        # any excavator of the site (zx200, zx120): the machine parameter, else the namespace, else zx200
-        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace(), "zx200")
-        self.kin = load_kinematics(machine_kind(self.machine), path=machine_path or None)
-        self.cfg = load_controller_config(cfg_path)
+        # any excavator of the site: the machine parameter, else the namespace; its kind's description gives the
+        # geometry, limits, pump flow and hydraulic delays, the config file the control choices
+        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace())
+        description = load_named(self.machine, machine_path).require(EXCAVATOR)
+        self.kin = ExcavatorKinematics(description)
+        self.cfg = load_controller_config(description, cfg_path)
         rate = float(declare_startup(self, "rate_hz", 0.0).value)  # 0 = rate_hz of the config file
         if rate < 0:
-            raise ConfigError(f"zx200_arm_controller: parameter rate_hz must be >= 0, got {rate}")
+            raise ConfigError(f"excavator_arm_controller: parameter rate_hz must be >= 0, got {rate}")
         if rate > 0:  # e.g. 50 Hz in the two-machine launch, whose /clock comes every 20 ms
-            import dataclasses
-
             self.cfg = dataclasses.replace(self.cfg, rate_hz=rate)
         self.ctl = ArmController(self.kin, self.cfg)
         self._q: np.ndarray | None = None
@@ -99,7 +102,7 @@ class ArmControllerNode(Node):
             goal_callback=self._on_goal, cancel_callback=lambda _h: CancelResponse.ACCEPT,
             callback_group=ReentrantCallbackGroup(), result_timeout=ACTION_RESULT_TIMEOUT_S,
         )
-        self.get_logger().info(f"zx200_arm_controller ready at {self.cfg.rate_hz} Hz")
+        self.get_logger().info(f"excavator_arm_controller ready at {self.cfg.rate_hz} Hz")
 
     def _on_state(self, msg: JointState) -> None:
         idx = {n: i for i, n in enumerate(msg.name)}
@@ -247,5 +250,5 @@ class ArmControllerNode(Node):
 
 
 def main() -> int:
-    """Console script ``zx200_arm_controller``."""
+    """Console script ``excavator_arm_controller``."""
     return run_node(ArmControllerNode, executor="single")

@@ -1,7 +1,7 @@
-"""``ic120_vessel``: :mod:`tms_rc.nodes.vessel_controller` under its former name.
+"""``ic120_vessel``: :mod:`tms_rc.nodes.vessel_controller` under its former executable and node name.
 
-The same node, named ``ic120_vessel``, whose machine defaults to ``ic120`` when neither the ``machine``
-parameter nor the namespace names one (the paper launch runs it in ``/ic120``).
+config/launch/paper_experiment.yaml runs it in the machine's namespace (``/<name>``), which names the machine as
+for ``vessel_controller`` (the ``machine`` parameter, else the namespace).
 """
 
 from __future__ import annotations
@@ -11,13 +11,16 @@ from typing import Any
 from tms_common.node import run_node
 from tms_rc.nodes.vessel_controller import VesselControllerNode
 
-__all__ = ["main", "Ic120Vessel"]
+__all__ = ["main", "Ic120Vessel", "NODE_NAME"]
+
+#: the former node name, which is this module's (and its executable's) name
+NODE_NAME = __name__.rpartition(".")[2]
 
 
 class Ic120Vessel(VesselControllerNode):
-    default_machine = "ic120"
+    """``vessel_controller`` named :data:`NODE_NAME`."""
 
-    def __init__(self, node_name: str = "ic120_vessel", **kwargs: Any) -> None:
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
 
 

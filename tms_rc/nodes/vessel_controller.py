@@ -1,8 +1,8 @@
 """``vessel_controller``: a crawler carrier's vessel (and vessel swing) servers (thin rclpy wrapper of VesselController).
 
 Run in the machine's namespace: ``vessel_controller --ros-args -r __ns:=/ic120_1`` (the machine is the
-``machine`` parameter, else the namespace's last segment; ``ic120_vessel`` is this node with the default
-machine ``ic120``). What it serves follows the machine's description (``tms_model.fleet.load_named``):
+``machine`` parameter, else the namespace's last segment; ``ic120_vessel`` is this node under its former
+name). What it serves follows the machine's description (``tms_model.fleet.load_named``):
 
 * every carrier (a description with a ``vessel``): action ``set_dump_angle`` (com3_msgs/action/SetDumpAngle,
   OPERA's): goal ``target_angle`` [rad] (0 = lowered, + = raised, up to the description's
@@ -91,13 +91,9 @@ def _nav_vessel(nav_yaml: str, kind: str) -> dict:
 
 
 class VesselControllerNode(Node):
-    #: the machine when neither the parameter nor the namespace names one
-    default_machine = ""
-
     def __init__(self, node_name: str = "vessel_controller", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace(),
-                                    self.default_machine)
+        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace())
         machine_yaml = str(declare_startup(self, "machine_config", "").value)
         nav_yaml = str(declare_startup(self, "nav_config", "").value)
         rate = float(declare_startup(self, "rate_hz", 10.0).value)

@@ -1,8 +1,8 @@
 """``tracked_localization``: localisation of a tracked machine (thin rclpy wrapper of Ic120Ekf / GlobalPoseRelay).
 
 Run in the machine's namespace: ``tracked_localization --ros-args -r __ns:=/ic120_1`` (the machine is the
-``machine`` parameter, else the namespace's last segment; ``ic120_localization`` is this node with the
-default machine ``ic120``). Its description (``tms_model.fleet.load_named``) names its frames and its kind's
+``machine`` parameter, else the namespace's last segment; ``ic120_localization`` is this node under its
+former name). Its description (``tms_model.fleet.load_named``) names its frames and its kind's
 nav file configures it (:mod:`tms_rp.tracked.config`).
 
 Odometry in frame ``odom`` (a crawler carrier's converter integrates the track speeds) is fused by the EKF.
@@ -46,13 +46,9 @@ __all__ = ["main", "TrackedLocalization"]
 
 
 class TrackedLocalization(Node):
-    #: the machine when neither the parameter nor the namespace names one
-    default_machine = ""
-
     def __init__(self, node_name: str = "tracked_localization", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace(),
-                                    self.default_machine)
+        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace())
         nav_config = str(declare_startup(self, "nav_config", "").value)
         site_config = str(declare_startup(self, "site_config", "").value)
         self.use_azimuth = bool(declare_startup(self, "use_azimuth", True).value)

@@ -1,8 +1,8 @@
 """``tracked_navigator``: Nav2-named navigation actions of a tracked machine (thin rclpy wrapper of NavigatorCore).
 
 Run in the machine's namespace: ``tracked_navigator --ros-args -r __ns:=/ic120_1`` (the machine is the
-``machine`` parameter, else the namespace's last segment; ``ic120_navigator`` is this node with the default
-machine ``ic120``). The kind's nav file (:mod:`tms_rp.tracked.config`: footprint, limits, map, reversing
+``machine`` parameter, else the namespace's last segment; ``ic120_navigator`` is this node under its former
+name). The kind's nav file (:mod:`tms_rp.tracked.config`: footprint, limits, map, reversing
 rule) configures it; every tracked machine's converter takes ``cmd_vel`` (centre speed + yaw rate: the
 crawler carrier's ``Velocity_Cmd``, the excavator's ``Velocity_Cmd_2`` in centre mode). Action servers
 ``navigate_to_pose``, ``navigate_through_poses``, ``follow_waypoints`` (nav2_msgs, Nav2 jazzy's types and
@@ -74,13 +74,9 @@ kinds = {"navigate_to_pose": NavigateToPose, "navigate_through_poses": NavigateT
 
 
 class TrackedNavigator(Node):
-    #: the machine when neither the parameter nor the namespace names one
-    default_machine = ""
-
     def __init__(self, node_name: str = "tracked_navigator", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace(),
-                                    self.default_machine)
+        self.machine = machine_name(str(declare_startup(self, "machine", "").value), self.get_namespace())
         nav_config = str(declare_startup(self, "nav_config", "").value)
         map_yaml = str(declare_startup(self, "map_yaml", "").value)
         self.pose_timeout = float(declare_startup(self, "pose_timeout_s", 1.0).value)

@@ -7,5 +7,5 @@ odometry, GNSS and azimuth with Mahalanobis gating), :mod:`costmap` (Nav2 map_se
 the machine's footprint), :mod:`planner` (coarse-to-fine Dijkstra on scipy.sparse graphs), :mod:`controller`
 (regulated pure pursuit for a tracked vehicle, forward and reverse), :mod:`navigator` (the Nav2 navigate_*
 semantics as a step function) and :mod:`rtk` (a machine whose converter gives a map-frame pose). Nodes live
-in :mod:`tms_rp.nodes` (``tracked_localization``, ``tracked_navigator``). Formerly ``tms_rp.ic120``.
+in :mod:`tms_rp.nodes` (``tracked_localization``, ``tracked_navigator``).
 """

@@ -10,7 +10,7 @@
 
 Every target is checked here (finite, non-empty, reachable, inside the joint limits, above the
 ground limit); failures raise :class:`~tms_model.excavator.codes.PlanningError` subclasses whose message
-names the joint or the distance. The targets are consumed by :class:`tms_rc.zx200.controller.ArmController`.
+names the joint or the distance. The targets are consumed by :class:`tms_rc.excavator.controller.ArmController`.
 """
 
 from __future__ import annotations

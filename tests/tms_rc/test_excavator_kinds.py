@@ -1,0 +1,93 @@
+"""Every excavator kind runs the arm controller with its own figures (no ROS).
+
+The control choices are one file (config/tms_rc/excavator_arm_controller.yaml); the pump flow, each joint's
+flow coefficient and the hydraulic delays come from the kind's description (config/machines/<kind>.yaml). The
+ZX120's controller holds the pumps to its own 265 L/min, not the ZX200's 424 L/min.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tms_common.config import config_path
+from tms_common.errors import ConfigError
+from tms_model.excavator import codes
+from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.excavator.targets import JointTarget
+from tms_model.machines import EXCAVATOR, load_machine
+from tms_rc.excavator.controller import ArmController, load_controller_config, load_controller_settings, settings_path
+from tms_rc.excavator.plant import LagDeadTimePlant
+
+
+def _excavators():
+    machines = [load_machine(p.stem) for p in sorted(config_path("machines").glob("*.yaml"))]
+    return [m for m in machines if m.type == EXCAVATOR]
+
+
+EXCAVATORS = _excavators()
+
+
+def test_both_excavator_kinds_are_found():
+    assert {m.kind for m in EXCAVATORS} >= {"zx200", "zx120"}
+
+
+@pytest.mark.parametrize("machine", EXCAVATORS, ids=lambda m: m.kind)
+def test_the_controller_takes_its_kinds_pump_flow_coefficients_and_delays(machine):
+    cfg = load_controller_config(machine)
+    assert cfg.pump_flow_lpm == machine.pump_flow
+    for i, name in enumerate(JOINTS):
+        drive, joint = machine.drives[name], machine.joint(name)
+        # the flow the joint draws at its velocity limit is the description's flow_at_limit_lpm
+        assert cfg.flow_per_rad_s[i] * joint.velocity == pytest.approx(drive.flow_at_limit)
+        assert cfg.lag_s[i] == drive.time_constant
+        assert cfg.dead_time_s[i] >= drive.dead_time  # plus the command transport, a controller choice
+
+
+def test_the_zx120_is_held_to_its_own_pump_not_the_zx200s():
+    zx120, zx200 = load_machine("zx120"), load_machine("zx200")
+    assert (zx120.pump_flow, zx200.pump_flow) == (265.0, 424.0)
+    cfg = dataclasses.replace(load_controller_config(zx120), use_acceleration_limits=False)
+    kin = ExcavatorKinematics(zx120)
+    ctl = ArmController(kin, cfg)
+    # every joint asked at its velocity limit at once: the last guard scales the command to the ZX120's pumps
+    u = ctl._enforce_hard_limits(np.array(kin.limits.velocity, dtype=float))
+    assert float(np.sum(cfg.flow_per_rad_s * np.abs(u))) == pytest.approx(265.0)
+    # ... where the ZX200's controller lets the same machine's joints draw 424 L/min
+    wider = ArmController(kin, dataclasses.replace(cfg, pump_flow_lpm=zx200.pump_flow))
+    u200 = wider._enforce_hard_limits(np.array(kin.limits.velocity, dtype=float))
+    assert float(np.sum(cfg.flow_per_rad_s * np.abs(u200))) == pytest.approx(424.0)
+
+
+def test_a_zx120_move_of_boom_arm_and_bucket_stays_within_265_l_per_min():
+    zx120 = load_machine("zx120")
+    kin = ExcavatorKinematics(zx120)
+    cfg = load_controller_config(zx120)
+    ctl = ArmController(kin, cfg)
+    q0 = np.array(kin.home, dtype=float)
+    q1 = q0 + np.array([0.0, 0.3, -0.5, -0.8])  # boom down, arm and bucket out: all three share the pumps
+    assert kin.limits.violation(q1) is None
+    plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q0)
+    q, v = q0.copy(), np.zeros(len(JOINTS))
+    ctl.start([JointTarget(q1, "move")])
+    flows = []
+    for _ in range(int(20.0 / cfg.dt)):
+        u = ctl.step(q, v)
+        flows.append(float(np.sum(cfg.flow_per_rad_s * np.abs(ctl.u_prev))))
+        q, v = plant.step(u)
+        if ctl.status.result is not None:
+            break
+    assert ctl.status.result == codes.SUCCESS, ctl.status
+    assert max(flows) <= 265.0 * (1 + 1e-3), max(flows)
+    assert max(flows) > 0.7 * 265.0, max(flows)  # the pumps, not the joints' speeds, paced the move
+
+
+def test_the_settings_file_refuses_a_machine_figure_and_unknown_keys(tmp_path):
+    text = settings_path().read_text()
+    for extra, key in (("pump_flow_lpm: 424.0", "pump_flow_lpm"), ("stop_timeout: 3.0", "stop_timeout")):
+        path = tmp_path / "ctl.yaml"
+        path.write_text(f"{text}\n{extra}\n")
+        with pytest.raises(ConfigError, match=rf"ctl.yaml:\d+: {key}: unknown key"):
+            load_controller_settings(path)
