@@ -6,7 +6,10 @@ As an RViz user expects it (REP 105, frames named as OPERA names them, :mod:`tms
     map -> <p>odom -> <p>base_link                per machine, from odometry and localisation
     <p>base_link -> ... -> bucket_end_link        fixed joints static, moving joints from joint_states
 
-``<p>`` is the machine's ``tf_prefix`` with a slash (``ic120_tf/``; none for the ZX200). Inputs, per machine:
+One tree per machine *name* (config/site.yaml ``machines``): two machines of one kind are two trees, each with its
+own frames. ``<p>`` is the machine's ``tf_prefix`` with a slash: its description's, with the kind replaced by the
+machine's name (:meth:`tms_model.machines.Machine.named`: ``<name>_tf/``); none when the description has none.
+Inputs, per machine:
 
 * ``joint_states``: every moving joint of the tree whose driving state is in the message;
 * ``odom_pose`` (nav_msgs/Odometry): in frame ``odom`` it is ``odom -> base_link``; in frame ``map`` the
@@ -55,24 +58,31 @@ def _finite(machine: str, what: str, values: Sequence[float]) -> None:
 
 
 class SiteTf:
-    """Transforms of the site and its machines; one :class:`MachineTree` per machine kind.
+    """Transforms of the site and its machines; one :class:`MachineTree` per machine name
+    (``tree.machine.model_name``).
 
     Raises:
-        ConfigError: two machines would publish the same frame (give one a ``tf_prefix``).
+        ConfigError: a machine is given twice, or two machines would publish the same frame (give one a
+            ``tf_prefix``).
     """
 
     def __init__(self, trees: Sequence[MachineTree], site: Site) -> None:
-        self.trees: dict[str, MachineTree] = {t.kind: t for t in trees}
+        self.trees: dict[str, MachineTree] = {}
+        for t in trees:
+            name = t.machine.model_name
+            if name in self.trees:
+                raise ConfigError(f"machine {name!r} is given twice")
+            self.trees[name] = t
         self.site = site
         owner: dict[str, str] = {WORLD: "the site", MAP: "the site"}
-        for t in trees:
+        for name, t in self.trees.items():
             for link in ("odom", *t.links):
                 frame = t.frame(link)
                 if frame in owner:
-                    raise ConfigError(f"{t.machine.source}: frame {frame!r} of {t.kind} is also a frame of {owner[frame]}; "
+                    raise ConfigError(f"{t.machine.source}: frame {frame!r} of {name} is also a frame of {owner[frame]}; "
                                       f"give one of them a tf_prefix in its machine description")
-                owner[frame] = t.kind
-        self._reference = {t.kind: self._reference_offset(t) for t in trees}
+                owner[frame] = name
+        self._reference = {name: self._reference_offset(t) for name, t in self.trees.items()}
 
     @staticmethod
     def _reference_offset(tree: MachineTree) -> Transform:

@@ -100,8 +100,27 @@ def test_bad_input_is_refused_naming_machine_and_field(site_tf: SiteTf) -> None:
 
 def test_two_machines_with_the_same_frames_are_refused() -> None:
     zx = load_tree("zx200")
-    twin = machine_tree(dataclasses.replace(zx.machine, kind="zx200b"))
+    twin = machine_tree(dataclasses.replace(zx.machine, name="zx200b"))
     with pytest.raises(ConfigError, match="frame 'odom' of zx200b is also a frame of zx200; give one of them a tf_prefix"):
         SiteTf([zx, twin], load_site())
-    prefixed = machine_tree(dataclasses.replace(zx.machine, kind="zx200b", tf_prefix="zx200b_tf"))
+    prefixed = machine_tree(dataclasses.replace(zx.machine, name="zx200b", tf_prefix="zx200b_tf"))
     assert SiteTf([zx, prefixed], load_site()).trees["zx200b"].frame("odom") == "zx200b_tf/odom"
+    with pytest.raises(ConfigError, match="machine 'zx200' is given twice"):
+        SiteTf([zx, zx], load_site())
+
+
+def test_machines_of_one_kind_are_one_tree_each_with_their_own_frames() -> None:
+    """Three machines of one kind (names of config/site.yaml): three trees keyed by name, frames prefixed by name,
+    each moved only by its own joint_states."""
+    names = ("ic120", "ic120_1", "ic120_2")
+    site = SiteTf([load_tree(n) for n in names], load_site())
+    assert set(site.trees) == set(names) and {t.kind for t in site.trees.values()} == {"ic120"}
+    assert {n: site.tree(n).frame("vessel_pin_link") for n in names} == {n: f"{n}_tf/vessel_pin_link" for n in names}
+    static = {(e.parent, e.child) for e in site.static(0.0)}
+    assert {(f"{n}_tf/base_link", f"{n}_tf/body_link") for n in names} <= static
+    for angle, name in zip((0.1, 0.4, 0.7), names, strict=True):
+        (edge,) = site.joint_states(name, ["vessel_joint"], [angle], 1.0)
+        assert (edge.parent, edge.child) == (f"{name}_tf/base_link", f"{name}_tf/vessel_pin_link")
+        assert edge.transform == site.tree(name).joint("dump_joint").transform(angle)
+        (odom,) = site.odometry(name, "odom", (1.0, 2.0, 0.0), (0, 0, 0, 1), 1.0)
+        assert (odom.parent, odom.child) == (f"{name}_tf/odom", f"{name}_tf/base_link")

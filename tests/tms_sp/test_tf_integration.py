@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from tests.ic120.stack import can_groups
+from tests.tracked_stack import can_groups
 from tests.rosproc import executable
 from tests.tflisten import TfListener
 from tms_model.excavator.kinematics import JOINTS, load_kinematics

@@ -12,15 +12,15 @@ the site in one node (the tree and its names: :mod:`tms_sp.site_tf`, :mod:`tms_m
   odom`` for a pose in ``map``), on every ``/<machine>/map_to_odom`` (geometry_msgs/TransformStamped)
   ``map -> odom``; each stamped with its message's stamp.
 
-Parameters (read at start-up): ``machines`` (string array, default ``[zx200, ic120]``; each machine's topics
-are under ``/<machine>/``; names of config/site.yaml ``machines``, each with its kind's description and its own
-/tf prefix), ``site``
-(site YAML, default config/site.yaml). A malformed message is logged naming the machine and field and
-publishes nothing.
+Parameters (read at start-up): ``machines`` (string array of names of config/site.yaml ``machines``; [] = those
+of ``config``; each machine is one tree, its kind's description with its own /tf prefix, its topics under
+``/<name>/``), ``config`` (default config/tms_sp/site_tf.yaml), ``site`` (site YAML, default config/site.yaml).
+A malformed message is logged naming the machine and field and publishes nothing.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from geometry_msgs.msg import TransformStamped
@@ -31,13 +31,16 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from tf2_msgs.msg import TFMessage
+from tms_common.config import config_path
 from tms_common.node import run_node
 from tms_common.params import declare_startup
+from tms_common.schema import load_schema
+from tms_model.fleet import load_named
 from tms_model.site import load_site
-from tms_model.urdf import load_tree
+from tms_model.urdf import machine_tree
 from tms_sp.site_tf import SiteTf, StampedTransform
 
-__all__ = ["LATCHED", "TF_QOS", "TfPublisher", "main"]
+__all__ = ["LATCHED", "TF_QOS", "TfConfig", "TfPublisher", "main"]
 
 #: robot_description and /tf_static: what robot_state_publisher and tf2's static broadcaster offer.
 LATCHED = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
@@ -45,6 +48,13 @@ LATCHED = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=Relia
 #: /tf: tf2's broadcaster and listener profile.
 TF_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE)
+
+
+@dataclass(frozen=True)
+class TfConfig:
+    """config/tms_sp/site_tf.yaml."""
+
+    machines: tuple[str, ...]  # site machine names
 
 
 def _seconds(stamp: Any) -> float:
@@ -68,22 +78,26 @@ class TfPublisher(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_sp_tf", **kwargs)
         self._log = self.get_logger()
-        machines = [str(m) for m in declare_startup(self, "machines", ["zx200", "ic120"]).value]
+        machines = [str(m) for m in declare_startup(self, "machines", [""]).value if m]
+        config = str(declare_startup(self, "config", "").value)
         site_path = str(declare_startup(self, "site", "").value)
-        trees = [load_tree(m) for m in machines]
-        self.core = SiteTf(trees, load_site(site_path or None))
+        if not machines:
+            machines = list(load_schema(TfConfig, config or config_path("tms_sp", "site_tf.yaml")).machines)
+        site = load_site(site_path or None)
+        # each machine by its name: its kind's description with its own /tf prefix
+        trees = [machine_tree(load_named(m, site=site)) for m in machines]
+        self.core = SiteTf(trees, site)
         self.pub_tf = self.create_publisher(TFMessage, "/tf", TF_QOS)
         self.pub_static = self.create_publisher(TFMessage, "/tf_static", LATCHED)
         self.pub_description = {}
-        for t in trees:
-            pub = self.create_publisher(String, f"/{t.kind}/robot_description", LATCHED)
+        for name, t in self.core.trees.items():
+            pub = self.create_publisher(String, f"/{name}/robot_description", LATCHED)
             pub.publish(String(data=t.urdf()))
-            self.pub_description[t.kind] = pub
-            self.create_subscription(JointState, f"/{t.kind}/joint_states",
-                                     lambda m, k=t.kind: self._on_joints(k, m), 50)
-            self.create_subscription(Odometry, f"/{t.kind}/odom_pose", lambda m, k=t.kind: self._on_odom(k, m), 50)
-            self.create_subscription(TransformStamped, f"/{t.kind}/map_to_odom",
-                                     lambda m, k=t.kind: self._on_map_to_odom(k, m), 50)
+            self.pub_description[name] = pub
+            self.create_subscription(JointState, f"/{name}/joint_states", lambda m, k=name: self._on_joints(k, m), 50)
+            self.create_subscription(Odometry, f"/{name}/odom_pose", lambda m, k=name: self._on_odom(k, m), 50)
+            self.create_subscription(TransformStamped, f"/{name}/map_to_odom",
+                                     lambda m, k=name: self._on_map_to_odom(k, m), 50)
         static = self.core.static(_seconds(self.get_clock().now().to_msg()))
         self.pub_static.publish(TFMessage(transforms=[_msg(t) for t in static]))
         self._log.info(f"tms_sp_tf ready: machines {machines}, {len(static)} static transforms")
