@@ -5,9 +5,17 @@ and dynamic records updated live by sensing) and the global blackboard, in the o
 schema (database ``rostmsdb``, collections ``task`` and ``parameter``). The backend is chosen by URI:
 ``mongodb://...`` goes through pymongo to a real MongoDB; the default is an embedded on-disk store
 with the same API. The reader/writer nodes expose it to other processes over ROS 2 services/topics.
+
+The public API, the one thing other packages import of tms_db: :func:`open_store`, :func:`declare_and_open` (a
+node's ``db_uri`` / ``db_path`` parameters and the store they name), :class:`Store`, the errors, and
+:func:`normalise_task_xml` (the one-line form a task's tree is stored in).
 """
 
+from tms_db.backend import open_store
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
-from tms_db.store import DATABASE, Store, default_path, open_store
+from tms_db.nodes.common import declare_and_open
+from tms_db.schema import normalise_task_xml
+from tms_db.store import DATABASE, Store, default_path
 
-__all__ = ["open_store", "Store", "StoreError", "RecordNotFound", "ValidationError", "DATABASE", "default_path"]
+__all__ = ["open_store", "declare_and_open", "Store", "StoreError", "RecordNotFound", "ValidationError",
+           "normalise_task_xml", "DATABASE", "default_path"]

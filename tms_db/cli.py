@@ -38,6 +38,7 @@ from bson import json_util
 from tms_common.config import load_yaml, read_utf8, repo_root
 from tms_common.errors import TmsError
 from tms_db import dumpfmt
+from tms_db.backend import open_store
 from tms_db.errors import (
     InputRefusedError,
     StorageFullError,
@@ -46,7 +47,7 @@ from tms_db.errors import (
     ValidationError,
 )
 from tms_db.schema import check_document_size, validate_parameter
-from tms_db.store import Store, build_task_doc, check_import_document, open_store, parameter_key
+from tms_db.store import Store, build_task_doc, check_import_document, parameter_key
 
 __all__ = ["main", "import_parameters", "check_parameters", "seed", "EXIT_CODES"]
 
@@ -119,7 +120,7 @@ def import_parameters(store: Store, path: str | Path, docs: Any = None, where: A
 
 def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     """Load a seed file ``{tasks: [{task_id, file, description, model_name?, blackboard?}], parameters: [...]}``;
-    idempotent. A task's ``blackboard`` gives its parameters (initial blackboard entries, e.g. ``{machine: ic120_1}``).
+    idempotent. A task's ``blackboard`` gives its parameters (initial blackboard entries, e.g. ``{machine: <machine name>}``).
 
     Task files are relative to the project root (else to the seed file's folder). Returns
     (tasks, parameters) loaded.

@@ -37,7 +37,7 @@ from typing import Any, TypeVar
 from bson import Binary, Decimal128, ObjectId
 
 from tms_db.errors import RecordNotFound, StorageFullError, StorageReadOnlyError, StoreError, ValidationError
-from tms_db.schema import check_document_size, is_number, validate_fields, validate_parameter
+from tms_db.schema import is_number, validate_fields, validate_parameter
 from tms_db.store import (
     _MISSING,
     ImportResult,
@@ -423,14 +423,12 @@ class EmbeddedStore(Store):
 
         return self._modify(record_name, model_name, change, fields=(field,))[0]
 
-    @staticmethod
-    def _checked_parameter(doc: Mapping[str, Any]) -> dict:
-        validate_parameter(doc)
-        check_document_size(doc, f"record {doc['record_name']!r}")
+    def _checked_parameter(self, doc: Mapping[str, Any]) -> dict:
+        doc = super()._checked_parameter(doc)
         if doc.get("_id") is not None and not isinstance(doc["_id"], ObjectId):  # stored, no read could decode it
             raise ValidationError(f"record {doc['record_name']!r}: field '_id' {doc['_id']!r} is not an ObjectId "
                                   "(the embedded store keys documents by ObjectId; leave it out to get one)")
-        return dict(doc)
+        return doc
 
     @staticmethod
     def _put_parameter(conn: sqlite3.Connection, doc: dict) -> None:
@@ -453,14 +451,7 @@ class EmbeddedStore(Store):
         doc = self._checked_parameter(doc)
         self._transaction(lambda conn: self._put_parameter(conn, doc))
 
-    def upsert_parameters(self, docs: Iterable[Mapping[str, Any]]) -> int:
-        checked = []
-        for i, doc in enumerate(docs):
-            try:
-                checked.append(self._checked_parameter(doc))
-            except ValidationError as exc:
-                raise ValidationError(f"document {i}: {exc}") from None
-
+    def _put_parameters(self, checked: list[dict]) -> int:
         def put(conn: sqlite3.Connection) -> int:
             for doc in checked:
                 self._put_parameter(conn, doc)

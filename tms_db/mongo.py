@@ -15,7 +15,7 @@ import bson
 import bson.errors
 
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
-from tms_db.schema import check_document_size, is_number, validate_fields, validate_parameter
+from tms_db.schema import is_number, validate_fields, validate_parameter
 from tms_db.store import (
     DATABASE,
     ImportResult,
@@ -42,6 +42,7 @@ class MongoStore(Store):
     """Store in MongoDB database ``database`` (default: the URI's database, else ``rostmsdb``)."""
 
     def __init__(self, uri: str, *, database: str | None = None, timeout_s: float = 5.0) -> None:
+        # the client is loaded only for a mongodb:// URI: the embedded store needs just bson
         import pymongo
         from pymongo import uri_parser
         from pymongo.errors import PyMongoError
@@ -207,12 +208,6 @@ class MongoStore(Store):
         else:
             self._params.insert_one(doc, session=session)
 
-    @staticmethod
-    def _checked_parameter(doc: Mapping[str, Any]) -> dict:
-        validate_parameter(doc)
-        check_document_size(doc, f"record {doc['record_name']!r}")
-        return dict(doc)
-
     def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
         self._put_parameter(self._checked_parameter(doc))
 
@@ -227,13 +222,7 @@ class MongoStore(Store):
                 return False
             raise
 
-    def upsert_parameters(self, docs: Iterable[Mapping[str, Any]]) -> int:
-        checked = []
-        for i, doc in enumerate(docs):
-            try:
-                checked.append(self._checked_parameter(doc))
-            except ValidationError as exc:
-                raise ValidationError(f"document {i}: {exc}") from None
+    def _put_parameters(self, checked: list[dict]) -> int:
         if self._in_transaction(lambda session: [self._put_parameter(dict(d), session) for d in checked]):
             return len(checked)
         # No transactions (a standalone server): validated above, so only the server can fail midway; say exactly where.

@@ -236,8 +236,8 @@ def detect_model_names(xml: str, blackboard: Mapping[str, Any] | None = None) ->
 
     The node palette (``<TreeNodesModel>``, Groot's list of node types with their default ports) names machines
     the task may never drive, so it is not read. (The original's task_generator.py searched the whole text for
-    zx120|zx200|ic120: a tree driving the ZX200 and the IC120 with LeafNodeSampleZx120 in its palette became
-    "zx200,ic120,zx120".) A port ``model_name="{key}"`` names the machine the task parameter ``key`` holds
+    every machine name it knew: a tree driving two machines with a third machine's leaf type in its palette was
+    recorded as driving all three.) A port ``model_name="{key}"`` names the machine the task parameter ``key`` holds
     (``blackboard``, the task document's field) when it is text; without it that leaf names no machine.
     """
     root = ET.fromstring(xml)

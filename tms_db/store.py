@@ -1,9 +1,5 @@
-"""The store API every module uses, and ``open_store`` which picks the backend by URI.
-
-``open_store(uri="mongodb://...")`` -> :class:`tms_db.mongo.MongoStore` (pymongo, a real MongoDB);
-``open_store()`` / ``open_store(path=DIR)`` -> :class:`tms_db.embedded.EmbeddedStore` (SQLite in WAL mode
-under ``DIR``, default ``$TMS_DB_PATH`` else ``~/.local/share/tms/db``). Both implement :class:`Store`
-and behave the same (one test suite runs against both).
+"""The store API every module uses: :class:`Store`, which both backends implement and which behave the same (one
+test suite runs against both); :func:`tms_db.backend.open_store` picks the backend by URI.
 
 Collections and shapes are the original's (database ``rostmsdb``): ``task`` documents
 ``{task_id, type: "task", model_name, description, task_sequence}``; ``parameter`` documents
@@ -24,10 +20,16 @@ from pathlib import Path
 from typing import Any
 
 from tms_db.errors import StoreError, ValidationError
-from tms_db.schema import check_document_size, is_number
+from tms_db.schema import (
+    check_document_size,
+    detect_model_names,
+    is_number,
+    normalise_task_xml,
+    validate_parameter,
+)
 
 __all__ = [
-    "Store", "open_store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS",
+    "Store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS",
     "ImportResult", "Rejected", "check_import_document", "document_label", "prevalidate_import", "import_key",
     "parameter_key", "check_document",
 ]
@@ -126,8 +128,6 @@ def check_import_document(collection: str, doc: Any) -> None:
     XML text, which must parse and hold a ``<BehaviorTree>``, or no look-up finds it and no start can run it.
     No document over :data:`tms_db.schema.MAX_DOCUMENT_BYTES`.
     """
-    from tms_db.schema import normalise_task_xml
-
     if not isinstance(doc, Mapping):
         raise ValidationError(f"not a document ({type(doc).__name__})")
     if collection == "task":
@@ -196,8 +196,6 @@ def check_document(collection: str, doc: Mapping[str, Any]) -> list[str]:
     ``record_name`` (``model_name`` is optional: the global blackboard's records have none), a record whose payload
     breaks its family's shape
     (:func:`tms_db.schema.validate_parameter`)."""
-    from tms_db.schema import validate_parameter
-
     label = document_label(doc)
     try:
         if collection == "task":
@@ -322,11 +320,28 @@ class Store(abc.ABC):
         """:meth:`import_documents` for several inputs (collection name, documents) at once, all or nothing
         together; one result per input, in order."""
 
-    @abc.abstractmethod
     def upsert_parameters(self, docs: Iterable[Mapping[str, Any]]) -> int:
         """:meth:`upsert_parameter` for many documents, all or nothing: every one is validated first (the first
         refusal raises ValidationError naming its position: ``document N: ...``), then all are written in one
-        transaction. Returns the number written."""
+        transaction (:meth:`_put_parameters`). Returns the number written."""
+        checked = []
+        for i, doc in enumerate(docs):
+            try:
+                checked.append(self._checked_parameter(doc))
+            except ValidationError as exc:
+                raise ValidationError(f"document {i}: {exc}") from None
+        return self._put_parameters(checked)
+
+    def _checked_parameter(self, doc: Mapping[str, Any]) -> dict:
+        """A copy of parameter document ``doc`` fit to store (shape of its family, size); a backend adds its own
+        checks. ValidationError naming the record otherwise."""
+        validate_parameter(doc)
+        check_document_size(doc, f"record {doc['record_name']!r}")
+        return dict(doc)
+
+    @abc.abstractmethod
+    def _put_parameters(self, checked: list[dict]) -> int:
+        """Write documents :meth:`_checked_parameter` returned, all in one transaction; the number written."""
 
     @abc.abstractmethod
     def check(self) -> list[str]:
@@ -348,31 +363,9 @@ class Store(abc.ABC):
         self.close()
 
 
-def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **options: Any) -> Store:
-    """Open the store: ``mongodb://`` / ``mongodb+srv://`` URIs via pymongo, otherwise the embedded store.
-
-    ``path`` (embedded only) is a directory, created if missing; default :func:`default_path`.
-    ``options`` go to the backend (``database=`` for MongoDB, default ``rostmsdb`` or the URI's database).
-    """
-    if uri:
-        if uri.startswith(("mongodb://", "mongodb+srv://")):
-            from tms_db.mongo import MongoStore
-
-            return MongoStore(uri, **options)
-        if uri.startswith("file:"):
-            path = uri.removeprefix("file://").removeprefix("file:")
-        else:
-            raise StoreError(f"db uri {uri!r}: unsupported scheme; use mongodb://... or leave it empty for the embedded store")
-    from tms_db.embedded import EmbeddedStore
-
-    return EmbeddedStore(Path(path).expanduser() if path else default_path(), **options)
-
-
 def build_task_doc(xml: str, task_id: int | None, description: str, model_name: str | None,
                    blackboard: dict | None = None) -> dict:
     """The task document for ``add_task`` (without ``task_id`` when it is still to be chosen)."""
-    from tms_db.schema import detect_model_names, normalise_task_xml
-
     label = f"task_id {task_id}" if task_id is not None else "new task"
     if task_id is not None:
         check_task_id(task_id)

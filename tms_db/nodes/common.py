@@ -5,7 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from tms_common.params import declare_startup
-from tms_db.store import Store, open_store
+from tms_db.backend import open_store
+from tms_db.store import Store
 
 __all__ = ["declare_and_open"]
 

@@ -1,0 +1,36 @@
+"""``open_store``: the backend a URI names.
+
+``open_store(uri="mongodb://...")`` -> :class:`tms_db.mongo.MongoStore` (pymongo, a real MongoDB);
+``open_store()`` / ``open_store(path=DIR)`` -> :class:`tms_db.embedded.EmbeddedStore` (SQLite in WAL mode
+under ``DIR``, default ``$TMS_DB_PATH`` else ``~/.local/share/tms/db``). A module of its own: both backends
+build on :mod:`tms_db.store`, so the function that picks one cannot live there.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from tms_db.embedded import EmbeddedStore
+from tms_db.errors import StoreError
+from tms_db.mongo import MongoStore
+from tms_db.store import Store, default_path
+
+__all__ = ["open_store"]
+
+
+def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **options: Any) -> Store:
+    """Open the store: ``mongodb://`` / ``mongodb+srv://`` URIs via pymongo, otherwise the embedded store.
+
+    ``path`` (embedded only) is a directory, created if missing; default :func:`tms_db.store.default_path`.
+    ``options`` go to the backend (``database=`` for MongoDB, default ``rostmsdb`` or the URI's database).
+    """
+    if uri:
+        if uri.startswith(("mongodb://", "mongodb+srv://")):
+            return MongoStore(uri, **options)
+        if uri.startswith("file:"):
+            path = uri.removeprefix("file://").removeprefix("file:")
+        else:
+            raise StoreError(f"db uri {uri!r}: unsupported scheme; use mongodb://... or leave it empty for the embedded store")
+    return EmbeddedStore(Path(path).expanduser() if path else default_path(), **options)
