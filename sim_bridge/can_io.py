@@ -6,7 +6,7 @@ The plant is driven *only* through these frames, as the real machines are. Per m
   its DBC range, wrong DLC, unknown id) is ignored and counted by reason; frames of the machine's
   own state direction (echoes) are ignored silently.
 * What a command frame does and what a state frame carries is the machine type's plant profile
-  (:mod:`sim_bridge.profiles`: excavator, crawler_dump); this module is the same for every type.
+  (:mod:`sim_bridge.profiles`: excavator, crawler_dump, dozer); this module is the same for every type.
 * Watchdog: no motion command frame for ``watchdog_s`` of simulated time -> the machine is brought to
   rest (commands zeroed; the hydraulics drain through their dead time and lag) and the trip counted.
 * Pilot cut-off (``Pilot_Cutoff_Cmd`` of :mod:`com3_can.pilot_cutoff`, a TMS extension beside COM3):
@@ -21,7 +21,7 @@ Conventions on the bus: joint angles/velocities as the URDF (swing + = CCW, boom
 crowd, bucket + = curl); azimuth clockwise-positive from map +x (ROS yaw = -azimuth, as the carrier
 DBC documents and the com3 relay reads it); ``Swing_Center_Position_x/y/z`` = plane rectangular
 coordinates of the swing centre in the site CRS with ROS axes (x = easting, y = northing, z =
-altitude), RTK noise; ``Front_Pin_Position_*`` = pin positions in the ZX200 ``base_link`` frame.
+altitude), RTK noise; ``Front_Pin_Position_*`` = pin positions in the excavator's ``base_link`` frame.
 """
 
 from __future__ import annotations
@@ -85,10 +85,9 @@ class PlantCanIO:
 
     Args:
         plant: the plant to drive.
-        buses: machine name -> bus, e.g. ``{"zx200": bus, "ic120": bus}`` (any python-can bus; a machine of
-            the plant may be omitted).
+        buses: machine name -> bus (any python-can bus; a machine of the plant may be omitted).
         watchdog_s: command-loss timeout in simulated seconds.
-        codecs: override the codecs (default: the DBC each machine's description names, ``PlantSpec.dbcs``).
+        codecs: override the codecs (default: the DBC each machine's description names, ``PlantMachine.dbc``).
     """
 
     def __init__(
@@ -103,10 +102,9 @@ class PlantCanIO:
         self.watchdog_s = watchdog_s
         self.sides: dict[str, Side] = {}
         for m, bus in buses.items():
-            profile = PLANT_PROFILES.get(plant.spec.types[m])
-            dbc = plant.spec.dbcs.get(m)  # the DBC its machine description names
-            codec = (codecs or {}).get(m) or (codec_for(dbc, m) if dbc else profile.codec(m))
-            self.sides[m] = Side(m, plant.machines[m], profile, bus, codec, plant.time)
+            machine = plant.spec.machines[m]
+            codec = (codecs or {}).get(m) or codec_for(machine.dbc, m)
+            self.sides[m] = Side(m, plant.machines[m], PLANT_PROFILES.get(machine.type), bus, codec, plant.time)
         self.gnss = Gnss(plant.spec.site)
         self.noise = Noise(plant.spec.sensors)
         self.replay = False  # True: commands are counted but not applied (the plant follows a log)
@@ -122,7 +120,7 @@ class PlantCanIO:
         if self.replay:
             return
         want = values["pilot_cutoff_cmd"] >= 0.5
-        spec = side.machine.spec.pilot_cutoff
+        spec = side.machine.description.pilot_cutoff
         if spec is None:
             side.counters["ignored_no_pilot_cutoff"] += 1
             return

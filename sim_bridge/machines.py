@@ -1,17 +1,19 @@
 """The machines of the plant, one class per type: state, actuator commands, stepping.
 
-Pure (no ROS, no CAN, no MuJoCo): the plant profiles (:mod:`sim_bridge.profiles`) build them from a
-machine spec and map COM3 frames onto their commands.
+Pure (no ROS, no CAN, no MuJoCo): the plant profiles (:mod:`sim_bridge.profiles`) build them from a machine of
+the plant (:class:`~sim_bridge.spec.PlantMachine`: its tms_model description, start pose and joints) and map COM3
+frames onto their commands. Each keeps its description as ``description``.
 """
 
 from __future__ import annotations
 
 import math
 
-from sim_bridge.config import CarrierSpec, DozerSpec, ExcavatorSpec
 from sim_bridge.hydraulics import JointBank
+from sim_bridge.spec import PlantMachine
 from sim_bridge.tracks import SkidSteer, centre_to_tracks
 from tms_model.geometry import wrap_angle
+from tms_model.machines import LIFT_JOINT, ROTATE_JOINT, VESSEL_JOINT, Machine
 
 __all__ = ["Excavator", "CrawlerCarrier", "Dozer"]
 
@@ -19,11 +21,18 @@ __all__ = ["Excavator", "CrawlerCarrier", "Dozer"]
 class _Tracked:
     """What every machine on tracks shares: its skid-steer base (``self.base``) driven by track commands."""
 
-    spec: ExcavatorSpec | CarrierSpec | DozerSpec
+    name: str
+    description: Machine
     base: SkidSteer
 
+    def _place(self, machine: PlantMachine, dt: float) -> None:
+        self.name = machine.name
+        self.description = machine.description
+        self.base = SkidSteer(machine.description.tracks, machine.description.track_drive, dt, machine.pose)
+        self.z = 0.0
+
     def set_centre_velocity(self, v: float, yaw_rate: float) -> None:
-        t = self.spec.tracks
+        t = self.description.tracks
         self.base.command[0], self.base.command[1] = centre_to_tracks(v, yaw_rate, t.gauge, t.max_yaw_rate)
 
     def set_track_speeds(self, left: float, right: float) -> None:
@@ -33,13 +42,13 @@ class _Tracked:
 class Excavator(_Tracked):
     """Backhoe state: tracked base + hydraulic front joints (swing, boom, arm, bucket)."""
 
-    def __init__(self, spec: ExcavatorSpec, dt: float, pose: tuple[float, float, float]) -> None:
-        s = spec
-        self.spec = s
-        self.front = JointBank(s.joints, s.drives, dt, pump_flow=s.pump_flow)
-        self.front.set_positions(s.home_pose)
-        self.base = SkidSteer(s.tracks, dt, pose)
-        self.z = 0.0
+    def __init__(self, machine: PlantMachine, dt: float) -> None:
+        self._place(machine, dt)
+        d = machine.description
+        assert d.bucket is not None and d.pump_flow is not None  # tms_model: every excavator has them
+        self.bucket = d.bucket
+        self.front = JointBank(d.joints, d.drives, dt, pump_flow=d.pump_flow)
+        self.front.set_positions(dict(machine.start_joints))
 
     @property
     def bank(self) -> JointBank:
@@ -56,7 +65,7 @@ class Excavator(_Tracked):
 
     def set_pilot_cutoff(self, engaged: bool) -> None:
         """Pilot cut-off (hydraulic lock) on/off; no-op when the machine YAML has no ``pilot_cutoff``."""
-        c = self.spec.pilot_cutoff
+        c = self.description.pilot_cutoff
         if c is None:
             return
         self.front.set_cutoff(c.front_time_constant if engaged else None)
@@ -86,16 +95,22 @@ class CrawlerCarrier(_Tracked):
     ``bank`` holds the joints in bus order (``rotate_joint`` first when there is one).
     """
 
-    def __init__(self, spec: CarrierSpec, dt: float, pose: tuple[float, float, float]) -> None:
-        s = spec
-        self.spec = s
-        self.joints = JointBank(s.joints, s.drives, dt)
-        self._iv = self.joints.names.index(s.vessel.name)
-        self._isw = None if s.swing is None else self.joints.names.index(s.swing.name)
-        self.base = SkidSteer(s.tracks, dt, pose)
+    def __init__(self, machine: PlantMachine, dt: float) -> None:
+        self._place(machine, dt)
+        d = machine.description
+        assert d.vessel is not None  # tms_model: every crawler dump has one
+        self.vessel = d.vessel  # hinge, inner size, capacity, loading and dumping
+        self.vessel_joint = d.joint(VESSEL_JOINT)  # angle 0 = lowered, + = raised
+        #: the upper body's rotate_joint (None: the vessel does not swing); with it the vessel turns about the
+        #: vertical axis through its origin
+        self.swing_joint = d.joint(ROTATE_JOINT) if d.swing is not None else None
+        self._swing_gain = d.swing.angle_gain if d.swing is not None else 0.0
+        self.joints = JointBank(d.joints, d.drives, dt)
+        self.joints.set_positions(dict(machine.start_joints))
+        self._iv = self.joints.names.index(self.vessel_joint.name)
+        self._isw = None if self.swing_joint is None else self.joints.names.index(self.swing_joint.name)
         self.vessel_target: float | None = None  # angle mode when not None
         self.swing_target: float | None = None
-        self.z = 0.0
 
     @property
     def bank(self) -> JointBank:
@@ -124,7 +139,7 @@ class CrawlerCarrier(_Tracked):
         return 0.0 if self._isw is None else self.joints.v[self._isw]
 
     def set_vessel_target(self, angle: float) -> None:
-        lo, hi = self.spec.vessel.lower or 0.0, self.spec.vessel.upper or 0.0
+        lo, hi = self.vessel_joint.lower or 0.0, self.vessel_joint.upper or 0.0
         self.vessel_target = max(lo, min(hi, angle))
 
     def set_vessel_velocity(self, v: float) -> None:
@@ -133,7 +148,7 @@ class CrawlerCarrier(_Tracked):
 
     def set_swing_target(self, angle: float) -> None:
         """Hold the upper body at ``angle`` (clamped to its limits, if any); ignored without a swing."""
-        j = self.spec.swing
+        j = self.swing_joint
         if j is None or self._isw is None:
             return
         if j.lower is not None and j.upper is not None:
@@ -154,7 +169,7 @@ class CrawlerCarrier(_Tracked):
 
     def set_pilot_cutoff(self, engaged: bool) -> None:
         """Pilot cut-off (hydraulic lock) on/off; no-op when the machine YAML has no ``pilot_cutoff``."""
-        c = self.spec.pilot_cutoff
+        c = self.description.pilot_cutoff
         if c is None:
             return
         if engaged:
@@ -169,13 +184,13 @@ class CrawlerCarrier(_Tracked):
     def step(self) -> None:
         if self.vessel_target is not None:
             err = self.vessel_target - self.joints.q[self._iv]
-            self.joints.command[self._iv] = err * self.spec.vessel_angle_gain
+            self.joints.command[self._iv] = err * self.vessel.angle_gain
         if self.swing_target is not None and self._isw is not None:
             q = self.joints.q[self._isw]
-            j = self.spec.swing
+            j = self.swing_joint
             # endless slew: the short way round; limited: straight to the target
             err = wrap_angle(self.swing_target - q) if j is not None and j.lower is None else self.swing_target - q
-            self.joints.command[self._isw] = err * self.spec.swing_angle_gain
+            self.joints.command[self._isw] = err * self._swing_gain
         self.joints.step()
         self.base.step()
 
@@ -183,13 +198,15 @@ class CrawlerCarrier(_Tracked):
 class Dozer(_Tracked):
     """Dozer state: tracked base + blade lift (hold, target angle or velocity; ``lift_joint`` + = down)."""
 
-    def __init__(self, spec: DozerSpec, dt: float, pose: tuple[float, float, float]) -> None:
-        self.spec = spec
-        self.joints = JointBank([spec.lift], spec.drives, dt)
-        self.joints.set_positions({spec.lift.name: spec.home_lift})
-        self.base = SkidSteer(spec.tracks, dt, pose)
+    def __init__(self, machine: PlantMachine, dt: float) -> None:
+        self._place(machine, dt)
+        d = machine.description
+        assert d.blade is not None  # tms_model: every dozer has one
+        self.blade = d.blade  # edge, width, capacity, angle gain, cutting
+        self.lift = d.joint(LIFT_JOINT)
+        self.joints = JointBank([self.lift], d.drives, dt)
+        self.joints.set_positions({self.lift.name: machine.start_joints[self.lift.name]})
         self.lift_target: float | None = None
-        self.z = 0.0
 
     @property
     def bank(self) -> JointBank:
@@ -204,7 +221,7 @@ class Dozer(_Tracked):
         return self.joints.v[0]
 
     def set_lift_target(self, angle: float) -> None:
-        j = self.spec.lift
+        j = self.lift
         self.lift_target = max(j.lower if j.lower is not None else angle, min(j.upper if j.upper is not None else angle,
                                                                               angle))
 
@@ -218,7 +235,7 @@ class Dozer(_Tracked):
         self.base.rest()
 
     def set_pilot_cutoff(self, engaged: bool) -> None:
-        c = self.spec.pilot_cutoff
+        c = self.description.pilot_cutoff
         if c is None:
             return
         if engaged:
@@ -231,7 +248,7 @@ class Dozer(_Tracked):
 
     def edge_in_base(self) -> tuple[float, float, float]:
         """The blade's cutting edge in base_link [m] (lift_joint about y: + turns the arm's x axis down)."""
-        j, e = self.spec.lift, self.spec.blade.edge_xyz
+        j, e = self.lift, self.blade.edge_xyz
         q = self.joints.q[0]
         c, s = math.cos(q), math.sin(q)
         # rotation about +y by q: x' = c x + s z, z' = -s x + c z
@@ -239,6 +256,6 @@ class Dozer(_Tracked):
 
     def step(self) -> None:
         if self.lift_target is not None:
-            self.joints.command[0] = (self.lift_target - self.joints.q[0]) * self.spec.blade.angle_gain
+            self.joints.command[0] = (self.lift_target - self.joints.q[0]) * self.blade.angle_gain
         self.joints.step()
         self.base.step()

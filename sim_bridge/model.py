@@ -3,7 +3,8 @@
 ``build_mjcf(spec)`` writes an MJCF document: the terrain height field and every machine of the plant,
 each written by its type's profile (:mod:`sim_bridge.profiles`) with names prefixed by the machine's
 name: an excavator is mocap base -> swing -> boom -> arm -> bucket with the URDF joint origins and a
-``<name>_bucket_tip`` site, a crawler carrier is mocap base -> vessel on its rear hinge. The bases are mocap bodies and the joints are set
+``<name>_bucket_tip`` site, a crawler carrier is mocap base -> (rotating upper body ->) vessel on its rear hinge,
+a dozer mocap base -> blade lift arm. The bases are mocap bodies and the joints are set
 from the hydraulic model (kinematic joints): MuJoCo computes the forward kinematics and renders; the
 actuator and soil dynamics live in :mod:`sim_bridge.hydraulics` and :mod:`sim_bridge.soil`, which is
 what keeps the plant far faster than real time. URDF ``rpy`` is fixed-axis XYZ, hence ``eulerseq="XYZ"``.
@@ -14,11 +15,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from sim_bridge.config import PlantSpec
 from sim_bridge.profiles import PLANT_PROFILES
+from sim_bridge.spec import PlantSpec
 from tms_model.geometry import quaternion_from_yaw, yaw_from_wxyz
 
 __all__ = ["build_mjcf", "SiteModel"]
+
 
 def build_mjcf(spec: PlantSpec) -> str:
     """The MJCF XML of every machine on the site (pure function of the configuration)."""
@@ -44,8 +46,8 @@ def build_mjcf(spec: PlantSpec) -> str:
         f'    <geom name="terrain" type="hfield" hfield="terrain" pos="{cx} {cy} {soil.ground_z - 5.0}" '
         'material="soil" contype="0" conaffinity="0"/>',
     ]
-    for name, machine in spec.machines.items():
-        lines += PLANT_PROFILES.get(spec.types[name]).mjcf(name, machine)
+    for machine in spec.machines.values():
+        lines += PLANT_PROFILES.get(machine.type).mjcf(machine)
     lines += [
         "  </worldbody>",
         "</mujoco>",
@@ -91,7 +93,7 @@ class SiteModel:
         self.data.mocap_quat[i] = yaw_quat(yaw)
 
     def set_joint(self, name: str, value: float) -> None:
-        """Set joint ``name`` (e.g. ``zx200_boom_joint``, ``ic120_vessel_joint``)."""
+        """Set joint ``name``: ``<machine>_<joint>`` (e.g. the boom of the machine named ``m``: ``m_boom_joint``)."""
         self.data.qpos[self._qadr[name]] = value
 
     def forward(self) -> None:

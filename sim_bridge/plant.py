@@ -3,8 +3,9 @@
 Pure core (no ROS, no CAN): :class:`Plant` holds one machine per entry of the plant YAML's ``machines``
 (built by its type's profile, :mod:`sim_bridge.profiles`), takes actuator commands (front joint
 velocities, track speeds, a vessel target angle or velocity), steps hydraulics, tracks, kinematics
-(MuJoCo) and soil, and exposes the true state. The soil is dug by the plant's excavator and carried by
-its crawler carrier (``PlantSpec.excavator`` / ``carrier``). :mod:`sim_bridge.can_io` maps COM3 frames onto these commands and the
+(MuJoCo) and soil, and exposes the true state. The paper's soil is dug by the plant's first excavator and
+carried by its first crawler carrier (``PlantSpec.excavator`` / ``carrier``); every carrier loads and dumps, every
+dozer blade cuts. :mod:`sim_bridge.can_io` maps COM3 frames onto these commands and the
 state onto frames; :mod:`sim_bridge.nodes.sim_plant` adds ``/clock`` and ``/sim/truth``.
 """
 
@@ -15,16 +16,14 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from sim_bridge.config import PlantSpec, load_plant
+from sim_bridge.config import load_plant
 from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
 from sim_bridge.model import SiteModel
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
+from sim_bridge.spec import PlantSpec
 
-__all__ = ["Plant", "MachineTruth", "stamp_parts", "Zx200", "Ic120"]
-
-#: the paper's machine classes under their former names
-Zx200, Ic120 = Excavator, CrawlerCarrier
+__all__ = ["Plant", "MachineTruth", "stamp_parts"]
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +52,7 @@ class MachineTruth:
 
 
 class Plant:
-    """Both machines, the site model and the soil; ``step()`` advances ``dt`` of simulated time."""
+    """The machines of the plant YAML, the site model and the soil; ``step()`` advances ``dt`` of simulated time."""
 
     def __init__(self, spec: PlantSpec | None = None) -> None:
         self.spec = spec or load_plant()
@@ -61,8 +60,7 @@ class Plant:
         self.time = 0.0  # = steps * dt (not accumulated: summing 0.01 drifts off the step grid)
         self.steps = 0
         self.machines: dict[str, Any] = {
-            name: PLANT_PROFILES.get(self.spec.types[name]).make_machine(ms, self.dt, self.spec.initial_poses[name])
-            for name, ms in self.spec.machines.items()
+            name: PLANT_PROFILES.get(m.type).make_machine(m, self.dt) for name, m in self.spec.machines.items()
         }
         #: the soil-digging excavator and the soil-carrying crawler carrier (the paper's ZX200 and IC120); None in a
         #: plant without them (``experiment: none``)
@@ -80,14 +78,16 @@ class Plant:
         self.tip_speed = 0.0
         self._edges: dict[str, tuple[float, float, float]] = {}
 
+    # The paper's names of the digging excavator and the carrying carrier, for callers outside sim_bridge that
+    # still use them; code of this package says excavator / carrier.
     @property
     def zx200(self) -> Excavator:
-        """The soil-digging excavator (the paper's ZX200)."""
+        """The soil-digging excavator."""
         return self.excavator
 
     @property
     def ic120(self) -> CrawlerCarrier:
-        """The soil-carrying crawler carrier (the paper's IC120)."""
+        """The soil-carrying crawler carrier."""
         return self.carrier
 
     # -- state -------------------------------------------------------------------------------------
@@ -107,7 +107,7 @@ class Plant:
     def roll_pitch(self, machine: str) -> tuple[float, float]:
         """Roll and pitch of a base resting on the height field under its footprint [rad]."""
         m = self.machines[machine]
-        t = m.spec.tracks
+        t = m.description.footprint
         c, s = math.cos(m.base.yaw), math.sin(m.base.yaw)
         x, y = m.base.x, m.base.y
         hl, hw = t.length / 2, t.width / 2
@@ -151,7 +151,7 @@ class Plant:
         self.time = self.steps * self.dt
 
     def _soil(self, prev, tip) -> None:  # noqa: ANN001 - numpy vectors
-        zx = self.excavator.spec
+        zx = self.excavator.bucket
         soil = self.soil
         ground = self.ground
         surface = ground.height(tip[0], tip[1])
@@ -162,15 +162,15 @@ class Plant:
                 (prev[0], prev[1]),
                 (tip[0], tip[1]),
                 tip[2],
-                width=zx.bucket_width,
+                width=zx.width,
                 lateral=lateral,
-                max_volume=zx.bucket_capacity - soil.bucket,
+                max_volume=zx.capacity - soil.bucket,
             )
             soil.bucket += got
             soil.dug += got
         alpha = self.excavator.tip_angle()
         if soil.bucket > 0.0 and alpha < zx.release_tip_angle and tip[2] >= surface:
-            rate = zx.bucket_capacity / zx.spill_time * min(1.0, (zx.release_tip_angle - alpha) / 0.5)
+            rate = zx.capacity / zx.spill_time * min(1.0, (zx.release_tip_angle - alpha) / 0.5)
             out = min(soil.bucket, rate * self.dt)
             soil.bucket -= out
             self._land(tip[0], tip[1], out)
@@ -179,8 +179,8 @@ class Plant:
     def _vessel_frame(ic: CrawlerCarrier) -> tuple[float, float, float, float, float]:
         """(ox, oy, cos, sin, yaw) of the vessel: base_link coordinates at swing 0 map to the map frame by turning
         about the slew centre (ox, oy) by the swing, then by the base pose."""
-        s = ic.spec
-        ox, oy = (s.swing.origin_xyz[0], s.swing.origin_xyz[1]) if s.swing is not None else (0.0, 0.0)
+        sw = ic.swing_joint
+        ox, oy = (sw.origin_xyz[0], sw.origin_xyz[1]) if sw is not None else (0.0, 0.0)
         th = ic.swing_angle
         return ox, oy, math.cos(th), math.sin(th), ic.base.yaw + th
 
@@ -194,7 +194,7 @@ class Plant:
     def _land(self, x: float, y: float, volume: float) -> None:
         """Soil falling at (x, y): into a carrier's vessel when over it and lowered, else on the ground."""
         for name, ic in self.carriers.items():
-            s = ic.spec
+            s = ic.vessel
             ox, oy, _, _, yaw = self._vessel_frame(ic)
             # (x, y) in the upper body's frame at the slew centre, then in base_link at swing 0
             cx, cy = self._vessel_to_map(ic, ox, oy)
@@ -215,12 +215,12 @@ class Plant:
     def _dump(self) -> None:
         """Every raised vessel empties onto a pile ``dump_distance`` behind its hinge, where the swung vessel points."""
         for name, ic in self.carriers.items():
-            s = ic.spec
+            s = ic.vessel
             angle = ic.vessel_angle
             load = self.soil.vessels[name]
             if load <= 0.0 or angle <= s.dump_start_angle:
                 continue
-            span = max(1e-6, (s.vessel.upper or angle) - s.dump_start_angle)
+            span = max(1e-6, (ic.vessel_joint.upper or angle) - s.dump_start_angle)
             rate = s.capacity / s.dump_time * min(1.0, (angle - s.dump_start_angle) / span)
             out = min(load, rate * self.dt)
             self.soil.vessels[name] = load - out
@@ -232,7 +232,7 @@ class Plant:
     def dump_point(self, machine: str) -> tuple[float, float]:
         """Map position where carrier ``machine`` would put its dumped pile now."""
         ic = self.carriers[machine]
-        return self._vessel_to_map(ic, ic.spec.hinge_xyz[0] - ic.spec.dump_distance, ic.spec.hinge_xyz[1])
+        return self._vessel_to_map(ic, ic.vessel.hinge_xyz[0] - ic.vessel.dump_distance, ic.vessel.hinge_xyz[1])
 
     def blade_edge(self, machine: str) -> tuple[float, float, float]:
         """Map position of dozer ``machine``'s blade edge (centre of the cutting edge)."""
@@ -243,7 +243,7 @@ class Plant:
 
     def _doze(self, name: str, dz: Dozer) -> None:
         """The blade cuts while moving below the surface and leaves its load ahead when lifted above it."""
-        b = dz.spec.blade
+        b = dz.blade
         x, y, z = self.blade_edge(name)
         prev = self._edges.get(name)
         self._edges[name] = (x, y, z)

@@ -8,10 +8,16 @@ the variable is unset) or ``osmesa``. Without one, :func:`render_png` raises
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
-from sim_bridge.errors import SimError
-from sim_bridge.plant import Plant
+# MuJoCo picks its GL backend when it is first imported: offscreen unless the caller chose one
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from pathlib import Path  # noqa: E402
+
+import mujoco  # noqa: E402
+
+from sim_bridge.errors import SimError  # noqa: E402
+from sim_bridge.plant import Plant  # noqa: E402
 
 __all__ = ["render_png", "render_rgb"]
 
@@ -19,9 +25,6 @@ __all__ = ["render_png", "render_rgb"]
 def render_rgb(plant: Plant, *, width: int = 960, height: int = 540, lookat=(8.0, 2.0, 0.0), distance: float = 38.0,
                azimuth: float = -60.0, elevation: float = -35.0):  # noqa: ANN001, ANN201 - numpy image
     """An RGB image (H x W x 3, uint8) of the site with the current terrain, machines and soil."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    import mujoco
-
     site = plant.model
     site.set_terrain(plant.ground.h, plant.spec.soil.ground_z)
     try:
@@ -40,7 +43,7 @@ def render_rgb(plant: Plant, *, width: int = 960, height: int = 540, lookat=(8.0
 
 def render_png(plant: Plant, path: str | Path, **view) -> Path:  # noqa: ANN003 - forwarded to render_rgb
     """Render the site and write a PNG; returns the path."""
-    import matplotlib.image
+    import matplotlib.image  # third-party, slow to import: only when a snapshot is written
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

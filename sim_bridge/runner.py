@@ -7,13 +7,15 @@ the 10 ms frames leave every 10 ms of wall time. A late loop makes up at most ``
 running its steps without sleeping (default 0: none, a late step shifts the schedule); a longer stall shifts the
 schedule by the rest. ``speed == 0`` runs as fast as the CPU allows.
 
-Truth log (JSON lines, one record per ``period`` of simulated time)::
+Truth log (JSON lines, one record per ``period`` of simulated time): the time, every machine of the plant by
+its name (base pose and the angles of the joints it reports) and the soil::
 
-    {"t": 1.25, "zx200": {"x":..,"y":..,"z":..,"yaw":.., "joints": {...}}, "ic120": {...},
-     "soil": {"mound": .., "bucket": .., "vessel": .., "dumped": ..}}
+    {"t": 1.25, "<machine>": {"x":..,"y":..,"z":..,"yaw":.., "joints": {...}}, "<machine>": {...},
+     "soil": {"mound": .., "ground": .., "bucket": .., "vessel": .., "dumped": ..}}
 
 Replay drives the models from such a log (latest record at or before the current time) instead of
-from the commands, as OperaSimVR's replay mode does: state frames, ``/clock`` and truth follow the log.
+from the commands, as OperaSimVR's replay mode does: state frames, ``/clock`` and truth follow the log. The log
+must hold the machines of the plant it is replayed on.
 """
 
 from __future__ import annotations
@@ -33,19 +35,23 @@ from sim_bridge.plant import Plant
 __all__ = ["PlantRunner", "TruthRecorder", "TruthLog", "truth_record"]
 
 
+#: keys of a truth record that are not machines
+TIME, SOIL = "t", "soil"
+
+
 def truth_record(plant: Plant) -> dict[str, Any]:
     """The plant's true state as one JSON-able record."""
-    zx, ic = plant.zx200, plant.ic120
-    return {
-        "t": round(plant.time, 6),
-        "zx200": {"x": zx.base.x, "y": zx.base.y, "z": zx.z, "yaw": zx.base.yaw,
-                  "joints": dict(zip(zx.front.names, zx.front.q, strict=True))},
-        "ic120": {"x": ic.base.x, "y": ic.base.y, "z": ic.z, "yaw": ic.base.yaw,
-                  "joints": {"vessel_joint": ic.vessel_angle}},
-        "soil": {"mound": plant.ground.mound_volume(), "ground": plant.ground.ground_soil_volume(),
-                 "bucket": plant.soil.bucket,
-                 "vessel": plant.soil.vessel, "dumped": plant.soil.dumped},
-    }
+    record: dict[str, Any] = {TIME: round(plant.time, 6)}
+    for name, m in plant.machines.items():
+        record[name] = {"x": m.base.x, "y": m.base.y, "z": m.z, "yaw": m.base.yaw,
+                        "joints": dict(zip(m.bank.names, m.bank.q, strict=True))}
+    record[SOIL] = {"mound": plant.ground.mound_volume(), "ground": plant.ground.ground_soil_volume(),
+                    "bucket": plant.soil.bucket, "vessel": plant.soil.vessel, "dumped": plant.soil.dumped}
+    return record
+
+
+def _machines(record: dict[str, Any]) -> list[str]:
+    return [key for key in record if key not in (TIME, SOIL)]
 
 
 class TruthRecorder:
@@ -81,15 +87,24 @@ class TruthLog:
                 continue
             try:
                 rec = json.loads(line)
-                float(rec["t"])
-                for m in ("zx200", "ic120"):
+                float(rec[TIME])
+                rec[SOIL]  # noqa: B018 - presence check
+                if not _machines(rec):
+                    raise KeyError("no machine")
+                for m in _machines(rec):
                     rec[m]["x"], rec[m]["y"], rec[m]["yaw"], rec[m]["joints"]  # noqa: B018 - presence check
             except (ValueError, KeyError, TypeError) as exc:
                 raise ReplayError(f"{self.path}:{number}: not a truth record ({type(exc).__name__}: {exc})") from None
             self.records.append(rec)
         if not self.records:
             raise ReplayError(f"{self.path}: the truth log holds no records")
-        self.times = [float(r["t"]) for r in self.records]
+        self.times = [float(r[TIME]) for r in self.records]
+        #: the machines of the log (those of its first record; every record must hold them)
+        self.machines = tuple(_machines(self.records[0]))
+        for number, rec in enumerate(self.records, 1):
+            if tuple(_machines(rec)) != self.machines:
+                raise ReplayError(f"{self.path}: record {number} holds the machines {_machines(rec)}, the first "
+                                  f"{list(self.machines)}")
 
     @property
     def duration(self) -> float:
@@ -99,9 +114,15 @@ class TruthLog:
         """The latest record at or before ``t`` (the first one before the log starts)."""
         return self.records[max(0, bisect_right(self.times, t + 1e-9) - 1)]
 
+    def check(self, plant: Plant) -> None:
+        """ReplayError unless the log holds exactly the machines of ``plant``."""
+        if set(self.machines) != set(plant.machines):
+            raise ReplayError(f"{self.path}: the log holds the machines {sorted(self.machines)}, the plant "
+                              f"{sorted(plant.machines)} (replay on the plant YAML it was recorded with)")
+
     def apply(self, plant: Plant) -> dict[str, Any]:
         rec = self.at(plant.time)
-        for m in ("zx200", "ic120"):
+        for m in self.machines:
             r = rec[m]
             plant.set_truth(m, r["x"], r["y"], r["yaw"], r["joints"])
         return rec
@@ -130,8 +151,10 @@ class PlantRunner:
         self.catch_up_s = catch_up_s
         self.on_step = on_step
         self.replay = replay
-        if io is not None and replay is not None:
-            io.replay = True
+        if replay is not None:
+            replay.check(plant)
+            if io is not None:
+                io.replay = True
         self._stop = threading.Event()
         self._now, self._sleep = time.perf_counter, time.sleep  # the wall clock (a test's own, to step it)
         self.wall_elapsed = 0.0

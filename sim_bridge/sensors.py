@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import random
 
-from sim_bridge.config import SensorSpec
+from sim_bridge.spec import SensorSpec
 from tms_model.site import Site
 
 __all__ = ["Gnss", "Noise"]

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim_bridge.config import SoilSpec
+from sim_bridge.spec import SoilSpec
 
 __all__ = ["HeightField", "SoilState"]
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 
-from sim_bridge.config import TrackSpec
 from sim_bridge.hydraulics import DeadTimeLag
+from tms_model.machines import TrackDrive, Tracks
 
 __all__ = ["SkidSteer", "centre_to_tracks"]
 
@@ -26,11 +26,13 @@ def centre_to_tracks(v: float, yaw_rate: float, gauge: float, max_yaw_rate: floa
 class SkidSteer:
     """Planar pose (x, y, yaw) of a tracked base driven by left/right track speed commands."""
 
-    def __init__(self, spec: TrackSpec, dt: float, pose: tuple[float, float, float]) -> None:
-        self.spec = spec
+    def __init__(self, tracks: Tracks, drive: TrackDrive, dt: float, pose: tuple[float, float, float]) -> None:
+        """``tracks`` (gauge, speed limit) and ``drive`` (travel hydraulics, slip) as the machine description has them."""
+        self.tracks = tracks
+        self.drive = drive
         self.dt = dt
-        self.left = DeadTimeLag(spec.dead_time, spec.time_constant, spec.max_speed, dt)
-        self.right = DeadTimeLag(spec.dead_time, spec.time_constant, spec.max_speed, dt)
+        self.left = DeadTimeLag(drive.dead_time, drive.time_constant, tracks.max_speed, dt)
+        self.right = DeadTimeLag(drive.dead_time, drive.time_constant, tracks.max_speed, dt)
         self.command = [0.0, 0.0]  # left, right [m/s]
         self.x, self.y, self.yaw = pose
         self.v = 0.0  # true ground speed [m/s]
@@ -50,15 +52,15 @@ class SkidSteer:
         self.cut_alpha = 1.0 if time_constant <= 0 else 1.0 - math.exp(-self.dt / time_constant)
 
     def step(self) -> None:
-        s = self.spec
+        d = self.drive
         if self.cut_alpha is not None:
             self.vl = self.left.step_vented(self.cut_alpha)
             self.vr = self.right.step_vented(self.cut_alpha)
         else:
             self.vl = self.left.step(self.command[0])
             self.vr = self.right.step(self.command[1])
-        self.v = 0.5 * (self.vl + self.vr) * (1.0 - s.slip)
-        self.w = (self.vr - self.vl) / s.gauge * (1.0 - s.yaw_slip)
+        self.v = 0.5 * (self.vl + self.vr) * (1.0 - d.slip)
+        self.w = (self.vr - self.vl) / self.tracks.gauge * (1.0 - d.yaw_slip)
         yaw_mid = self.yaw + 0.5 * self.w * self.dt
         self.x += self.v * math.cos(yaw_mid) * self.dt
         self.y += self.v * math.sin(yaw_mid) * self.dt

@@ -8,15 +8,15 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
 
 * ``/clock`` (rosgraph_msgs/Clock) every step,
 * ``/sim/truth/<machine>/pose`` (geometry_msgs/PoseStamped), ``/sim/truth/<machine>/joint_states``
-  (sensor_msgs/JointState), ``/sim/truth/zx200/bucket_tip`` (geometry_msgs/PointStamped),
+  (sensor_msgs/JointState) for every machine by name, ``/sim/truth/<excavator>/bucket_tip``
+  (geometry_msgs/PointStamped) of the digging excavator (the paper's ZX200),
 * ``/sim/truth/soil`` (std_msgs/Float64MultiArray ``[mound, bucket, vessel, dumped, total_error, ground]`` m^3,
   labels in ``layout.dim[0].label``), every ``truth_period_s``,
 * ``/sim/truth/<carrier>/soil`` (std_msgs/Float64MultiArray ``[vessel, loaded, dumped]`` m^3, labels in
   ``layout.dim[0].label``) for every crawler carrier by name: its load now and the totals that landed in its
   vessel and that it dumped, every ``truth_period_s``,
 * ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/<carrier>/vessel_points``
-  (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name (the paper's IC120: ``/sim/sensors/ic120/
-  vessel_points``): LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
+  (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name: LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
   simulated time (0.5 s; the mound's every ``mound_scan_period_s``, default the same), noise ``scan_noise_m``
   (0.02 m),
 * ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
@@ -29,18 +29,30 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering without a display (before mujoco loads)
 
+import math  # noqa: E402
 import threading  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
+import numpy as np  # noqa: E402
+from builtin_interfaces.msg import Time  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from geometry_msgs.msg import PointStamped, PoseStamped  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import JointState, PointCloud2, PointField  # noqa: E402
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension  # noqa: E402
 
+from com3_can.bus import link_config, load_bus_config, open_bus  # noqa: E402
+from sim_bridge.can_io import PlantCanIO  # noqa: E402
 from sim_bridge.config import load_plant  # noqa: E402
 from sim_bridge.errors import SimConfigError  # noqa: E402
 from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
+from sim_bridge.render import render_png  # noqa: E402
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
+from sim_bridge.scanners import mound_scan, pack_xyz, vessel_scan  # noqa: E402
 from tms_common.node import realtime_thread, run_node  # noqa: E402
-from tms_common.params import startup_parameters
+from tms_common.params import startup_parameters  # noqa: E402
 
 SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 
@@ -50,19 +62,6 @@ class SimPlantNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("sim_plant", **kwargs)
-        from builtin_interfaces.msg import Time
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import PointStamped, PoseStamped
-        from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-
-        from com3_can.bus import link_config, load_bus_config, open_bus
-        from sim_bridge.can_io import PlantCanIO
-
-        self._Time, self._Clock = Time, Clock
-        self._PoseStamped, self._PointStamped, self._JointState = PoseStamped, PointStamped, JointState
-        self._Float64MultiArray, self._Dim, self._DiagnosticArray = Float64MultiArray, MultiArrayDimension, DiagnosticArray
         p = startup_parameters(self)
         speed = float(p("speed", 1.0).value)
         catch_up = float(p("catch_up_s", 0.0).value)
@@ -98,12 +97,10 @@ class SimPlantNode(Node):
         self.joint_pub = {
             m: self.create_publisher(JointState, f"/sim/truth/{m}/joint_states", 10) for m in self.plant.machines
         }
-        self.tip_pub = self.create_publisher(PointStamped, "/sim/truth/zx200/bucket_tip", 10)
+        digger = spec.excavator  # the excavator digging the soil; none in a plant without the soil experiment
+        self.tip_pub = self.create_publisher(PointStamped, f"/sim/truth/{digger}/bucket_tip", 10) if digger else None
         self.soil_pub = self.create_publisher(Float64MultiArray, "/sim/truth/soil", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/sim/diagnostics", 10)
-        from sensor_msgs.msg import PointCloud2, PointField
-
-        self._PointCloud2, self._PointField = PointCloud2, PointField
         self._scan_period = float(p("scan_period_s", 0.5).value)
         # The mound changes only where the bucket cuts, and its cloud (~40k points) and assessment are the costly
         # scan: a site with several carriers scans it less often than their vessels (config/launch/fleet.yaml).
@@ -113,6 +110,7 @@ class SimPlantNode(Node):
                               f"{self._scan_period} / {self._mound_scan_period}")
         self._scan_noise = float(p("scan_noise_m", 0.02).value)
         self._next_scan = self._next_mound_scan = 0.0
+        self._scan_rng = np.random.default_rng(spec.sensors.seed + 1)
         self.mound_pub = self.create_publisher(PointCloud2, "/sim/sensors/mound/points", 2)
         self.vessel_pub = {m: self.create_publisher(PointCloud2, f"/sim/sensors/{m}/vessel_points", 2)
                            for m in self.plant.carriers}
@@ -138,13 +136,13 @@ class SimPlantNode(Node):
 
     def _stamp(self, t: float):  # noqa: ANN202
         sec, nanosec = stamp_parts(t)
-        return self._Time(sec=sec, nanosec=nanosec)
+        return Time(sec=sec, nanosec=nanosec)
 
     def _on_step(self, plant: Plant) -> None:
         stamp = self._stamp(plant.time)
         if plant.time + 1e-9 >= self._next_clock:
             self._next_clock = max(self._next_clock + self._clock_period, plant.time) if self._clock_period > 0 else 0.0
-            self.clock_pub.publish(self._Clock(clock=stamp))
+            self.clock_pub.publish(Clock(clock=stamp))
         if self.recorder is not None:
             self.recorder(plant)
         if plant.time + 1e-9 >= self._next_truth:
@@ -161,78 +159,61 @@ class SimPlantNode(Node):
             self._publish_status(plant, stamp)
 
     def _publish_truth(self, plant: Plant, stamp) -> None:  # noqa: ANN001
-        import math
-
         for m in plant.machines:
             t = plant.truth(m)
-            msg = self._PoseStamped()
+            msg = PoseStamped()
             msg.header.stamp, msg.header.frame_id = stamp, "map"
             msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = t.x, t.y, t.z
             msg.pose.orientation.z, msg.pose.orientation.w = math.sin(t.yaw / 2), math.cos(t.yaw / 2)
             self.pose_pub[m].publish(msg)
             bank = plant.machines[m].bank
-            js = self._JointState()
+            js = JointState()
             js.header.stamp = stamp
             js.name, js.position, js.velocity = list(bank.names), list(bank.q), list(bank.v)
             self.joint_pub[m].publish(js)
-        tip = plant.bucket_tip()
-        pt = self._PointStamped()
-        pt.header.stamp, pt.header.frame_id = stamp, "map"
-        pt.point.x, pt.point.y, pt.point.z = tip
-        self.tip_pub.publish(pt)
-        soil = self._Float64MultiArray()
-        soil.layout.dim = [self._Dim(label=SOIL_LABELS, size=6, stride=6)]
+        if self.tip_pub is not None:
+            pt = PointStamped()
+            pt.header.stamp, pt.header.frame_id = stamp, "map"
+            pt.point.x, pt.point.y, pt.point.z = plant.bucket_tip()
+            self.tip_pub.publish(pt)
+        soil = Float64MultiArray()
+        soil.layout.dim = [MultiArrayDimension(label=SOIL_LABELS, size=6, stride=6)]
         error = plant.total_volume() - plant.initial_volume
         soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error,
                      plant.ground.ground_soil_volume()]
         self.soil_pub.publish(soil)
         for m, pub in self.carrier_soil_pub.items():
-            msg = self._Float64MultiArray()
-            msg.layout.dim = [self._Dim(label="vessel,loaded,dumped", size=3, stride=3)]
+            msg = Float64MultiArray()
+            msg.layout.dim = [MultiArrayDimension(label="vessel,loaded,dumped", size=3, stride=3)]
             msg.data = [plant.soil.vessels.get(m, 0.0), plant.soil.loaded_by.get(m, 0.0), plant.soil.dumped_by.get(m, 0.0)]
             pub.publish(msg)
 
     def _cloud(self, points, frame: str, stamp):  # noqa: ANN001, ANN202
-        from sim_bridge.scanners import pack_xyz
-
-        msg = self._PointCloud2()
+        msg = PointCloud2()
         msg.header.stamp, msg.header.frame_id = stamp, frame
         data, n = pack_xyz(points)
         msg.height, msg.width = 1, n
-        msg.fields = [self._PointField(name=c, offset=4 * i, datatype=self._PointField.FLOAT32, count=1)
+        msg.fields = [PointField(name=c, offset=4 * i, datatype=PointField.FLOAT32, count=1)
                       for i, c in enumerate("xyz")]
         msg.is_bigendian, msg.point_step, msg.row_step, msg.is_dense = False, 12, 12 * n, True
         msg.data = data
         return msg
 
-    def _rng(self, plant: Plant):  # noqa: ANN202
-        if not hasattr(self, "_scan_rng"):
-            import numpy as np
-
-            self._scan_rng = np.random.default_rng(plant.spec.sensors.seed + 1)
-        return self._scan_rng
-
     def _publish_mound_scan(self, plant: Plant, stamp) -> None:  # noqa: ANN001
-        from sim_bridge.scanners import mound_scan
-
         soil = plant.spec.soil
         pts = mound_scan(plant.ground, soil.mound_center, soil.mound_base_radius + 1.5, noise=self._scan_noise,
-                         rng=self._rng(plant))
+                         rng=self._scan_rng)
         self.mound_pub.publish(self._cloud(pts, "map", stamp))
 
     def _publish_vessel_scans(self, plant: Plant, stamp) -> None:  # noqa: ANN001
-        from sim_bridge.scanners import vessel_scan
-
         for m, pub in self.vessel_pub.items():
-            spec = plant.carriers[m].spec
-            pts = vessel_scan(plant.soil.vessels[m], spec.inner_length, spec.inner_width, noise=self._scan_noise,
-                              rng=self._rng(plant))
+            vessel = plant.carriers[m].vessel
+            pts = vessel_scan(plant.soil.vessels[m], vessel.inner_length, vessel.inner_width, noise=self._scan_noise,
+                              rng=self._scan_rng)
             pub.publish(self._cloud(pts, f"{m}/vessel", stamp))
 
     def _publish_status(self, plant: Plant, stamp) -> None:  # noqa: ANN001
-        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-
-        arr = self._DiagnosticArray()
+        arr = DiagnosticArray()
         arr.header.stamp = stamp
         for machine, counters in self.io.counters().items():
             st = DiagnosticStatus(name=f"sim_plant/{machine}", hardware_id=machine, message="ok")
@@ -255,8 +236,6 @@ class SimPlantNode(Node):
             self.recorder.close()
         if self._snapshot:
             try:
-                from sim_bridge.render import render_png
-
                 render_png(self.plant, Path(self._snapshot))
                 self.get_logger().info(f"snapshot written to {self._snapshot}")
             except Exception as exc:  # noqa: BLE001 - rendering is optional

@@ -1,34 +1,29 @@
 """Plant profiles: what the plant does for one machine type, found by name as the converter's profiles are.
 
-A profile reads the type's machine YAML into a spec, builds the machine (:mod:`sim_bridge.machines`), writes
-its MuJoCo bodies, applies its COM3 command frames and builds its state frames, all through the signal
-map of :mod:`com3_can.signal_map`. :class:`~sim_bridge.can_io.PlantCanIO`, :class:`~sim_bridge.plant.Plant`
-and :func:`~sim_bridge.model.build_mjcf` are neutral and ask the profile of each machine's ``type``.
+A profile builds the type's machine (:mod:`sim_bridge.machines`) from its description placed on the site
+(:class:`~sim_bridge.spec.PlantMachine`), writes its MuJoCo bodies, applies its COM3 command frames and builds its
+state frames, all through the signal map of :mod:`com3_can.signal_map`. :class:`~sim_bridge.can_io.PlantCanIO`,
+:class:`~sim_bridge.plant.Plant` and :func:`~sim_bridge.model.build_mjcf` are neutral and ask the profile of each
+machine's ``type``.
 
-``PLANT_PROFILES`` is the registry: ``excavator``, ``crawler_dump`` and ``dozer`` register on import; another type
-registers with ``PLANT_PROFILES.register("name", Class)`` (a duplicate name is refused, an unknown one
-named with the known ones).
+``PLANT_PROFILES`` is the registry, the one place that maps machine types to plant code: ``excavator``,
+``crawler_dump`` and ``dozer`` are registered here; another type registers with ``PLANT_PROFILES.register("name",
+Class)`` (a duplicate name is refused, an unknown one named with the known ones). The profiles import nothing of
+this module: the dependency runs from the registry (and :mod:`sim_bridge.config`, which asks it) to them.
 """
 
 from __future__ import annotations
 
 from com3_can.registry import Registry
 from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.crawler_carrier import CrawlerCarrierPlantProfile
+from sim_bridge.profiles.dozer import DozerPlantProfile
+from sim_bridge.profiles.excavator import ExcavatorPlantProfile
 
 __all__ = ["PLANT_PROFILES", "PlantProfile"]
 
 #: machine type -> plant profile class
 PLANT_PROFILES: Registry[type[PlantProfile]] = Registry("plant profile")
 
-
-def _register_builtins() -> None:
-    from sim_bridge.profiles.crawler_carrier import CrawlerCarrierPlantProfile
-    from sim_bridge.profiles.dozer import DozerPlantProfile
-    from sim_bridge.profiles.excavator import ExcavatorPlantProfile
-
-    PLANT_PROFILES.register(ExcavatorPlantProfile.machine_type, ExcavatorPlantProfile)
-    PLANT_PROFILES.register(CrawlerCarrierPlantProfile.machine_type, CrawlerCarrierPlantProfile)
-    PLANT_PROFILES.register(DozerPlantProfile.machine_type, DozerPlantProfile)
-
-
-_register_builtins()
+for _profile in (ExcavatorPlantProfile, CrawlerCarrierPlantProfile, DozerPlantProfile):
+    PLANT_PROFILES.register(_profile.machine_type, _profile)

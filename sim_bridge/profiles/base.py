@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from com3_can.codec import Com3Codec
-from com3_can.profiles.base import codec_for
+from sim_bridge.spec import PlantMachine
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
     from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["PlantProfile"]
@@ -17,30 +15,22 @@ __all__ = ["PlantProfile"]
 class PlantProfile:
     """The plant side of one machine type; class-level (no per-machine state: that lives in the :class:`Side`).
 
-    * ``type``: registry name; ``dbc``: DBC file in ``com3_can/dbc`` (the converter profile's);
+    * ``machine_type``: registry name (a type constant of :mod:`tms_model.machines`);
     * ``motion_frames``: command frames that feed the command-loss watchdog.
+
+    The DBC of a machine's bus is its description's (``PlantMachine.dbc``), not the type's.
     """
 
     machine_type: ClassVar[str] = ""
-    dbc: ClassVar[str] = ""
     motion_frames: ClassVar[frozenset[str]] = frozenset()
 
-    @classmethod
-    def codec(cls, machine: str) -> Com3Codec:
-        return codec_for(cls.dbc, machine)
-
     @staticmethod
-    def load_spec(path: Path) -> Any:
-        """The machine spec of a machine YAML of this type."""
+    def make_machine(machine: PlantMachine, dt: float) -> Any:
+        """The machine state object (an :mod:`sim_bridge.machines` class) at its start pose and joints."""
         raise NotImplementedError
 
     @staticmethod
-    def make_machine(spec: Any, dt: float, pose: tuple[float, float, float]) -> Any:
-        """The machine state object (an :mod:`sim_bridge.machines` class)."""
-        raise NotImplementedError
-
-    @staticmethod
-    def mjcf(name: str, spec: Any) -> list[str]:
+    def mjcf(machine: PlantMachine) -> list[str]:
         """MJCF lines of the machine's bodies (a mocap ``<name>_base`` body and its children)."""
         raise NotImplementedError
 

@@ -9,20 +9,20 @@ rate, roll/pitch, GNSS fix of the base (RTK noise).
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from com3_can.profiles.crawler_carrier import CrawlerCarrierProfile
 from com3_can.signal_map import CARRIER_FRAMES as F
 from com3_can.signal_map import CARRIER_SWING as S
 from com3_can.signal_map import CARRIER_VESSEL as V
-from com3_can.signal_map import EXCAVATOR_TRACKS as T
-from sim_bridge.config import CarrierSpec, load_carrier
+from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import CrawlerCarrier
 from sim_bridge.profiles.base import PlantProfile
-from sim_bridge.profiles.excavator import _v, _wrap
+from sim_bridge.profiles.common import tracked_state, vec
+from sim_bridge.spec import PlantMachine
+from tms_model.machines import ROTATE_JOINT, VESSEL_JOINT
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
     from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["CrawlerCarrierPlantProfile"]
@@ -30,38 +30,35 @@ __all__ = ["CrawlerCarrierPlantProfile"]
 
 class CrawlerCarrierPlantProfile(PlantProfile):
     machine_type = CrawlerCarrierProfile.machine_type
-    dbc = CrawlerCarrierProfile.dbc
     motion_frames = frozenset(f for frames in CrawlerCarrierProfile.channels.values() for f in frames)
 
     @staticmethod
-    def load_spec(path: Path) -> CarrierSpec:
-        return load_carrier(path)
+    def make_machine(machine: PlantMachine, dt: float) -> CrawlerCarrier:
+        return CrawlerCarrier(machine, dt)
 
     @staticmethod
-    def make_machine(spec: CarrierSpec, dt: float, pose: tuple[float, float, float]) -> CrawlerCarrier:
-        return CrawlerCarrier(spec, dt, pose)
-
-    @staticmethod
-    def mjcf(name: str, spec: CarrierSpec) -> list[str]:
-        length, width = spec.inner_length, spec.inner_width
-        vessel = spec.vessel
+    def mjcf(machine: PlantMachine) -> list[str]:
+        name, d = machine.name, machine.description
+        assert d.vessel is not None  # tms_model: every crawler dump has one
+        length, width = d.vessel.inner_length, d.vessel.inner_width
+        vessel = d.joint(VESSEL_JOINT)
         lines = [
             f'    <body name="{name}_base" mocap="true">',
-            f'      <geom type="box" size="{spec.tracks.length / 2} {spec.tracks.width / 2} 0.45" pos="0 0 0.45" '
+            f'      <geom type="box" size="{d.footprint.length / 2} {d.footprint.width / 2} 0.45" pos="0 0 0.45" '
             'material="ic" contype="0" conaffinity="0"/>',
         ]
         indent = "      "
-        if spec.swing is not None:  # the rotating upper body carries the vessel
-            sw = spec.swing
+        if d.swing is not None:  # the rotating upper body carries the vessel
+            sw = d.joint(ROTATE_JOINT)
             rng = "" if sw.lower is None else f' range="{sw.lower} {sw.upper}" limited="true"'
             lines += [
-                f'{indent}<body name="{name}_{sw.child}" pos="{_v(sw.origin_xyz)}">',
+                f'{indent}<body name="{name}_{sw.child}" pos="{vec(sw.origin_xyz)}">',
                 f'{indent}  <joint name="{name}_{sw.name}" type="hinge" axis="0 0 1"{rng}/>',
                 f'{indent}  <geom type="cylinder" size="1.0 0.1" material="ic" contype="0" conaffinity="0" mass="1"/>',
             ]
             indent += "  "
         lines += [
-            f'{indent}<body name="{name}_vessel_link" pos="{_v(vessel.origin_xyz)}">',
+            f'{indent}<body name="{name}_vessel_link" pos="{vec(vessel.origin_xyz)}">',
             f'{indent}  <joint name="{name}_{vessel.name}" type="hinge" axis="0 -1 0"'
             f' range="{vessel.lower} {vessel.upper}" limited="true"/>',
             f'{indent}  <geom type="box" size="{length / 2} {width / 2} 0.05" pos="{length / 2} 0 0.53" material="ic" '
@@ -69,7 +66,7 @@ class CrawlerCarrierPlantProfile(PlantProfile):
             f'{indent}  <site name="{name}_vessel_centre" pos="{length / 2} 0 0.53" size="0.1"/>',
             f"{indent}</body>",
         ]
-        if spec.swing is not None:
+        if d.swing is not None:
             lines.append("      </body>")
         lines.append("    </body>")
         return lines
@@ -109,26 +106,9 @@ class CrawlerCarrierPlantProfile(PlantProfile):
     @staticmethod
     def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
         ic: CrawlerCarrier = side.machine
-        if frame == "Machine_State":
-            return io.machine_state(side)
-        if frame == F["track_velocity"]:
-            return {V.left_track_velocity: ic.base.vl, V.right_track_velocity: ic.base.vr}
         if frame == F["vessel_angle"]:
             return {V.angle: ic.vessel_angle, V.angular_velocity: ic.vessel_rate}
         if frame == F["swing_angle"]:
             return {S.angle: ic.swing_angle, S.angular_velocity: ic.swing_rate}
-        if frame == "Vehicle_Azimuth":
-            return {"track_body_azimuth": -_wrap(ic.base.yaw), "yaw_rate": -ic.base.w}
-        if frame == "Roll_Pitch_Angle":
-            return io.roll_pitch(side.name)
-        if frame.startswith("GNSS_"):
-            if frame == "GNSS_Latitude" or side.fix is None:  # one fix per 100 ms cycle, shared by the three frames
-                side.fix = io.gnss.fix(ic.base.x, ic.base.y, ic.z, io.noise)
-            fix = side.fix
-            if frame == "GNSS_Latitude":
-                return {"latitude": fix[0]}
-            if frame == "GNSS_Longitude":
-                return {"longitude": fix[1]}
-            return {"altitude": fix[2], "fix_status": 3.0, "num_satellites": 20.0,
-                    "horizontal_accuracy": io.plant.spec.sensors.gnss_sigma_h}
-        raise KeyError(f"{side.name}: no builder for state frame {frame}")
+        # travel, azimuth, attitude, GNSS and Machine_State frames are every tracked machine's
+        return tracked_state(io, side, frame)

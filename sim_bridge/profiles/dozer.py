@@ -8,21 +8,20 @@ blade lift angle, azimuth and yaw rate, roll/pitch, GNSS fix of the base (RTK no
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from com3_can.profiles.dozer import DozerProfile
 from com3_can.signal_map import BLADE_ANGLE, BLADE_VELOCITY
 from com3_can.signal_map import DOZER_BLADE as B
 from com3_can.signal_map import DOZER_FRAMES as F
-from com3_can.signal_map import EXCAVATOR_TRACKS as T
-from sim_bridge.config import DozerSpec, load_dozer
+from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import Dozer
 from sim_bridge.profiles.base import PlantProfile
-from sim_bridge.profiles.crawler_carrier import CrawlerCarrierPlantProfile
-from sim_bridge.profiles.excavator import _v
+from sim_bridge.profiles.common import tracked_state, vec
+from sim_bridge.spec import PlantMachine
+from tms_model.machines import LIFT_JOINT
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
     from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["DozerPlantProfile"]
@@ -30,33 +29,30 @@ __all__ = ["DozerPlantProfile"]
 
 class DozerPlantProfile(PlantProfile):
     machine_type = DozerProfile.machine_type
-    dbc = DozerProfile.dbc
     motion_frames = frozenset(f for frames in DozerProfile.channels.values() for f in frames)
 
     @staticmethod
-    def load_spec(path: Path) -> DozerSpec:
-        return load_dozer(path)
+    def make_machine(machine: PlantMachine, dt: float) -> Dozer:
+        return Dozer(machine, dt)
 
     @staticmethod
-    def make_machine(spec: DozerSpec, dt: float, pose: tuple[float, float, float]) -> Dozer:
-        return Dozer(spec, dt, pose)
-
-    @staticmethod
-    def mjcf(name: str, spec: DozerSpec) -> list[str]:
-        j, b = spec.lift, spec.blade
-        t = spec.tracks
+    def mjcf(machine: PlantMachine) -> list[str]:
+        name, d = machine.name, machine.description
+        assert d.blade is not None  # tms_model: every dozer has one
+        j, b = d.joint(LIFT_JOINT), d.blade
+        t = d.footprint
         rng = f' range="{j.lower} {j.upper}" limited="true"'
         return [
             f'    <body name="{name}_base" mocap="true">',
             f'      <geom type="box" size="{t.length * 0.35} {t.width * 0.4} 0.6" pos="0 0 0.6" material="dz" '
             'contype="0" conaffinity="0"/>',
-            f'      <body name="{name}_{j.child}" pos="{_v(j.origin_xyz)}" euler="{_v(j.origin_rpy)}">',
-            f'        <joint name="{name}_{j.name}" type="hinge" axis="{_v(j.axis)}"{rng}/>',
+            f'      <body name="{name}_{j.child}" pos="{vec(j.origin_xyz)}" euler="{vec(j.origin_rpy)}">',
+            f'        <joint name="{name}_{j.name}" type="hinge" axis="{vec(j.axis)}"{rng}/>',
             f'        <geom type="box" size="{b.edge_xyz[0] / 2} 0.1 0.1" pos="{b.edge_xyz[0] / 2} 0 0" material="dz" '
             'contype="0" conaffinity="0" mass="1"/>',
-            f'        <geom type="box" size="0.1 {b.width / 2} 0.45" pos="{_v((b.edge_xyz[0], b.edge_xyz[1], b.edge_xyz[2] + 0.45))}" '
+            f'        <geom type="box" size="0.1 {b.width / 2} 0.45" pos="{vec((b.edge_xyz[0], b.edge_xyz[1], b.edge_xyz[2] + 0.45))}" '
             'material="dz" contype="0" conaffinity="0" mass="1"/>',
-            f'        <site name="{name}_blade_edge" pos="{_v(b.edge_xyz)}" size="0.08"/>',
+            f'        <site name="{name}_blade_edge" pos="{vec(b.edge_xyz)}" size="0.08"/>',
             "      </body>",
             "    </body>",
         ]
@@ -100,5 +96,5 @@ class DozerPlantProfile(PlantProfile):
         dz: Dozer = side.machine
         if frame == F["blade_angle"]:
             return {B.angle: dz.lift_angle, B.angular_velocity: dz.lift_rate}
-        # travel, azimuth, attitude, GNSS and Machine_State frames are the carrier's
-        return CrawlerCarrierPlantProfile.state(io, side, frame)
+        # travel, azimuth, attitude, GNSS and Machine_State frames are every tracked machine's
+        return tracked_state(io, side, frame)

@@ -10,18 +10,19 @@ centre in the site CRS (RTK noise), pin positions in ``base_link``, flows, press
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from com3_can.profiles.excavator import ExcavatorProfile
 from com3_can.signal_map import EXCAVATOR_FRAMES as F
-from com3_can.signal_map import EXCAVATOR_FRONT, EXCAVATOR_TRACKS, PILOT_MAX_MPA
-from sim_bridge.config import ExcavatorSpec, load_excavator
+from com3_can.signal_map import EXCAVATOR_FRONT, PILOT_MAX_MPA
+from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import Excavator
 from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.common import vec
+from sim_bridge.spec import PlantMachine
 from tms_model.geometry import wrap_angle
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
     from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["ExcavatorPlantProfile"]
@@ -34,45 +35,35 @@ _LINK_BOX = {  # visual boxes per link: (half sizes, offset in link frame), ZX20
 }
 
 
-def _v(values: tuple[float, ...] | list[float]) -> str:
-    return " ".join(f"{v:.6g}" for v in values)
-
-
-_wrap = wrap_angle
-
-
 class ExcavatorPlantProfile(PlantProfile):
     machine_type = ExcavatorProfile.machine_type
-    dbc = ExcavatorProfile.dbc
     motion_frames = frozenset(f for frames in ExcavatorProfile.channels.values() for f in frames)
 
     @staticmethod
-    def load_spec(path: Path) -> ExcavatorSpec:
-        return load_excavator(path)
+    def make_machine(machine: PlantMachine, dt: float) -> Excavator:
+        return Excavator(machine, dt)
 
     @staticmethod
-    def make_machine(spec: ExcavatorSpec, dt: float, pose: tuple[float, float, float]) -> Excavator:
-        return Excavator(spec, dt, pose)
-
-    @staticmethod
-    def mjcf(name: str, spec: ExcavatorSpec) -> list[str]:
+    def mjcf(machine: PlantMachine) -> list[str]:
+        name, d = machine.name, machine.description
+        assert d.bucket is not None  # tms_model: every excavator has one
         lines = [
             f'    <body name="{name}_base" mocap="true">',
-            f'      <geom type="box" size="{spec.tracks.length / 2} {spec.tracks.width / 2} 0.45" pos="0 0 0.45" '
+            f'      <geom type="box" size="{d.footprint.length / 2} {d.footprint.width / 2} 0.45" pos="0 0 0.45" '
             'material="zx" contype="0" conaffinity="0"/>',
         ]
         indent = "      "
         closes = []
-        for j in spec.joints:
+        for j in d.joints:
             half, off = _LINK_BOX.get(j.child, ((0.2, 0.2, 0.2), (0, 0, 0)))
-            lines.append(f'{indent}<body name="{name}_{j.child}" pos="{_v(j.origin_xyz)}" euler="{_v(j.origin_rpy)}">')
+            lines.append(f'{indent}<body name="{name}_{j.child}" pos="{vec(j.origin_xyz)}" euler="{vec(j.origin_rpy)}">')
             rng = "" if j.lower is None else f' range="{j.lower} {j.upper}" limited="true"'
-            lines.append(f'{indent}  <joint name="{name}_{j.name}" type="hinge" axis="{_v(j.axis)}"{rng}/>')
-            lines.append(f'{indent}  <geom type="box" size="{_v(half)}" pos="{_v(off)}" material="zx" contype="0" '
+            lines.append(f'{indent}  <joint name="{name}_{j.name}" type="hinge" axis="{vec(j.axis)}"{rng}/>')
+            lines.append(f'{indent}  <geom type="box" size="{vec(half)}" pos="{vec(off)}" material="zx" contype="0" '
                          'conaffinity="0" mass="1"/>')
             closes.append(f"{indent}</body>")
             indent += "  "
-        lines.append(f'{indent}<site name="{name}_bucket_tip" pos="{_v(spec.bucket_tip_xyz)}" size="0.08"/>')
+        lines.append(f'{indent}<site name="{name}_bucket_tip" pos="{vec(d.bucket.tip_xyz)}" size="0.08"/>')
         lines.extend(reversed(closes))
         lines.append("    </body>")
         return lines
@@ -83,7 +74,6 @@ class ExcavatorPlantProfile(PlantProfile):
         s = side.settings
         front_mode = None if s is None else int(s["front_signal_switch_command"])
         travel_mode = None if s is None else int(s["travel_signal_switch_command"])
-        t = EXCAVATOR_TRACKS
         if frame == F["setting"]:
             side.settings = v
         elif frame == F["front_velocity"]:
@@ -92,13 +82,13 @@ class ExcavatorPlantProfile(PlantProfile):
         elif frame == F["front_pilot"]:
             side.pilot.update(v)
             if front_mode == 1:
-                vmax = {j.name: j.velocity for j in zx.spec.joints}
+                vmax = {j.name: j.velocity for j in zx.description.joints}
                 zx.set_front_velocity({
                     j.joint: vmax[j.joint] * (v[j.pilot_plus] - v[j.pilot_minus]) / PILOT_MAX_MPA for j in EXCAVATOR_FRONT
                 })
         elif frame == F["travel_velocity"]:
-            centre, yaw = v[t.centre_velocity_cmd], v[t.yaw_rate_cmd]
-            left, right = v[t.left_velocity_cmd], v[t.right_velocity_cmd]
+            centre, yaw = v[T.centre_velocity_cmd], v[T.yaw_rate_cmd]
+            left, right = v[T.left_velocity_cmd], v[T.right_velocity_cmd]
             if travel_mode == 3 or (travel_mode is None and (centre != 0.0 or yaw != 0.0)):
                 zx.set_centre_velocity(centre, yaw)
             elif travel_mode in (2, None):
@@ -106,10 +96,10 @@ class ExcavatorPlantProfile(PlantProfile):
         elif frame == F["travel_pilot"]:
             side.pilot.update(v)
             if travel_mode == 1:
-                vmax = zx.spec.tracks.max_speed
+                vmax = zx.description.tracks.max_speed
                 zx.set_track_speeds(
-                    vmax * (v[t.left_forward] - v[t.left_backward]) / PILOT_MAX_MPA,
-                    vmax * (v[t.right_forward] - v[t.right_backward]) / PILOT_MAX_MPA,
+                    vmax * (v[T.left_forward] - v[T.left_backward]) / PILOT_MAX_MPA,
+                    vmax * (v[T.right_forward] - v[T.right_backward]) / PILOT_MAX_MPA,
                 )
 
     @staticmethod
@@ -120,7 +110,7 @@ class ExcavatorPlantProfile(PlantProfile):
         dq = dict(zip(zx.front.names, zx.front.v, strict=True))
         if frame == F["front_angle"]:
             out = {j.angle: q[j.joint] for j in EXCAVATOR_FRONT}
-            out["swing_relative_angle"] = _wrap(q["swing_joint"])
+            out["swing_relative_angle"] = wrap_angle(q["swing_joint"])
             return out
         if frame == F["front_angular_velocity"]:
             return {j.angular_velocity: dq[j.joint] for j in EXCAVATOR_FRONT}
@@ -130,7 +120,7 @@ class ExcavatorPlantProfile(PlantProfile):
             return io.roll_pitch(name)
         if frame == "Vehicle_Azimuth":
             yaw = zx.base.yaw
-            return {"upper_body_azimuth": -_wrap(yaw + q["swing_joint"]), "track_body_azimuth": -_wrap(yaw)}
+            return {"upper_body_azimuth": -wrap_angle(yaw + q["swing_joint"]), "track_body_azimuth": -wrap_angle(yaw)}
         if frame.startswith("Swing_Center_Position"):
             c = io.plant.model.body_pos(f"{name}_body_link")
             s = io.plant.spec.sensors
@@ -152,11 +142,11 @@ class ExcavatorPlantProfile(PlantProfile):
                 f = math.copysign(flows[j.joint], dq[j.joint])
                 out[f"{j.short}_cylinder_bottom_flow_rate"] = f
                 out[f"{j.short}_cylinder_rod_flow_rate"] = -f
-            sw = 200.0 * dq["swing_joint"] / zx.spec.joint("swing_joint").velocity
+            sw = 200.0 * dq["swing_joint"] / zx.description.joint("swing_joint").velocity
             out.update(swing_motor_a_flow_rate=sw, swing_motor_b_flow_rate=-sw)
             return out
         if frame == "Hydraulic_Flow_Rate_2":
-            t = zx.spec.tracks
+            t = zx.description.tracks
             fl, fr = 200.0 * zx.base.vl / t.max_speed, 200.0 * zx.base.vr / t.max_speed
             return {"right_track_motor_a_flow_rate": fr, "right_track_motor_b_flow_rate": -fr,
                     "left_track_motor_a_flow_rate": fl, "left_track_motor_b_flow_rate": -fl}
@@ -174,7 +164,7 @@ class ExcavatorPlantProfile(PlantProfile):
 def _pilot_echo(zx: Excavator) -> dict[str, float]:
     """Measured pilot pressures equivalent to the current joint commands (velocity mode)."""
     cmd = dict(zip(zx.front.names, zx.front.command, strict=True))
-    vmax = {j.name: j.velocity for j in zx.spec.joints}
+    vmax = {j.name: j.velocity for j in zx.description.joints}
     out: dict[str, float] = {}
     for j in EXCAVATOR_FRONT:
         p = PILOT_MAX_MPA * min(1.0, abs(cmd[j.joint]) / vmax[j.joint]) if vmax[j.joint] > 0 else 0.0

@@ -15,16 +15,18 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
+from com3_can.bus import open_bus, socketcan_available
+from com3_can.codec import load_codec
 from tests.rosproc import executable, free_can_ports
+from tms_common.config import config_path
 
 
 def _bus_cfgs(domain: int) -> dict[str, dict[str, Any]]:
     backend = os.environ.get("TMS_CAN_TEST_BACKEND", "udp_multicast")
     if backend == "socketcan":
-        from com3_can.bus import socketcan_available
-
         channel = os.environ.get("TMS_CAN_TEST_CHANNEL", "vcan0")
         if not socketcan_available() or not Path("/sys/class/net", channel).exists():
             pytest.skip(f"SocketCAN interface {channel} is not available in this kernel")
@@ -42,11 +44,6 @@ class Machine:
     """A COM3 peer of one machine: sends command frames every 10 ms and decodes the state frames."""
 
     def __init__(self, machine: str, cfg: dict[str, Any]) -> None:
-        import can
-
-        from com3_can.bus import open_bus
-        from com3_can.codec import load_codec
-
         self._can = can
         self.machine = machine
         self.codec = load_codec(machine)
@@ -149,8 +146,6 @@ def start_plant(procs, domain: int, tmp_path: Path) -> Iterator[Callable[..., Pl
     machines_open: list[Machine] = []
 
     def start(*, speed: float = 1.0, ic120_pose: str = "ic120_start", **params: Any) -> PlantUnderTest:
-        from tms_common.config import config_path
-
         text = config_path("sim", "plant.yaml").read_text().replace("ic120: ic120_start", f"ic120: {ic120_pose}")
         cfg_file = tmp_path / "plant.yaml"
         cfg_file.write_text(text)

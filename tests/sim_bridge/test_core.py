@@ -7,11 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from sim_bridge.config import load_plant, load_zx200
-from sim_bridge.errors import SimConfigError
+from sim_bridge.config import load_description, load_plant
+from sim_bridge.errors import ReplayError, SimConfigError
 from sim_bridge.hydraulics import DeadTimeLag, JointBank
 from sim_bridge.model import SiteModel
 from sim_bridge.plant import Plant, stamp_parts
+from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder
 from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
 from sim_bridge.sensors import Gnss, Noise
 from tms_common.config import config_path
@@ -40,8 +41,9 @@ def test_command_above_limit_saturates_at_velocity_limit():
 
 
 def test_joint_stops_at_position_limit(spec):
-    boom = spec.zx200.joint("boom_joint")
-    bank = JointBank([boom], spec.zx200.drives, spec.dt)
+    zx = spec.description(spec.excavator)
+    boom = zx.joint("boom_joint")
+    bank = JointBank([boom], zx.drives, spec.dt)
     bank.q[0] = -0.5
     bank.command[0] = 0.4  # + = down, towards the upper limit -0.1
     for _ in range(800):
@@ -51,7 +53,7 @@ def test_joint_stops_at_position_limit(spec):
 
 
 def test_shared_pump_flow_slows_arm_joints_together(spec):
-    zx = spec.zx200
+    zx = spec.description(spec.excavator)
     bank = JointBank(zx.joints, zx.drives, spec.dt, pump_flow=zx.pump_flow)
     bank.set_positions({"boom_joint": -0.2, "arm_joint": 1.0, "bucket_joint": 0.0})
     names = bank.names
@@ -76,14 +78,15 @@ def test_shared_pump_flow_slows_arm_joints_together(spec):
 
 def test_tracks_slip_and_odometry_drift(spec):
     plant = Plant(spec)
-    plant.ic120.set_centre_velocity(1.0, 0.0)
-    x0 = plant.ic120.base.x
+    ic = plant.carrier
+    ic.set_centre_velocity(1.0, 0.0)
+    x0 = ic.base.x
     odo = 0.0
     for _ in range(1000):
         plant.step()
-        odo += 0.5 * (plant.ic120.base.vl + plant.ic120.base.vr) * plant.dt
-    travelled = plant.ic120.base.x - x0
-    assert travelled == pytest.approx(odo * (1 - spec.ic120.tracks.slip), rel=1e-6)
+        odo += 0.5 * (ic.base.vl + ic.base.vr) * plant.dt
+    travelled = ic.base.x - x0
+    assert travelled == pytest.approx(odo * (1 - spec.description(spec.carrier).track_drive.slip), rel=1e-6)
     assert odo - travelled > 0.3  # track odometry over-reads by the slip
 
 
@@ -101,27 +104,28 @@ def test_mjcf_kinematics_match_urdf_zero_pose(spec):
 def test_soil_conserved_over_scripted_dig_load_dump(spec):
     plant = Plant(spec)
     plant.set_truth("ic120", 1.2, 6.5, 0.0, {"vessel_joint": 0.0})  # site point P1
-    names = plant.zx200.front.names
+    zx, ic = plant.excavator, plant.carrier
+    names = zx.front.names
     v0 = plant.total_volume()
     for _cycle in range(2):
         for target in DIG_CYCLE:
             t0 = plant.time
             while plant.time - t0 < 30.0:
-                q = dict(zip(names, plant.zx200.front.q, strict=True))
+                q = dict(zip(names, zx.front.q, strict=True))
                 if pose_reached(q, target):
                     break
-                plant.zx200.set_front_velocity(servo_velocity(q, target))
+                zx.set_front_velocity(servo_velocity(q, target))
                 plant.step()
-            plant.zx200.set_front_velocity(dict.fromkeys(names, 0.0))
+            zx.set_front_velocity(dict.fromkeys(names, 0.0))
             for _ in range(150):
                 plant.step()
     loaded = plant.soil.vessel
     assert plant.soil.dug > 1.0
     assert loaded > 0.8
-    plant.ic120.set_vessel_target(spec.ic120.vessel.upper)
+    ic.set_vessel_target(ic.vessel.max_angle)
     for _ in range(2000):
         plant.step()
-    plant.ic120.set_vessel_target(0.0)
+    ic.set_vessel_target(0.0)
     for _ in range(800):
         plant.step()
     assert plant.soil.vessel == pytest.approx(0.0, abs=1e-9)
@@ -155,13 +159,26 @@ def _write_broken(tmp_path: Path, old: str, new: str) -> Path:
 def test_malformed_machine_yaml_names_the_key(tmp_path):
     bad = _write_broken(tmp_path, "velocity: 0.45", 'velocity: "fast"')
     with pytest.raises(SimConfigError, match=r"zx200\.yaml:\d+: joints\.boom_joint\.velocity: expected a number"):
-        load_zx200(bad)
+        load_description(bad)
     typo = _write_broken(tmp_path, "pump_flow_lpm:", "pump_flow_lmp:")
     with pytest.raises(SimConfigError, match=r"hydraulics\.pump_flow_lmp: unknown key"):
-        load_zx200(typo)
+        load_description(typo)
     missing = _write_broken(tmp_path, "arm_joint: 0.4255, ", "")
+    plant = tmp_path / "plant.yaml"  # the plant YAML naming the broken file for its machine zx200
+    text = config_path("sim", "plant.yaml").read_text()
+    assert "zx200: machines/zx200.yaml" in text
+    plant.write_text(text.replace("zx200: machines/zx200.yaml", f"zx200: {missing}"))
     with pytest.raises(SimConfigError, match=r"hydraulics\.dead_time_s\.arm_joint: missing required key"):
-        load_plant(zx200=missing)
+        load_plant(plant)
+
+
+def test_plant_yaml_machine_must_be_on_the_site_as_that_kind(tmp_path):
+    text = config_path("sim", "plant.yaml").read_text()
+    path = tmp_path / "plant.yaml"
+    path.write_text(text.replace("ic120: machines/ic120.yaml", "ic120: machines/mst110cr.yaml"))
+    with pytest.raises(SimConfigError, match=r"plant\.yaml:\d+: machines\.ic120: .*mst110cr\.yaml describes a "
+                                             r"mst110cr, but 'ic120' is a ic120 on the site"):
+        load_plant(path)
 
 
 def test_malformed_plant_yaml_names_the_key(tmp_path):
@@ -178,24 +195,26 @@ def test_malformed_plant_yaml_names_the_key(tmp_path):
 
 
 def test_truth_record_and_replay(spec, tmp_path):
-    from sim_bridge.errors import ReplayError
-    from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder
-
     plant = Plant(spec)
-    plant.ic120.set_centre_velocity(1.0, 0.2)
-    plant.zx200.set_front_velocity({"swing_joint": 0.5})
+    plant.carrier.set_centre_velocity(1.0, 0.2)
+    plant.excavator.set_front_velocity({"swing_joint": 0.5})
     rec = TruthRecorder(tmp_path / "truth.jsonl", 0.1)
     PlantRunner(plant, None, speed=0.0, on_step=rec).run(duration=5.0)
     rec.close()
-    final = (plant.ic120.base.x, plant.ic120.base.y, plant.zx200.front.q[0])
+    final = (plant.carrier.base.x, plant.carrier.base.y, plant.excavator.front.q[0])
     log = TruthLog(tmp_path / "truth.jsonl")
+    assert log.machines == ("zx200", "ic120")  # every machine of the plant, by name
     replayed = Plant(spec)
     PlantRunner(replayed, None, speed=0.0, replay=log).run(duration=log.duration)
-    assert (replayed.ic120.base.x, replayed.ic120.base.y, replayed.zx200.front.q[0]) == pytest.approx(final, abs=0.11)
-    assert replayed.ic120.base.x > spec.initial_poses["ic120"][0] + 2.0  # it really moved
+    got = (replayed.carrier.base.x, replayed.carrier.base.y, replayed.excavator.front.q[0])
+    assert got == pytest.approx(final, abs=0.11)
+    assert replayed.carrier.base.x > spec.initial_poses["ic120"][0] + 2.0  # it really moved
     (tmp_path / "bad.jsonl").write_text('{"t": 0}\n')
     with pytest.raises(ReplayError, match=r"bad\.jsonl:1: not a truth record"):
         TruthLog(tmp_path / "bad.jsonl")
+    kinds = Plant(load_plant(config_path("sim", "kinds_plant.yaml")))  # other machines than the log's
+    with pytest.raises(ReplayError, match=r"truth\.jsonl: the log holds the machines \['ic120', 'zx200'\], the plant"):
+        PlantRunner(kinds, None, speed=0.0, replay=log)
 
 
 def test_plant_time_on_the_step_grid_and_stamps_carry_the_second(spec):
@@ -235,8 +254,6 @@ class _WallClock:
 def test_paced_runner_makes_up_a_stall_within_catch_up_s(spec, catch_up_s, lost_s):
     """At 2x real time, a 0.3 s stall at step 50: the runner makes up at most ``catch_up_s`` of it by steps
     without sleep, and the rest shifts the schedule (wall time lost for good)."""
-    from sim_bridge.runner import PlantRunner
-
     plant = Plant(spec)
     clock = _WallClock(step_s=0.001, stall_at=50, stall_s=0.3)
     runner = PlantRunner(plant, None, speed=2.0, on_step=clock.on_step, catch_up_s=catch_up_s)
@@ -249,7 +266,5 @@ def test_paced_runner_makes_up_a_stall_within_catch_up_s(spec, catch_up_s, lost_
 
 
 def test_paced_runner_refuses_a_negative_catch_up(spec):
-    from sim_bridge.runner import PlantRunner
-
     with pytest.raises(ValueError, match="catch_up_s must be >= 0"):
         PlantRunner(Plant(spec), None, speed=1.0, catch_up_s=-0.1)

@@ -20,6 +20,7 @@ import pytest
 
 from com3_can.bridge_core import POSITION, BridgeConfig, BridgeCore, JointStateOut, OdomOut
 from com3_can.bus import load_bus_config, open_bus
+from com3_can.profiles import converter_profile
 from sim_bridge.can_io import PlantCanIO
 from sim_bridge.config import load_plant
 from sim_bridge.errors import SimConfigError
@@ -40,7 +41,7 @@ class Rig:
             channel = f"{kind}-{uuid.uuid4().hex}"
             plant_buses[kind] = self._open(channel)
             self.conv[kind] = self._open(channel)
-            self.cores[kind] = BridgeCore(BridgeConfig.load(kind, load_bus_config(kind)), 0.0)
+            self.cores[kind] = BridgeCore(BridgeConfig.load(kind, load_bus_config(kind)), 0.0, converter_profile(kind))
         self.io = PlantCanIO(self.plant, plant_buses, watchdog_s=self.plant.spec.watchdog_s)
         self.joints: dict[str, JointStateOut] = {}
         self.odom: dict[str, OdomOut] = {}
@@ -150,11 +151,11 @@ def test_mst_swings_to_the_commanded_angle_and_dumps_where_the_vessel_points(rig
     plant.soil.vessels[kind] = 3.0
     before = plant.total_volume()
     px, py = plant.dump_point(kind)
-    s = mst.spec
+    s = mst.vessel
     assert (px, py) == pytest.approx((mst.base.x, mst.base.y + s.hinge_xyz[0] - s.dump_distance), abs=0.05)
     h0 = plant.ground.height(px, py)
     unswung = (mst.base.x + s.hinge_xyz[0] - s.dump_distance, mst.base.y)
-    top = s.vessel.upper
+    top = s.max_angle
     rig.run(8.0, lambda cores, now: {kind: cores[kind].rot_dump_cmd(["dump_joint"], POSITION, [top], now)})
     assert rig.joint(kind, "vessel_joint") == pytest.approx(top, abs=0.02)
     assert plant.soil.vessels[kind] == pytest.approx(0.0, abs=1e-9)  # all of it left the vessel
@@ -168,7 +169,7 @@ def test_mst_swings_to_the_commanded_angle_and_dumps_where_the_vessel_points(rig
 def test_d37pxi_blade_lifts_over_can_and_cuts_the_mound(rig: Rig) -> None:
     plant = rig.plant
     dz = plant.machines["d37pxi"]
-    lo, hi = dz.spec.lift.lower, dz.spec.lift.upper
+    lo, hi = dz.lift.lower, dz.lift.upper
     rig.run(3.0, lambda cores, now: {"d37pxi": cores["d37pxi"].blade_cmd(["lift_joint"], POSITION, [lo], [], now)})
     assert rig.joint("d37pxi", "lift_joint") == pytest.approx(lo, abs=0.01)  # raised (URDF: - = up)
     assert plant.blade_edge("d37pxi")[2] > 0.5

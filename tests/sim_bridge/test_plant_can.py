@@ -10,27 +10,36 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Float64MultiArray
 
 from sim_bridge.config import load_plant
 from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
 from sim_bridge.sensors import Gnss
+from tms_model.geometry import Pose2D, yaw_from_quaternion
+from tms_sp.arrival import ArrivalDetector
+from tms_sp.config import load_sensing_config
 
 pytestmark = pytest.mark.integration
 
 SPEC = load_plant()
+ZX = SPEC.description(SPEC.excavator)  # the descriptions of the machines the peers command
+IC = SPEC.description(SPEC.carrier)
 FIELD = {"swing_joint": "swing", "boom_joint": "boom", "arm_joint": "arm", "bucket_joint": "bucket"}
 
 
 def _settle_lag(joint: str) -> float:
-    j = SPEC.zx200.drives[joint]
+    j = ZX.drives[joint]
     return j.dead_time + 4.0 * j.time_constant  # within 2% of the step after dead time + 4 tau
 
 
 def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plant, ros_node):
-    import numpy as np
-    from rosgraph_msgs.msg import Clock
-
     plant = start_plant(speed=1.0)
     zx = plant.zx200
     zx.get("Front_Angle")
@@ -51,7 +60,7 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
 
     # Boom up (-), arm crowd (+), bucket curl (+) within their limits; swing asked beyond its 1.1 rad/s limit.
     cmd = {"boom_joint": -0.3, "arm_joint": 0.3, "bucket_joint": 0.3, "swing_joint": 1.5}
-    expect = dict(cmd, swing_joint=SPEC.zx200.joint("swing_joint").velocity)
+    expect = dict(cmd, swing_joint=ZX.joint("swing_joint").velocity)
     t0 = time.monotonic()
     zx.command("Velocity_Cmd_1", **{f"{FIELD[j]}_target_anguler_velocity": v for j, v in cmd.items()})
     reached: dict[str, float] = {}  # wall time of the first frame at speed
@@ -77,14 +86,14 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
         moved_s, reached_s = sim_at(moved[j]) - s0, sim_at(reached[j]) - s0
         # no motion during most of the dead time; at speed within the configured lag (+0.3 s: command
         # transit and the 10 ms frame period, in simulated time)
-        assert moved_s >= 0.6 * SPEC.zx200.drives[j].dead_time, (j, moved_s)
+        assert moved_s >= 0.6 * ZX.drives[j].dead_time, (j, moved_s)
         assert reached_s <= lag + 0.3, (j, reached_s, lag)
     # The swing never exceeds its velocity limit (command 1.5 rad/s).
     swing = [v["swing_relative_angular_velocity"] for _, n, v in zx.history if n == "Front_Angular_Velocity"]
-    assert max(swing) <= SPEC.zx200.joint("swing_joint").velocity + 0.002
+    assert max(swing) <= ZX.joint("swing_joint").velocity + 0.002
     # Keep commanding: boom, arm and bucket end at their position limits with zero velocity.
-    limits = {"boom_joint": SPEC.zx200.joint("boom_joint").lower, "arm_joint": SPEC.zx200.joint("arm_joint").upper,
-              "bucket_joint": SPEC.zx200.joint("bucket_joint").upper}
+    limits = {"boom_joint": ZX.joint("boom_joint").lower, "arm_joint": ZX.joint("arm_joint").upper,
+              "bucket_joint": ZX.joint("bucket_joint").upper}
 
     def at_limits(_values: dict[str, float]) -> bool:
         a, w = zx.get("Front_Angle"), zx.get("Front_Angular_Velocity")
@@ -109,7 +118,7 @@ def test_watchdog_brings_machine_to_rest_when_commands_stop(start_plant):
         timeout=20,
     )
     assert t_rest is not None, ic.get("Track_Velocity")
-    tracks = SPEC.ic120.tracks
+    tracks = IC.track_drive
     # watchdog 0.5 s + dead time + lag to 0.25% of 0.8 m/s (6 tau), with 1 s of scheduling slack
     assert t_rest - t_stop <= SPEC.watchdog_s + tracks.dead_time + 6 * tracks.time_constant + 1.0
     assert t_rest - t_stop >= SPEC.watchdog_s  # not before the watchdog expired
@@ -117,8 +126,6 @@ def test_watchdog_brings_machine_to_rest_when_commands_stop(start_plant):
 
 
 def test_out_of_range_command_frame_is_ignored_and_counted(start_plant, ros_node):
-    from diagnostic_msgs.msg import DiagnosticArray
-
     plant = start_plant(speed=1.0)
     zx = plant.zx200
     before = zx.get("Front_Angle")
@@ -145,8 +152,6 @@ def test_out_of_range_command_frame_is_ignored_and_counted(start_plant, ros_node
 
 
 def test_gnss_converts_back_to_truth_within_noise(start_plant, ros_node):
-    from geometry_msgs.msg import PoseStamped
-
     plant = start_plant(speed=1.0)
     truth: dict[str, PoseStamped] = {}
     for m in ("zx200", "ic120"):
@@ -172,14 +177,12 @@ def test_gnss_converts_back_to_truth_within_noise(start_plant, ros_node):
     e = plant.zx200.get("Swing_Center_Position_1")["swing_center_position_x"]
     n = plant.zx200.get("Swing_Center_Position_2")["swing_center_position_y"]
     p = truth["zx200"].pose.position
-    ox, oy, _ = SPEC.zx200.joint("swing_joint").origin_xyz
+    ox, oy, _ = ZX.joint("swing_joint").origin_xyz
     assert e - SPEC.site.origin_plane[0] == pytest.approx(p.x + ox, abs=tol)
     assert n - SPEC.site.origin_plane[1] == pytest.approx(p.y + oy, abs=tol)
 
 
 def test_soil_conserved_over_scripted_dig_load_dump_over_can(start_plant, ros_node):
-    from std_msgs.msg import Float64MultiArray
-
     plant = start_plant(speed=2.0, ic120_pose="P1")
     zx, ic = plant.zx200, plant.ic120
     soil: list[list[float]] = []
@@ -217,7 +220,7 @@ def test_soil_conserved_over_scripted_dig_load_dump_over_can(start_plant, ros_no
             break
     vessel_after_load = soil[-1][2]
     assert vessel_after_load > 0.5, soil[-1]
-    ic.command("Vessel_Cmd", target_vessel_angle=SPEC.ic120.vessel.upper, vessel_control_enable=1)
+    ic.command("Vessel_Cmd", target_vessel_angle=IC.vessel.max_angle, vessel_control_enable=1)
     end = time.monotonic() + 40
     while time.monotonic() < end and soil[-1][2] > 1e-6:
         spin(0.2)
@@ -243,14 +246,6 @@ def test_truth_stamps_and_clock_never_go_back_so_arrival_holds_at_p1(start_plant
     reset, so SENSING_ARRIVAL_FLG fell at every such second while the IC120 stood at P1 (demo of
     08:20, 160-357 s).
     """
-    from geometry_msgs.msg import PoseStamped
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from rosgraph_msgs.msg import Clock
-
-    from tms_model.geometry import Pose2D, yaw_from_quaternion
-    from tms_sp.arrival import ArrivalDetector
-    from tms_sp.config import load_sensing_config
-
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     poses: list[tuple[int, int, float, float, float]] = []
     clock: list[tuple[int, int]] = []
@@ -292,9 +287,6 @@ def test_truth_stamps_and_clock_never_go_back_so_arrival_holds_at_p1(start_plant
 def test_mound_scanned_at_its_own_period_vessels_at_theirs(start_plant, ros_node):
     """``mound_scan_period_s`` 2.0 beside ``scan_period_s`` 0.5: over 8 s of simulated time the vessel cloud
     comes every 0.5 s and the mound cloud every 2 s (the fleet scans its mound less often: fleet.yaml)."""
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import PointCloud2
-
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     stamps: dict[str, list[float]] = {"mound": [], "vessel": []}
     for key, topic in (("mound", "/sim/sensors/mound/points"), ("vessel", "/sim/sensors/ic120/vessel_points")):

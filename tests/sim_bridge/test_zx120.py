@@ -14,18 +14,20 @@ from __future__ import annotations
 import math
 import uuid
 
+import can
 import numpy as np
 import pytest
 
 from com3_can.bridge_core import VELOCITY, BridgeConfig, BridgeCore, JointStateOut
 from com3_can.bus import load_bus_config, open_bus
-from com3_can.profiles import PROFILES, profile_for
+from com3_can.profiles import PROFILES, converter_profile, profile_for
 from sim_bridge.can_io import PlantCanIO
 from sim_bridge.config import load_plant
 from sim_bridge.plant import Plant
 from sim_bridge.profiles import PLANT_PROFILES
 from tms_common.config import config_path
 from tms_common.errors import ConfigError
+from tms_model.excavator.kinematics import load_kinematics
 
 FRONT = ["swing_joint", "boom_joint", "arm_joint", "bucket_joint"]
 COMMAND = [0.3, -0.25, 0.35, 0.4]  # swing left, boom up, arm crowd, bucket curl [rad/s]
@@ -35,7 +37,7 @@ def test_zx120_is_an_excavator_by_its_description_only() -> None:
     assert profile_for("zx120") is profile_for("zx200") is PROFILES.get("excavator")
     cfg = BridgeConfig.load("zx120")
     assert cfg.machine_type == "excavator" and cfg.track_gauge == pytest.approx(1.99)
-    assert BridgeCore(cfg, 0.0).topics == frozenset({"front_cmd", "tracks_cmd", "cmd_vel"})
+    assert BridgeCore(cfg, 0.0, converter_profile("zx120")).topics == frozenset({"front_cmd", "tracks_cmd", "cmd_vel"})
     spec = load_plant(config_path("sim", "zx120_plant.yaml"))
     assert spec.types == {"zx200": "excavator", "ic120": "crawler_dump", "zx120": "excavator"}
     assert spec.excavator == "zx200"  # the ZX200 still digs the soil
@@ -50,8 +52,6 @@ def test_registries_refuse_duplicates_and_name_the_known_types() -> None:
 
 
 def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
-    from tms_model.excavator.kinematics import load_kinematics
-
     plant = Plant(load_plant(config_path("sim", "zx120_plant.yaml")))
     zx120 = plant.machines["zx120"]
     q0 = np.array(zx120.front.q)
@@ -60,8 +60,7 @@ def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
     conv_bus = open_bus({"interface": "virtual", "channel": channel})
     try:
         io = PlantCanIO(plant, {"zx120": plant_bus}, watchdog_s=plant.spec.watchdog_s)
-        core = BridgeCore(BridgeConfig.load("zx120", load_bus_config("zx120")), plant.time)
-        import can
+        core = BridgeCore(BridgeConfig.load("zx120", load_bus_config("zx120")), plant.time, converter_profile("zx120"))
 
         def send(txs) -> None:  # noqa: ANN001
             for tx in txs:
@@ -95,7 +94,8 @@ def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
     for name, dq, v in zip(FRONT, moved, COMMAND, strict=True):
         assert math.copysign(1.0, dq) == math.copysign(1.0, v) and abs(dq) > 0.8 * abs(v), (name, moved)
     # the ZX200 on the same site did not move: the frames went to the ZX120 only
-    assert np.allclose(plant.zx200.front.q, [plant.spec.zx200.home_pose[n] for n in FRONT])
+    digger = plant.excavator
+    assert digger.name == "zx200" and np.allclose(digger.front.q, [digger.description.home_pose[n] for n in FRONT])
 
     t_js, js = joints[-1]
     assert js.name == tuple(FRONT)

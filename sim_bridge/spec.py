@@ -1,0 +1,122 @@
+"""What the plant is built from: its machines placed on the site, the soil grid and the sensor noise.
+
+Frozen data only, built by :func:`sim_bridge.config.load_plant`. A machine of the plant is its tms_model
+description (:class:`tms_model.machines.Machine`: geometry, hydraulics, soil handling, read once for every
+package) plus what the plant alone decides for that one machine: its name on the site, where it starts and the
+DBC of its bus. Nothing of the description is copied, so the plant and the rest of the stack read the same
+figures.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from tms_common.schema import setting
+from tms_model.machines import Machine
+from tms_model.site import Site
+
+__all__ = ["PlantMachine", "SoilSpec", "SensorSpec", "PlantSpec"]
+
+
+@dataclass(frozen=True)
+class PlantMachine:
+    """One machine of the plant.
+
+    ``description`` is tms_model's, named ``name``; ``pose`` the initial base pose in map (x, y, yaw);
+    ``start_joints`` the joint angles at start (the description's ``home_pose``, for the digging excavator with the
+    plant YAML's ``initial_front`` over it); ``dbc`` the DBC file of its COM3 bus (in ``com3_can/dbc``).
+    """
+
+    name: str
+    description: Machine
+    pose: tuple[float, float, float]
+    start_joints: Mapping[str, float]
+    dbc: str
+
+    @property
+    def type(self) -> str:
+        """The machine type (the plant profile that serves it, :mod:`sim_bridge.profiles`)."""
+        return self.description.type
+
+
+@dataclass(frozen=True)
+class SoilSpec:
+    """Height-field site with one mound (a truncated cone on flat ground, from ``site.yaml``'s ``mound``)."""
+
+    x_min: float
+    y_min: float
+    size_x: float
+    size_y: float
+    resolution: float
+    mound_center: tuple[float, float]
+    mound_base_radius: float
+    mound_top_radius: float  # truncated cone; 0 = cone
+    mound_height: float
+    ground_z: float
+    deposit_radius: float  # [m] disc over which released soil lands on the ground
+    dump_radius: float  # [m] disc of a vessel dump pile
+    mound_region_margin: float  # [m] beyond the base radius still counted as the mound (spills at its foot)
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """Sensor noise (1 sigma) and seed: RTK-fix GNSS, IMU, encoders (the plant YAML's ``sensors:``, read as is)."""
+
+    gnss_sigma_h: float = setting(lo=0.0, doc="[m] horizontal GNSS noise")
+    gnss_sigma_v: float = setting(lo=0.0, doc="[m] vertical GNSS noise")
+    imu_sigma: float = setting(lo=0.0, doc="[rad] roll/pitch noise")
+    seed: int = setting(lo=0, doc="seed of every noise source of the plant")
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """Everything the plant needs, with where it came from.
+
+    ``machines`` holds the plant YAML's machines by name, in its order. The paper's soil experiment (``experiment:
+    dig_and_carry``, the default) digs with ``excavator`` and carries with ``carrier``: the names of the first
+    excavator and the first crawler dump of the plant YAML; a plant YAML with ``experiment: none`` may hold any
+    machines (then ``excavator`` / ``carrier`` may be "").
+    """
+
+    machines: Mapping[str, PlantMachine]
+    site: Site  # tms_model: points, mound, CRS, map origin and the one projector
+    soil: SoilSpec
+    sensors: SensorSpec
+    dt: float
+    watchdog_s: float
+    files: tuple[str, ...]
+    excavator: str = ""
+    carrier: str = ""
+    experiment: str = "dig_and_carry"
+
+    def description(self, name: str) -> Machine:
+        """The tms_model description of machine ``name``."""
+        return self.machines[name].description
+
+    @property
+    def types(self) -> dict[str, str]:
+        """Machine name -> type."""
+        return {name: m.type for name, m in self.machines.items()}
+
+    @property
+    def initial_poses(self) -> dict[str, tuple[float, float, float]]:
+        """Machine name -> initial (x, y, yaw) in map."""
+        return {name: m.pose for name, m in self.machines.items()}
+
+    @property
+    def dbcs(self) -> dict[str, str]:
+        """Machine name -> the DBC file of its bus."""
+        return {name: m.dbc for name, m in self.machines.items()}
+
+    # The paper's names of the digging excavator and the carrying carrier, for callers outside sim_bridge that
+    # still use them; code of this package says excavator / carrier.
+    @property
+    def zx200(self) -> Machine:
+        """The description of the soil-digging excavator."""
+        return self.description(self.excavator)
+
+    @property
+    def ic120(self) -> Machine:
+        """The description of the soil-carrying crawler carrier."""
+        return self.description(self.carrier)
