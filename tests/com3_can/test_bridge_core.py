@@ -19,8 +19,9 @@ from com3_can.bridge_core import (
 )
 from com3_can.codec import load_codec
 from com3_can.errors import Com3CommandError
-from com3_can.profiles import converter_profile
+from com3_can.profiles import PROFILES, converter_profile
 from com3_can.scheduler import FrameScheduler
+from tms_common.errors import ConfigError
 
 FRONT = ["swing_joint", "boom_joint", "arm_joint", "bucket_joint"]
 
@@ -279,11 +280,18 @@ def test_machine_setting_and_bad_config() -> None:
         core.machine_setting({"engine_rpm": 3000}, now=0.0)
     with pytest.raises(Com3CommandError, match=r"unknown field 'turbo'"):
         core.machine_setting({"turbo": 1}, now=0.0)
-    from tms_common.errors import ConfigError
-
     with pytest.raises(ConfigError, match="watchdog_s must be > 0"):
         BridgeConfig.load("zx200", watchdog_s=0.0)
     with pytest.raises(ConfigError, match=r"site.yaml: no machine 'd61' in machines \(known: .*ic120.*zx200"):
         BridgeConfig.load("d61")
     with pytest.raises(ConfigError, match=r"default_setting.turbo"):
         BridgeCore(BridgeConfig.load("zx200", default_setting={"turbo": 1}), 0.0, converter_profile("zx200"))
+
+
+def test_the_core_runs_the_profile_it_is_given_and_refuses_one_of_another_type() -> None:
+    cfg = BridgeConfig.load("zx200")
+    profile = converter_profile("zx200")
+    assert BridgeCore(cfg, 0.0, profile).profile is profile
+    other = next(t for t in PROFILES if t != cfg.machine_type)
+    with pytest.raises(ConfigError, match=rf"zx200 is a {cfg.machine_type}, but the profile given serves '{other}'"):
+        BridgeCore(cfg, 0.0, PROFILES.get(other)("zx200"))
