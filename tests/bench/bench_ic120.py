@@ -62,7 +62,7 @@ def bench_controller() -> None:
     from tms_rp.tracked.config import load_nav_config
     from tms_rp.tracked.controller import TrackedPurePursuit
 
-    cfg = load_nav_config()
+    cfg = load_nav_config(machine="ic120")
     ctl = TrackedPurePursuit(cfg.controller, cfg.limits)
     s = np.linspace(0, 200, 2001)
     path = np.column_stack([s, 5 * np.sin(s / 20)])
@@ -122,7 +122,7 @@ def _ekf_loop_route(seed: int):  # noqa: ANN202
     from tests.tms_rp.kinematics import TrackedModel
 
     rng = np.random.default_rng(seed)
-    cfg = load_nav_config()
+    cfg = load_nav_config(machine="ic120")
     nav = cfg.build_navigator()
     pts = site_points()
     sx, sy, syaw = pts["ic120_start"]
@@ -251,7 +251,7 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
     from tests.rosproc import Proc, isolated_domain, ros_env
 
     pts = site_points()
-    costmap = load_nav_config().build_costmap()
+    costmap = load_nav_config(machine="ic120").build_costmap()
     plant_cfg = _plant_config_file(0.02)
     errs = {"P1": ([], []), "P5": ([], [])}
     statuses: list[str] = []

@@ -7,9 +7,9 @@ import math
 import pytest
 
 from tms_model.machines import Joint, load_machine
-from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams
+from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams, VesselTuning
 
-TUNING = {"tolerance": 0.02, "settle_time": 0.3, "timeout_margin": 5.0}
+TUNING = VesselTuning(tolerance=0.02, settle_time=0.3, timeout_margin=5.0)
 
 
 def _run(ctl: VesselController, q: float, target: float, rate: float) -> tuple[str, float]:

@@ -2,10 +2,22 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
-from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams
+
+from tms_model.machines import load_machine
+from tms_model.nav_files import load_nav_files
+from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams, VesselTuning
+
+IC = load_machine("ic120")
+
+
+def _params(**changes) -> VesselParams:  # noqa: ANN003
+    """The IC120's vessel (65 deg, 0.3 rad/s) with its nav file's tuning."""
+    tuning = load_nav_files(IC.kind).section(VesselTuning, "vessel")
+    return dataclasses.replace(VesselParams.from_config(IC.vessel, tuning, f"{IC.source} vessel.max_angle"), **changes)
 
 
 def _run(ctl, angle, target_rate=0.3, t_end=20.0, dt=0.05, cancel_at=None):
@@ -28,7 +40,7 @@ def step_moving(ctl, angle):
 
 
 def test_raise_within_two_degrees():
-    ctl = VesselController(VesselParams())
+    ctl = VesselController(_params())
     ctl.start(math.radians(60), 0.0, 0.0)
     step, angle, t = _run(ctl, 0.0)
     assert step.status == "SUCCEEDED"
@@ -37,7 +49,7 @@ def test_raise_within_two_degrees():
 
 
 def test_timeout_when_vessel_does_not_move():
-    ctl = VesselController(VesselParams(timeout_margin=1.0))
+    ctl = VesselController(_params(timeout_margin=1.0))
     ctl.start(1.0, 0.0, 0.0)
     t = 0.0
     while True:
@@ -50,7 +62,7 @@ def test_timeout_when_vessel_does_not_move():
 
 
 def test_cancel_holds_current_angle():
-    ctl = VesselController(VesselParams())
+    ctl = VesselController(_params())
     ctl.start(1.0, 0.0, 0.0)
     step, angle, _ = _run(ctl, 0.0, cancel_at=1.0)
     assert step.status == "CANCELED"
@@ -60,7 +72,7 @@ def test_cancel_holds_current_angle():
 
 @pytest.mark.parametrize("bad", [-0.1, 1.2, float("nan")])
 def test_bad_targets_name_value_and_range(bad):
-    ctl = VesselController(VesselParams())
+    ctl = VesselController(_params())
     with pytest.raises(VesselError, match="target_angle"):
         ctl.start(bad, 0.0, 0.0)
     assert ctl.target is None

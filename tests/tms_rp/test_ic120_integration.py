@@ -141,7 +141,7 @@ def test_navigation_and_vessel_over_can(procs, domain, ros_node):
     assert status == 4 and result.error_code == 0, result.error_msg  # STATUS_SUCCEEDED
     assert e_xy < 0.2 and e_yaw < 0.1
     tr = np.array([p[1:] for p in truth.poses])
-    costmap = load_nav_config().build_costmap()
+    costmap = load_nav_config(machine="ic120").build_costmap()
     assert not costmap.footprint_hits(tr[:, 0], tr[:, 1], tr[:, 2]).any(), "footprint touched the mound or the ZX200"
     moving = np.hypot(np.diff(tr[:, 0]), np.diff(tr[:, 1])) > 1e-3
     heading = np.column_stack([np.cos(tr[1:, 2]), np.sin(tr[1:, 2])])
@@ -210,7 +210,7 @@ def test_bad_goals_blocked_path_and_cancel_over_can(procs, domain, ros_node):
         status, result = nav(*args).wait(20.0)
         assert status == 6 and result.error_code == code and text in result.error_msg, (args, result.error_msg)
     # unreachable: a new map with a wall across the site
-    cm = load_nav_config().build_costmap()
+    cm = load_nav_config(machine="ic120").build_costmap()
     grid = cm.map.grid.copy()
     c0 = cm.map.world_to_cell(33.0, 0.0)[1]
     grid[:, c0:c0 + 10] = 100

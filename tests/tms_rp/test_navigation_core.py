@@ -19,7 +19,7 @@ from tests.tms_rp.harness import drive, paper_legs, pose_error, site_points
 from tests.tms_rp.kinematics import TrackedModel
 from tms_common.errors import ConfigError
 
-CFG = load_nav_config()
+CFG = load_nav_config(machine="ic120")
 
 
 def _empty(w=400, h=300, res=0.1):
@@ -274,16 +274,13 @@ def test_nav_config_errors_name_file_and_key(tmp_path):
     text = Path(CFG.file).read_text()
     bad = tmp_path / "nav.yaml"
     bad.write_text(text.replace("rotate_speed: 0.3", "rotate_speeed: 0.3"))
-    with pytest.raises(ConfigError, match=r"nav.yaml:\d+: controller: unknown key 'rotate_speeed'"):
-        load_nav_config(bad, map_yaml=CFG.map_yaml)
+    with pytest.raises(ConfigError, match=r"nav.yaml:\d+: controller.rotate_speeed: unknown key"):
+        load_nav_config(bad, map_yaml=CFG.map_yaml, machine="ic120")
 
 
 def test_brake_decelerates_within_limits_to_rest():
     """What the navigator node commands while the pose is stale: a ramp to rest, not a step."""
-    from tms_rp.tracked.config import load_nav_config
-    from tms_rp.tracked.controller import TrackedPurePursuit
-
-    cfg = load_nav_config()
+    cfg = load_nav_config(machine="ic120")
     ctl = TrackedPurePursuit(cfg.controller, cfg.limits)
     ctl._v, ctl._w = cfg.limits.max_speed, cfg.limits.max_yaw_rate
     dt = 0.05

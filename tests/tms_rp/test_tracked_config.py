@@ -51,11 +51,12 @@ def test_legs_reverse_false_drives_every_leg_forward(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("text", "message"), [
-    ("legs: {reverse: maybe}\n", r"nav.yaml:1: legs.reverse must be true or false"),
-    ("footprint: {length: 4.0, widht: 2.0}\n", r"nav.yaml:1: footprint: unknown key 'widht'"),
-    ("tracks: {max_accel: -1}\n", r"nav.yaml:1: tracks.max_accel must be a positive number"),
+    ("legs: {reverse: maybe}\n", r"nav.yaml:1: legs.reverse: expected true or false"),
+    ("footprint: {length: 4.0, widht: 2.0}\n", r"nav.yaml:1: footprint.widht: unknown key"),
+    ("tracks: {max_accel: -1}\n", r"nav.yaml:1: tracks.max_accel: must be >= "),
     ("blade: {}\n", r"nav.yaml:1: unknown section 'blade'"),
-    ("controller: {desired_sped: 1.0}\n", r"nav.yaml:\d+: controller: unknown key 'desired_sped'"),
+    ("controller: {desired_sped: 1.0}\n", r"nav.yaml:\d+: controller.desired_sped: unknown key"),
+    ("goal_checker: {xy_goal_tolerance: 0}\n", r"nav.yaml:1: goal_checker.xy_goal_tolerance: must be >= "),
 ])
 def test_a_bad_kind_file_names_file_line_and_key(tmp_path: Path, text: str, message: str) -> None:
     nav = tmp_path / "nav.yaml"

@@ -15,10 +15,11 @@ import math
 from dataclasses import dataclass
 
 from tms_common.errors import TmsError
+from tms_common.schema import setting
 from tms_model.geometry import wrap_angle
 from tms_model.machines import Joint, Vessel
 
-__all__ = ["VesselParams", "VesselController", "VesselError", "VesselStep"]
+__all__ = ["VesselParams", "VesselTuning", "VesselController", "VesselError", "VesselStep"]
 
 
 class VesselError(TmsError, ValueError):
@@ -26,18 +27,28 @@ class VesselError(TmsError, ValueError):
 
 
 @dataclass(frozen=True)
+class VesselTuning:
+    """The ``vessel`` section of a carrier's nav file (:func:`tms_model.nav_files.load_nav_files`): when an axis
+    is there, and how long it may take."""
+
+    tolerance: float = setting(lo=1e-6, doc="[rad] measured angle within this of the target")
+    settle_time: float = setting(lo=1e-6, doc="[s] inside tolerance for this long")
+    timeout_margin: float = setting(lo=1e-6, doc="[s] timeout = |delta| / velocity + margin")
+
+
+@dataclass(frozen=True)
 class VesselParams:
     """Limits from the description (``vessel``, or the swing joint) + tuning from the nav file's ``vessel``."""
 
-    max_angle: float = 1.134464
-    velocity: float = 0.3
-    tolerance: float = math.radians(2.0)
-    settle_time: float = 0.3
-    timeout_margin: float = 10.0
+    max_angle: float
+    velocity: float
+    tolerance: float
+    settle_time: float
+    timeout_margin: float
     min_angle: float = 0.0
     continuous: bool = False  # no limits: any target, the short way round (min/max unused)
     what: str = "vessel"  # the axis, in messages
-    source: str = "config/machines/ic120.yaml vessel.max_angle"  # where the limits come from, in messages
+    source: str = "the machine's description"  # where the limits come from, in messages
 
     def __post_init__(self) -> None:
         for name in ("max_angle", "velocity", "tolerance", "settle_time", "timeout_margin"):
@@ -48,17 +59,17 @@ class VesselParams:
             raise ValueError(f"{self.what}: min_angle {self.min_angle!r} must be below max_angle {self.max_angle!r}")
 
     @classmethod
-    def from_config(cls, machine_vessel: Vessel, nav_vessel: dict, source: str = "") -> VesselParams:
-        return cls(machine_vessel.max_angle, machine_vessel.velocity,
-                   float(nav_vessel["tolerance"]), float(nav_vessel["settle_time"]), float(nav_vessel["timeout_margin"]),
-                   source=source or "config/machines/ic120.yaml vessel.max_angle")
+    def from_config(cls, machine_vessel: Vessel, tuning: VesselTuning, source: str) -> VesselParams:
+        """The vessel of a carrier: its description's angle limit and velocity (``source`` names it)."""
+        return cls(machine_vessel.max_angle, machine_vessel.velocity, tuning.tolerance, tuning.settle_time,
+                   tuning.timeout_margin, source=source)
 
     @classmethod
-    def for_swing(cls, joint: Joint, nav_vessel: dict, source: str = "") -> VesselParams:
+    def for_swing(cls, joint: Joint, tuning: VesselTuning, source: str = "") -> VesselParams:
         """The vessel swing of a carrier: the swing joint's limits (none = continuous) and velocity."""
         continuous = joint.lower is None or joint.upper is None
         return cls(math.pi if continuous else float(joint.upper), joint.velocity,
-                   float(nav_vessel["tolerance"]), float(nav_vessel["settle_time"]), float(nav_vessel["timeout_margin"]),
+                   tuning.tolerance, tuning.settle_time, tuning.timeout_margin,
                    min_angle=-math.pi if continuous else float(joint.lower), continuous=continuous,
                    what=joint.name, source=source or f"{joint.name} limits")
 

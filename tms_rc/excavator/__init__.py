@@ -1,4 +1,4 @@
-"""ZX200 arm control: the HEAP-style hierarchical QP controller and its node.
+"""Excavator arm control (every excavator kind): the HEAP-style hierarchical QP controller and its node.
 
 * :mod:`tms_rc.excavator.hqp`: strict-priority hierarchical QP over joint velocities (OSQP per level).
 * :mod:`tms_rc.excavator.controller`: the 100 Hz arm controller (pump flow, joint velocity, position

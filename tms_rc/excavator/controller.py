@@ -1,4 +1,4 @@
-"""The ZX200 arm controller: HEAP-style hierarchical inverse kinematics at 100 Hz.
+"""The excavator arm controller: HEAP-style hierarchical inverse kinematics at 100 Hz (any excavator kind).
 
 Every control step turns the measured joint angles into joint-velocity commands by solving
 :class:`~tms_rc.excavator.hqp.HierarchicalQP` with these priorities, highest first:
@@ -375,8 +375,8 @@ class ArmController:
     """The hierarchical arm controller; call :meth:`step` once per control period.
 
     Args:
-        kin: the ZX200 kinematic model.
-        cfg: controller parameters.
+        kin: the excavator's kinematic model (its description: joint limits).
+        cfg: controller parameters (:func:`controller_config` of the same description).
     """
 
     SAFETY_LEVELS = (

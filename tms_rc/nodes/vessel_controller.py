@@ -24,13 +24,12 @@ is, waits for it to stop, then reports CANCELED (a DumpUp call cannot be cancele
 
 Parameters: ``machine``, ``machine_config`` (the kind's description file instead of config/machines/<kind>.yaml),
 ``nav_config`` (the ``vessel`` tuning: tolerance, settle_time, timeout_margin; default the kind's nav file,
-:mod:`tms_rp`'s config/nav/<kind>_nav.yaml over tracked_nav.yaml), ``rate_hz``.
+config/nav/<kind>_nav.yaml over tracked_nav.yaml, :mod:`tms_model.nav_files`), ``rate_hz``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -41,7 +40,6 @@ from sensor_msgs.msg import JointState
 from com3_msgs.action import SetDumpAngle, SetSwingAngle
 from com3_msgs.msg import JointCmd
 from com3_msgs.srv import DumpUp
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
@@ -49,7 +47,8 @@ from tms_common.rclpy_compat import create_deferred_service
 from tms_model.com3 import CARRIER_DUMP_JOINT, CARRIER_ROTATE_JOINT, POSITION
 from tms_model.fleet import load_named, machine_name, vessel_swing_joint
 from tms_model.machines import load_machine
-from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams
+from tms_model.nav_files import load_nav_files
+from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams, VesselTuning
 
 __all__ = ["main", "VesselControllerNode", "VESSEL_JOINT"]
 
@@ -71,25 +70,6 @@ class _Axis:
     active: tuple[Any, Future, Any] | None = None
 
 
-def _nav_vessel(nav_yaml: str, kind: str) -> dict:
-    """The ``vessel`` tuning of the kind's nav file (merged over the default's), without loading tms_rp."""
-    paths = [config_path("nav", "tracked_nav.yaml")]
-    own = Path(nav_yaml) if nav_yaml else Path(config_path("nav", f"{kind}_nav.yaml"))
-    if (nav_yaml or own.is_file()) and own.resolve() != Path(paths[0]).resolve():
-        paths.append(own)  # a file given by parameter is read even when missing: the error names it
-    out: dict = {}
-    for path in paths:
-        data, where = load_yaml(path)
-        section = (data or {}).get("vessel") if isinstance(data, dict) else None
-        if section is not None and not isinstance(section, dict):
-            raise where.error(("vessel",), "vessel: must be a mapping")
-        out.update(section or {})
-    for key in ("tolerance", "settle_time", "timeout_margin"):
-        if key not in out:
-            raise ConfigError(f"{paths[-1]}: vessel.{key} missing (nor in {paths[0]})")
-    return out
-
-
 class VesselControllerNode(Node):
     def __init__(self, node_name: str = "vessel_controller", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
@@ -106,7 +86,7 @@ class VesselControllerNode(Node):
         if desc.vessel is None:
             raise ConfigError(f"{desc.source}: {self.machine} ({desc.kind}, a {desc.type}) has no vessel: "
                               "vessel_controller serves crawler carriers")
-        tuning = _nav_vessel(nav_yaml, desc.kind)
+        tuning = load_nav_files(desc.kind, nav_yaml or None).section(VesselTuning, "vessel")
         self.axes: dict[str, _Axis] = {"vessel": _Axis(
             "set_dump_angle",
             VesselController(VesselParams.from_config(desc.vessel, tuning, f"{desc.source} vessel.max_angle")),

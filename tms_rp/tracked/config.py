@@ -8,9 +8,12 @@ One stack serves every tracked machine; what differs per kind is data:
   kind without one uses the documented default ``config/nav/tracked_nav.yaml``; a kind's file may hold only
   what differs from the default: each of its sections is merged key by key over the default's.
 
-Sections (unknown ones and unknown keys are errors naming the file and line): ``localization``, ``costmap``,
-``planner``, ``controller``, ``goal_checker``, ``progress_checker``, ``vessel`` (carriers; tms_rc.carrier) and
-the optional per-kind ones:
+The files are found and merged by :mod:`tms_model.nav_files` (the vessel controller of tms_rc reads the same
+files' ``vessel`` section there); every section is read here with :mod:`tms_common.schema` (a frozen dataclass
+per section: unknown keys and bad values are errors naming the file, line and key). Sections:
+``localization`` (:class:`~tms_rp.tracked.ekf.EkfParams` + ``geodetic_crs``), ``costmap``
+(:class:`~tms_rp.tracked.costmap.CostmapParams` + ``map``), ``planner``, ``controller``, ``goal_checker``,
+``progress_checker``, ``vessel`` (carriers; read by tms_rc.carrier) and the optional per-kind ones:
 
 * ``tracks: {max_accel, max_yaw_accel}``: the accelerations navigation needs, for a description without them
   (the excavators' descriptions give speeds only); the description's values win where it has them;
@@ -19,36 +22,87 @@ the optional per-kind ones:
 * ``legs: {reverse}``: ``true`` (default) drives a leg in reverse when the pose's heading is opposite to the
   leg's bearing (the paper's route rule); ``false`` always drives forward and turns at the pose.
 
-Errors name the file, line and key (tms_common.config). The same builders run at node start-up, in the
+The same builders run at node start-up, in the
 tests and in the benchmark, so there is one source of truth for every number.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-from tms_common.config import Where, config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_model.machines import Machine, load_machine
+from tms_common.schema import setting
+from tms_model.fleet import load_named
+from tms_model.machines import Machine, load_machine, machine_path
+from tms_model.nav_files import DEFAULT_NAV, load_nav_files, nav_path_for
 from tms_rp.tracked.controller import ControllerParams, Limits
 from tms_rp.tracked.costmap import Costmap, CostmapParams, Footprint, load_map
 from tms_rp.tracked.ekf import EkfParams
 from tms_rp.tracked.navigator import GoalChecker, NavigatorCore, ProgressChecker
 from tms_rp.tracked.planner import GridPlanner, PlannerParams
 
-__all__ = ["NavConfig", "load_nav_config", "nav_path_for", "DEFAULT_NAV"]
+__all__ = ["NavConfig", "load_nav_config", "nav_path_for", "DEFAULT_NAV", "GoalSection", "ProgressSection"]
 
-#: the default nav file of a kind without ``config/nav/<kind>_nav.yaml``
-DEFAULT_NAV = "tracked_nav.yaml"
-_SECTIONS = {"localization", "costmap", "planner", "controller", "goal_checker", "progress_checker", "vessel"}
-_OPTIONAL = {"tracks", "footprint", "legs"}
+
+@dataclass(frozen=True)
+class LocalizationSection(EkfParams):
+    """``localization``: the EKF's parameters and the CRS a NavSatFix's latitude and longitude are read in."""
+
+    geodetic_crs: str = "EPSG:6668"
+
+
+@dataclass(frozen=True)
+class CostmapSection(CostmapParams):
+    """``costmap``: inflation parameters and the map file (relative to the nav file's directory)."""
+
+    map: str | None = None
+
+
+@dataclass(frozen=True)
+class GoalSection:
+    """``goal_checker``: when a goal is reached (Nav2's goal checker tolerances)."""
+
+    xy_goal_tolerance: float = setting(lo=1e-6, doc="[m]")
+    yaw_goal_tolerance: float = setting(lo=1e-6, doc="[rad]")
+    stop_distance: float = setting(0.05, lo=0.0, doc="[m] translation stops inside this distance")
+
+
+@dataclass(frozen=True)
+class ProgressSection:
+    """``progress_checker``: a goal fails when the machine moves less than this in this time (Nav2's)."""
+
+    required_movement: float = setting(lo=0.0, doc="[m]")
+    movement_time_allowance: float = setting(lo=1e-6, doc="[s]")
+
+
+@dataclass(frozen=True)
+class TracksSection:
+    """``tracks``: accelerations for a description that gives none (the description's win where it has them)."""
+
+    max_accel: float | None = setting(None, lo=1e-9, doc="[m/s^2]")
+    max_yaw_accel: float | None = setting(None, lo=1e-9, doc="[rad/s^2]")
+
+
+@dataclass(frozen=True)
+class FootprintSection:
+    """``footprint``: the navigation footprint when it is not the undercarriage's [m]."""
+
+    length: float = setting(lo=0.1)
+    width: float = setting(lo=0.1)
+
+
+@dataclass(frozen=True)
+class LegsSection:
+    """``legs``: ``reverse`` drives a leg in reverse when the pose's heading is opposite to the leg's bearing."""
+
+    reverse: bool = True
 
 
 @dataclass(frozen=True)
 class NavConfig:
-    """Everything the localisation, navigator and vessel nodes of one machine need."""
+    """Everything the localisation and navigator nodes of one machine need."""
 
     file: str
     ekf: EkfParams
@@ -57,9 +111,8 @@ class NavConfig:
     map_yaml: Path
     planner: PlannerParams
     controller: ControllerParams
-    goal: dict
-    progress: dict
-    vessel: dict
+    goal: GoalSection
+    progress: ProgressSection
     limits: Limits
     footprint: Footprint
     machine: Machine  # the machine's (named) description: tracks, footprint, vessel, tf prefix
@@ -71,132 +124,81 @@ class NavConfig:
     def build_navigator(self, costmap: Costmap | None = None) -> NavigatorCore:
         return NavigatorCore(
             costmap or self.build_costmap(), GridPlanner(self.planner), self.controller, self.limits,
-            GoalChecker(float(self.goal["xy_goal_tolerance"]), float(self.goal["yaw_goal_tolerance"])),
-            ProgressChecker(float(self.progress["required_movement"]), float(self.progress["movement_time_allowance"])),
-            turn_in_place_radius=float(self.goal["xy_goal_tolerance"]),
+            GoalChecker(self.goal.xy_goal_tolerance, self.goal.yaw_goal_tolerance),
+            ProgressChecker(self.progress.required_movement, self.progress.movement_time_allowance),
+            turn_in_place_radius=self.goal.xy_goal_tolerance,
             reverse=self.reverse,
         )
 
 
-def _build(cls: type, section: dict, where: Where, name: str, extra_ok: set[str] = frozenset()) -> Any:
-    known = set(cls.__dataclass_fields__)
-    for key in section:
-        if key not in known and key not in extra_ok:
-            raise where.error((name, key), f"{name}: unknown key {key!r}; known: {sorted(known | extra_ok)}")
+def _fields(cls: type, section: object) -> dict:
+    """The fields of the dataclass ``cls`` taken from ``section`` (an instance of a subclass of ``cls``)."""
+    return {f.name: getattr(section, f.name) for f in dataclasses.fields(cls)}
+
+
+def _description(machine: str, machine_yaml: str | Path | None) -> Machine:
+    """The description of the machine called ``machine`` on the site; a kind's own name off the site is read
+    as that kind (a test or a bench run of one kind)."""
     try:
-        return cls(**{k: v for k, v in section.items() if k in known})
-    except (TypeError, ValueError) as exc:
-        raise where.error((name,), f"{name}: {exc}") from None
-
-
-def nav_path_for(kind: str) -> Path:
-    """``config/nav/<kind>_nav.yaml`` when it exists, else the default ``config/nav/tracked_nav.yaml``."""
-    own = config_path("nav", f"{kind}_nav.yaml")
-    return Path(own) if Path(own).is_file() else Path(config_path("nav", DEFAULT_NAV))
-
-
-def _read(path: Path) -> tuple[dict, Where]:
-    data, where = load_yaml(path)
-    if not isinstance(data, dict):
-        raise where.error((), "navigation config must be a mapping")
-    for key in data:
-        if key not in _SECTIONS | _OPTIONAL:
-            raise where.error((key,), f"unknown section {key!r}; known: {sorted(_SECTIONS | _OPTIONAL)}")
-        if not isinstance(data[key], dict):
-            raise where.error((key,), f"section {key!r} must be a mapping")
-    return data, where
-
-
-def _number(section: dict, where: Where, name: str, key: str) -> float:
-    value = section.get(key)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
-        raise where.error((name, key), f"{name}.{key} must be a positive number, got {value!r}")
-    return float(value)
+        return load_named(machine, machine_yaml)
+    except ConfigError:
+        if machine_yaml is None and not machine_path(machine).is_file():
+            raise
+        return load_machine(machine, machine_yaml)
 
 
 def load_nav_config(nav_yaml: str | Path | None = None, machine_yaml: str | Path | None = None,
-                    map_yaml: str | Path | None = None, *, machine: str = "ic120") -> NavConfig:
+                    map_yaml: str | Path | None = None, *, machine: str) -> NavConfig:
     """Read and validate the navigation config of the machine called ``machine`` (a name of the site).
 
     ``nav_yaml`` (default :func:`nav_path_for` its kind) is merged section by section over
-    ``config/nav/tracked_nav.yaml``; ``machine_yaml`` replaces the kind's description file.
+    ``config/nav/tracked_nav.yaml`` (:func:`tms_model.nav_files.load_nav_files`); ``machine_yaml`` replaces the
+    kind's description file.
     """
-    from tms_model.fleet import load_named
-
-    try:
-        description = load_named(machine, machine_yaml)
-    except ConfigError:
-        if machine_yaml is None and not Path(config_path("machines", f"{machine}.yaml")).is_file():
-            raise
-        description = load_machine(machine, machine_yaml)  # a kind's name, not on the site
-    nav_path = Path(nav_yaml) if nav_yaml else nav_path_for(description.kind)
-    default_path = Path(config_path("nav", DEFAULT_NAV))
-    data, where = _read(nav_path)
-    wheres = dict.fromkeys(data, where)
-    if nav_path.resolve() != default_path.resolve():
-        base, base_where = _read(default_path)
-        for key, section in base.items():
-            if key in data:
-                data[key] = {**section, **data[key]}
-            else:
-                data[key], wheres[key] = dict(section), base_where
-    missing = _SECTIONS - set(data)
-    if missing:
-        raise where.error((), f"missing sections {sorted(missing)}")
+    description = _description(machine, machine_yaml)
+    files = load_nav_files(description.kind, nav_yaml)
+    for name in ("localization", "costmap", "planner", "controller", "goal_checker", "progress_checker"):
+        if not files.has(name):
+            raise files.own_where.error((), f"missing section {name!r}")
     tracks = description.tracks
-    acc = data.get("tracks", {})
-    for key in acc:
-        if key not in ("max_accel", "max_yaw_accel"):
-            raise wheres["tracks"].error(("tracks", key), f"tracks: unknown key {key!r}; known: ['max_accel', 'max_yaw_accel']")
+    acc = files.section(TracksSection, "tracks")
+    where_tracks = files.where("tracks")
+    max_accel = tracks.max_accel if tracks.max_accel is not None else acc.max_accel
+    max_yaw_accel = tracks.max_yaw_accel if tracks.max_yaw_accel is not None else acc.max_yaw_accel
+    if max_accel is None or max_yaw_accel is None:
+        raise where_tracks.error(("tracks",), f"tracks: {description.source} gives no accelerations: the nav file's "
+                                 "tracks section must give max_accel and max_yaw_accel")
     try:
-        limits = Limits(tracks.max_speed, tracks.max_yaw_rate,
-                        tracks.max_accel if tracks.max_accel is not None else _number(acc, wheres.get("tracks", where), "tracks", "max_accel"),
-                        tracks.max_yaw_accel if tracks.max_yaw_accel is not None
-                        else _number(acc, wheres.get("tracks", where), "tracks", "max_yaw_accel"))
+        limits = Limits(tracks.max_speed, tracks.max_yaw_rate, max_accel, max_yaw_accel)
     except ValueError as exc:
         raise ConfigError(f"{description.source}: {exc}") from None
     footprint = Footprint(description.footprint.length, description.footprint.width)
-    if "footprint" in data:
-        fp = data["footprint"]
-        for key in fp:
-            if key not in ("length", "width"):
-                raise wheres["footprint"].error(("footprint", key), f"footprint: unknown key {key!r}; known: ['length', 'width']")
-        footprint = Footprint(_number(fp, wheres["footprint"], "footprint", "length"),
-                              _number(fp, wheres["footprint"], "footprint", "width"))
-    reverse = True
-    if "legs" in data:
-        for key, value in data["legs"].items():
-            if key != "reverse":
-                raise wheres["legs"].error(("legs", key), f"legs: unknown key {key!r}; known: ['reverse']")
-            if not isinstance(value, bool):
-                raise wheres["legs"].error(("legs", key), f"legs.reverse must be true or false, got {value!r}")
-            reverse = value
-    loc = dict(data["localization"])
-    costmap_sec = dict(data["costmap"])
-    map_rel = costmap_sec.pop("map", None)
+    if files.has("footprint"):
+        fp = files.section(FootprintSection, "footprint")
+        footprint = Footprint(fp.length, fp.width)
+    reverse = files.section(LegsSection, "legs").reverse
+    loc = files.section(LocalizationSection, "localization")
+    costmap = files.section(CostmapSection, "costmap")
     if map_yaml is None:
-        if not map_rel:
-            raise wheres["costmap"].error(("costmap",), "costmap.map: missing map file")
-        map_yaml = nav_path.parent / str(map_rel)
-    goal = dict(data["goal_checker"])
-    ctrl = dict(data["controller"])
-    ctrl.setdefault("stop_distance", goal.get("stop_distance", 0.05))
-    ctrl.setdefault("yaw_goal_tolerance", goal.get("yaw_goal_tolerance", 0.1))
-    for key in ("xy_goal_tolerance", "yaw_goal_tolerance"):
-        if not isinstance(goal.get(key), (int, float)) or not goal[key] > 0:
-            raise wheres["goal_checker"].error(("goal_checker", key),
-                                               f"goal_checker.{key} must be a positive number, got {goal.get(key)!r}")
+        if not costmap.map:
+            raise files.where("costmap").error(("costmap",), "costmap.map: missing map file")
+        map_yaml = files.path.parent / costmap.map
+    goal = files.section(GoalSection, "goal_checker")
+    ctrl = files.section(ControllerParams, "controller")
+    given = files.merged("controller")
+    # the controller stops and turns to the goal heading within the goal checker's figures unless told otherwise
+    ctrl = dataclasses.replace(ctrl, **{k: getattr(goal, k) for k in ("stop_distance", "yaw_goal_tolerance")
+                                        if k not in given})
     return NavConfig(
-        file=str(nav_path),
-        ekf=_build(EkfParams, loc, wheres["localization"], "localization", {"geodetic_crs"}),
-        geodetic_crs=str(loc.get("geodetic_crs", "EPSG:6668")),
-        costmap=_build(CostmapParams, costmap_sec, wheres["costmap"], "costmap"),
+        file=str(files.path),
+        ekf=EkfParams(**_fields(EkfParams, loc)),
+        geodetic_crs=loc.geodetic_crs,
+        costmap=CostmapParams(**_fields(CostmapParams, costmap)),
         map_yaml=Path(map_yaml),
-        planner=_build(PlannerParams, data["planner"], wheres["planner"], "planner"),
-        controller=_build(ControllerParams, ctrl, wheres["controller"], "controller"),
+        planner=files.section(PlannerParams, "planner"),
+        controller=ctrl,
         goal=goal,
-        progress=dict(data["progress_checker"]),
-        vessel=dict(data["vessel"]),
+        progress=files.section(ProgressSection, "progress_checker"),
         limits=limits,
         footprint=footprint,
         machine=description,
