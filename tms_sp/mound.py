@@ -96,18 +96,18 @@ class ExcavationTarget:
     expected_volume: float  # [m^3] soil within the bucket footprint at the target
 
     def in_base(self, base: Pose2D) -> tuple[float, float, float]:
-        """Target position in the ZX200 base frame (what the DB record and the planner use)."""
+        """Target position in the excavator base frame (what the DB record and the planner use)."""
         p = base.from_map(np.array([self.x, self.y, self.z]))
         return float(p[0]), float(p[1]), float(p[2])
 
     def record_fields(self, base: Pose2D) -> dict[str, float | int]:
-        """The ``position_with_angle`` payload of the excavation record (ZX200 base frame)."""
+        """The ``position_with_angle`` payload of the excavation record (excavator base frame)."""
         bx, by, bz = self.in_base(base)
         return {"position_with_angle": 1, "x": bx, "y": by, "z": bz, "theta_w": self.theta_w, "offset": self.offset}
 
     def approach_record_fields(self, base: Pose2D, height: float) -> dict[str, float | int]:
         """The ``position_with_angle`` payload of the approach record: the target ``height`` higher with the
-        same edge angle, where the excavate's approach segment begins (ZX200 base frame)."""
+        same edge angle, where the excavate's approach segment begins (excavator base frame)."""
         bx, by, bz = self.in_base(base)
         return {"position_with_angle": 1, "x": bx, "y": by, "z": bz + height, "theta_w": self.theta_w}
 
@@ -175,7 +175,7 @@ def assess_mound(
     grid: HeightGrid, swing_axis_xy: tuple[float, float], params: ExcavationParams,
     previous_xy: tuple[float, float] | None = None, was_depleted: bool = False,
 ) -> MoundAssessment:
-    """Assess the mound on ``grid`` (map frame) for a ZX200 whose swing axis is at ``swing_axis_xy``.
+    """Assess the mound on ``grid`` (map frame) for an excavator whose swing axis is at ``swing_axis_xy``.
 
     ``previous_xy`` (map frame): the target chosen before. Its cell stays the target while its score on this
     grid is within ``params.target_hysteresis`` of the best one: on a noisy scan several cells score
