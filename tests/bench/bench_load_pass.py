@@ -22,6 +22,7 @@ soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in sep
 from __future__ import annotations
 
 import math
+import dataclasses
 import os
 import time
 import xml.etree.ElementTree as ET
@@ -71,12 +72,12 @@ class PassRig:
         self.plant = Plant(load_plant(config_path("sim", "paper_plant.yaml")))
         self.kin = load_kinematics()
         cfg = load_controller_config(self.kin.machine)
-        cfg.rate_hz = RATE_HZ
+        cfg = dataclasses.replace(cfg, rate_hz=RATE_HZ)
         self.ctl_cfg = cfg
         # one controller for every action, as excavator_arm_controller keeps one: a goal that ends at a
         # pass-through point leaves commands in flight, and the next goal starts from their prediction
         self.ctl = ArmController(self.kin, cfg)
-        self.planner = Zx200Planner(self.kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
+        self.planner = Zx200Planner(self.kin, load_planner_config(self.kin.machine.kind), ground_min_z=cfg.ground_min_z)
         self.sensing = load_sensing_config()
         self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
         self._measured: deque = deque(maxlen=TRANSPORT + 1)

@@ -121,7 +121,7 @@ def _run(kin, cfg, q0, targets, solve_times, max_steps=8000, cpu_times=None, rec
 def core() -> None:
     kin = load_kinematics()
     cfg = load_controller_config(kin.machine)
-    planner = Zx200Planner(kin, load_planner_config(), ground_min_z=cfg.ground_min_z)
+    planner = Zx200Planner(kin, load_planner_config(kin.machine.kind), ground_min_z=cfg.ground_min_z)
     n = int(os.environ.get("ZX200_BENCH_N", "100"))
     rng = np.random.default_rng(7)
     solve_times: list[float] = []

@@ -44,7 +44,7 @@ def model(kin):  # noqa: ANN001, ANN201
 
 @pytest.fixture(scope="module")
 def cp(kin, model):  # noqa: ANN001, ANN201
-    return CollisionPlanner(Zx200Planner(kin, load_planner_config()), model)
+    return CollisionPlanner(Zx200Planner(kin, load_planner_config(kin.machine.kind)), model)
 
 
 def scene_of(doc: dict, model: ArmCollisionModel) -> Scene:
@@ -98,7 +98,7 @@ def test_padded_arm_encloses_the_plants_link_boxes(kin, model: ArmCollisionModel
     """The plant (MuJoCo) checks contacts with its own link boxes: every one must lie inside the planner's link."""
     from sim_bridge.profiles.excavator import _LINK_BOX
 
-    cfg = load_collision_config()
+    cfg = load_collision_config(kin.machine.kind)
     for link, (half, off) in _LINK_BOX.items():
         box = cfg.links[link]["box"]
         assert np.all(np.abs(np.array(off) - np.array(box["offset"])) + np.array(half)

@@ -13,7 +13,7 @@ from tms_model.excavator.kinematics import load_kinematics
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 
 KIN = load_kinematics()
-PLAN = Zx200Planner(KIN, load_planner_config())
+PLAN = Zx200Planner(KIN, load_planner_config(KIN.machine.kind))
 
 
 def test_seed_target_penetrates_at_the_point_drags_offset_and_keeps_soil() -> None:

@@ -29,8 +29,10 @@ The original's collision-aware variants, same types: ``tms_rp_zx200_change_pose_
 :class:`tms_rp.zx200.collision_planner.CollisionPlanner` (dense path checks, detours over objects); a target or
 path it cannot clear ends with ``TmsRpErrorCodes.FAILURE`` and a message naming the object and its record.
 
-Parameters (read-only, read at start-up): ``machine_config``, ``planner_config``, ``controller_config``,
-``collision_config`` (YAML paths; defaults in config/), ``collision_object_record_name`` (the original's; "" = no
+Parameters (read-only, read at start-up, :class:`tms_common.params.StartupParams`): ``machine`` (the excavator
+on the site; default the namespace's last segment), ``machine_config``, ``planner_config``, ``controller_config``,
+``collision_config`` (YAML paths; defaults in config/: the kind's description, config/tms_rp/<kind>_planner.yaml,
+config/tms_rc/excavator_arm_controller.yaml, config/tms_rp/<kind>_collision.yaml), ``collision_object_record_name`` (the original's; "" = no
 objects), ``collision_object_dump_record_name`` (the original's mesh records: not supported, goals of the _plan
 actions are refused while it is set), ``db_uri`` / ``db_path`` (the store, ``tms_db.open_store``).
 """
@@ -45,7 +47,6 @@ import uuid
 
 import numpy as np
 from action_msgs.msg import GoalStatus
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
@@ -56,7 +57,10 @@ from unique_identifier_msgs.msg import UUID
 from tms_common.action_client import RaceFreeActionClient
 from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
+from tms_common.params import StartupParams
 from tms_common.ticker import Ticker
+from tms_db import open_store
+from tms_db.errors import RecordNotFound, StoreError
 from tms_if_opera.interface import (
     CHANGE_POSE,
     CHANGE_POSE_OPTIONS,
@@ -65,12 +69,15 @@ from tms_if_opera.interface import (
     EXCAVATE_SIMPLE,
     EXCAVATE_SIMPLE_PLAN,
     OPTIONS_TTL_S,
+    PLANNER_NODE,
     PLANNING_OUTCOME,
     RELEASE_SIMPLE,
 )
 from tms_model.excavator import codes
 from tms_model.excavator.codes import PlanningError
-from tms_model.excavator.kinematics import JOINTS, load_kinematics
+from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.fleet import load_named, machine_name
+from tms_model.machines import EXCAVATOR
 from tms_model.excavator.targets import JointTarget
 from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
@@ -101,28 +108,30 @@ _STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CAN
 class Zx200PlannerNode(Node):
     """Validates and sequences ZX200 goals; motion is delegated to ``arm_controller/move``."""
 
-    def __init__(self, node_name: str = "zx200_planner", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+    def __init__(self, node_name: str = PLANNER_NODE, **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
         super().__init__(node_name, **kwargs)
-        read_only = ParameterDescriptor(read_only=True)
+        params = StartupParams(self)
 
         def path(name: str) -> str | None:
-            return self.declare_parameter(name, "", read_only).value or None
+            return params.text(name) or None
 
-        kin = load_kinematics("zx200", path=path("machine_config"))
-        pcfg = load_planner_config(path("planner_config"))
+        # the excavator the node plans for: the machine parameter, else the namespace; its kind's description
+        # and planning files
+        self.machine = machine_name(params.text("machine"), self.get_namespace())
+        description = load_named(self.machine, path("machine_config")).require(EXCAVATOR)
+        kin = ExcavatorKinematics(description)
+        pcfg = load_planner_config(description.kind, path("planner_config"))
         ccfg = load_controller_settings(path("controller_config"))
         self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.collision.ground_min_z)
         # the _plan actions: collision objects from the DB, as the original's planning servers read them
         self.collision = CollisionPlanner(self.planner, ArmCollisionModel(kin, load_collision_config(
-            path("collision_config"))), via_tolerance_rad=ccfg.via_tolerance_rad)
-        self._collision_record = str(self.declare_parameter("collision_object_record_name", "", read_only).value)
-        dump = str(self.declare_parameter("collision_object_dump_record_name", "", read_only).value)
+            description.kind, path("collision_config"))), via_tolerance_rad=ccfg.via_tolerance_rad)
+        self._collision_record = params.text("collision_object_record_name")
+        dump = params.text("collision_object_dump_record_name")
         self._dump_records = [r.strip() for r in dump.split(",") if r.strip()]
         db_uri, db_path = path("db_uri"), path("db_path")
         self._store = None
-        if self._collision_record:
-            from tms_db import open_store  # the original's planning servers read the DB themselves (mongocxx)
-
+        if self._collision_record:  # the original's planning servers read the DB themselves (mongocxx)
             self._store = open_store(uri=db_uri, path=db_path)
         self._group = ReentrantCallbackGroup()
         self._ticker = Ticker(self, TICK_S, callback_group=self._group)
@@ -155,7 +164,7 @@ class Zx200PlannerNode(Node):
         self._plan_options_srv = self.create_service(Zx200ChangePoseOptions, CHANGE_POSE_PLAN_OPTIONS,
                                                      self._on_options, callback_group=self._group)
         self._outcome_pub = self.create_publisher(Zx200PlanningOutcome, PLANNING_OUTCOME, OUTCOME_QOS)
-        self.get_logger().info("zx200_planner ready")
+        self.get_logger().info(f"{self.get_name()} ready")
 
     # -------------------------------------------------------------- joint_states, read when a goal needs them
     def _on_state(self, msg: JointState) -> None:
@@ -188,7 +197,7 @@ class Zx200PlannerNode(Node):
     # -------------------------------------------------------------- goals, cancel, stop (run_node's hook)
     def _on_goal(self, _request) -> GoalResponse:  # noqa: ANN001
         if self._goals.stopping.is_set():
-            self.get_logger().error("goal rejected: zx200_planner is stopping")
+            self.get_logger().error(f"goal rejected: {self.get_name()} is stopping")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
@@ -204,7 +213,7 @@ class Zx200PlannerNode(Node):
                 self.get_logger().error(f"{name} goal failed inside the planner: {traceback.format_exc()}")
                 if not handle.is_active:
                     raise
-                return self._end(handle, action_type, codes.FAILURE, f"zx200_planner error: {exc!r}", name)
+                return self._end(handle, action_type, codes.FAILURE, f"{self.get_name()} error: {exc!r}", name)
 
     def on_stop_requested(self) -> bool:
         """Cancel the running controller goals (the waits below see ``stopping``); True while any runs."""
@@ -274,7 +283,7 @@ class Zx200PlannerNode(Node):
             "later (wall)"))
         if code != codes.SUCCESS:
             if self._goals.stopping.is_set() and not handle.is_cancel_requested:  # ended by our stop
-                return self._end(handle, action_type, codes.FAILURE, f"zx200_planner stopping (SIGINT/SIGTERM): {message}",
+                return self._end(handle, action_type, codes.FAILURE, f"{self.get_name()} stopping (SIGINT/SIGTERM): {message}",
                                  name)
             return self._end(handle, action_type, code, message, name)
         self._pass_through_end = self.planner.pass_through_end(targets)
@@ -425,8 +434,6 @@ class Zx200PlannerNode(Node):
                                        "primitive in the collision_objects of collision_object_record_name's record")
         if not self._collision_record:
             return Scene([], self.collision.model.padding_for())
-        from tms_db.errors import RecordNotFound, StoreError
-
         try:
             doc = self._store.get_record(self._collision_record)
         except RecordNotFound:

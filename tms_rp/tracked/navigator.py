@@ -24,6 +24,7 @@ from tms_model.geometry import wrap_angle, yaw_from_quaternion
 from tms_rp.tracked.controller import ControllerParams, Limits, TrackedPurePursuit
 from tms_rp.tracked.costmap import Costmap
 from tms_rp.tracked.errors import (
+    GoalOccupiedError,
     GoalOutsideMapError,
     InvalidGoalError,
     NavError,
@@ -153,8 +154,6 @@ class NavigatorCore:
             ox, oy = cm.map.origin
             sx, sy = cm.map.size_m
             raise GoalOutsideMapError(f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]")
-        from tms_rp.tracked.errors import GoalOccupiedError
-
         if cm.obstacles[cm.map.world_to_cell(x, y)]:
             raise GoalOccupiedError(f"pose {index} ({x:.2f}, {y:.2f}) lies inside an obstacle")
         if bool(cm.footprint_hits(x, y, yaw)[0]):

@@ -16,7 +16,7 @@ not name keep the configured default (the original's 0.25 m on boom_link, arm_li
 bucket_end_link). Ours beyond the original: an element may carry ``padding`` [m] (default 0), kept around that
 object as well.
 
-The arm is the union of per-link shapes (``config/tms_rp/zx200_collision.yaml``) placed by the ZX200 kinematics
+The arm is the union of per-link shapes (``config/tms_rp/<kind>_collision.yaml``) placed by the kinematics
 (:class:`tms_model.excavator.kinematics.ExcavatorKinematics`). The distance of a link to an object is coal's
 (signed: negative inside); the link is in collision when that distance is below link padding + object padding.
 Pure Python (numpy, pinocchio, coal); no ROS.
@@ -39,7 +39,8 @@ from tms_model.excavator.codes import FAILURE, PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 
 __all__ = ["ARM_LINKS", "PRIMITIVES", "CollisionConfig", "CollisionError", "CollisionObject", "CollisionRecordError",
-           "Contact", "ArmCollisionModel", "load_collision_config", "objects_from_record"]
+           "Contact", "ArmCollisionModel", "collision_config_path", "load_collision_config",
+           "objects_from_record"]
 
 #: the ZX200 links the model places, base to tip (OPERA's zx200_description names)
 ARM_LINKS = ("body_link", "boom_link", "arm_link", "bucket_link", "bucket_end_link")
@@ -200,7 +201,7 @@ class LinkShape:
 
 @dataclass(frozen=True)
 class CollisionConfig:
-    """``config/tms_rp/zx200_collision.yaml``."""
+    """``config/tms_rp/<kind>_collision.yaml``: an excavator kind's arm shapes and path checks."""
 
     links: dict[str, list[dict]]
     link_padding: dict[str, float]
@@ -210,9 +211,15 @@ class CollisionConfig:
     carry_front: tuple[float, float, float] = (-1.08, 1.9, 1.9)
 
 
-def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
-    """Read the collision YAML; unknown keys, links or shapes are reported naming the file and key."""
-    path = Path(path) if path is not None else config_path("tms_rp", "zx200_collision.yaml")
+def collision_config_path(kind: str) -> Path:
+    """``config/tms_rp/<kind>_collision.yaml``."""
+    return Path(config_path("tms_rp", f"{kind}_collision.yaml"))
+
+
+def load_collision_config(kind: str, path: str | Path | None = None) -> CollisionConfig:
+    """Read the collision YAML of excavator ``kind`` (or ``path``); unknown keys, links or shapes are reported
+    naming the file and key."""
+    path = Path(path) if path is not None else collision_config_path(kind)
     data, _ = load_yaml(path)
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping")
@@ -269,7 +276,7 @@ class ArmCollisionModel:
 
     def __init__(self, kin: ExcavatorKinematics, cfg: CollisionConfig | None = None) -> None:
         self.kin = kin
-        self.cfg = cfg or load_collision_config()
+        self.cfg = cfg or load_collision_config(kin.machine.kind)
         machine = kin.machine
         next_pin = {j.parent: np.array(j.origin_xyz) for j in machine.joints}  # parent link -> child joint origin
         next_pin["bucket_link"] = np.array(machine.bucket.tip_xyz)

@@ -22,19 +22,19 @@ from typing import Any
 
 import numpy as np
 
-from tms_common.config import config_path, load_yaml
-from tms_common.errors import ConfigError
+from tms_common.config import config_path
+from tms_common.schema import load_schema
 from tms_model.excavator.codes import InvalidGoalError, JointLimitError, PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_model.geometry import wrap_angle
 
-__all__ = ["PlannerConfig", "load_planner_config", "Zx200Planner"]
+__all__ = ["PlannerConfig", "load_planner_config", "planner_config_path", "Zx200Planner"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class PlannerConfig:
-    """Excavation/release geometry (``config/tms_rp/zx200_planner.yaml``)."""
+    """Excavation/release geometry of an excavator kind (``config/tms_rp/<kind>_planner.yaml``)."""
 
     approach_height: float = 1.0
     penetrate_depth: float = 0.0
@@ -53,20 +53,15 @@ class PlannerConfig:
     continue_window_rad: float = 0.5
 
 
-def load_planner_config(path: str | Path | None = None) -> PlannerConfig:
-    """Read the planner YAML; unknown or non-numeric keys are reported with the file name."""
-    path = Path(path) if path is not None else config_path("tms_rp", "zx200_planner.yaml")
-    data, _ = load_yaml(path)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping")
-    known = PlannerConfig.__dataclass_fields__
-    for key in data:
-        if key not in known:
-            raise ConfigError(f"{path}: unknown key {key!r} (known: {', '.join(known)})")
-    try:
-        return PlannerConfig(**{k: float(v) for k, v in data.items()})
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{path}: bad value: {exc}") from None
+def planner_config_path(kind: str) -> Path:
+    """``config/tms_rp/<kind>_planner.yaml``: the planning geometry of an excavator kind."""
+    return Path(config_path("tms_rp", f"{kind}_planner.yaml"))
+
+
+def load_planner_config(kind: str, path: str | Path | None = None) -> PlannerConfig:
+    """The planning geometry of excavator ``kind`` (or of the file ``path``), read with :mod:`tms_common.schema`:
+    unknown keys and non-numbers are errors naming the file, line and key."""
+    return load_schema(PlannerConfig, path if path is not None else planner_config_path(kind))
 
 
 def _finite(values: Any, what: str) -> np.ndarray:
