@@ -7,12 +7,11 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar, Protocol
 
 from com3_can.bridge_config import BridgeConfig
-from com3_can.codec import Com3Codec, codec_for
+from com3_can.codec import Com3Codec
 from com3_can.errors import Com3CommandError
 from com3_can.outputs import ImuOut, Tx
 
-# codec_for is re-exported: sim_bridge's plant profiles import it from here
-__all__ = ["ConverterProfile", "Core", "codec_for"]
+__all__ = ["ConverterProfile", "Core"]
 
 
 class Core(Protocol):
@@ -43,9 +42,8 @@ class ConverterProfile:
 
     Class attributes a profile sets:
 
-    * ``machine_type``: registry name (a type constant of :mod:`tms_model.machines`); ``dbc``: the DBC file in
-      ``com3_can/dbc`` the type speaks (deprecated: the converter uses the one the machine description names,
-      ``Machine.dbc``; kept while sim_bridge's plant profiles read it);
+    * ``machine_type``: registry name (a type constant of :mod:`tms_model.machines`); the DBC is not the
+      profile's: the machine description names it (``Machine.dbc``);
     * ``channels``: channel name -> command frames it feeds (one watchdog per channel);
     * ``topics``: the ROS command topics the type takes, named as OPERA's com3_ros names them for that type
       (excavator ``front_cmd``, ``tracks_cmd``; crawler carrier ``track_cmd``, ``rot_dump_cmd``; dozer ``track_cmd``,
@@ -58,7 +56,6 @@ class ConverterProfile:
     """
 
     machine_type: ClassVar[str] = ""
-    dbc: ClassVar[str] = ""
     channels: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     topics: ClassVar[frozenset[str]] = frozenset()
     tracks_topic: ClassVar[str] = "tracks_cmd"

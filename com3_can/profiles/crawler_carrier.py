@@ -105,7 +105,6 @@ class TrackedProfile(ConverterProfile):
 
 class CrawlerCarrierProfile(TrackedProfile):
     machine_type = CRAWLER_DUMP
-    dbc = "crawler_carrier_com3.dbc"  # deprecated (see ConverterProfile)
     channels = {"travel": (F["travel_velocity"],), "vessel": (F["vessel"],), "swing": (F["swing"],)}
     topics = frozenset({"track_cmd", "cmd_vel", "rot_dump_cmd"})
     setting_topic = "crawler_carrier_machine_setting"

@@ -28,7 +28,6 @@ __all__ = ["DozerProfile"]
 
 class DozerProfile(TrackedProfile):
     machine_type = DOZER
-    dbc = "dozer_com3.dbc"  # deprecated (see ConverterProfile)
     channels = {"travel": (F["travel_velocity"],), "blade": (F["blade"],)}
     topics = frozenset({"track_cmd", "cmd_vel", "blade_cmd"})
     setting_topic = "machine_setting"

@@ -27,7 +27,6 @@ _FRONT = {j.joint: j for j in EXCAVATOR_FRONT}
 
 class ExcavatorProfile(ConverterProfile):
     machine_type = EXCAVATOR
-    dbc = "excavator_com3.dbc"  # deprecated (see ConverterProfile)
     channels = {
         "front": (F["front_velocity"], F["front_pilot"]),
         "travel": (F["travel_velocity"], F["travel_pilot"]),
