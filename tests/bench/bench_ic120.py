@@ -102,7 +102,7 @@ def bench_ekf() -> None:
     print(f"EKF odometry predict: {summary_ms(t_odom)}")
     print(f"EKF GNSS update (gated): {summary_ms(t_gnss)}")
     print(f"EKF azimuth update: {summary_ms(t_az)}")
-    # accuracy on synthetic data (same cases as tests/ic120/test_localization_core.py)
+    # accuracy on synthetic data (same cases as tests/tms_rp/test_localization_core.py)
     from tests.tms_rp.test_localization_core import _run
 
     _, err, _, _ = _run(simulate(120.0, gnss_sigma=0.02, slip=0.04))

@@ -1,5 +1,5 @@
 """change_pose_plan over a carrier parked under the swing path: the subtask server, the DB, the planner, the arm
-controller, com3_bridge and the MuJoCo plant, every one its own process (tests/zx200/conftest.py ``arm_stack``).
+controller, com3_bridge and the MuJoCo plant, every one its own process (tests/arm_stack.py ``arm_stack``).
 
 The collision objects are the original's record (``collision_objects`` of the record the planner's
 ``collision_object_record_name`` names); the goals are LeafNodeBase goals naming position_with_angle records, as
