@@ -27,57 +27,24 @@ altitude), RTK noise; ``Front_Pin_Position_*`` = pin positions in the excavator'
 from __future__ import annotations
 
 import logging
-from collections import Counter
 from collections.abc import Mapping
-from typing import Any
 
 import can
+import numpy as np
 
 from com3_can.codec import Com3Codec, codec_for
 from com3_can.errors import Com3DecodeError
 from com3_can.pilot_cutoff import FRAME as CUTOFF_FRAME
 from com3_can.pilot_cutoff import cutoff_codec
-from com3_can.scheduler import FrameScheduler
 from sim_bridge.plant import Plant
-from sim_bridge.profiles import PLANT_PROFILES, PlantProfile
+from sim_bridge.profiles import PLANT_PROFILES
+from sim_bridge.profiles.base import Side
 from sim_bridge.sensors import Gnss, Noise
+from sim_bridge.spec import SensorSpec
 
 __all__ = ["PlantCanIO", "Side"]
 
 log = logging.getLogger(__name__)
-
-
-class Side:
-    """Per-machine bus state: the machine, its profile, codec, schedule, modes, watchdog and counters."""
-
-    def __init__(self, name: str, machine: Any, profile: type[PlantProfile], bus: can.BusABC, codec: Com3Codec,
-                 start: float) -> None:
-        self.name = name
-        self.machine = machine
-        self.profile = profile
-        self.bus = bus
-        self.codec = codec
-        self.schedule = FrameScheduler({n: codec.cycle_ms(n) / 1000.0 for n in codec.state_frames}, start)
-        self.ranges = {
-            n: {s.name: (s.minimum, s.maximum) for s in codec.signals(n)} for n in codec.frame_names
-        }
-        self.state_ids = {codec.frame_id(n) for n in codec.state_frames}
-        self.last_motion = start
-        self.resting = True  # no command yet: at rest
-        self.settings: dict[str, float] | None = None
-        self.alive = 0
-        self.counters: Counter[str] = Counter()
-        self.pilot: dict[str, float] = {}
-        self.fix: tuple[float, float, float] | None = None  # GNSS fix shared by the frames of one cycle
-        self.cutoff_requested = False
-        self.cutoff_at: float | None = None  # simulated time the requested cut-off takes effect
-        self.cutoff_engaged = False
-
-    def encode(self, frame: str, values: dict[str, float]) -> can.Message:
-        rng = self.ranges[frame]
-        clipped = {k: min(rng[k][1], max(rng[k][0], v)) for k, v in values.items()}
-        data = self.codec.encode(frame, clipped)
-        return can.Message(arbitration_id=self.codec.frame_id(frame), data=data, is_extended_id=True)
 
 
 class PlantCanIO:
@@ -223,6 +190,15 @@ class PlantCanIO:
                 sent += 1
                 side.counters["sent"] += 1
         return sent
+
+    @property
+    def sensors(self) -> SensorSpec:
+        """The plant's sensor noise figures."""
+        return self.plant.spec.sensors
+
+    def body_pos(self, body: str) -> np.ndarray:
+        """Map position of MuJoCo body ``body`` (``<machine>_<link>``) now."""
+        return self.plant.model.body_pos(body)
 
     def _alive(self, side: Side) -> int:
         value = side.alive

@@ -9,7 +9,8 @@ machine's ``type``.
 ``PLANT_PROFILES`` is the registry, the one place that maps machine types to plant code: ``excavator``,
 ``crawler_dump`` and ``dozer`` are registered here; another type registers with ``PLANT_PROFILES.register("name",
 Class)`` (a duplicate name is refused, an unknown one named with the known ones). The profiles import nothing of
-this module: the dependency runs from the registry (and :mod:`sim_bridge.config`, which asks it) to them.
+this module, :mod:`sim_bridge.config` or :mod:`sim_bridge.can_io`: the dependency runs from the registry (and the
+modules that ask it) to them, and they see the bus I/O through :class:`~sim_bridge.profiles.base.PlantBus`.
 """
 
 from __future__ import annotations

@@ -1,15 +1,71 @@
-"""Base class of plant profiles (see :mod:`sim_bridge.profiles`)."""
+"""Base class of plant profiles (see :mod:`sim_bridge.profiles`), and what a profile works on: a machine's
+:class:`Side` of the bus and the :class:`PlantBus` (:class:`sim_bridge.can_io.PlantCanIO` is one)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, ClassVar
+from collections import Counter
+from typing import Any, ClassVar, Protocol
 
-from sim_bridge.spec import PlantMachine
+import can
+import numpy as np
 
-if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
-    from sim_bridge.can_io import PlantCanIO, Side
+from com3_can.codec import Com3Codec
+from com3_can.scheduler import FrameScheduler
+from sim_bridge.sensors import Gnss, Noise
+from sim_bridge.spec import PlantMachine, SensorSpec
 
-__all__ = ["PlantProfile"]
+__all__ = ["PlantBus", "PlantProfile", "Side"]
+
+
+class PlantBus(Protocol):
+    """The plant's CAN I/O as a profile sees it: sensors and the shared state frames."""
+
+    gnss: Gnss
+    noise: Noise
+
+    @property
+    def sensors(self) -> SensorSpec: ...
+
+    def body_pos(self, body: str) -> np.ndarray: ...
+
+    def machine_state(self, side: Side) -> dict[str, float]: ...
+
+    def roll_pitch(self, machine: str) -> dict[str, float]: ...
+
+
+class Side:
+    """Per-machine bus state: the machine, its profile, codec, schedule, modes, watchdog and counters."""
+
+    def __init__(self, name: str, machine: Any, profile: type[PlantProfile], bus: can.BusABC, codec: Com3Codec,
+                 start: float) -> None:
+        self.name = name
+        self.machine = machine
+        self.profile = profile
+        self.bus = bus
+        self.codec = codec
+        self.schedule = FrameScheduler({n: codec.cycle_ms(n) / 1000.0 for n in codec.state_frames}, start)
+        self.ranges = {
+            n: {s.name: (s.minimum, s.maximum) for s in codec.signals(n)} for n in codec.frame_names
+        }
+        self.state_ids = {codec.frame_id(n) for n in codec.state_frames}
+        self.last_motion = start
+        self.resting = True  # no command yet: at rest
+        self.settings: dict[str, float] | None = None
+        self.alive = 0
+        self.counters: Counter[str] = Counter()
+        self.pilot: dict[str, float] = {}
+        self.fix: tuple[float, float, float] | None = None  # GNSS fix shared by the frames of one cycle
+        self.cutoff_requested = False
+        self.cutoff_at: float | None = None  # simulated time the requested cut-off takes effect
+        self.cutoff_engaged = False
+
+    def encode(self, frame: str, values: dict[str, float]) -> can.Message:
+        rng = self.ranges[frame]
+        clipped = {k: min(rng[k][1], max(rng[k][0], v)) for k, v in values.items()}
+        data = self.codec.encode(frame, clipped)
+        return can.Message(arbitration_id=self.codec.frame_id(frame), data=data, is_extended_id=True)
+
+
 
 
 class PlantProfile:
@@ -35,11 +91,11 @@ class PlantProfile:
         raise NotImplementedError
 
     @staticmethod
-    def command(io: PlantCanIO, side: Side, frame: str, values: dict[str, float]) -> None:
+    def command(io: PlantBus, side: Side, frame: str, values: dict[str, float]) -> None:
         """Apply one decoded command frame to ``side.machine``."""
         raise NotImplementedError
 
     @staticmethod
-    def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+    def state(io: PlantBus, side: Side, frame: str) -> dict[str, float]:
         """Physical values of state frame ``frame`` now."""
         raise NotImplementedError

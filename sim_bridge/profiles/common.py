@@ -7,14 +7,10 @@ implement.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from com3_can.signal_map import CARRIER_FRAMES
 from com3_can.signal_map import CARRIER_VESSEL as V
+from sim_bridge.profiles.base import PlantBus, Side
 from tms_model.geometry import wrap_angle
-
-if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
-    from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["vec", "tracked_state"]
 
@@ -27,7 +23,7 @@ def vec(values: tuple[float, ...] | list[float]) -> str:
     return " ".join(f"{v:.6g}" for v in values)
 
 
-def tracked_state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+def tracked_state(io: PlantBus, side: Side, frame: str) -> dict[str, float]:
     """Physical values of a tracked machine's shared state frame ``frame`` (KeyError for any other)."""
     m = side.machine
     if frame == "Machine_State":
@@ -47,5 +43,5 @@ def tracked_state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
         if frame == "GNSS_Longitude":
             return {"longitude": fix[1]}
         return {"altitude": fix[2], "fix_status": 3.0, "num_satellites": 20.0,
-                "horizontal_accuracy": io.plant.spec.sensors.gnss_sigma_h}
+                "horizontal_accuracy": io.sensors.gnss_sigma_h}
     raise KeyError(f"{side.name}: no builder for state frame {frame}")

@@ -9,21 +9,16 @@ rate, roll/pitch, GNSS fix of the base (RTK noise).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from com3_can.profiles.crawler_carrier import CrawlerCarrierProfile
 from com3_can.signal_map import CARRIER_FRAMES as F
 from com3_can.signal_map import CARRIER_SWING as S
 from com3_can.signal_map import CARRIER_VESSEL as V
 from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import CrawlerCarrier
-from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.base import PlantBus, PlantProfile, Side
 from sim_bridge.profiles.common import tracked_state, vec
 from sim_bridge.spec import PlantMachine
 from tms_model.machines import ROTATE_JOINT, VESSEL_JOINT
-
-if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
-    from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["CrawlerCarrierPlantProfile"]
 
@@ -72,7 +67,7 @@ class CrawlerCarrierPlantProfile(PlantProfile):
         return lines
 
     @staticmethod
-    def command(io: PlantCanIO, side: Side, frame: str, v: dict[str, float]) -> None:
+    def command(io: PlantBus, side: Side, frame: str, v: dict[str, float]) -> None:
         ic: CrawlerCarrier = side.machine
         s = side.settings
         if frame == F["setting"]:
@@ -104,7 +99,7 @@ class CrawlerCarrierPlantProfile(PlantProfile):
                 ic.hold_swing()
 
     @staticmethod
-    def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+    def state(io: PlantBus, side: Side, frame: str) -> dict[str, float]:
         ic: CrawlerCarrier = side.machine
         if frame == F["vessel_angle"]:
             return {V.angle: ic.vessel_angle, V.angular_velocity: ic.vessel_rate}

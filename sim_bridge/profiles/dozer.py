@@ -8,21 +8,16 @@ blade lift angle, azimuth and yaw rate, roll/pitch, GNSS fix of the base (RTK no
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from com3_can.profiles.dozer import DozerProfile
 from com3_can.signal_map import BLADE_ANGLE, BLADE_VELOCITY
 from com3_can.signal_map import DOZER_BLADE as B
 from com3_can.signal_map import DOZER_FRAMES as F
 from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import Dozer
-from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.base import PlantBus, PlantProfile, Side
 from sim_bridge.profiles.common import tracked_state, vec
 from sim_bridge.spec import PlantMachine
 from tms_model.machines import LIFT_JOINT
-
-if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
-    from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["DozerPlantProfile"]
 
@@ -58,7 +53,7 @@ class DozerPlantProfile(PlantProfile):
         ]
 
     @staticmethod
-    def command(io: PlantCanIO, side: Side, frame: str, v: dict[str, float]) -> None:
+    def command(io: PlantBus, side: Side, frame: str, v: dict[str, float]) -> None:
         dz: Dozer = side.machine
         s = side.settings
         if frame == F["setting"]:
@@ -92,7 +87,7 @@ class DozerPlantProfile(PlantProfile):
                 dz.set_lift_velocity(0.0)
 
     @staticmethod
-    def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+    def state(io: PlantBus, side: Side, frame: str) -> dict[str, float]:
         dz: Dozer = side.machine
         if frame == F["blade_angle"]:
             return {B.angle: dz.lift_angle, B.angular_velocity: dz.lift_rate}

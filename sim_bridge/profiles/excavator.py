@@ -10,20 +10,17 @@ centre in the site CRS (RTK noise), pin positions in ``base_link``, flows, press
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from com3_can.profiles.excavator import ExcavatorProfile
 from com3_can.signal_map import EXCAVATOR_FRAMES as F
 from com3_can.signal_map import EXCAVATOR_FRONT, PILOT_MAX_MPA
 from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import Excavator
-from sim_bridge.profiles.base import PlantProfile
+from sim_bridge.profiles.base import PlantBus, PlantProfile, Side
 from sim_bridge.profiles.common import vec
 from sim_bridge.spec import PlantMachine
 from tms_model.geometry import wrap_angle
-
-if TYPE_CHECKING:  # the bus I/O runs the profiles; they only see its type
-    from sim_bridge.can_io import PlantCanIO, Side
 
 __all__ = ["ExcavatorPlantProfile"]
 
@@ -69,7 +66,7 @@ class ExcavatorPlantProfile(PlantProfile):
         return lines
 
     @staticmethod
-    def command(io: PlantCanIO, side: Side, frame: str, v: dict[str, float]) -> None:
+    def command(io: PlantBus, side: Side, frame: str, v: dict[str, float]) -> None:
         zx: Excavator = side.machine
         s = side.settings
         front_mode = None if s is None else int(s["front_signal_switch_command"])
@@ -103,7 +100,7 @@ class ExcavatorPlantProfile(PlantProfile):
                 )
 
     @staticmethod
-    def state(io: PlantCanIO, side: Side, frame: str) -> dict[str, float]:
+    def state(io: PlantBus, side: Side, frame: str) -> dict[str, float]:
         zx: Excavator = side.machine
         name = side.name
         q = dict(zip(zx.front.names, zx.front.q, strict=True))
@@ -122,8 +119,8 @@ class ExcavatorPlantProfile(PlantProfile):
             yaw = zx.base.yaw
             return {"upper_body_azimuth": -wrap_angle(yaw + q["swing_joint"]), "track_body_azimuth": -wrap_angle(yaw)}
         if frame.startswith("Swing_Center_Position"):
-            c = io.plant.model.body_pos(f"{name}_body_link")
-            s = io.plant.spec.sensors
+            c = io.body_pos(f"{name}_body_link")
+            s = io.sensors
             e, n, alt = io.gnss.map_to_plane(float(c[0]), float(c[1]), float(c[2]))
             axis = frame[-1]
             value = {"1": e + io.noise.gauss(s.gnss_sigma_h), "2": n + io.noise.gauss(s.gnss_sigma_h),
@@ -131,7 +128,7 @@ class ExcavatorPlantProfile(PlantProfile):
             return {f"swing_center_position_{'xyz'[int(axis) - 1]}": value}
         if frame.startswith("Front_Pin_Position"):
             joint = {"1": "boom", "2": "arm", "3": "bucket"}[frame[-1]]
-            p = _in_base(zx, io.plant.model.body_pos(f"{name}_{joint}_link"))
+            p = _in_base(zx, io.body_pos(f"{name}_{joint}_link"))
             return {f"{joint}_pin_position_{a}": p[i] for i, a in enumerate("xyz")}
         if frame == "Hydraulic_Flow_Rate_1":
             flows = dict(zip(zx.front.names, zx.front.flows(), strict=True))
