@@ -4,7 +4,7 @@ Pure functions returning ``(N, 3)`` point arrays; the plant node packs them into
 
 * :func:`mound_scan`: height samples of the ground around the mound, in ``map``, with Gaussian range
   noise, on a regular sub-grid of the height field (a stand-in for a site LiDAR scan);
-* :func:`vessel_scan`: samples of the load surface inside the IC120 vessel in frame ``ic120/vessel``
+* :func:`vessel_scan`: samples of the load surface inside a carrier's vessel in frame ``<carrier>/vessel``
   (origin at the vessel floor centre, x forward, y left, z up, vessel lowered; z = load height above
   the floor). The plant models the vessel load as a volume only, so the scan shows it as an even layer
   of that volume over the inner floor (documented limitation: no heap shape).

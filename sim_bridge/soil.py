@@ -1,7 +1,7 @@
-"""Soil: the ground as a height field, plus the soil held by the bucket and the vessel.
+"""Soil: the ground as a height field, plus the soil held by the bucket, the vessels and the blades.
 
 Volume bookkeeping is exact by construction: every transfer moves a volume computed from the cells
-it changes, so ``ground + bucket + vessel`` stays equal to the initial ground volume (up to float
+it changes, so ``ground + bucket + vessels + blades`` stays equal to the initial ground volume (up to float
 rounding). The ground volume is measured above a reference plane far below the surface.
 
 * Cutting: while the bucket edge moves faster than ``cut_min_speed`` below the surface, the cells
@@ -9,7 +9,7 @@ rounding). The ground volume is measured above a reference plane far below the s
   bucket takes that volume up to its free capacity (cells are cut proportionally less when full).
 * Spilling: with the bucket open (tip angle below ``release_tip_angle``) and its edge above ground,
   the load leaves at ``capacity / spill_time`` per second (scaled by how far open). Soil landing over
-  the IC120 vessel (lowered) becomes vessel load up to its capacity; the rest piles on the ground.
+  a carrier's vessel (lowered) becomes its load up to its capacity; the rest piles on the ground.
 * Dumping: above ``dump_start_angle`` the vessel empties at ``capacity / dump_time`` per second (scaled
   by the angle) onto a pile ``dump_distance`` behind the hinge, along the vessel as its upper body is swung.
 * Dozing: while a dozer moves faster than ``cut_min_speed`` with its blade edge below the surface, the cells
