@@ -48,6 +48,8 @@ from tms_db.errors import (
 )
 from tms_db.schema import check_document_size, validate_parameter
 from tms_db.store import Store, build_task_doc, check_import_document, parameter_key
+from tms_ts.limits import MAX_TREE_BYTES, check_tree_size, task_id_problem
+from tms_ts.loader import check_tree
 
 __all__ = ["main", "import_parameters", "check_parameters", "seed", "EXIT_CODES"]
 
@@ -157,7 +159,7 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
         if not xml_path.exists():
             raise StoreError(f"{seed_file}:{line}: task file {entry['file']}: No such file")
         # at most a tree's size (never read further: a careless path to /dev/zero), UTF-8, named by byte offset
-        xml = read_utf8(xml_path, f"{seed_file}:{line}: task file", limit=_max_tree_bytes(), limit_name="MAX_TREE_BYTES")
+        xml = read_utf8(xml_path, f"{seed_file}:{line}: task file", limit=MAX_TREE_BYTES, limit_name="MAX_TREE_BYTES")
         try:
             build_task_doc(xml, entry["task_id"], entry.get("description", ""), entry.get("model_name"),
                            entry.get("blackboard"))
@@ -176,24 +178,11 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     return len(tasks), n_params
 
 
-def _max_tree_bytes() -> int:
-    try:
-        from tms_ts.limits import MAX_TREE_BYTES
-    except ImportError:
-        from tms_db.schema import MAX_DOCUMENT_BYTES as MAX_TREE_BYTES
-    return MAX_TREE_BYTES
-
-
 def check_task_tree(doc: dict, source: str | None = None) -> None:
     """Load a task document's tree as the task manager does at start (``tms_ts.loader.check_tree``, as ``task add``:
     no ROS, no store), so a restore refuses and ``check`` reports a tree the manager would refuse. Lives
-    here, in the command line, so that tms_db itself never imports tms_ts (which uses tms_db). Without tms_ts
-    installed only the store's own XML check applies."""
-    try:
-        from tms_ts.limits import task_id_problem
-        from tms_ts.loader import check_tree
-    except ImportError:
-        return
+    here, in the command line, an application above the scheduler, so that the store itself never imports tms_ts
+    (which uses it)."""
     problem = task_id_problem(doc.get("task_id"))  # the id a start message can name (int32)
     if problem:
         raise ValidationError(problem)
@@ -273,9 +262,6 @@ def _checked_task_file(path: str, task_id: int | None) -> str:
     own loader without ROS (``tms_ts.loader.check_tree``: limits, node ids, ports, SubTrees, leaf names). Errors name
     the file and the line and column in it (the store keeps a one-line form; the user's text is checked here).
     """
-    from tms_ts.limits import check_tree_size, task_id_problem
-    from tms_ts.loader import check_tree
-
     if task_id is not None:
         problem = task_id_problem(task_id)
         if problem:

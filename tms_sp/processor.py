@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from tms_db.errors import RecordNotFound
+from tms_db import RecordNotFound
 from tms_model.geometry import Pose2D
 from tms_sp.arrival import ArrivalDetector
 from tms_sp.config import SensingConfig

@@ -26,8 +26,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from tms_db.errors import ValidationError
-from tms_db.schema import normalise_task_xml
+from tms_db import ValidationError, normalise_task_xml
 from tms_ts.errors import TaskSequenceError, TreeLoadError
 from tms_ts.limits import MAX_JSON_DEPTH, check_tree_size, json_depth_exceeds, task_id_problem
 

@@ -27,7 +27,7 @@ from rclpy.node import Node
 
 from tms_common.errors import TmsError
 from tms_common.node import run_node
-from tms_db.nodes.common import declare_and_open
+from tms_db import declare_and_open
 from tms_sp.ingest import SENSING_TOPICS, SensingTopic, SensingWriter
 
 __all__ = ["SensingIngest", "main"]

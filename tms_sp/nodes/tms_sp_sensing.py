@@ -46,7 +46,7 @@ from sensor_msgs.msg import PointCloud2
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
-from tms_db.nodes.common import declare_and_open
+from tms_db import declare_and_open
 from tms_model.geometry import Pose2D, yaw_from_quaternion
 from tms_sp.config import load_sensing_config
 from tms_sp.errors import SensingError
