@@ -148,6 +148,8 @@ class Vessel:
     inner_length: float
     inner_width: float
     capacity: float  # [m^3] heaped
+    floor_above_hinge: float  # [m] the inner floor above the hinge, vessel lowered
+    rim_above_hinge: float  # [m] the side rim above the hinge, vessel lowered
     dead_time: float
     time_constant: float
     angle_gain: float  # [1/s] machine-side P gain from target angle to vessel velocity
@@ -449,8 +451,12 @@ def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
     hv = hyd.sub("vessel")
     hv.only({"dead_time_s", "time_constant_s", "angle_gain", "load_max_angle", "dump_start_angle", "dump_time_s", "dump_distance"})
     v = top.sub("vessel")
-    v.only({"hinge_xyz", "max_angle", "velocity", "inner_length", "inner_width", "capacity"})
+    v.only({"hinge_xyz", "max_angle", "velocity", "inner_length", "inner_width", "capacity",
+            "floor_above_hinge", "rim_above_hinge"})
     max_angle = v.number("max_angle", lo=0.01, hi=math.pi / 2)
+    if not v.number("rim_above_hinge") > v.number("floor_above_hinge"):
+        raise v.key_error("rim_above_hinge", f"must be above floor_above_hinge {v.number('floor_above_hinge')}, "
+                          f"got {v.number('rim_above_hinge')}")
     vessel = Vessel(
         hinge_xyz=v.vector("hinge_xyz", 3),  # type: ignore[arg-type]
         max_angle=max_angle,
@@ -458,6 +464,8 @@ def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
         inner_length=v.number("inner_length", lo=0.1),
         inner_width=v.number("inner_width", lo=0.1),
         capacity=v.number("capacity", lo=0.01),
+        floor_above_hinge=v.number("floor_above_hinge", lo=-5.0, hi=5.0),
+        rim_above_hinge=v.number("rim_above_hinge", lo=-5.0, hi=10.0),
         dead_time=hv.number("dead_time_s", lo=0.0, hi=5.0),
         time_constant=hv.number("time_constant_s", lo=0.0, hi=10.0),
         angle_gain=hv.number("angle_gain", lo=0.0),

@@ -7,8 +7,7 @@
 Machines are known by their site names (config/site.yaml ``machines``): ``excavator`` digs and loads,
 ``carriers`` are the crawler carriers it loads. Their facts come from their kinds' descriptions
 (config/machines/<kind>.yaml): the bucket's capacity and width, the swing axis, each carrier's vessel
-(inner size, capacity, hinge). The vessel floor and rim heights above the hinge are no part of the descriptions
-yet, so sensing.yaml ``vessel.heights`` gives them per kind; a carrier of a kind without an entry is refused.
+(inner size, capacity, hinge, floor and rim above the hinge).
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ from tms_sp.heightgrid import GridSpec
 from tms_sp.mound import ExcavationParams
 from tms_sp.vessel import VesselGeometry, VesselParams
 
-__all__ = ["SensingConfig", "VesselHeights", "load_sensing_config", "carrier_vessel_geometry"]
+__all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry"]
 
 
 # ---- the schema of config/tms_sp/sensing.yaml (documented inline there) -----------------------------------------
@@ -61,23 +60,9 @@ class _Excavation:
 
 
 @dataclass(frozen=True)
-class VesselHeights:
-    """A vessel's floor and side rim above its hinge [m] (sensing.yaml ``vessel.heights.<kind>``)."""
-
-    floor_above_hinge: float
-    rim_above_hinge: float
-
-    def __post_init__(self) -> None:
-        if not self.rim_above_hinge > self.floor_above_hinge:
-            raise ValueError(f"rim_above_hinge {self.rim_above_hinge} must be above floor_above_hinge "
-                             f"{self.floor_above_hinge}")
-
-
-@dataclass(frozen=True)
 class _Vessel:
     release_record: str
     angle_record: str
-    heights: dict[str, VesselHeights]
     wall_margin: float
     clearance: float
     carry_theta_w_deg: float
@@ -135,7 +120,6 @@ class SensingConfig:
     excavation_update_threshold: float
     carriers: tuple[str, ...]
     vessels: Mapping[str, VesselGeometry]  # per carrier name: its kind's vessel
-    vessel_heights: Mapping[str, VesselHeights]  # per carrier kind
     vessel: VesselParams
     release_record: str
     angle_record: str
@@ -163,25 +147,21 @@ class SensingConfig:
 
     def vessel_geometry(self, name: str) -> VesselGeometry:
         """The vessel of the site's carrier ``name``: that of one of ``carriers``, else read from its kind's
-        description and ``vessel.heights``."""
+        description."""
         if name in self.vessels:
             return self.vessels[name]
         try:
-            return _vessel_geometry(name, self.site, self.vessel_heights, self.source)
+            return _vessel_geometry(name, self.site)
         except ConfigError as exc:
             raise ConfigError(f"carrier {name!r}: {exc}") from None
 
 
-def _vessel_geometry(name: str, site: Site, heights: Mapping[str, VesselHeights], source: str) -> VesselGeometry:
-    m = load_named(name, site=site).require(CRAWLER_DUMP)
-    assert m.vessel is not None
-    if m.kind not in heights:
-        raise ConfigError(f"{source + ': ' if source else ''}vessel.heights: no entry for kind {m.kind!r} of carrier {name!r} (its description "
-                          f"{m.source} gives no floor and rim heights; kinds given: {sorted(heights)})")
-    h = heights[m.kind]
-    return VesselGeometry(inner_length=m.vessel.inner_length, inner_width=m.vessel.inner_width,
-                          capacity=m.vessel.capacity, hinge_xyz=m.vessel.hinge_xyz,
-                          floor_above_hinge=h.floor_above_hinge, rim_above_hinge=h.rim_above_hinge)
+def _vessel_geometry(name: str, site: Site) -> VesselGeometry:
+    v = load_named(name, site=site).require(CRAWLER_DUMP).vessel
+    assert v is not None
+    return VesselGeometry(inner_length=v.inner_length, inner_width=v.inner_width, capacity=v.capacity,
+                          hinge_xyz=v.hinge_xyz, floor_above_hinge=v.floor_above_hinge,
+                          rim_above_hinge=v.rim_above_hinge)
 
 
 def load_sensing_config(
@@ -214,7 +194,7 @@ def load_sensing_config(
     vessels = {}
     for c in carriers:
         try:
-            vessels[c] = _vessel_geometry(c, the_site, s.vessel.heights, "")
+            vessels[c] = _vessel_geometry(c, the_site)
         except ConfigError as exc:
             raise fail(("carriers",), f"{c!r}: {exc}") from None
     assert zx.bucket is not None
@@ -295,7 +275,6 @@ def load_sensing_config(
         excavation_update_threshold=e.update_threshold,
         carriers=carriers,
         vessels=MappingProxyType(vessels),
-        vessel_heights=v.heights,
         vessel=vparams,
         release_record=v.release_record,
         angle_record=v.angle_record,

@@ -30,7 +30,7 @@ __all__ = ["VesselGeometry", "VesselParams", "VesselAssessment", "assess_vessel"
 
 @dataclass(frozen=True)
 class VesselGeometry:
-    """A carrier's vessel: its description's ``vessel`` + sensing.yaml ``vessel.heights`` of its kind."""
+    """A carrier's vessel, from its description's ``vessel`` (config/machines/<kind>.yaml)."""
 
     inner_length: float
     inner_width: float

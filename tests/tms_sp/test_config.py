@@ -36,10 +36,9 @@ def test_each_carrier_of_the_site_senses_its_own_kinds_vessel():
     assert cfg.carriers == tuple(carriers)
     for c in carriers:
         g, m = cfg.vessels[c], load_named(c)
-        heights = SENSING_YAML["vessel"]["heights"][m.kind]
-        assert (g.inner_length, g.inner_width, g.capacity, g.hinge_xyz) == (
-            m.vessel.inner_length, m.vessel.inner_width, m.vessel.capacity, m.vessel.hinge_xyz), c
-        assert (g.floor_above_hinge, g.rim_above_hinge) == (heights["floor_above_hinge"], heights["rim_above_hinge"]), c
+        assert (g.inner_length, g.inner_width, g.capacity, g.hinge_xyz, g.floor_above_hinge, g.rim_above_hinge) == (
+            m.vessel.inner_length, m.vessel.inner_width, m.vessel.capacity, m.vessel.hinge_xyz,
+            m.vessel.floor_above_hinge, m.vessel.rim_above_hinge), c
     ic, mst = cfg.vessels["ic120_1"], cfg.vessels["mst110cr_2"]
     # the MST's vessel is not the IC120's: size, hinge, floor and rim all its own
     assert ic.inner_width != mst.inner_width and ic.capacity != mst.capacity and ic.hinge_xyz != mst.hinge_xyz
