@@ -53,7 +53,7 @@ def _error(where: Where, path: tuple[Any, ...], problem: str) -> ConfigError:
     return ConfigError(f"{where.file}:{where.line_of(path)}: {_name(path)}: {problem}")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
@@ -109,7 +109,7 @@ def _convert(tp: Any, value: Any, where: Where, path: tuple[Any, ...], meta: dic
             if len(value) != len(args):
                 raise _error(where, path, f"expected a list of {len(args)} values, got {len(value)}: {value!r}")
             item_types = list(args)
-        return tuple(_convert(t, v, where, path + (i,), meta) for i, (t, v) in enumerate(zip(item_types, value)))
+        return tuple(_convert(t, v, where, path + (i,), meta) for i, (t, v) in enumerate(zip(item_types, value, strict=True)))
     if origin is dict:
         if not isinstance(value, dict):
             raise _error(where, path, f"expected a mapping, got {value!r}")
