@@ -54,7 +54,7 @@ class PlantCanIO:
         plant: the plant to drive.
         buses: machine name -> bus (any python-can bus; a machine of the plant may be omitted).
         watchdog_s: command-loss timeout in simulated seconds.
-        codecs: override the codecs (default: the DBC each machine's description names, ``PlantMachine.dbc``).
+        codecs: override the codecs (default: the DBC each machine's description names, ``Machine.dbc``).
     """
 
     def __init__(
@@ -70,7 +70,7 @@ class PlantCanIO:
         self.sides: dict[str, Side] = {}
         for m, bus in buses.items():
             machine = plant.spec.machines[m]
-            codec = (codecs or {}).get(m) or codec_for(machine.dbc, m)
+            codec = (codecs or {}).get(m) or codec_for(machine.description.dbc, m)
             self.sides[m] = Side(m, plant.machines[m], PLANT_PROFILES.get(machine.type), bus, codec, plant.time)
         self.gnss = Gnss(plant.spec.site)
         self.noise = Noise(plant.spec.sensors)

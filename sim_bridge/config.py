@@ -161,7 +161,7 @@ def load_plant(path: str | Path | None = None, *, site: str | Path | None = None
     poses.only(set(paths))
     machines = {
         name: PlantMachine(name=name, description=d, pose=_pose(poses, name, site_model, site_path),
-                           start_joints=MappingProxyType(start[name]), dbc=d.dbc)
+                           start_joints=MappingProxyType(start[name]))
         for name, d in descriptions.items()
     }
     return PlantSpec(

@@ -2,8 +2,8 @@
 
 Frozen data only, built by :func:`sim_bridge.config.load_plant`. A machine of the plant is its tms_model
 description (:class:`tms_model.machines.Machine`: geometry, hydraulics, soil handling, read once for every
-package) plus what the plant alone decides for that one machine: its name on the site, where it starts and the
-DBC of its bus. Nothing of the description is copied, so the plant and the rest of the stack read the same
+package; the DBC of its bus too) plus what the plant alone decides for that one machine: its name on the site and
+where it starts. Nothing of the description is copied, so the plant and the rest of the stack read the same
 figures.
 """
 
@@ -25,14 +25,13 @@ class PlantMachine:
 
     ``description`` is tms_model's, named ``name``; ``pose`` the initial base pose in map (x, y, yaw);
     ``start_joints`` the joint angles at start (the description's ``home_pose``, for the digging excavator with the
-    plant YAML's ``initial_front`` over it); ``dbc`` the DBC file of its COM3 bus (in ``com3_can/dbc``).
+    plant YAML's ``initial_front`` over it).
     """
 
     name: str
     description: Machine
     pose: tuple[float, float, float]
     start_joints: Mapping[str, float]
-    dbc: str
 
     @property
     def type(self) -> str:
@@ -107,7 +106,7 @@ class PlantSpec:
     @property
     def dbcs(self) -> dict[str, str]:
         """Machine name -> the DBC file of its bus."""
-        return {name: m.dbc for name, m in self.machines.items()}
+        return {name: m.description.dbc for name, m in self.machines.items()}
 
     # The paper's names of the digging excavator and the carrying carrier, for callers outside sim_bridge that
     # still use them; code of this package says excavator / carrier.

@@ -74,7 +74,7 @@ class PlantProfile:
     * ``machine_type``: registry name (a type constant of :mod:`tms_model.machines`);
     * ``motion_frames``: command frames that feed the command-loss watchdog.
 
-    The DBC of a machine's bus is its description's (``PlantMachine.dbc``), not the type's.
+    The DBC of a machine's bus is the one its description names (``Machine.dbc``), not the type's.
     """
 
     machine_type: ClassVar[str] = ""
