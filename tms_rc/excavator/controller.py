@@ -3,7 +3,8 @@
 Every control step turns the measured joint angles into joint-velocity commands by solving
 :class:`~tms_rc.excavator.hqp.HierarchicalQP` with these priorities, highest first:
 
-1. pump flow: ``sum_i flow_i |dq_i| <= pump_flow`` (16 linear rows, one per sign pattern);
+1. pump flow: ``sum_i flow_i |dq_i| <= pump_flow`` (16 linear rows, one per sign pattern; the pump flow and
+   each joint's flow from the machine's description);
 2. joint (cylinder) velocity limits, rate-limited by the acceleration limits;
 3. joint position limits (velocity bounds that shrink towards a limit, so no step crosses it);
 4. ground and self-collision avoidance of the bucket tip and pin (height and distance from the
@@ -22,7 +23,7 @@ state + what the lag still moves + commands still in flight), joints' delays are
 output, and each reference starts at the predicted state, so the machine follows it one predictor
 horizon (``preview_s``) later.
 
-Pure Python (numpy, pinocchio via tms_rp, OSQP); the node is :mod:`tms_rc.nodes.excavator_arm_controller`.
+Pure Python (numpy, pinocchio via tms_model.excavator.kinematics, OSQP); the node is :mod:`tms_rc.nodes.excavator_arm_controller`.
 """
 
 from __future__ import annotations
