@@ -52,7 +52,7 @@ nodes:
       parameters: {{machine: zx200, can_port: {zx_port}}}}}
   - {{name: com3_bridge, package: com3_can, executable: com3_bridge, namespace: /ic120,
       parameters: {{machine: ic120, can_port: {ic_port}}}}}
-  - {{name: zx200_arm_controller, package: tms_rc, executable: zx200_arm_controller, namespace: /zx200}}
+  - {{name: excavator_arm_controller, package: tms_rc, executable: excavator_arm_controller, namespace: /zx200}}
   - {{name: zx200_planner, package: tms_if_opera, executable: zx200_planner, namespace: /zx200}}
   - {{name: ic120_localization, package: tms_rp, executable: ic120_localization, namespace: /ic120}}
   - {{name: ic120_navigator, package: tms_rp, executable: ic120_navigator, namespace: /ic120,
@@ -60,7 +60,7 @@ nodes:
   - {{name: subtasks_zx200, package: tms_ts, executable: tms_ts_subtasks, parameters: {{machine: zx200}}}}
   - {{name: subtasks_ic120, package: tms_ts, executable: tms_ts_subtasks, parameters: {{machine: ic120}}}}
   - {{name: tms_ts_manager, package: tms_ts, executable: tms_ts_manager}}
-  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}}}}}
+  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}, machines: [zx200, ic120]}}}}
 """
     path = tmp_path / "panel_e2e.yaml"
     path.write_text(text)
@@ -130,7 +130,7 @@ def test_starting_an_unknown_task_shows_the_schedulers_error(procs, browser_page
 parameters: {{db_path: "{db}"}}
 nodes:
   - {{name: tms_ts_manager, package: tms_ts, executable: tms_ts_manager}}
-  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}}}}}
+  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}, machines: [zx200, ic120]}}}}
 """
     (tmp_path / "l.yaml").write_text(text)
     launcher = procs([VENV / "bin" / "tms-launch", str(tmp_path / "l.yaml")], name="tms-launch")
