@@ -1,7 +1,7 @@
 """A wall-clock tick that async execute callbacks await between their checks, on one executor thread.
 
 An action server whose goals wait on a downstream goal runs them as coroutines on a single-threaded executor
-(as ``zx200_arm_controller`` does) instead of parking one thread of a large pool per goal in a sleep loop.
+(as ``excavator_arm_controller`` does) instead of parking one thread of a large pool per goal in a sleep loop.
 A coroutine that must also watch things no future reports (a cancel request, a stop, a server vanishing from
 the graph, a deadline) awaits :meth:`Ticker.next` between its checks: the future completes at the next tick,
 or at once on :meth:`Ticker.wake` (a cancel callback calls it) or when a future given to

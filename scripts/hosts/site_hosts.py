@@ -207,7 +207,7 @@ class Site:
 #: (the key, where present, is what counts)
 UNCONTAINED_HOST = {
     "sim_plant": "plant",
-    "zx200_arm_controller": "zx200_pc", "zx200_planner": "zx200_pc",
+    "excavator_arm_controller": "zx200_pc", "zx200_planner": "zx200_pc",
     "ic120_localization": "ic120_pc", "ic120_navigator": "ic120_pc", "ic120_vessel": "ic120_pc",
     "tms_ts_subtasks": "site_server", "tms_sp_sensing": "site_server", "tms_ts_manager": "site_server",
     "tms_ur_experiment": "site_server", "tms_ur_panel": "site_server",

@@ -100,7 +100,7 @@ def test_paper_experiment_composes_into_the_real_systems_computers():
     composed = {p.name: [n.fqn for n in p.nodes] for p in processes(launch, "composed")}
     assert composed == {
         "plant": ["/sim_plant", "/zx200/com3_bridge", "/ic120/com3_bridge"],
-        "zx200_pc": ["/zx200/zx200_arm_controller", "/zx200/zx200_planner"],
+        "zx200_pc": ["/zx200/excavator_arm_controller", "/zx200/zx200_planner"],
         "ic120_pc": ["/ic120/ic120_localization", "/ic120/ic120_navigator", "/ic120/ic120_vessel"],
         "site_server": ["/subtasks_zx200", "/subtasks_ic120", "/tms_ts_manager", "/tms_ur_experiment"],
         "sensing_pc": ["/tms_sp_sensing", "/tms_sp_tf"],
@@ -138,7 +138,7 @@ def test_cli_list_shows_each_layouts_processes_and_rejects_unknown_containers(ca
     assert [line.split("\t")[0] for line in lines] == ["plant", "zx200_pc", "ic120_pc", "site_server", "sensing_pc"]
     assert main(["--list", "--layout", "per-node", "--containers", "zx200_pc", str(PAPER)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines == ["zx200_arm_controller\tnode\t/zx200/zx200_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner"]
+    assert lines == ["excavator_arm_controller\tnode\t/zx200/excavator_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner"]
     assert main(["--list", "--containers", "nowhere", str(PAPER)]) == 2
     assert "no container(s) ['nowhere']" in capsys.readouterr().err
 
@@ -152,11 +152,11 @@ def test_layout_from_the_environment(capsys, monkeypatch):
 def test_param_overrides_set_a_nodes_parameter_and_name_what_does_not_fit():
     launch = parse_launch_file(PAPER)
     out = with_parameters(launch, ["tms_sp_sensing:blackboard_records=[SAMPLE_BLACKBOARD_SHIMIZU]",
-                                   "tms_sp_sensing:approach_record=", "/zx200/zx200_arm_controller:rate_hz=25.0"])
+                                   "tms_sp_sensing:approach_record=", "/zx200/excavator_arm_controller:rate_hz=25.0"])
     by = {n.fqn: n for n in out.nodes}
     assert by["/tms_sp_sensing"].parameters["blackboard_records"] == ["SAMPLE_BLACKBOARD_SHIMIZU"]
     assert by["/tms_sp_sensing"].parameters["approach_record"] == ""
-    assert by["/zx200/zx200_arm_controller"].parameters["rate_hz"] == 25.0
+    assert by["/zx200/excavator_arm_controller"].parameters["rate_hz"] == 25.0
     assert "-p" in by["/tms_sp_sensing"].ros_args() and launch.nodes != out.nodes  # the input is not changed
     for bad, culprit in (("nobody:x=1", "no node 'nobody'"), ("tms_sp_sensing=1", "NODE:KEY=VALUE"),
                          ("tms_sp_sensing:x=[1,", "not YAML")):
