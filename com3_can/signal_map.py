@@ -22,7 +22,6 @@ __all__ = [
     "EXCAVATOR_FRONT",
     "EXCAVATOR_FRAMES",
     "TRACK_SIGNALS",
-    "EXCAVATOR_TRACKS",
     "CARRIER_FRAMES",
     "CARRIER_VESSEL",
     "CARRIER_SWING",
@@ -98,7 +97,6 @@ class TrackSignals:
 
 #: the travel signals of every machine on tracks (excavator, crawler carrier, dozer)
 TRACK_SIGNALS = TrackSignals()
-EXCAVATOR_TRACKS = TRACK_SIGNALS  # deprecated alias of TRACK_SIGNALS, kept until sim_bridge's profiles use the new name
 
 #: Frame roles of the excavator DBC (``dbc/excavator_com3.dbc``).
 EXCAVATOR_FRAMES: Mapping[str, str] = MappingProxyType({

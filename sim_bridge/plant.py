@@ -78,17 +78,6 @@ class Plant:
         self.tip_speed = 0.0
         self._edges: dict[str, tuple[float, float, float]] = {}
 
-    # The paper's names of the digging excavator and the carrying carrier, for callers outside sim_bridge that
-    # still use them; code of this package says excavator / carrier.
-    @property
-    def zx200(self) -> Excavator:
-        """The soil-digging excavator."""
-        return self.excavator
-
-    @property
-    def ic120(self) -> CrawlerCarrier:
-        """The soil-carrying crawler carrier."""
-        return self.carrier
 
     # -- state -------------------------------------------------------------------------------------
     def truth(self, machine: str) -> MachineTruth:

@@ -108,14 +108,3 @@ class PlantSpec:
         """Machine name -> the DBC file of its bus."""
         return {name: m.description.dbc for name, m in self.machines.items()}
 
-    # The paper's names of the digging excavator and the carrying carrier, for callers outside sim_bridge that
-    # still use them; code of this package says excavator / carrier.
-    @property
-    def zx200(self) -> Machine:
-        """The description of the soil-digging excavator."""
-        return self.description(self.excavator)
-
-    @property
-    def ic120(self) -> Machine:
-        """The description of the soil-carrying crawler carrier."""
-        return self.description(self.carrier)

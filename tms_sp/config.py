@@ -138,9 +138,6 @@ class SensingConfig:
         """The first carrier's vessel (the paper's single carrier)."""
         return self.vessels[self.carriers[0]]
 
-    #: the former name, still read by tests/paper and tests/bench
-    zx200_base = excavator_base
-
     def swing_axis_map(self) -> tuple[float, float]:
         p = self.excavator_base.to_map([self.swing_axis_in_base[0], self.swing_axis_in_base[1], 0.0])
         return float(p[0]), float(p[1])

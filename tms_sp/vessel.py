@@ -158,6 +158,3 @@ def release_in_excavator(
     }
     return pose, {"target_angle": float(swing)}
 
-
-#: the former name, still called by tests/paper and tests/bench
-release_in_zx200 = release_in_excavator

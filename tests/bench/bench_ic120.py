@@ -82,9 +82,8 @@ def bench_controller() -> None:
 
 
 def bench_ekf() -> None:
-    from tms_rp.tracked.ekf import Ic120Ekf
-
     from tests.tms_rp.synth import simulate
+    from tms_rp.tracked.ekf import Ic120Ekf
 
     samples = simulate(120.0)
     ekf = Ic120Ekf()
@@ -115,11 +114,10 @@ def bench_ekf() -> None:
 
 def _ekf_loop_route(seed: int):  # noqa: ANN202
     """One paper cycle with the EKF in the loop on the kinematic model; returns final errors and collisions."""
-    from tms_rp.tracked.config import load_nav_config
-    from tms_rp.tracked.ekf import Ic120Ekf
-
     from tests.tms_rp.harness import paper_legs, site_points
     from tests.tms_rp.kinematics import TrackedModel
+    from tms_rp.tracked.config import load_nav_config
+    from tms_rp.tracked.ekf import Ic120Ekf
 
     rng = np.random.default_rng(seed)
     cfg = load_nav_config(machine="ic120")
@@ -242,13 +240,13 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import NavSatFix
-    from tms_rp.tracked.config import load_nav_config
 
     from nav2_msgs.action import NavigateThroughPoses
-    from tests.tms_rp.harness import paper_legs, site_points
-    from tests.rosutil import ActionCall, Truth, pose_stamped, spin_for, spin_until, yaw_of
-    from tests.tracked_stack import start_ours, start_plant_and_bridge
     from tests.rosproc import Proc, isolated_domain, ros_env
+    from tests.rosutil import ActionCall, Truth, pose_stamped, spin_for, spin_until, yaw_of
+    from tests.tms_rp.harness import paper_legs, site_points
+    from tests.tracked_stack import start_ours, start_plant_and_bridge
+    from tms_rp.tracked.config import load_nav_config
 
     pts = site_points()
     costmap = load_nav_config(machine="ic120").build_costmap()

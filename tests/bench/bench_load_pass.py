@@ -21,8 +21,8 @@ soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in sep
 
 from __future__ import annotations
 
-import math
 import dataclasses
+import math
 import os
 import time
 import xml.etree.ElementTree as ET
@@ -43,7 +43,7 @@ from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp.config import load_sensing_config
 from tms_sp.heightgrid import HeightGrid
 from tms_sp.mound import assess_mound
-from tms_sp.vessel import assess_vessel, release_in_zx200
+from tms_sp.vessel import assess_vessel, release_in_excavator
 
 #: The paper launch's choices (config/launch/paper_experiment.yaml): 50 Hz controller.
 RATE_HZ = 50.0
@@ -89,7 +89,7 @@ class PassRig:
 
     @property
     def q(self) -> np.ndarray:
-        return np.array(self.plant.zx200.front.q, dtype=float)
+        return np.array(self.plant.excavator.front.q, dtype=float)
 
     def run(self, targets: list, limit_s: float = 300.0) -> tuple[int, str, float]:
         """Run one action's targets to the end; returns (result code, message, simulated seconds).
@@ -121,7 +121,7 @@ class PassRig:
         ``LOAD_PASS_TRANSPORT=k``: the measurement the controller gets is k periods old and its command
         reaches the plant k periods later, as joint_states and commands over ROS and CAN do in the stack.
         """
-        front = self.plant.zx200.front
+        front = self.plant.excavator.front
         self._measured.append((np.array(front.q, dtype=float), np.array(front.v, dtype=float)))
         q, v = self._measured[0]
         if not skip:
@@ -129,7 +129,7 @@ class PassRig:
             self._commands.append(u)
         if len(self._commands) > TRANSPORT:
             u = self._commands.popleft()
-            self.plant.zx200.set_front_velocity(dict(zip(front.names, u.tolist(), strict=True)))
+            self.plant.excavator.set_front_velocity(dict(zip(front.names, u.tolist(), strict=True)))
         for _ in range(self.sub_steps):
             self.plant.step()
 
@@ -157,7 +157,7 @@ class PassRig:
         grid = HeightGrid(spec, np.full((spec.ny, spec.nx), h), 1.0)
         v = assess_vessel(grid, geom, self.sensing.vessel)
         ic = self.plant.truth("ic120")
-        pose, angle = release_in_zx200(v.release_xyz, Pose2D(ic.x, ic.y, ic.yaw), self.base, geom,
+        pose, angle = release_in_excavator(v.release_xyz, Pose2D(ic.x, ic.y, ic.yaw), self.base, geom,
                                        self.sensing.swing_axis_in_base, self.sensing.vessel.carry_theta_w)
         return [pose["x"], pose["y"], pose["z"]], pose["theta_w"], angle["target_angle"]
 

@@ -21,17 +21,17 @@ SIM_SECONDS = 120.0
 
 
 def _drive(plant: Plant, io=None) -> float:  # noqa: ANN001
-    names = plant.zx200.front.names
-    plant.ic120.set_centre_velocity(1.0, 0.1)
+    names = plant.excavator.front.names
+    plant.carrier.set_centre_velocity(1.0, 0.1)
     steps = int(SIM_SECONDS / plant.dt)
     k = 0
     start = time.perf_counter()
     for _ in range(steps):
-        q = dict(zip(names, plant.zx200.front.q, strict=True))
+        q = dict(zip(names, plant.excavator.front.q, strict=True))
         target = DIG_CYCLE[k % len(DIG_CYCLE)]
         if pose_reached(q, target, tol=0.05):
             k += 1
-        plant.zx200.set_front_velocity(servo_velocity(q, target))
+        plant.excavator.set_front_velocity(servo_velocity(q, target))
         if io is not None:
             io.poll()
             io.watchdog()

@@ -210,8 +210,8 @@ def plant() -> None:  # noqa: PLR0915 - one campaign
     from rclpy.executors import SingleThreadedExecutor
 
     from com3_msgs.msg import JointCmd
-    from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
     from tests.arm_stack import ArmStack
+    from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
     from tests.tms_if_opera.test_plant_integration import joint_goal, pose_goal, pwa_goal
 
     kin = load_kinematics()

@@ -71,7 +71,7 @@ def test_pilot_cutoff_frame_stops_both_machines_within_its_solenoid_and_spool_ti
 
     plant, io, buses, peers = _plant_io()
     try:
-        zx, ic = plant.zx200, plant.ic120
+        zx, ic = plant.excavator, plant.carrier
         zx.set_front_velocity({"swing_joint": 0.5, "arm_joint": 0.3, "bucket_joint": 0.4, "boom_joint": 0.0})
         ic.set_centre_velocity(1.0, 0.0)
         _run(plant, io, 3.0)
@@ -87,7 +87,7 @@ def test_pilot_cutoff_frame_stops_both_machines_within_its_solenoid_and_spool_ti
             moving = max([abs(v) for v in zx.front.v] + [abs(zx.base.vl), abs(ic.base.vl), abs(ic.base.vr)])
             if moving < REST_JOINT and rest is None:
                 rest = plant.time - t0
-        c = plant.spec.zx200.pilot_cutoff
+        c = plant.spec.description(plant.spec.excavator).pilot_cutoff
         assert rest is not None and rest < 0.5, rest
         # no faster than the solenoid delay: the model does not stop instantly
         assert rest > c.solenoid_delay

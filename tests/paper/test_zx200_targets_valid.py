@@ -16,16 +16,17 @@ import yaml
 from tests.tms_sp.treeutil import ROOT, load_seed
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.geometry import Pose2D
-from tms_rc.zx200.controller import load_controller_config
+from tms_rc.excavator.controller import load_controller_config
 from tms_rp.zx200.planner import Zx200Planner, load_planner_config
 from tms_sp import synthetic as syn
 from tms_sp.config import load_sensing_config
 from tms_sp.heightgrid import rasterize
 from tms_sp.mound import assess_mound
-from tms_sp.vessel import assess_vessel, release_in_zx200
+from tms_sp.vessel import assess_vessel, release_in_excavator
 
 KIN = load_kinematics()
-PLANNER = Zx200Planner(KIN, load_planner_config(), ground_min_z=load_controller_config().ground_min_z)
+PLANNER = Zx200Planner(KIN, load_planner_config(KIN.machine.kind),
+                       ground_min_z=load_controller_config(KIN.machine).ground_min_z)
 CFG = load_sensing_config()
 SPILL_ANGLE = 1.2  # config/machines/zx200.yaml hydraulics.bucket.release_tip_angle: spills below this
 
@@ -80,7 +81,7 @@ def test_every_sensed_release_target_passes_planner_validation():
             va = assess_vessel(_vessel_grid(volume, cx, rng), CFG.vessel_geom, CFG.vessel)
             for dx, dy, dyaw in ((0, 0, 0), (tol, 0, 0), (-tol, 0, 0), (0, tol, yaw_tol), (0, -tol, -yaw_tol)):
                 ic = Pose2D(x=p1.x + dx, y=p1.y + dy, yaw=p1.yaw + dyaw)
-                pose, angle = release_in_zx200(va.release_xyz, ic, CFG.zx200_base, CFG.vessel_geom,
+                pose, angle = release_in_excavator(va.release_xyz, ic, CFG.excavator_base, CFG.vessel_geom,
                                                CFG.swing_axis_in_base, CFG.vessel.carry_theta_w)
                 _validate(CFG.release_record, pose)
                 _validate(CFG.angle_record, angle)
@@ -101,9 +102,9 @@ def test_every_sensed_excavation_target_passes_planner_validation():
         a = assess_mound(grid, CFG.swing_axis_map(), CFG.excavation)
         if a.target is None:
             break
-        fields = a.target.record_fields(CFG.zx200_base)
+        fields = a.target.record_fields(CFG.excavator_base)
         _validate(CFG.excavation_record, fields)
-        approach = {**a.target.approach_record_fields(CFG.zx200_base, CFG.approach_height),
+        approach = {**a.target.approach_record_fields(CFG.excavator_base, CFG.approach_height),
                     "theta_w_tolerance": _seed_zx200()[CFG.approach_record]["theta_w_tolerance"]}
         _validate(CFG.approach_record, approach)
         # The tree's return_over_mound (a pass-through change_pose from over the vessel) ends at the

@@ -13,8 +13,8 @@ from typing import Any
 
 import pytest
 
-from tests.rosproc import executable
 from tests.arm_stack import _zx_bus
+from tests.rosproc import executable
 
 pytestmark = [pytest.mark.integration]
 

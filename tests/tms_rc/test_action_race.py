@@ -18,8 +18,8 @@ import time
 import pytest
 
 from tests.action_handle import ClientHandleProxy
-from tests.rosproc import executable
 from tests.arm_stack import joint_states_held_at
+from tests.rosproc import executable
 
 pytestmark = pytest.mark.integration
 

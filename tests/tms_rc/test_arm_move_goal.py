@@ -11,8 +11,8 @@ import time
 
 import pytest
 
-from tests.rosproc import executable
 from tests.arm_stack import joint_states_held_at
+from tests.rosproc import executable
 from tms_model.excavator import codes
 
 pytestmark = pytest.mark.integration

@@ -18,7 +18,12 @@ from tms_model.excavator import codes
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import JointTarget
 from tms_model.machines import EXCAVATOR, load_machine
-from tms_rc.excavator.controller import ArmController, load_controller_config, load_controller_settings, settings_path
+from tms_rc.excavator.controller import (
+    ArmController,
+    load_controller_config,
+    load_controller_settings,
+    settings_path,
+)
 from tms_rc.excavator.plant import LagDeadTimePlant
 
 

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import math
 
-from tms_rp.tracked.navigator import NavigatorCore
-
 from tests.tms_rp.kinematics import TrackedModel
 from tms_model.site import load_site
+from tms_rp.tracked.navigator import NavigatorCore
 
 
 def site_points() -> dict:

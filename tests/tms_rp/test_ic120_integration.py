@@ -118,11 +118,10 @@ def test_localization_over_can_rms_outage_and_jump(procs, domain, ros_node, tmp_
 
 def test_navigation_and_vessel_over_can(procs, domain, ros_node):
     """Clients on the peers' types only: Nav2's NavigateThroughPoses, OPERA com3_msgs' SetDumpAngle."""
-    from tms_rp.tracked.config import load_nav_config
-
     from com3_msgs.action import SetDumpAngle
     from nav2_msgs.action import NavigateThroughPoses
     from tests.tms_rp.harness import site_points
+    from tms_rp.tracked.config import load_nav_config
 
     start_plant_and_bridge(procs, domain)
     ours = start_ours(procs)
@@ -182,9 +181,9 @@ def test_bad_goals_blocked_path_and_cancel_over_can(procs, domain, ros_node):
     planner's ComputePathToPose codes), a good goal drives the IC120 there, a cancel ends with it at rest."""
     from nav_msgs.msg import OccupancyGrid
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from tms_rp.tracked.config import load_nav_config
 
     from nav2_msgs.action import NavigateToPose
+    from tms_rp.tracked.config import load_nav_config
 
     start_plant_and_bridge(procs, domain)
     ours = start_ours(procs, nodes=("ic120_localization", "ic120_navigator"))

@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from tms_rp.tracked.ekf import EkfParams, Ic120Ekf
 
 from tests.tms_rp.synth import simulate
 from tms_model.geometry import wrap_angle
+from tms_rp.tracked.ekf import EkfParams, Ic120Ekf
 
 
 def _run(samples, *, outage=None, jump=None):

@@ -8,16 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.tms_rp.harness import drive, paper_legs, pose_error, site_points
+from tests.tms_rp.kinematics import TrackedModel
+from tms_common.errors import ConfigError
 from tms_rp.tracked.config import load_nav_config
 from tms_rp.tracked.controller import ControllerParams, Limits, TrackedPurePursuit
 from tms_rp.tracked.costmap import INSCRIBED, LETHAL, Costmap, Footprint, OccupancyMap, load_map, save_map
 from tms_rp.tracked.errors import GoalOccupiedError, InvalidGoalError, NoValidPathError
 from tms_rp.tracked.navigator import GoalChecker, leg_direction, validate_pose
 from tms_rp.tracked.planner import GridPlanner, PlannerParams
-
-from tests.tms_rp.harness import drive, paper_legs, pose_error, site_points
-from tests.tms_rp.kinematics import TrackedModel
-from tms_common.errors import ConfigError
 
 CFG = load_nav_config(machine="ic120")
 

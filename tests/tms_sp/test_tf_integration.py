@@ -20,9 +20,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from tests.tracked_stack import can_groups
 from tests.rosproc import executable
 from tests.tflisten import TfListener
+from tests.tracked_stack import can_groups
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.geometry import yaw_from_quaternion
 from tms_model.transform import Transform

@@ -76,9 +76,9 @@ from tms_if_opera.interface import (
 from tms_model.excavator import codes
 from tms_model.excavator.codes import PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_model.excavator.targets import JointTarget
 from tms_model.fleet import load_named, machine_name
 from tms_model.machines import EXCAVATOR
-from tms_model.excavator.targets import JointTarget
 from tms_msg.action import Zx200ArmMove
 from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
