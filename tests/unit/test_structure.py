@@ -216,3 +216,18 @@ def test_packages_import_only_lower_levels() -> None:
 def test_the_cycle_finder_finds_a_cycle() -> None:
     graph = {"p.a": {"p.b"}, "p.b": {"p.c"}, "p.c": {"p.a"}, "p.d": {"p.a"}, "q.x": {"p.a"}}
     assert _cycles(graph) == [["p.a", "p.b", "p.c"]]
+
+
+def test_the_store_is_used_through_its_public_api_only() -> None:
+    """docs/architecture.md: packages above tms_db import only the names ``tms_db/__init__.py`` exports."""
+    found = []
+    for package in LEVELS:
+        if package == "tms_db":
+            continue
+        for path in _modules(package):
+            rel = path.relative_to(ROOT).as_posix()
+            for node, name, _ in _project_imports(ast.parse(path.read_text(), rel)):
+                if name.startswith("tms_db.") and not isinstance(node, ast.ImportFrom) or (
+                        isinstance(node, ast.ImportFrom) and node.module != "tms_db" and name.startswith("tms_db.")):
+                    found.append(f"{rel}:{node.lineno}: {name}")
+    assert not found, "imports of tms_db's modules (use `from tms_db import ...`):\n" + "\n".join(found)

@@ -59,8 +59,7 @@ from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import StartupParams
 from tms_common.ticker import Ticker
-from tms_db import open_store
-from tms_db.errors import RecordNotFound, StoreError
+from tms_db import RecordNotFound, StoreError, open_store
 from tms_if_opera.interface import (
     CHANGE_POSE,
     CHANGE_POSE_OPTIONS,
