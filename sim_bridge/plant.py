@@ -139,7 +139,7 @@ class Plant:
         self.steps += 1
         self.time = self.steps * self.dt
 
-    def _soil(self, prev, tip) -> None:  # noqa: ANN001 - numpy vectors
+    def _soil(self, prev, tip) -> None:  # numpy vectors
         zx = self.excavator.bucket
         soil = self.soil
         ground = self.ground

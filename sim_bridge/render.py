@@ -12,24 +12,24 @@ import os
 # MuJoCo picks its GL backend when it is first imported: offscreen unless the caller chose one
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from pathlib import Path  # noqa: E402
+from pathlib import Path
 
-import mujoco  # noqa: E402
+import mujoco
 
-from sim_bridge.errors import SimError  # noqa: E402
-from sim_bridge.plant import Plant  # noqa: E402
+from sim_bridge.errors import SimError
+from sim_bridge.plant import Plant
 
 __all__ = ["render_png", "render_rgb"]
 
 
 def render_rgb(plant: Plant, *, width: int = 960, height: int = 540, lookat=(8.0, 2.0, 0.0), distance: float = 38.0,
-               azimuth: float = -60.0, elevation: float = -35.0):  # noqa: ANN001, ANN201 - numpy image
+               azimuth: float = -60.0, elevation: float = -35.0):  # numpy image
     """An RGB image (H x W x 3, uint8) of the site with the current terrain, machines and soil."""
     site = plant.model
     site.set_terrain(plant.ground.h, plant.spec.soil.ground_z)
     try:
         renderer = mujoco.Renderer(site.model, height, width)
-    except Exception as exc:  # noqa: BLE001 - MuJoCo raises several GL error types
+    except Exception as exc:  # MuJoCo raises several GL error types
         raise SimError(f"offscreen rendering not available (MUJOCO_GL={os.environ['MUJOCO_GL']}): {exc}") from exc
     try:
         cam = mujoco.MjvCamera()
@@ -41,7 +41,7 @@ def render_rgb(plant: Plant, *, width: int = 960, height: int = 540, lookat=(8.0
         renderer.close()
 
 
-def render_png(plant: Plant, path: str | Path, **view) -> Path:  # noqa: ANN003 - forwarded to render_rgb
+def render_png(plant: Plant, path: str | Path, **view) -> Path:  # forwarded to render_rgb
     """Render the site and write a PNG; returns the path."""
     import matplotlib.image  # third-party, slow to import: only when a snapshot is written
 

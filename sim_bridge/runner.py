@@ -88,11 +88,11 @@ class TruthLog:
             try:
                 rec = json.loads(line)
                 float(rec[TIME])
-                rec[SOIL]  # noqa: B018 - presence check
+                rec[SOIL]  # presence check
                 if not _machines(rec):
                     raise KeyError("no machine")
                 for m in _machines(rec):
-                    rec[m]["x"], rec[m]["y"], rec[m]["yaw"], rec[m]["joints"]  # noqa: B018 - presence check
+                    rec[m]["x"], rec[m]["y"], rec[m]["yaw"], rec[m]["joints"]  # presence check
             except (ValueError, KeyError, TypeError) as exc:
                 raise ReplayError(f"{self.path}:{number}: not a truth record ({type(exc).__name__}: {exc})") from None
             self.records.append(rec)

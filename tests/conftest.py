@@ -37,7 +37,7 @@ def procs(domain: int) -> Iterator[callable]:
 
 
 @pytest.fixture
-def ros_node(domain: int):  # noqa: ANN201
+def ros_node(domain: int):
     """An rclpy node in this test process, in its own Context on the test's domain."""
     import rclpy
     from rclpy.context import Context

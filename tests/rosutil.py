@@ -6,7 +6,7 @@ import math
 import time
 
 
-def spin_until(node, pred, timeout: float, step: float = 0.05) -> bool:  # noqa: ANN001
+def spin_until(node, pred, timeout: float, step: float = 0.05) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         node.executor_for_test.spin_once(timeout_sec=step)
@@ -15,11 +15,11 @@ def spin_until(node, pred, timeout: float, step: float = 0.05) -> bool:  # noqa:
     return False
 
 
-def spin_for(node, seconds: float) -> None:  # noqa: ANN001
+def spin_for(node, seconds: float) -> None:
     spin_until(node, lambda: False, seconds)
 
 
-def pose_stamped(x: float, y: float, yaw: float, frame: str = "map"):  # noqa: ANN201
+def pose_stamped(x: float, y: float, yaw: float, frame: str = "map"):
     from geometry_msgs.msg import PoseStamped
 
     p = PoseStamped()
@@ -29,14 +29,14 @@ def pose_stamped(x: float, y: float, yaw: float, frame: str = "map"):  # noqa: A
     return p
 
 
-def yaw_of(q) -> float:  # noqa: ANN001
+def yaw_of(q) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 class ActionCall:
     """send a goal, collect feedback, wait for the result (all by spinning the test node)."""
 
-    def __init__(self, node, action_type, name: str, goal, *, server_timeout: float = 30.0) -> None:  # noqa: ANN001
+    def __init__(self, node, action_type, name: str, goal, *, server_timeout: float = 30.0) -> None:
         from rclpy.action import ActionClient
 
         self.node = node
@@ -49,7 +49,7 @@ class ActionCall:
         assert self.handle.accepted
         self._result = self.handle.get_result_async()
 
-    def wait(self, timeout: float):  # noqa: ANN201
+    def wait(self, timeout: float):
         assert spin_until(self.node, self._result.done, timeout), "no result in time"
         r = self._result.result()
         return r.status, r.result
@@ -62,7 +62,7 @@ class ActionCall:
 class Truth:
     """Records /sim/truth/ic120/pose (receive time, x, y, yaw) and the vessel truth angle."""
 
-    def __init__(self, node) -> None:  # noqa: ANN001
+    def __init__(self, node) -> None:
         from geometry_msgs.msg import PoseStamped
         from sensor_msgs.msg import JointState
 
@@ -73,7 +73,7 @@ class Truth:
         node.create_subscription(PoseStamped, "/sim/truth/ic120/pose", self._on_pose, 50)
         node.create_subscription(JointState, "/sim/truth/ic120/joint_states", self._on_joints, 50)
 
-    def _on_pose(self, m) -> None:  # noqa: ANN001
+    def _on_pose(self, m) -> None:
         self.poses.append((time.monotonic(), m.pose.position.x, m.pose.position.y, yaw_of(m.pose.orientation)))
         st = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
         self.stamped.append((st, m.pose.position.x, m.pose.position.y, yaw_of(m.pose.orientation)))
@@ -91,7 +91,7 @@ class Truth:
             out.append((sim[i] + float(delay[near].min()), p[1], p[2], p[3]))
         return out
 
-    def _on_joints(self, m) -> None:  # noqa: ANN001
+    def _on_joints(self, m) -> None:
         self.joints = dict(zip(m.name, m.position, strict=False))
 
     @property

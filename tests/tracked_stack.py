@@ -19,7 +19,7 @@ def can_groups(domain: int) -> dict[str, dict]:
     }
 
 
-def start_plant_and_bridge(procs, domain: int, *, speed: float = 1.0, extra_plant: list[str] = (),  # noqa: ANN001, ANN201
+def start_plant_and_bridge(procs, domain: int, *, speed: float = 1.0, extra_plant: list[str] = (),
                            bridge_sim_time: bool = False):
     """The plant and the IC120 bridge (wall clock by default, as on a machine; ``bridge_sim_time`` -> /clock)."""
     buses = can_groups(domain)
@@ -37,7 +37,7 @@ def start_plant_and_bridge(procs, domain: int, *, speed: float = 1.0, extra_plan
     return plant, bridge
 
 
-def start_ours(procs, *, nodes=("ic120_localization", "ic120_navigator", "ic120_vessel"), params=()):  # noqa: ANN001, ANN201
+def start_ours(procs, *, nodes=("ic120_localization", "ic120_navigator", "ic120_vessel"), params=()):
     pkgs = {"ic120_localization": "tms_rp", "ic120_navigator": "tms_rp", "ic120_vessel": "tms_rc"}
     out = {}
     for n in nodes:

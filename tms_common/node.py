@@ -44,7 +44,7 @@ EXECUTORS = ("single", "multi", "events")
 ACTION_RESULT_TIMEOUT_S = 5.0
 
 
-def realtime_thread(priority: int, who: str, logger) -> bool:  # noqa: ANN001
+def realtime_thread(priority: int, who: str, logger) -> bool:
     """Put the calling thread under SCHED_FIFO at ``priority`` (1-99; 0 = leave it as it is; else ConfigError).
 
     For a thread whose wake-up latency matters more than its share (the plant loop, the manager's tick): on a
@@ -64,7 +64,7 @@ def realtime_thread(priority: int, who: str, logger) -> bool:  # noqa: ANN001
     return True
 
 
-def make_executor(kind: str | None = None, *, threads: int = 8, context=None):  # noqa: ANN001, ANN201
+def make_executor(kind: str | None = None, *, threads: int = 8, context=None):
     """Build an executor by name: ``single``, ``multi`` or ``events``; ``None``: ``$TMS_EXECUTOR``, else ``single``.
 
     ``multi`` gets ``threads`` threads (not rclpy's default of one per CPU: with 2 CPUs, two action goals
@@ -87,7 +87,7 @@ def make_executor(kind: str | None = None, *, threads: int = 8, context=None):  
     raise ValueError(f"unknown executor {kind!r}{source}: expected one of {', '.join(EXECUTORS)}")
 
 
-def uses_wait_set(executor) -> bool:  # noqa: ANN001
+def uses_wait_set(executor) -> bool:
     """True for rclpy's wait-set executors (single, multi): they honour callback groups, so
     :func:`tms_common.rclpy_compat.park` keeps an entity out of them (QoS event polling, the ``/clock``
     relay) and guard conditions work; False for ``events``."""
@@ -190,7 +190,7 @@ class _StopRequested(Exception):  # noqa: N818 - a request, not an error
 
 
 @contextlib.contextmanager
-def _stop_on_signals(node, spinner):  # noqa: ANN001, ANN202
+def _stop_on_signals(node, spinner):
     """SIGINT/SIGTERM end ``node``'s spin on ``spinner`` between two callbacks, with its context still valid.
 
     A Python signal handler runs only when the main thread is back in Python, not while it waits in
@@ -229,7 +229,7 @@ def _stop_on_signals(node, spinner):  # noqa: ANN001, ANN202
 
 
 @contextlib.contextmanager
-def signals_to(trigger: Callable[[], None], thread_name: str):  # noqa: ANN201
+def signals_to(trigger: Callable[[], None], thread_name: str):
     """SIGINT/SIGTERM call ``trigger`` from a relay thread, through a wake-up fd: a Python signal handler
     does not run while the main thread waits in ``rcl_wait``. Handlers are restored on exit."""
     import signal
@@ -242,7 +242,7 @@ def signals_to(trigger: Callable[[], None], thread_name: str):  # noqa: ANN201
         try:
             while os.read(read_fd, 16):
                 trigger()
-        except Exception:  # noqa: BLE001, S110 - the guard is gone (node destroyed): nothing left to stop
+        except Exception:  # noqa: BLE001 - the guard is gone (node destroyed): nothing left to stop
             pass
         finally:
             os.close(read_fd)
@@ -259,7 +259,7 @@ def signals_to(trigger: Callable[[], None], thread_name: str):  # noqa: ANN201
         os.close(write_fd)  # the relay's read returns b"" and it ends
 
 
-def _wait_for_callback_threads(spinner, timeout_s: float, *, run_queued: bool) -> None:  # noqa: ANN001
+def _wait_for_callback_threads(spinner, timeout_s: float, *, run_queued: bool) -> None:
     """Let callbacks still running in a MultiThreadedExecutor's threads end before the node is destroyed.
 
     ``run_queued``: handlers queued but not started run too (the context is valid: stopped in context);

@@ -81,10 +81,10 @@ def use_internals(feature: str) -> bool:
 class _Parked(CallbackGroup):
     """A callback group no executor ever finds ready (see :func:`park`)."""
 
-    def can_execute(self, entity: Any) -> bool:  # noqa: ARG002
+    def can_execute(self, entity: Any) -> bool:
         return False
 
-    def beginning_execution(self, entity: Any) -> bool:  # noqa: ARG002
+    def beginning_execution(self, entity: Any) -> bool:
         return False
 
     def ending_execution(self, entity: Any) -> None:
@@ -413,4 +413,4 @@ def _point_node_at(node: Any, executor: Any) -> None:
     import weakref
 
     if use_internals("guarding EventsExecutor tasks against the SIGSEGV of a raising task"):
-        node._Node__executor_weakref = weakref.ref(executor)  # noqa: SLF001
+        node._Node__executor_weakref = weakref.ref(executor)

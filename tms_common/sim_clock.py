@@ -137,6 +137,6 @@ def share_time_source(leader: Node, follower: Node) -> bool:
         return False
     if not rclpy_compat.use_internals("one /clock subscription per container"):
         return False
-    follower._time_source.detach_node()  # noqa: SLF001 - rclpy gives no accessor; destroys its subscription
-    leader._time_source.attach_clock(follower.get_clock())  # noqa: SLF001
+    follower._time_source.detach_node()  # rclpy gives no accessor; destroys its subscription
+    leader._time_source.attach_clock(follower.get_clock())
     return True

@@ -23,7 +23,7 @@ __all__ = ["Ticker"]
 class Ticker:
     """Futures completed every ``period_s`` [s wall] while any is awaited."""
 
-    def __init__(self, node: Node, period_s: float, callback_group=None) -> None:  # noqa: ANN001
+    def __init__(self, node: Node, period_s: float, callback_group=None) -> None:
         if not period_s > 0:
             raise ValueError(f"Ticker: period_s must be > 0, got {period_s}")
         self._waiters: list[Future] = []

@@ -132,7 +132,7 @@ class _CallSoon:
         self._executor.call_soon(self._callback)
 
 
-def _signals_to(guard_holder: list[Any]):  # noqa: ANN202
+def _signals_to(guard_holder: list[Any]):
     """SIGINT/SIGTERM trigger the stop guard condition once it exists. No callback is cut in half."""
     def trigger() -> None:
         if guard_holder:

@@ -68,7 +68,7 @@ def _die_with_parent() -> None:
     os.setpgrp()
 
 
-def _child_setup(nice: int | None):  # noqa: ANN202 - a preexec_fn
+def _child_setup(nice: int | None):  # a preexec_fn
     """Child-side setup before exec: :func:`_die_with_parent`, then the node's ``nice`` (set before exec, so
     every thread the node starts inherits it; renicing a running process changes its main thread only)."""
 
@@ -119,7 +119,7 @@ def cpu_table(rows: list[tuple[str, float]], wall_s: float) -> list[str]:
 class Launcher:
     """Starts, watches and stops the processes of one launch file."""
 
-    def __init__(self, launch: LaunchFile, *, out=None, layout: str = "composed",  # noqa: ANN001
+    def __init__(self, launch: LaunchFile, *, out=None, layout: str = "composed",
                  containers: list[str] | None = None) -> None:
         self.launch = launch
         self.processes = processes(launch, layout, containers)
@@ -145,7 +145,7 @@ class Launcher:
                 print(f"[{run.spec.name}] {line}", file=self.out, flush=True)
 
     # -- graph ----------------------------------------------------------------------------------
-    def _graph(self):  # noqa: ANN202
+    def _graph(self):
         if self._graph_node is None:
             import rclpy
             from rclpy.signals import SignalHandlerOptions
@@ -176,7 +176,7 @@ class Launcher:
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
             env=env,
-            preexec_fn=_child_setup(spec.nice),  # noqa: PLW1509 - needed for PDEATHSIG, a process group, nice
+            preexec_fn=_child_setup(spec.nice),  # needed for PDEATHSIG, a process group, nice
         )
         run = Running(spec=spec, proc=proc, reader=threading.Thread(target=lambda: None))
         run.reader = threading.Thread(target=self._pump, args=(run,), daemon=True, name=f"pump-{spec.name}")

@@ -173,7 +173,7 @@ def _parse(path: Path) -> Site:
     crs = top.string("crs")
     try:
         CRS.from_user_input(crs)
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - pyproj raises its own CRSError and others for a bad text
         raise top.key_error("crs", f"not a CRS pyproj knows: {exc}") from None
     o = top.sub("map_origin_plane")
     o.only({"easting", "northing", "altitude"})

@@ -125,7 +125,7 @@ class MoundAssessment:
 
 
 def _level_cuts(
-    z: np.ndarray, spec, rows: np.ndarray, cols: np.ndarray, dist: np.ndarray,  # noqa: ANN001 - GridSpec
+    z: np.ndarray, spec, rows: np.ndarray, cols: np.ndarray, dist: np.ndarray,  # GridSpec
     swing_axis_xy: tuple[float, float], params: ExcavationParams,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(depth, cut volume) per candidate cell: a level drag towards the machine at ``surface - depth``.

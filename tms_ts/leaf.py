@@ -103,7 +103,7 @@ class PendingStop:
     outcome: str = ""
 
 
-def poll_stops(ctx) -> bool:  # noqa: ANN001 - TreeContext (avoid import cycle in annotations)
+def poll_stops(ctx) -> bool:  # TreeContext (avoid import cycle in annotations)
     """Resolve confirmed stops, escalate overdue ones; True when none is left pending."""
     now = ctx.clock()
     for stop in ctx.stops:
@@ -153,7 +153,7 @@ class LeafNode(StatefulNode):
         spec = SUBTASKS.get(subtask_name)
         return spec is None or spec.reads_record
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.model_name = self.get_input("model_name").strip("/")
         self.subtask_name = self.get_input("subtask_name").strip("/")
@@ -167,7 +167,7 @@ class LeafNode(StatefulNode):
         self.planning_seen = False
         self.ctx.leaves.append(self)
 
-    def _ros(self):  # noqa: ANN202
+    def _ros(self):
         if self.ctx.ros is None:
             raise TreeRuntimeError(f"{self.describe()}: no ROS side to reach {self.action}")
         return self.ctx.ros

@@ -38,7 +38,7 @@ _STATE = {SUCCEEDED: TaskState.SUCCESS, FAILED: TaskState.FAILURE, CANCELED: Tas
 _LETTERS = {IDLE: "I", RUNNING: "R", Status.SUCCESS: "S", Status.FAILURE: "F"}
 
 
-def snapshot_text(root, max_nodes: int, total: int | None = None) -> str:  # noqa: ANN001 - a tms_ts.bt.core.BtNode
+def snapshot_text(root, max_nodes: int, total: int | None = None) -> str:  # a tms_ts.bt.core.BtNode
     """One line per node, depth first (indentation, id, name, ``[I/R/S/F]``), at most ``max_nodes`` lines.
 
     Iterative: a tree of any depth. ``total`` (the tree's node count, when known) names how many were left out.
@@ -124,7 +124,7 @@ class StatusBook:
             del self.ended[task_id]
 
     def build(self, runs: Mapping[int, TaskRun], loading: Iterable[tuple[int, str]] = (), *,
-              stamp=None) -> TaskStatus:  # noqa: ANN001 - builtin_interfaces/Time
+              stamp=None) -> TaskStatus:  # builtin_interfaces/Time
         """The status message now; marks what it sends as sent."""
         self._prune()
         msg = TaskStatus()

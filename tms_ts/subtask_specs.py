@@ -300,32 +300,32 @@ def _poses_goal(action_type: Any) -> Callable[[PosesPlan], Any]:
 
 
 # planning results -> (ok, detail for people) ---------------------------------------------------------
-def zx200_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a TmsRpZx200* action result
+def zx200_ok(result) -> tuple[bool, str]:  # a TmsRpZx200* action result
     """tms_msg_rp/TmsRpErrorCodes: SUCCESS or a failure code (the text comes from the planning outcome topic)."""
     return result.error_code.val == TmsRpErrorCodes.SUCCESS, f"error_code {result.error_code.val}"
 
 
-def nav2_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - a Nav2-shaped action result
+def nav2_ok(result) -> tuple[bool, str]:  # a Nav2-shaped action result
     """Nav2 ``error_code``: NONE (0) or a failure code."""
     return result.error_code == 0, f"error_code {result.error_code}: {result.error_msg}"
 
 
-def dump_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs SetDumpAngle.Result
+def dump_ok(result) -> tuple[bool, str]:  # com3_msgs SetDumpAngle.Result
     """com3_msgs SetDumpAngle: the ``success`` flag (the peer's result carries no reason; the server logs it)."""
     return bool(result.success), "" if result.success else "success false (the set_dump_angle server's log says why)"
 
 
-def swing_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs SetSwingAngle.Result
+def swing_ok(result) -> tuple[bool, str]:  # com3_msgs SetSwingAngle.Result
     """com3_msgs SetSwingAngle: the ``success`` flag (the server logs the reason)."""
     return bool(result.success), "" if result.success else "success false (the set_swing_angle server's log says why)"
 
 
-def dump_up_ok(response) -> tuple[bool, str]:  # noqa: ANN001 - com3_msgs DumpUp.Response
+def dump_up_ok(response) -> tuple[bool, str]:  # com3_msgs DumpUp.Response
     """com3_msgs/srv/DumpUp: the reply's ``result`` (the server logs the reason)."""
     return bool(response.result), "" if response.result else "result false (the vessel_target_pos server's log says why)"
 
 
-def arm_ok(result) -> tuple[bool, str]:  # noqa: ANN001 - tms_msg Zx200ArmMove.Result
+def arm_ok(result) -> tuple[bool, str]:  # tms_msg Zx200ArmMove.Result
     """The arm controller: TmsRpErrorCodes SUCCESS, else its code and message."""
     return result.error_code.val == TmsRpErrorCodes.SUCCESS, f"error_code {result.error_code.val}: {result.message}"
 

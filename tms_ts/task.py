@@ -66,7 +66,7 @@ class TaskRun:
         except TsError as exc:
             log.error("task %s: %s: %s", self.task_id, type(exc).__name__, exc)
             self._abort(f"{type(exc).__name__}: {exc}")
-        except Exception as exc:  # noqa: BLE001 - one task's error must not end the manager's timer
+        except Exception as exc:  # one task's error must not end the manager's timer
             log.exception("task %s: step raised", self.task_id)
             self._abort(f"{type(exc).__name__}: {exc}")
         return self.state
@@ -78,7 +78,7 @@ class TaskRun:
             try:
                 self._stop(FAILED, message)
                 return
-            except Exception:  # noqa: BLE001 - the task ends anyway; the halt's error is logged
+            except Exception:  # the task ends anyway; the halt's error is logged
                 log.exception("task %s: halt after an error raised", self.task_id)
         self.ctx.stops.clear()
         self._finish(FAILED, message)
@@ -108,7 +108,7 @@ class TaskRun:
             log.error("task %s: %s: %s", self.task_id, type(exc).__name__, exc)
             self._stop(FAILED, f"{type(exc).__name__}: {exc}")
             return
-        except Exception as exc:  # noqa: BLE001 - any node error ends the task, never the manager
+        except Exception as exc:  # any node error ends the task, never the manager
             log.exception("task %s: tick raised", self.task_id)
             self._stop(FAILED, f"{type(exc).__name__}: {exc}")
             return
@@ -129,7 +129,7 @@ class TaskRun:
         try:
             self.lock_active_machines(reason)
             self._stop(CANCELED, reason)
-        except Exception as exc:  # noqa: BLE001 - a cancel comes from a subscription callback: never end the manager
+        except Exception as exc:  # a cancel comes from a subscription callback: never end the manager
             log.exception("task %s: cancel raised", self.task_id)
             self.ctx.stops.clear()
             self._finish(FAILED, f"{reason}; halting the tree raised {type(exc).__name__}: {exc}")

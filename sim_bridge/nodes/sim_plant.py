@@ -29,30 +29,30 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering without a display (before mujoco loads)
 
-import math  # noqa: E402
-import threading  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
+import math
+import threading
+from pathlib import Path
+from typing import Any
 
-import numpy as np  # noqa: E402
-from builtin_interfaces.msg import Time  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
-from geometry_msgs.msg import PointStamped, PoseStamped  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import JointState, PointCloud2, PointField  # noqa: E402
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension  # noqa: E402
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, PoseStamped
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, PointCloud2, PointField
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from com3_can.bus import link_config, load_bus_config, open_bus  # noqa: E402
-from sim_bridge.can_io import PlantCanIO  # noqa: E402
-from sim_bridge.config import load_plant  # noqa: E402
-from sim_bridge.errors import SimConfigError  # noqa: E402
-from sim_bridge.plant import Plant, stamp_parts  # noqa: E402
-from sim_bridge.render import render_png  # noqa: E402
-from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder  # noqa: E402
-from sim_bridge.scanners import mound_scan, pack_xyz, vessel_scan  # noqa: E402
-from tms_common.node import realtime_thread, run_node  # noqa: E402
-from tms_common.params import startup_parameters  # noqa: E402
+from com3_can.bus import link_config, load_bus_config, open_bus
+from sim_bridge.can_io import PlantCanIO
+from sim_bridge.config import load_plant
+from sim_bridge.errors import SimConfigError
+from sim_bridge.plant import Plant, stamp_parts
+from sim_bridge.render import render_png
+from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder
+from sim_bridge.scanners import mound_scan, pack_xyz, vessel_scan
+from tms_common.node import realtime_thread, run_node
+from tms_common.params import startup_parameters
 
 SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
 
@@ -134,7 +134,7 @@ class SimPlantNode(Node):
             self.get_logger().fatal(f"plant loop crashed: {type(exc).__name__}: {exc}")
             os._exit(1)
 
-    def _stamp(self, t: float):  # noqa: ANN202
+    def _stamp(self, t: float):
         sec, nanosec = stamp_parts(t)
         return Time(sec=sec, nanosec=nanosec)
 
@@ -158,7 +158,7 @@ class SimPlantNode(Node):
             self._next_status += self._status_period
             self._publish_status(plant, stamp)
 
-    def _publish_truth(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+    def _publish_truth(self, plant: Plant, stamp) -> None:
         for m in plant.machines:
             t = plant.truth(m)
             msg = PoseStamped()
@@ -188,7 +188,7 @@ class SimPlantNode(Node):
             msg.data = [plant.soil.vessels.get(m, 0.0), plant.soil.loaded_by.get(m, 0.0), plant.soil.dumped_by.get(m, 0.0)]
             pub.publish(msg)
 
-    def _cloud(self, points, frame: str, stamp):  # noqa: ANN001, ANN202
+    def _cloud(self, points, frame: str, stamp):
         msg = PointCloud2()
         msg.header.stamp, msg.header.frame_id = stamp, frame
         data, n = pack_xyz(points)
@@ -199,20 +199,20 @@ class SimPlantNode(Node):
         msg.data = data
         return msg
 
-    def _publish_mound_scan(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+    def _publish_mound_scan(self, plant: Plant, stamp) -> None:
         soil = plant.spec.soil
         pts = mound_scan(plant.ground, soil.mound_center, soil.mound_base_radius + 1.5, noise=self._scan_noise,
                          rng=self._scan_rng)
         self.mound_pub.publish(self._cloud(pts, "map", stamp))
 
-    def _publish_vessel_scans(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+    def _publish_vessel_scans(self, plant: Plant, stamp) -> None:
         for m, pub in self.vessel_pub.items():
             vessel = plant.carriers[m].vessel
             pts = vessel_scan(plant.soil.vessels[m], vessel.inner_length, vessel.inner_width, noise=self._scan_noise,
                               rng=self._scan_rng)
             pub.publish(self._cloud(pts, f"{m}/vessel", stamp))
 
-    def _publish_status(self, plant: Plant, stamp) -> None:  # noqa: ANN001
+    def _publish_status(self, plant: Plant, stamp) -> None:
         arr = DiagnosticArray()
         arr.header.stamp = stamp
         for machine, counters in self.io.counters().items():

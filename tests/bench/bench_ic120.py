@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from tests.bench.stats import percentile, summary_ms  # noqa: E402
+from tests.bench.stats import percentile, summary_ms
 
 
 def bench_planner() -> None:
@@ -112,7 +112,7 @@ def bench_ekf() -> None:
     print(f"5 m GNSS jump for 3 s: {sum(not r.accepted for r in res)}/{len(res)} fixes rejected, max error {err[300:330].max():.3f} m")
 
 
-def _ekf_loop_route(seed: int):  # noqa: ANN202
+def _ekf_loop_route(seed: int):
     """One paper cycle with the EKF in the loop on the kinematic model; returns final errors and collisions."""
     from tests.tms_rp.harness import paper_legs, site_points
     from tests.tms_rp.kinematics import TrackedModel
@@ -264,7 +264,7 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
     print(f"plant campaign: load average at start {os.getloadavg()}", flush=True)
     t_campaign = time.monotonic()
     with isolated_domain() as domain:
-        def procs(cmd, name=None):  # noqa: ANN001, ANN202
+        def procs(cmd, name=None):
             p = Proc([str(c) for c in cmd], ros_env(domain), name=name)
             started.append(p)
             return p
@@ -276,7 +276,7 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
         node.executor_for_test = SingleThreadedExecutor(context=ctx)
         node.executor_for_test.add_node(node)
 
-        def stop(_sig, _frame):  # noqa: ANN001, ANN202 - rclpy's handler would swallow Ctrl-C / kill
+        def stop(_sig, _frame):  # rclpy's handler would swallow Ctrl-C / kill
             raise KeyboardInterrupt
 
         for sig in (signal.SIGINT, signal.SIGTERM):

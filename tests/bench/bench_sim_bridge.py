@@ -20,7 +20,7 @@ from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros
 SIM_SECONDS = 120.0
 
 
-def _drive(plant: Plant, io=None) -> float:  # noqa: ANN001
+def _drive(plant: Plant, io=None) -> float:
     names = plant.excavator.front.names
     plant.carrier.set_centre_velocity(1.0, 0.1)
     steps = int(SIM_SECONDS / plant.dt)

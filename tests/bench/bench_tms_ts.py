@@ -167,7 +167,7 @@ def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0, checkpoint_s: f
     start_pub = node.create_publisher(TaskIds, "/tms_ts/start", 10)
     emg_pub = node.create_publisher(Bool, "/emergency_signal", 10)
 
-    def spin(seconds: float, until=None) -> None:  # noqa: ANN001
+    def spin(seconds: float, until=None) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)
@@ -230,14 +230,14 @@ def _manager_on(kind: str, domain: int, db: str) -> str:
     done = [0]
     sent = node.ros.send_subtask_goal
 
-    def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202 - count the goals that end SUCCEEDED
+    def counted(*args, **kwargs):  # count the goals that end SUCCEEDED
         goal = sent(*args, **kwargs)
-        on_result = goal._on_result  # noqa: SLF001
+        on_result = goal._on_result
 
-        def on_result_counted(future):  # noqa: ANN001, ANN202
+        def on_result_counted(future):
             on_result(future)
             done[0] += goal.state == SUCCEEDED
-        goal._on_result = on_result_counted  # noqa: SLF001
+        goal._on_result = on_result_counted
         return goal
     node.ros.send_subtask_goal = counted
 
@@ -253,9 +253,9 @@ def _manager_on(kind: str, domain: int, db: str) -> str:
         for task_id in range(100, 110):
             node.start_task(task_id)
         spin_for(10.0)  # servers found, every task looping
-        s0, d0, r0, w0 = dict(node._stats), done[0], resource.getrusage(resource.RUSAGE_SELF), time.monotonic()  # noqa: SLF001
+        s0, d0, r0, w0 = dict(node._stats), done[0], resource.getrusage(resource.RUSAGE_SELF), time.monotonic()
         spin_for(EXEC_SECONDS)
-        s1, r1, wall = node._stats, resource.getrusage(resource.RUSAGE_SELF), time.monotonic() - w0  # noqa: SLF001
+        s1, r1, wall = node._stats, resource.getrusage(resource.RUSAGE_SELF), time.monotonic() - w0
         running = sum(1 for r in node.runs.values() if not r.done)
     finally:
         ex.shutdown(timeout_sec=1.0)

@@ -135,7 +135,7 @@ class Probe:
                      "emg": self.node.create_publisher(Bool, "/emergency_signal", reliable)}
         self.TaskIds, self.String, self.Int32, self.Bool = TaskIds, String, Int32, Bool
 
-    def _on_status(self, msg) -> None:  # noqa: ANN001
+    def _on_status(self, msg) -> None:
         now = time.monotonic()
         if self.keep_status:  # states only: an old manager's status carried megabytes of snapshots
             self.status.append((now, {t.task_id: t.state for t in msg.tasks}))
@@ -151,7 +151,7 @@ class Probe:
                 return states[task_id]
         return None
 
-    def spin(self, seconds: float, until=None) -> bool:  # noqa: ANN001
+    def spin(self, seconds: float, until=None) -> bool:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             self.ex.spin_once(timeout_sec=0.02)
@@ -159,7 +159,7 @@ class Probe:
                 return True
         return until is None
 
-    def publish(self, key: str, msg) -> None:  # noqa: ANN001
+    def publish(self, key: str, msg) -> None:
         pub = self.pubs[key]
         self.spin(20, lambda: pub.get_subscription_count() > 0)
         pub.publish(msg)

@@ -204,7 +204,7 @@ def core() -> None:
           f"|period - 10 ms| median {1000 * np.median(jitter):.3f} ms, p99 {1000 * np.percentile(jitter, 99):.3f} ms")
 
 
-def plant() -> None:  # noqa: PLR0915 - one campaign
+def plant() -> None:  # one campaign
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor

@@ -24,7 +24,7 @@ def main() -> int:
     flushed = [time.monotonic()]
     tick = manager.TaskManager._tick
 
-    def timed_tick(self) -> None:  # noqa: ANN001
+    def timed_tick(self) -> None:
         now = time.monotonic()
         ticks.append(now)
         try:

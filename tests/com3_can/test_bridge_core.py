@@ -34,7 +34,7 @@ def ic(now: float = 0.0) -> BridgeCore:
     return BridgeCore(BridgeConfig.load("ic120"), now, converter_profile("ic120"))
 
 
-def by_name(txs):  # noqa: ANN001, ANN202
+def by_name(txs):
     return {t.name: t for t in txs}
 
 
@@ -69,7 +69,7 @@ def test_front_effort_maps_to_pilot_pressure_with_dead_zone() -> None:
         (([], VELOCITY, [], []), r"joint_name is empty"),
     ],
 )
-def test_bad_front_cmd_is_rejected_and_changes_nothing(args, match) -> None:  # noqa: ANN001
+def test_bad_front_cmd_is_rejected_and_changes_nothing(args, match) -> None:
     core = zx()
     core.front_cmd(["arm_joint"], VELOCITY, [0.3], [], now=0.0)
     before = core.current_values("Velocity_Cmd_1")

@@ -116,7 +116,7 @@ def front(velocities: list[float]) -> Any:
                     velocity=velocities)
 
 
-def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, peer, can_cfg) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Bool
@@ -231,7 +231,7 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
     assert any("watchdog: no front_cmd" in d.status[0].message for d in diags), [d.status[0].message for d in diags[-5:]]
 
 
-def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg) -> None:
     import random
 
     from diagnostic_msgs.msg import DiagnosticArray
@@ -352,7 +352,7 @@ def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg
     assert int(values["rx_dropped_total"]) == garbled, values
 
 
-def test_odom_period_publishes_fewer_odom_pose_messages_without_losing_odometry(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+def test_odom_period_publishes_fewer_odom_pose_messages_without_losing_odometry(procs, ros_node, peer, can_cfg) -> None:
     """``odom_period_s`` (the paper launch's 0.02 s) thins ``odom_pose`` but the odometry still integrates
     every Track_Velocity frame: the pose after 2 s at 0.5 m/s is the same ~1 m."""
     from nav_msgs.msg import Odometry
@@ -380,7 +380,7 @@ def test_odom_period_publishes_fewer_odom_pose_messages_without_losing_odometry(
     assert odoms[-1].pose.pose.position.x - x0 == pytest.approx(0.5 * 2.0, abs=0.35)
 
 
-def test_imu_period_thins_imu(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+def test_imu_period_thins_imu(procs, ros_node, peer, can_cfg) -> None:
     """``imu_period_s`` 0.1: Roll_Pitch_Angle frames every 10 ms give at most one ``imu`` per 0.1 s of the
     node clock, and the latest roll still comes through."""
     from sensor_msgs.msg import Imu
@@ -407,7 +407,7 @@ def test_imu_period_thins_imu(procs, ros_node, peer, can_cfg) -> None:  # noqa: 
     assert math.atan2(2 * (q.w * q.x + q.y * q.z), 1 - 2 * (q.x * q.x + q.y * q.y)) == pytest.approx(0.05, abs=1e-3)
 
 
-def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, can_cfg) -> None:  # noqa: ANN001
+def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, can_cfg) -> None:
     """``machine_setting`` (excavator) and ``crawler_carrier_machine_setting`` (crawler carrier) take OPERA's
     com3_msgs types and reach Machine_Setting_Cmd; a crawler-carrier swing_mode the IC120 cannot meet is refused."""
     from com3_msgs.msg import CrawlerCarrierCom3MachineSetting, ExcavatorCom3MachineSetting

@@ -20,7 +20,7 @@ def _core(kind: str) -> BridgeCore:
     return BridgeCore(BridgeConfig.load(kind), 0.0, converter_profile(kind))
 
 
-def _frame(core: BridgeCore, txs, name: str) -> dict[str, float]:  # noqa: ANN001
+def _frame(core: BridgeCore, txs, name: str) -> dict[str, float]:
     tx = next(t for t in txs if t.name == name)
     return core.codec.decode(tx.arbitration_id, tx.data)[1]
 

@@ -45,7 +45,7 @@ def test_frames_built_before_emg_stop_do_not_follow_its_neutral_frame(domain: in
         built, release = threading.Event(), threading.Event()
         tick = node.core.tick
 
-        def held_tick(now: float):  # noqa: ANN202 - the sender thread, preempted after building its frames
+        def held_tick(now: float):  # the sender thread, preempted after building its frames
             txs = tick(now)
             if any(tx.arbitration_id == v1 and tx.data != NEUTRAL_V1 for tx in txs) and not built.is_set():
                 built.set()

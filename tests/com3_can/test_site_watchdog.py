@@ -20,7 +20,7 @@ def zx(site_timeout_s: float) -> BridgeCore:
     return BridgeCore(BridgeConfig.load("zx200", site_timeout_s=site_timeout_s), 0.0, converter_profile("zx200"))
 
 
-def velocity_frame(txs) -> str | None:  # noqa: ANN001
+def velocity_frame(txs) -> str | None:
     return next((t.data.hex() for t in txs if t.name == "Velocity_Cmd_1"), None)
 
 

@@ -62,7 +62,7 @@ pytestmark = pytest.mark.skipif(_REASON is not None, reason=f"site hosts: {_REAS
 
 
 @contextlib.contextmanager
-def site_node(domain: int):  # noqa: ANN201
+def site_node(domain: int):
     """An rclpy node of this process on the site network (discovery beyond localhost)."""
     import rclpy
     from rclpy.context import Context
@@ -99,7 +99,7 @@ def seed_db(db: Path) -> None:
         store.close()
 
 
-def start_hosts(site, tmp: Path, domain: int, db: Path) -> dict[str, Proc]:  # noqa: ANN001
+def start_hosts(site, tmp: Path, domain: int, db: Path) -> dict[str, Proc]:
     """Every host's part of the paper launch under tms-launch, the commands of docs/deployment.md."""
     procs = {}
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "AMENT_PREFIX_PATH": str(VENV), "PYTHONUNBUFFERED": "1",
@@ -112,7 +112,7 @@ def start_hosts(site, tmp: Path, domain: int, db: Path) -> dict[str, Proc]:  # n
     return procs
 
 
-def zx_rest_time(series, since: float, until: float) -> float | None:  # noqa: ANN001
+def zx_rest_time(series, since: float, until: float) -> float | None:
     """Simulated time from ``since`` until the ZX200 (front joints, base) stays at rest up to ``until``."""
     pairs = [(b.t, speeds(a, b)) for a, b in zip(series, series[1:], strict=False) if since < b.t <= until]
     for i, (t, _) in enumerate(pairs):
@@ -152,7 +152,7 @@ def scenario(tmp_path: Path) -> None:
         run(site, node, domain, tmp_path)
 
 
-def run(site, site_node, domain: int, tmp_path: Path) -> None:  # noqa: ANN001
+def run(site, site_node, domain: int, tmp_path: Path) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
 
     db = tmp_path / "db"

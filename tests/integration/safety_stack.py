@@ -66,7 +66,7 @@ def _literal(value: object) -> str:
     return str(value)
 
 
-def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | None = None,  # noqa: ANN001
+def start_stack(procs, domain: int, tmp: Path, speed: float, overrides: dict | None = None,
                 skip: set[str] | frozenset[str] = frozenset(), tasks: dict[int, tuple[str, str]] | None = None) -> dict:
     """Seed the DB (paper seed + tasks 91/92) and start every node; returns ``{label: Proc}``.
     ``overrides`` maps a node name of the launch file to parameters replacing its own; ``skip`` names more nodes
@@ -181,17 +181,17 @@ class Probe:
         self._thread.join(timeout=2.0)
 
     # -- callbacks ---------------------------------------------------------------------------------
-    def _sample(self, stamp) -> Sample:  # noqa: ANN001
+    def _sample(self, stamp) -> Sample:
         t = round(stamp.sec + stamp.nanosec * 1e-9, 4)
         s = self.samples.get(t)
         if s is None:
             s = self.samples[t] = Sample(t, time.monotonic())
         return s
 
-    def _on_clock(self, msg) -> None:  # noqa: ANN001
+    def _on_clock(self, msg) -> None:
         self.clock = msg.clock.sec + msg.clock.nanosec * 1e-9
 
-    def _on_js(self, machine: str, msg) -> None:  # noqa: ANN001
+    def _on_js(self, machine: str, msg) -> None:
         with self._lock:
             s = self._sample(msg.header.stamp)
             if machine == "zx200":
@@ -199,7 +199,7 @@ class Probe:
             else:
                 s.ic_dq = tuple(msg.velocity)
 
-    def _on_pose(self, machine: str, msg) -> None:  # noqa: ANN001
+    def _on_pose(self, machine: str, msg) -> None:
         q = msg.pose.orientation
         yaw = 2.0 * math.atan2(q.z, q.w)
         with self._lock:
@@ -210,7 +210,7 @@ class Probe:
             else:
                 s.ic_pose = pose
 
-    def _on_soil(self, msg) -> None:  # noqa: ANN001
+    def _on_soil(self, msg) -> None:
         with self._lock:
             self.bucket = float(msg.data[1])
             self.bucket_log.append((self.clock, self.bucket))
@@ -226,7 +226,7 @@ class Probe:
         old = [b for s, b in log if s <= t - window]
         return bool(old) and v - old[-1] > 1e-4
 
-    def _on_status(self, msg) -> None:  # noqa: ANN001
+    def _on_status(self, msg) -> None:
         with self._lock:
             for st in msg.tasks:
                 self.tasks[int(st.task_id)] = (int(st.state), st.message)
@@ -248,7 +248,7 @@ class Probe:
             return [s for _, s in sorted(self.samples.items())
                     if s.zx_dq and s.ic_dq and s.zx_pose is not None and s.ic_pose is not None]
 
-    def wait(self, cond, timeout: float, step: float = 0.05) -> bool:  # noqa: ANN001
+    def wait(self, cond, timeout: float, step: float = 0.05) -> bool:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if cond():
@@ -259,13 +259,13 @@ class Probe:
         return cond()
 
 
-def wait_servers(node, timeout: float, servers: dict[str, str] | None = None) -> list[str]:  # noqa: ANN001
+def wait_servers(node, timeout: float, servers: dict[str, str] | None = None) -> list[str]:
     """Wait until every action server of ``servers`` (default :data:`SERVERS`) is available; returns the missing ones."""
     import importlib
 
     from rclpy.action import ActionClient
 
-    def action_type(spec: str):  # noqa: ANN202 - "package.action:Type"
+    def action_type(spec: str):  # "package.action:Type"
         module, name = spec.split(":")
         return getattr(importlib.import_module(module), name)
 

@@ -58,7 +58,7 @@ def _launch(tmp: Path) -> Path:
     return path
 
 
-def _start(procs, tmp_path):  # noqa: ANN001, ANN202
+def _start(procs, tmp_path):
     db = tmp_path / "db"
     db.mkdir()
     import os

@@ -25,13 +25,13 @@ nodes:
 """
 
 
-def _launch(procs, tmp_path: Path, text: str, *args: str):  # noqa: ANN001, ANN202
+def _launch(procs, tmp_path: Path, text: str, *args: str):
     path = tmp_path / "launch.yaml"
     path.write_text(text)
     return procs([VENV / "bin" / "tms-launch", *args, str(path)], name="tms-launch")
 
 
-def _stop(launcher) -> None:  # noqa: ANN001
+def _stop(launcher) -> None:
     os.kill(launcher.popen.pid, signal.SIGINT)
     assert launcher.wait(20) == 0, launcher.output
 

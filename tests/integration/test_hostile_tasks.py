@@ -29,7 +29,7 @@ GOOD = tree('<Sequence><SetLocalBlackboard output_key="N" value="3"/><Delay dela
             '</Sequence>')
 
 
-def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no_process_exits(procs, ros_node, tmp_path):  # noqa: ANN001
+def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no_process_exits(procs, ros_node, tmp_path):
     from std_msgs.msg import String
 
     from tms_db import open_store
@@ -54,7 +54,7 @@ def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no
     start = ros_node.create_publisher(TaskIds, "/tms_ts/start", 50)
     sequence = ros_node.create_publisher(String, "/task_sequence", 50)
 
-    def spin_until(predicate, timeout: float, what: str) -> None:  # noqa: ANN001
+    def spin_until(predicate, timeout: float, what: str) -> None:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             ros_node.executor_for_test.spin_once(timeout_sec=0.05)

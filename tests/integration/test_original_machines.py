@@ -58,7 +58,7 @@ ORIGINAL: dict[str, list[str]] = {
 LEAF = "tms_msg_ts/action/LeafNodeBase"
 
 
-def test_every_original_machine_serves_every_subtask_of_its_kind(procs, ros_node, tmp_path):  # noqa: ANN001
+def test_every_original_machine_serves_every_subtask_of_its_kind(procs, ros_node, tmp_path):
     from rclpy.action import get_action_names_and_types
 
     launch = yaml.safe_load(LAUNCH.read_text())

@@ -90,7 +90,7 @@ def _write_configs(tmp: Path, domain: int, supervisor: bool = True, backend: str
     return path
 
 
-def _start(procs, domain, tmp_path, supervisor: bool = True, backend: str = "udp_multicast"):  # noqa: ANN001, ANN202
+def _start(procs, domain, tmp_path, supervisor: bool = True, backend: str = "udp_multicast"):
     """Seed a fresh embedded DB and start the whole stack; returns the tms-launch process."""
     db = tmp_path / "db"
     db.mkdir()

@@ -49,7 +49,7 @@ QUIET_S = 3.0  # [s simulated] of no motion checked after rest
 # ---------------------------------------------------------------------------------------------------
 # unit level (no ROS)
 # ---------------------------------------------------------------------------------------------------
-def _plant_io():  # noqa: ANN202
+def _plant_io():
     from sim_bridge.can_io import PlantCanIO
     from sim_bridge.plant import Plant
 
@@ -59,7 +59,7 @@ def _plant_io():  # noqa: ANN202
     return plant, PlantCanIO(plant, buses, watchdog_s=5.0), buses, peers
 
 
-def _run(plant, io, seconds: float) -> None:  # noqa: ANN001
+def _run(plant, io, seconds: float) -> None:
     for _ in range(round(seconds / plant.spec.dt)):
         io.poll()
         io.watchdog()
@@ -162,7 +162,7 @@ class _Port:
         return []
 
 
-def _run_task(port: _Port, clock: list[float]):  # noqa: ANN202
+def _run_task(port: _Port, clock: list[float]):
     from tms_ts.bt.core import TreeContext
     from tms_ts.loader import load_tree
     from tms_ts.task import TaskRun
@@ -243,7 +243,7 @@ def _tail(stack: dict, n: int = 15) -> str:
     return "\n".join(f"--- {k}\n" + "\n".join(p.output.splitlines()[-n:]) for k, p in stack.items())
 
 
-def _bring_up(procs, domain, ros_node, tmp_path):  # noqa: ANN001, ANN202
+def _bring_up(procs, domain, ros_node, tmp_path):
     stack = start_stack(procs, domain, tmp_path, STACK_SPEED)
     # before the probe's spin thread starts: destroying an action client while another thread adds it
     # to the executor's wait set kills that thread (rclpy: "action client pointer is invalid")

@@ -60,12 +60,12 @@ def test_twenty_resent_change_pose_goals_to_the_held_pose_all_end_with_a_result(
     subtask: list[tuple[float, int, str]] = []  # (wall, error_code, error_msg) per subtask goal
     planning: list[tuple[int, str]] = []  # (error_code, message) per planning goal
 
-    def on_subtask(msg) -> None:  # noqa: ANN001
+    def on_subtask(msg) -> None:
         if msg.action == "/zx200/subtask_zx200_change_pose":
             with lock:
                 subtask.append((time.monotonic(), int(msg.error_code), msg.error_msg))
 
-    def on_planning(msg) -> None:  # noqa: ANN001
+    def on_planning(msg) -> None:
         with lock:
             planning.append((int(msg.error_code), msg.message))
 

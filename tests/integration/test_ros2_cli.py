@@ -31,17 +31,17 @@ READ_ONLY = [("/sim_plant", "speed", 2.0), ("/zx200/com3_bridge", "machine", "ic
              ("/ic120/ic120_navigator", "pose_timeout_s", 5.0), ("/tms_sp_sensing", "rate_hz", 5.0)]
 
 
-def _expected_nodes(launch_path) -> set[str]:  # noqa: ANN001
+def _expected_nodes(launch_path) -> set[str]:
     launch = yaml.safe_load(launch_path.read_text())
     return {f"{n.get('namespace', '').rstrip('/')}/{n['name']}" for n in launch["nodes"]}
 
 
-def _graph(node) -> set[str]:  # noqa: ANN001
+def _graph(node) -> set[str]:
     """``ros2 node list``: the nodes on the graph, hidden ones (a name starting with "_") left out as ros2cli does."""
     return {f"{ns.rstrip('/')}/{name}" for name, ns in node.get_node_names_and_namespaces() if not name.startswith("_")}
 
 
-def _wait(futures: dict, deadline: float, executor) -> None:  # noqa: ANN001
+def _wait(futures: dict, deadline: float, executor) -> None:
     while time.monotonic() < deadline and not all(f.done() for f in futures.values()):
         executor.spin_once(timeout_sec=0.05)
 

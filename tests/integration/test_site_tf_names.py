@@ -58,7 +58,7 @@ def _spin_until(node: Any, done: Any, timeout: float, every: tuple[float, Any] |
     return done()
 
 
-def test_three_ic120s_of_the_original_launch_are_three_trees(procs, ros_node) -> None:  # noqa: ANN001
+def test_three_ic120s_of_the_original_launch_are_three_trees(procs, ros_node) -> None:
     from nav_msgs.msg import Odometry
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState

@@ -52,11 +52,11 @@ class Rig:
         self.buses.append(bus)
         return bus
 
-    def _send(self, kind: str, txs) -> None:  # noqa: ANN001
+    def _send(self, kind: str, txs) -> None:
         for tx in txs:
             self.conv[kind].send(can.Message(arbitration_id=tx.arbitration_id, data=tx.data, is_extended_id=True))
 
-    def run(self, seconds: float, commands=None) -> None:  # noqa: ANN001
+    def run(self, seconds: float, commands=None) -> None:
         """Step the plant ``seconds``; ``commands(core_of, now)`` is called at 10 Hz (a controller's stream)."""
         end = self.plant.time + seconds
         next_cmd = self.plant.time

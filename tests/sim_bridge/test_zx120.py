@@ -62,7 +62,7 @@ def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
         io = PlantCanIO(plant, {"zx120": plant_bus}, watchdog_s=plant.spec.watchdog_s)
         core = BridgeCore(BridgeConfig.load("zx120", load_bus_config("zx120")), plant.time, converter_profile("zx120"))
 
-        def send(txs) -> None:  # noqa: ANN001
+        def send(txs) -> None:
             for tx in txs:
                 conv_bus.send(can.Message(arbitration_id=tx.arbitration_id, data=tx.data, is_extended_id=True))
 

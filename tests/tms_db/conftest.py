@@ -19,14 +19,14 @@ MONGO_URI = os.environ.get("TMS_MONGODB_URI", "")
 
 
 @pytest.fixture(params=["embedded", "mongodb"])
-def store(request: pytest.FixtureRequest, tmp_path) -> Iterator[Store]:  # noqa: ANN001
+def store(request: pytest.FixtureRequest, tmp_path) -> Iterator[Store]:
     if request.param == "mongodb":
         if not MONGO_URI:
             pytest.skip("MongoDB backend: set TMS_MONGODB_URI=mongodb://host:port to run it (no server here)")
         name = f"tms_test_{uuid.uuid4().hex[:12]}"
         s = open_store(uri=MONGO_URI, database=name)
         yield s
-        s._client.drop_database(name)  # noqa: SLF001 - test cleanup
+        s._client.drop_database(name)  # test cleanup
         s.close()
     else:
         s = open_store(path=tmp_path / "db")

@@ -13,20 +13,20 @@ from tms_db import StoreError, open_store
 from tms_db.embedded import BACKSTOP_CHECKPOINT_PAGES, DB_FILE
 
 
-def _write(store, n: int, pause_s: float) -> None:  # noqa: ANN001
+def _write(store, n: int, pause_s: float) -> None:
     store.upsert_parameter({"record_name": "BB", "type": "dynamic", "N": 0})
     for i in range(n):
         store.set_fields("BB", {f"T{i % 10}": i, "N": i})
         time.sleep(pause_s)
 
 
-def test_background_checkpoint_bounds_the_wal_and_keeps_every_write(tmp_path) -> None:  # noqa: ANN001
+def test_background_checkpoint_bounds_the_wal_and_keeps_every_write(tmp_path) -> None:
     store = open_store(path=tmp_path / "db")
     store.checkpoint_in_background(0.05)
-    thread = store._checkpointer  # noqa: SLF001
+    thread = store._checkpointer
     assert thread is not None and thread.is_alive()
     # the writer's own automatic checkpoint only as a backstop
-    assert store._query("PRAGMA wal_autocheckpoint") == [(BACKSTOP_CHECKPOINT_PAGES,)]  # noqa: SLF001
+    assert store._query("PRAGMA wal_autocheckpoint") == [(BACKSTOP_CHECKPOINT_PAGES,)]
     _write(store, 300, 0.01)
     wal = tmp_path / "db" / f"{DB_FILE}-wal"
     # 300 commits of >= 1 page (4 KiB) each: 1.2 MB and more if nothing had checkpointed and restarted the WAL
@@ -39,9 +39,9 @@ def test_background_checkpoint_bounds_the_wal_and_keeps_every_write(tmp_path) ->
         assert again.check() == []
 
 
-def test_without_the_thread_the_writer_checkpoints_itself(tmp_path) -> None:  # noqa: ANN001
+def test_without_the_thread_the_writer_checkpoints_itself(tmp_path) -> None:
     with open_store(path=tmp_path / "db") as store:
-        assert store._query("PRAGMA wal_autocheckpoint") == [(1000,)]  # noqa: SLF001 - SQLite's default
+        assert store._query("PRAGMA wal_autocheckpoint") == [(1000,)]  # SQLite's default
         _write(store, 1500, 0.0)
         # 1500 commits of >= 1 page (4 KiB + a 24-byte frame header) each: over 6.1 MB had nothing checkpointed;
         # SQLite's own checkpoint after 1000 pages restarts the WAL from its start, so it stays near 4.1 MB
@@ -52,6 +52,6 @@ def test_without_the_thread_the_writer_checkpoints_itself(tmp_path) -> None:  # 
 
 
 @pytest.mark.parametrize("period", [0.0, -1.0])
-def test_a_bad_period_is_refused_naming_the_store(tmp_path, period: float) -> None:  # noqa: ANN001
+def test_a_bad_period_is_refused_naming_the_store(tmp_path, period: float) -> None:
     with open_store(path=tmp_path / "db") as store, pytest.raises(StoreError, match=r"rostmsdb\.sqlite3.*period"):
         store.checkpoint_in_background(period)

@@ -14,7 +14,7 @@ from tms_db import open_store
 pytestmark = pytest.mark.integration
 
 
-def _call(node, client, request, timeout: float = 30.0):  # noqa: ANN001, ANN202
+def _call(node, client, request, timeout: float = 30.0):
     assert client.wait_for_service(timeout_sec=timeout), f"service {client.srv_name} not available"
     future = client.call_async(request)
     deadline = time.monotonic() + timeout

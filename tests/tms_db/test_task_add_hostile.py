@@ -45,7 +45,7 @@ def doc(body: str, extra: str = "") -> str:
 
 
 @pytest.fixture(scope="module")
-def seeded(tmp_path_factory) -> Path:  # noqa: ANN001
+def seeded(tmp_path_factory) -> Path:
     """A database holding one task and one record, so 'unchanged' compares something."""
     db = tmp_path_factory.mktemp("hostile") / "db"
     src = db.parent / "ok.xml"
@@ -88,7 +88,7 @@ CASES = [
 
 @pytest.mark.parametrize(("name", "data", "extra", "expected"), CASES, ids=[c[0] for c in CASES])
 def test_a_refused_tree_is_one_line_with_its_file_line_and_column_and_nothing_stored(seeded, tmp_path, name, data, extra,
-                                                                                     expected) -> None:  # noqa: ANN001
+                                                                                     expected) -> None:
     src = tmp_path / name
     src.write_bytes(data)
     before = content(seeded)
@@ -103,7 +103,7 @@ def test_a_refused_tree_is_one_line_with_its_file_line_and_column_and_nothing_st
     assert content(seeded) == before  # nothing stored, nothing changed
 
 
-def test_the_same_trees_are_what_the_manager_refuses_and_a_valid_one_is_stored(seeded, tmp_path) -> None:  # noqa: ANN001
+def test_the_same_trees_are_what_the_manager_refuses_and_a_valid_one_is_stored(seeded, tmp_path) -> None:
     # the CLI and the manager run one loader: its error for the stored form names the same node and problem
     from tms_ts.errors import TreeLoadError
     from tms_ts.loader import load_tree
@@ -137,7 +137,7 @@ BODIES = st.one_of(
 @given(BODIES, st.one_of(st.none(), st.integers(-2**70, 2**70)))
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 def test_any_generated_tree_is_stored_or_refused_in_one_line_and_never_half_applied(seeded, tmp_path, capsys, body,
-                                                                                   task_id) -> None:  # noqa: ANN001
+                                                                                   task_id) -> None:
     src = tmp_path / "gen.xml"
     src.write_text(doc(body), encoding="utf-8", errors="surrogatepass")
     before = content(seeded)

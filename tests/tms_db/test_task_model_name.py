@@ -37,7 +37,7 @@ ZX200_WITH_PALETTE = """<?xml version="1.0"?>
 """
 
 
-def test_the_palette_names_no_machine_only_the_leaves_do(store):  # noqa: ANN001
+def test_the_palette_names_no_machine_only_the_leaves_do(store):
     tid = store.add_task(ZX200_WITH_PALETTE, description="ZX200 of the 2024-12 demo")
     assert store.get_task(tid)["model_name"] == "zx200"  # the whole-text search gave "zx200,ic120,zx120"
 
@@ -54,7 +54,7 @@ def test_two_machines_in_leaf_order_each_once_across_subtrees():
     assert detect_model_names(xml) == "ic120,zx200"
 
 
-def test_a_task_parameter_names_the_machine_and_without_it_the_leaf_names_none(store):  # noqa: ANN001
+def test_a_task_parameter_names_the_machine_and_without_it_the_leaf_names_none(store):
     xml = ('<root><BehaviorTree ID="B"><Sequence>'
            '<Action ID="LeafNodeIc120" model_name="{machine}" record_name="ENTER_PATH" subtask_name="st_ic120_follow_waypoints"/>'
            '<Action ID="LeafNodeZx200" model_name="zx200" record_name="p" subtask_name="subtask_zx200_change_pose"/>'

@@ -32,7 +32,7 @@ def _spin_until(node: Any, pred: Any, timeout: float, every: tuple[float, Any] |
     return pred()
 
 
-def test_com3_msgs_joint_cmd_on_front_cmd_moves_the_plant_arm(procs, domain, ros_node, tmp_path) -> None:  # noqa: ANN001
+def test_com3_msgs_joint_cmd_on_front_cmd_moves_the_plant_arm(procs, domain, ros_node, tmp_path) -> None:
     from geometry_msgs.msg import PointStamped
     from sensor_msgs.msg import JointState
 

@@ -40,7 +40,7 @@ def _tip(bearing: float) -> list[float]:
 class PlantContacts:
     """The plant's own geometry (sim_bridge's MuJoCo model of the same plant file), posed from its truth."""
 
-    def __init__(self, plant_config) -> None:  # noqa: ANN001
+    def __init__(self, plant_config) -> None:
         import mujoco
 
         from sim_bridge.config import load_plant
@@ -79,7 +79,7 @@ class PlantContacts:
         return best_d, best_pad, where
 
 
-def test_change_pose_plan_swings_over_a_parked_carrier_without_contact(arm_stack, procs, ros_node, tmp_path) -> None:  # noqa: ANN001
+def test_change_pose_plan_swings_over_a_parked_carrier_without_contact(arm_stack, procs, ros_node, tmp_path) -> None:
     from geometry_msgs.msg import PoseStamped
     from rclpy.action import ActionClient
     from sensor_msgs.msg import JointState

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 
 
-def test_the_planner_is_one_node_that_answers_and_refuses_to_change_its_start_up_parameters(ros_node) -> None:  # noqa: ANN001
+def test_the_planner_is_one_node_that_answers_and_refuses_to_change_its_start_up_parameters(ros_node) -> None:
     from rclpy.parameter import Parameter
 
     from tms_if_opera.nodes.zx200_planner import Zx200PlannerNode

@@ -25,7 +25,7 @@ TOL_M, TOL_RAD = 0.03, math.radians(2.0)
 KIN = load_kinematics()
 
 
-def joint_goal(q):  # noqa: ANN001, ANN201
+def joint_goal(q):
     from trajectory_msgs.msg import JointTrajectoryPoint
 
     from tms_msg_rp.action import TmsRpZx200ChangePose
@@ -36,7 +36,7 @@ def joint_goal(q):  # noqa: ANN001, ANN201
     return g
 
 
-def pwa_goal(p, theta_w):  # noqa: ANN001, ANN201
+def pwa_goal(p, theta_w):
     from tms_msg_rp.action import TmsRpZx200ChangePose
     from tms_msg_rp.msg import TmsRpZx200PositionWithAngle
 
@@ -48,7 +48,7 @@ def pwa_goal(p, theta_w):  # noqa: ANN001, ANN201
     return g
 
 
-def pose_goal(q):  # noqa: ANN001, ANN201
+def pose_goal(q):
     from geometry_msgs.msg import Pose
 
     from tms_msg_rp.action import TmsRpZx200ChangePose
@@ -63,7 +63,7 @@ def pose_goal(q):  # noqa: ANN001, ANN201
     return g
 
 
-def settled_tip(stack) -> np.ndarray:  # noqa: ANN001
+def settled_tip(stack) -> np.ndarray:
     stack.spin(0.5)
     return np.array(stack.tip)
 

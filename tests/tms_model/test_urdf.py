@@ -19,7 +19,7 @@ from tms_model.transform import Transform, quaternion_from_axis_angle
 from tms_model.urdf import load_tree
 
 
-def _random_front(kin, rng: np.random.Generator) -> np.ndarray:  # noqa: ANN001
+def _random_front(kin, rng: np.random.Generator) -> np.ndarray:
     lo = np.where(np.isfinite(kin.limits.lower), kin.limits.lower, -math.pi)
     hi = np.where(np.isfinite(kin.limits.upper), kin.limits.upper, math.pi)
     return rng.uniform(lo, hi)

@@ -29,23 +29,23 @@ Q = [0.0, -0.8, 1.3, 1.2]
 class _SlowSendHandle(ClientHandleProxy):
     """Wraps an rclpy action-client handle: ``send_goal_request`` returns only after the response was taken."""
 
-    def __init__(self, inner) -> None:  # noqa: ANN001
+    def __init__(self, inner) -> None:
         super().__init__(inner)
         self.taken = threading.Event()
 
-    def send_goal_request(self, request):  # noqa: ANN001, ANN201
+    def send_goal_request(self, request):
         seq = self._inner.send_goal_request(request)
         self.taken.wait(30.0)  # the sending thread "preempted" until the response has been taken
         return seq
 
-    def take_goal_response(self, response_type):  # noqa: ANN001, ANN201
+    def take_goal_response(self, response_type):
         data = self._inner.take_goal_response(response_type)
         if all(data):
             self.taken.set()
         return data
 
 
-def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, object]:  # noqa: ANN001
+def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, object]:
     from rclpy.executors import MultiThreadedExecutor
 
     from tms_msg.action import Zx200ArmMove
@@ -58,7 +58,7 @@ def _send_with_forced_race(node, client_cls, wait_s: float) -> tuple[bool, objec
     spinner.start()
     try:
         assert client.wait_for_server(timeout_sec=60.0), "arm_controller/move not available"
-        client._client_handle = _SlowSendHandle(client._client_handle)  # noqa: SLF001 - the forced window
+        client._client_handle = _SlowSendHandle(client._client_handle)  # the forced window
         goal = Zx200ArmMove.Goal(segments=[Zx200ArmSegment(kind=Zx200ArmSegment.JOINT, label="race",
                                                            joint_positions=[float(v) for v in Q])])
         future = client.send_goal_async(goal)

@@ -21,7 +21,7 @@ Q = [0.0, -0.8, 1.3, 1.2]
 
 
 @pytest.fixture
-def controller(procs, ros_node):  # noqa: ANN001, ANN201
+def controller(procs, ros_node):
     """A running controller, a joint_states feed at Q, and the front_cmd velocities it publishes."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -43,7 +43,7 @@ def controller(procs, ros_node):  # noqa: ANN001, ANN201
         executor.shutdown(timeout_sec=5.0)
 
 
-def _run(node, executor, segments, timeout: float = 60.0):  # noqa: ANN001, ANN202
+def _run(node, executor, segments, timeout: float = 60.0):
     from rclpy.action import ActionClient
 
     from tms_msg.action import Zx200ArmMove
@@ -69,7 +69,7 @@ def _run(node, executor, segments, timeout: float = 60.0):  # noqa: ANN001, ANN2
     return result.result().status, result.result().result, feedback
 
 
-def _joint(label: str, q, via: bool = False):  # noqa: ANN001, ANN202
+def _joint(label: str, q, via: bool = False):
     from tms_msg.msg import Zx200ArmSegment
 
     return Zx200ArmSegment(kind=Zx200ArmSegment.JOINT, label=label, joint_positions=[float(v) for v in q], via=via)
@@ -110,7 +110,7 @@ def test_segments_run_in_order_as_one_goal(controller) -> None:
     assert [seg for seg, _ in named] == sorted(seg for seg, _ in named), f"segments out of order: {named}"
 
 
-def test_a_goal_sent_before_the_first_joint_states_waits_for_them(procs, ros_node) -> None:  # noqa: ANN001
+def test_a_goal_sent_before_the_first_joint_states_waits_for_them(procs, ros_node) -> None:
     """Start-up: the goal callback waits (without blocking the single-threaded node) for the first joint_states,
     then accepts; the goal runs and succeeds at the held pose."""
     import rclpy
@@ -148,7 +148,7 @@ def test_a_goal_sent_before_the_first_joint_states_waits_for_them(procs, ros_nod
         node.destroy_node()
 
 
-def _send(node, executor, client, segments, timeout: float = 30.0):  # noqa: ANN001, ANN202
+def _send(node, executor, client, segments, timeout: float = 30.0):
     """Send a goal and wait for its acceptance; returns its result future."""
     from tms_msg.action import Zx200ArmMove
 
@@ -160,7 +160,7 @@ def _send(node, executor, client, segments, timeout: float = 30.0):  # noqa: ANN
     return send.result().get_result_async()
 
 
-def _wait(executor, futures, timeout: float = 60.0) -> None:  # noqa: ANN001
+def _wait(executor, futures, timeout: float = 60.0) -> None:
     end = time.monotonic() + timeout
     while not all(f.done() for f in futures) and time.monotonic() < end:
         executor.spin_once(timeout_sec=0.02)

@@ -162,6 +162,6 @@ def test_success_only_when_commands_in_flight_keep_the_goal(kin, cfg):
         ctl, q, _ = run(kin, cfg, q0, [JointTarget(q1)], steps=6000)
         assert ctl.status.result == codes.SUCCESS, ctl.status
         plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q)
-        for u in list(ctl._in_flight)[-int(round(float(np.max(cfg.dead_time_s)) / cfg.dt)):]:  # noqa: SLF001
+        for u in list(ctl._in_flight)[-int(round(float(np.max(cfg.dead_time_s)) / cfg.dt)):]:
             q, _ = plant.step(u)
         assert np.linalg.norm(kin.tip_position(q) - kin.tip_position(q1)) < cfg.goal_tolerance_m * 1.5

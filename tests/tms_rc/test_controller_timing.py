@@ -84,7 +84,7 @@ def test_a_few_millimetres_are_closed_within_seconds(kin, cfg50):
     assert ctl.status.result == codes.SUCCESS, ctl.status
     assert np.linalg.norm(kin.tip_position(q) - kin.tip_position(q1)) < 0.006
     assert t < 9.0, f"5 mm goal took {t:.1f} s of simulated time"
-    assert np.all(np.abs(ctl._pid_q.integral) < 0.01), ctl._pid_q.integral  # noqa: SLF001 - no windup
+    assert np.all(np.abs(ctl._pid_q.integral) < 0.01), ctl._pid_q.integral  # no windup
 
 
 @pytest.mark.parametrize("name,ticks,max_s", [
@@ -129,7 +129,7 @@ def test_without_time_stamps_the_step_counts_one_period(kin, cfg50):
 class _StuckSwingPlant(LagDeadTimePlant):
     """The swing does not move at all (the other joints follow their commands)."""
 
-    def step(self, command):  # noqa: ANN001, ANN201
+    def step(self, command):
         c = np.array(command, dtype=float)
         c[0] = 0.0
         return super().step(c)

@@ -12,7 +12,7 @@ from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_rc.excavator.segments import CARTESIAN, JOINT, targets_from_segments
 
 
-def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5), theta_w=1.0, scale=0.0, via=False):  # noqa: ANN001, ANN201
+def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5), theta_w=1.0, scale=0.0, via=False):
     return SimpleNamespace(kind=kind, label=label, joint_positions=list(q), position=SimpleNamespace(x=p[0], y=p[1], z=p[2]),
                            theta_w=theta_w, speed_scale=scale, via=via)
 

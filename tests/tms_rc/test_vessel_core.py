@@ -14,7 +14,7 @@ from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams, V
 IC = load_machine("ic120")
 
 
-def _params(**changes) -> VesselParams:  # noqa: ANN003
+def _params(**changes) -> VesselParams:
     """The IC120's vessel (65 deg, 0.3 rad/s) with its nav file's tuning."""
     tuning = load_nav_files(IC.kind).section(VesselTuning, "vessel")
     return dataclasses.replace(VesselParams.from_config(IC.vessel, tuning, f"{IC.source} vessel.max_angle"), **changes)

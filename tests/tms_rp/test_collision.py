@@ -33,17 +33,17 @@ def carrier_doc(x: float = 0.0, y: float = 7.5, yaw: float = math.pi / 2, height
 
 
 @pytest.fixture(scope="module")
-def kin():  # noqa: ANN201
+def kin():
     return load_kinematics()
 
 
 @pytest.fixture(scope="module")
-def model(kin):  # noqa: ANN001, ANN201
+def model(kin):
     return ArmCollisionModel(kin)
 
 
 @pytest.fixture(scope="module")
-def cp(kin, model):  # noqa: ANN001, ANN201
+def cp(kin, model):
     return CollisionPlanner(Zx200Planner(kin, load_planner_config(kin.machine.kind)), model)
 
 
@@ -84,7 +84,7 @@ def test_record_reads_the_originals_fields_and_link_padding(model: ArmCollisionM
     (lambda d: d.__setitem__("link_padding", {"cab_link": 0.2}), "link_padding.cab_link", "not a ZX200 link"),
     (lambda d: d.__setitem__("link_padding", {"arm_link": "wide"}), "link_padding.arm_link", "finite number"),
 ])
-def test_bad_record_names_record_and_field(mutate, field: str, words: str) -> None:  # noqa: ANN001
+def test_bad_record_names_record_and_field(mutate, field: str, words: str) -> None:
     doc = carrier_doc()
     mutate(doc)
     with pytest.raises(CollisionRecordError) as err:
@@ -94,7 +94,7 @@ def test_bad_record_names_record_and_field(mutate, field: str, words: str) -> No
 
 
 # ------------------------------------------------------------------------------------------ the padded arm
-def test_padded_arm_encloses_the_plants_link_boxes(kin, model: ArmCollisionModel) -> None:  # noqa: ANN001
+def test_padded_arm_encloses_the_plants_link_boxes(kin, model: ArmCollisionModel) -> None:
     """The plant (MuJoCo) checks contacts with its own link boxes: every one must lie inside the planner's link."""
     from sim_bridge.profiles.excavator import _LINK_BOX
 
@@ -105,7 +105,7 @@ def test_padded_arm_encloses_the_plants_link_boxes(kin, model: ArmCollisionModel
                       <= np.array(box["size"]) / 2 + 1e-9), link
 
 
-def test_distance_to_a_box_is_measured_with_the_padding(kin, model: ArmCollisionModel) -> None:  # noqa: ANN001
+def test_distance_to_a_box_is_measured_with_the_padding(kin, model: ArmCollisionModel) -> None:
     q = kin.home.copy()  # front straight out along +x, tip ~6.3 m out, 0.46 m up
     tip = kin.tip_position(q)
     wall = CollisionObject.make("wall", "r", 1, [0.2, 4.0, 4.0], [tip[0] + 1.0, 0.0, 2.0], [0, 0, 0, 1])
@@ -121,7 +121,7 @@ def test_distance_to_a_box_is_measured_with_the_padding(kin, model: ArmCollision
 
 
 # ------------------------------------------------------------------------------------------ planning
-def test_a_path_across_a_box_goes_around_it(kin, model: ArmCollisionModel, cp: CollisionPlanner) -> None:  # noqa: ANN001
+def test_a_path_across_a_box_goes_around_it(kin, model: ArmCollisionModel, cp: CollisionPlanner) -> None:
     scene = scene_of(carrier_doc(), model)
     q_a = kin.ik_position_with_angle(np.array(tip_at(0.8)), 1.6)
     direct = cp.joint_line(q_a, kin.ik_position_with_angle(np.array(tip_at(2.35)), 1.6))
@@ -136,7 +136,7 @@ def test_a_path_across_a_box_goes_around_it(kin, model: ArmCollisionModel, cp: C
     assert all(t.via for t in targets[:-1]) and not targets[-1].via
 
 
-def test_direct_path_is_kept_when_free(kin, model: ArmCollisionModel, cp: CollisionPlanner) -> None:  # noqa: ANN001
+def test_direct_path_is_kept_when_free(kin, model: ArmCollisionModel, cp: CollisionPlanner) -> None:
     scene = scene_of(carrier_doc(x=0.0, y=-7.5), model)  # the carrier behind the other side
     q_a = kin.ik_position_with_angle(np.array(tip_at(0.8)), 1.6)
     plain = cp.planner.change_pose(current_q=q_a, positions_with_angle=[(tip_at(2.35), 1.6)])
@@ -145,7 +145,7 @@ def test_direct_path_is_kept_when_free(kin, model: ArmCollisionModel, cp: Collis
 
 
 @pytest.mark.parametrize("mode", ["position_with_angle", "joints"])
-def test_target_inside_the_object_is_refused_naming_it(kin, model, cp, mode: str) -> None:  # noqa: ANN001
+def test_target_inside_the_object_is_refused_naming_it(kin, model, cp, mode: str) -> None:
     scene = scene_of(carrier_doc(), model)
     q_a = kin.ik_position_with_angle(np.array(tip_at(0.8)), 1.6)
     inside = tip_at(math.pi / 2, radius=7.5, z=1.5)  # in the carrier's box
@@ -158,7 +158,7 @@ def test_target_inside_the_object_is_refused_naming_it(kin, model, cp, mode: str
     assert f"'ic120' (record '{RECORD}')" in str(err.value) and "target" in str(err.value)
 
 
-def test_no_way_over_is_refused_naming_the_blocking_object(kin, model, cp) -> None:  # noqa: ANN001
+def test_no_way_over_is_refused_naming_the_blocking_object(kin, model, cp) -> None:
     # a wall 12 m high ring-fencing the front on both sides: neither over nor the long way round
     doc = carrier_doc(height=12.0)
     doc["collision_objects"].append({**doc["collision_objects"][0], "id": "wall_behind",
@@ -171,14 +171,14 @@ def test_no_way_over_is_refused_naming_the_blocking_object(kin, model, cp) -> No
     assert "no collision-free path" in str(err.value) and "'ic120'" in str(err.value)
 
 
-def test_start_pose_in_collision_is_refused(kin, model, cp) -> None:  # noqa: ANN001
+def test_start_pose_in_collision_is_refused(kin, model, cp) -> None:
     scene = scene_of(carrier_doc(), model)
     q_in = kin.ik_position_with_angle(np.array(tip_at(math.pi / 2, radius=7.5, z=1.5)), 1.6)
     with pytest.raises(CollisionError, match=r"start pose .* in collision: .*'ic120'"):
         cp.change_pose(scene, current_q=q_in, positions_with_angle=[(tip_at(0.8), 1.6)])
 
 
-def test_excavate_approach_goes_around_and_a_dig_into_the_object_is_refused(kin, model, cp) -> None:  # noqa: ANN001
+def test_excavate_approach_goes_around_and_a_dig_into_the_object_is_refused(kin, model, cp) -> None:
     scene = scene_of(carrier_doc(), model)
     q_a = kin.ik_position_with_angle(np.array(tip_at(0.8)), 1.6)
     targets = cp.excavate(scene, tip_at(2.35, z=-0.3), 1.0, 1.0, q_a)
@@ -191,7 +191,7 @@ def test_excavate_approach_goes_around_and_a_dig_into_the_object_is_refused(kin,
         cp.excavate(scene, tip_at(math.pi / 2, radius=4.2, z=-0.3), 1.0, 0.5, q_a)
 
 
-def test_cartesian_segments_are_checked_on_the_tip_line(kin, cp) -> None:  # noqa: ANN001
+def test_cartesian_segments_are_checked_on_the_tip_line(kin, cp) -> None:
     q_a = kin.ik_position_with_angle(np.array([6.0, 0.0, 0.5]), 1.6)
     qs = cp.tip_line(q_a, CartesianTarget(np.array([6.0, 0.0, 2.5]), 1.6))
     tips = np.array([kin.tip_position(q) for q in qs])

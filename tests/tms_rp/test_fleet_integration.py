@@ -37,7 +37,7 @@ def _plant_yaml(tmp_path, machines: dict[str, str], poses: dict[str, object]) ->
     return str(path)
 
 
-def _container(procs, name: str, nodes: list[dict], **env: str):  # noqa: ANN001, ANN202
+def _container(procs, name: str, nodes: list[dict], **env: str):
     return procs([sys.executable, "-m", "tms_launch.container", name, json.dumps(nodes)], name=name, **env)
 
 
@@ -58,7 +58,7 @@ def _stack(machine: str, *, vessel: bool = False, arm: bool = False) -> list[dic
     return nodes
 
 
-def _plant(procs, tmp_path, machines: dict[str, str], poses: dict[str, object], parked: dict[str, str]):  # noqa: ANN001, ANN202
+def _plant(procs, tmp_path, machines: dict[str, str], poses: dict[str, object], parked: dict[str, str]):
     """The plant with ``machines`` (each with its converter) and ``parked`` ones (no converter: held at rest by
     the plant's watchdog; the plant needs an excavator and a carrier on the site)."""
     plant = [{"name": "sim_plant", "package": "sim_bridge", "executable": "sim_plant",
@@ -70,7 +70,7 @@ def _plant(procs, tmp_path, machines: dict[str, str], poses: dict[str, object], 
 class _Truth:
     """The plant's truth of one machine by name: last pose (x, y, yaw) and joints."""
 
-    def __init__(self, node, name: str) -> None:  # noqa: ANN001
+    def __init__(self, node, name: str) -> None:
         from geometry_msgs.msg import PoseStamped
         from sensor_msgs.msg import JointState
 
@@ -80,11 +80,11 @@ class _Truth:
         node.create_subscription(JointState, f"/sim/truth/{name}/joint_states",
                                  lambda m: self.joints.update(zip(m.name, m.position, strict=False)), 10)
 
-    def _on_pose(self, m) -> None:  # noqa: ANN001
+    def _on_pose(self, m) -> None:
         self.pose = (m.pose.position.x, m.pose.position.y, yaw_of(m.pose.orientation))
 
 
-def _wait_estimate(node, name: str, *procs, timeout: float = 90.0) -> None:  # noqa: ANN001
+def _wait_estimate(node, name: str, *procs, timeout: float = 90.0) -> None:
     from nav_msgs.msg import Odometry
 
     got: list = []

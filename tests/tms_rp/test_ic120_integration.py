@@ -30,7 +30,7 @@ def _plant_config(tmp_path, gnss_sigma: float) -> str:
     return str(path)
 
 
-def _wait_for_estimate(node) -> None:  # noqa: ANN001
+def _wait_for_estimate(node) -> None:
     from nav_msgs.msg import Odometry
 
     got = []
@@ -191,7 +191,7 @@ def test_bad_goals_blocked_path_and_cancel_over_can(procs, domain, ros_node):
     truth = Truth(node)
     _wait_for_estimate(node)
 
-    def nav(x, y, yaw, timeout=20.0, qz=None, qw=None):  # noqa: ANN001, ANN202
+    def nav(x, y, yaw, timeout=20.0, qz=None, qw=None):
         g = NavigateToPose.Goal()
         g.pose = pose_stamped(x, y, yaw)
         if qz is not None:

@@ -46,7 +46,7 @@ def _speed(samples: list[tuple[float, float, float]]) -> float:
 
 
 @pytest.mark.parametrize("name", sorted(KINDS))
-def test_kind_drives_swings_dumps_and_rests_on_the_watchdog(procs, domain, ros_node, tmp_path, name):  # noqa: ANN001
+def test_kind_drives_swings_dumps_and_rests_on_the_watchdog(procs, domain, ros_node, tmp_path, name):
     from geometry_msgs.msg import PoseStamped
 
     from tms_db import open_store

@@ -44,7 +44,7 @@ class Goal:
 
 
 class FleetWorld:
-    def __init__(self, store, cfg, geoms) -> None:  # noqa: ANN001
+    def __init__(self, store, cfg, geoms) -> None:
         self.store, self.cfg, self.geoms = store, cfg, geoms
         self.spec = cfg.mound_grid
         xg, yg = self.spec.centres()
@@ -122,13 +122,13 @@ class FleetWorld:
             self.vessel[into] += self.bucket
             self.bucket = 0.0
 
-    def mound_scan(self, rng) -> np.ndarray:  # noqa: ANN001
+    def mound_scan(self, rng) -> np.ndarray:
         xg, yg = self.spec.centres()
         pts = np.column_stack([xg.ravel(), yg.ravel(), self.surface.ravel()])
         pts[:, 2] += rng.normal(0, 0.02, len(pts))
         return pts
 
-    def vessel_scan(self, carrier: str, rng) -> np.ndarray:  # noqa: ANN001
+    def vessel_scan(self, carrier: str, rng) -> np.ndarray:
         g = self.geoms[carrier]
         spec = g.grid_spec(self.cfg.resolution)
         v = self.vessel[carrier]

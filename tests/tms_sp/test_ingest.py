@@ -20,7 +20,7 @@ PATH = {"model_name": "ic120", "record_name": "LOAD_PATH", "type": "dynamic",
 
 
 @pytest.fixture
-def writer(tmp_path):  # noqa: ANN201
+def writer(tmp_path):
     store = open_store(path=tmp_path / "db")
     for doc in (FLAGS, POSE, PATH, {**POSE, "record_name": "home", "type": "static"}):
         store.upsert_parameter(doc)

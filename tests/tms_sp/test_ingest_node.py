@@ -13,7 +13,7 @@ from tms_db import open_store
 pytestmark = pytest.mark.integration
 
 
-def _wait_db(db, predicate, timeout: float, what: str, proc):  # noqa: ANN001, ANN202
+def _wait_db(db, predicate, timeout: float, what: str, proc):
     deadline = time.monotonic() + timeout
     while True:
         with open_store(path=db) as store:

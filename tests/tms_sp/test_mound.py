@@ -48,8 +48,8 @@ def test_a_cell_whose_drag_cuts_almost_nothing_is_no_target():
     my = cfg.mound.cy
     assert params.min_cut > 0.0
 
-    def surface(block: bool):  # noqa: ANN202
-        def z(x, y):  # noqa: ANN001, ANN202
+    def surface(block: bool):
+        def z(x, y):
             r = np.hypot(x - ax, y - ay)
             rim = (r >= params.reach_min) & (r <= params.reach_min + 0.4) & (np.abs(y - my) < 1.5)
             far = (r >= 6.8) & (r <= 7.8) & (np.abs(y - my) < 1.0) & block

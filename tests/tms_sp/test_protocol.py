@@ -133,7 +133,7 @@ class World:
         return syn.scan(heap, (spec.x_min, spec.x_max), (spec.y_min, spec.y_max), 3000, rng, noise=0.01, outliers=0.0)
 
 
-def step_and_sense(world: World, sensing: SiteSensing, t: float, rng) -> None:  # noqa: ANN001
+def step_and_sense(world: World, sensing: SiteSensing, t: float, rng) -> None:
     """One world step at time ``t`` [s], then sensing's scans of it (as the node feeds them)."""
     world.step()
     sensing.on_carrier_pose(t, world.ic120)

@@ -92,7 +92,7 @@ def _spin_until(node: Any, done: Any, timeout: float, every: tuple[float, Any] |
     return done()
 
 
-def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(procs, domain, ros_node) -> None:  # noqa: ANN001
+def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(procs, domain, ros_node) -> None:
     from geometry_msgs.msg import PointStamped, PoseStamped
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState

@@ -24,7 +24,7 @@ class TsSystem:
         while time.monotonic() < end:
             self.node.executor_for_test.spin_once(timeout_sec=0.05)
 
-    def task(self, task_id: int):  # noqa: ANN201
+    def task(self, task_id: int):
         """Latest TaskState of ``task_id`` (None if never reported)."""
         for status in reversed(self.statuses):
             for t in status.tasks:
@@ -32,7 +32,7 @@ class TsSystem:
                     return t
         return None
 
-    def wait(self, predicate, timeout: float, what: str):  # noqa: ANN001, ANN201
+    def wait(self, predicate, timeout: float, what: str):
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self.node.executor_for_test.spin_once(timeout_sec=0.05)
@@ -42,14 +42,14 @@ class TsSystem:
         out = "\n".join(f"--- {n}\n{p.output[-3000:]}" for n, p in self.procs.items())
         raise AssertionError(f"timed out after {timeout} s waiting for {what}\n{out}")
 
-    def publish(self, topic: str, msg) -> None:  # noqa: ANN001
+    def publish(self, topic: str, msg) -> None:
         pub = self.pubs[topic]
         self.wait(lambda: pub.get_subscription_count() > 0, 20, f"a subscriber on {topic}")
         pub.publish(msg)
 
 
 @pytest.fixture
-def ts_system(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
+def ts_system(tmp_path, procs, ros_node):
     """``start(stub_duration_s=..., ignore_cancel=False, server_wait_s=..., manager_args=("-p", "k:=v"))`` -> TsSystem
     (seed the DB first)."""
     from std_msgs.msg import Bool, Int32, String

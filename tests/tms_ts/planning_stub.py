@@ -45,7 +45,7 @@ def _say(line: str) -> None:
         sys.stdout.flush()
 
 
-def _result(action_type, ok: bool):  # noqa: ANN001, ANN202
+def _result(action_type, ok: bool):
     res = action_type.Result()
     if hasattr(res, "error_code") and hasattr(res.error_code, "val"):
         res.error_code.val = TmsRpErrorCodes.SUCCESS if ok else Zx200PlanningOutcome.CANCELED
@@ -76,12 +76,12 @@ class PlanningStub(Node):
         ]
         _say(f"planning stub ready {models}")
 
-    def _on_options(self, request, response):  # noqa: ANN001, ANN202
+    def _on_options(self, request, response):
         _say(f"OPTIONS pass_through={request.pass_through} theta_w_tolerance={request.theta_w_tolerance:g}")
         response.accepted = True
         return response
 
-    def _run(self, gh, name: str, action_type):  # noqa: ANN001, ANN202
+    def _run(self, gh, name: str, action_type):
         _say(f"GOAL {name}")
         end = time.monotonic() + self.duration
         while time.monotonic() < end:

@@ -32,7 +32,7 @@ class Scripted(ActionNode):
 register_node("Scripted", Scripted)
 
 
-def tree(body: str, **scripts: str):  # noqa: ANN201
+def tree(body: str, **scripts: str):
     """Load ``body`` (the inside of one BehaviorTree) with scripts ``id=statuses``."""
     t = load_tree(f'<root main_tree_to_execute="T"><BehaviorTree ID="T">{body}</BehaviorTree></root>')
     t.ctx.blackboard.set("log", [])
@@ -41,7 +41,7 @@ def tree(body: str, **scripts: str):  # noqa: ANN201
     return t
 
 
-def log(t) -> list[str]:  # noqa: ANN001
+def log(t) -> list[str]:
     out = list(t.ctx.blackboard.get("log"))
     t.ctx.blackboard.get("log").clear()
     return out

@@ -44,13 +44,13 @@ class _BoolPortProbe(ActionNode):
 register_node("BoolPortProbe", _BoolPortProbe)
 
 
-def _tree(body: str, store=None):  # noqa: ANN001, ANN202
+def _tree(body: str, store=None):
     return load_tree(f'<root main_tree_to_execute="T"><BehaviorTree ID="T">{body}</BehaviorTree></root>',
                      TreeContext(store=store))
 
 
 @pytest.fixture
-def store(tmp_path):  # noqa: ANN001, ANN201
+def store(tmp_path):
     s = open_store(path=tmp_path / "db")
     s.upsert_parameter({"record_name": "BB", "type": "dynamic", "CONTINUE_FLG": False, "N": 3, "D": 1.5})
     yield s
@@ -74,7 +74,7 @@ DEMO_SHAPE = """<root main_tree_to_execute="BehaviorTree">
 </root>"""
 
 
-def test_the_demo_trees_end_refused_by_keep_running_until_flgup_naming_node_line_key_and_rule(store, caplog):  # noqa: ANN001
+def test_the_demo_trees_end_refused_by_keep_running_until_flgup_naming_node_line_key_and_rule(store, caplog):
     # BT.CPP: the text "true" goes into a key no typed port declared -> untyped entry holding std::string;
     # KeepRunningUntilFlgup throws "Unsupported type for key [TERMINATE_FLG]" and the manager ends the task.
     tree = load_tree(DEMO_SHAPE, TreeContext(store=store), source="task 2")
@@ -91,7 +91,7 @@ def test_the_demo_trees_end_refused_by_keep_running_until_flgup_naming_node_line
     assert "std::string 'true'" in msg and "SetBlackboard writes its value as a std::string" in msg
 
 
-def test_while_the_flag_is_unset_the_demo_loop_keeps_running(store):  # noqa: ANN001
+def test_while_the_flag_is_unset_the_demo_loop_keeps_running(store):
     store.set_fields("BB", {"CONTINUE_FLG": True})
     tree = load_tree(DEMO_SHAPE, TreeContext(store=store))
     assert [tree.tick() for _ in range(3)] == [RUNNING] * 3  # an absent key is "not yet", not an error
@@ -160,14 +160,14 @@ def test_a_first_write_through_a_subtree_remapping_is_stored_unparsed_as_bt_cpp_
      'true == true and ""(false)'),  # "not" is a word: substituted by "" (no such key)
     ("<AlwaysSuccess/>", 'UNKNOWN == ""', SUCCESS, "true"),
 ])
-def test_conditional_expression_substitutes_entries_as_the_original(setter, expr, expected, exprtk_input):  # noqa: ANN001
+def test_conditional_expression_substitutes_entries_as_the_original(setter, expr, expected, exprtk_input):
     t = _tree(f'<Sequence>{setter}<Condition ID="ConditionalExpression" '
               f'conditional_expression="{expr.replace(chr(34), "&quot;")}"/></Sequence>')
     assert t.tick() is expected, t.root.children[1].feedback_message
     assert t.root.children[1].substitute(expr) == exprtk_input
 
 
-def test_conditional_expression_leaves_a_long_entry_a_name_exprtk_does_not_know(store):  # noqa: ANN001
+def test_conditional_expression_leaves_a_long_entry_a_name_exprtk_does_not_know(store):
     store.set_fields("BB", {"L": 2**40})  # a BSON int64: the original sets it as long, which it does not substitute
     t = _tree('<Sequence><Action ID="BlackboardValueReaderMongo" mongo_param_name="L" mongo_record_name="BB" '
               'output_port="L"/><Condition ID="ConditionalExpression" conditional_expression="L &gt; 0"/></Sequence>',
@@ -178,7 +178,7 @@ def test_conditional_expression_leaves_a_long_entry_a_name_exprtk_does_not_know(
 
 
 # -- a {key} declared std::string by the original's string ports ---------------------------------------------------
-def test_a_key_a_string_port_declared_refuses_a_number_from_the_db(store):  # noqa: ANN001
+def test_a_key_a_string_port_declared_refuses_a_number_from_the_db(store):
     # The fleet ticket pattern: input_value="{N}" declares N std::string; the reader's int is refused (the
     # original's reader catches the LogicError and returns FAILURE).
     t = _tree('<Sequence><Action ID="BlackboardValueReaderMongo" output_port="N" mongo_record_name="BB" '
@@ -190,7 +190,7 @@ def test_a_key_a_string_port_declared_refuses_a_number_from_the_db(store):  # no
     assert "Declared type [std::string] != current type [int]" in reason
 
 
-def test_a_bool_read_through_a_string_port_is_the_text_1_as_any_cast_gives_it(store):  # noqa: ANN001
+def test_a_bool_read_through_a_string_port_is_the_text_1_as_any_cast_gives_it(store):
     # SetBlackboard's copy skips the type check (the original's N_INT idiom); getInput<std::string> of a bool is "1",
     # which MongoValueWriter then writes as the int 1.
     store.set_fields("BB", {"FLG": True})
@@ -203,7 +203,7 @@ def test_a_bool_read_through_a_string_port_is_the_text_1_as_any_cast_gives_it(st
     assert t.ctx.blackboard.get("B2") == 1 and t.ctx.blackboard.get_any("B2").vtype == INT
 
 
-def test_counter_on_a_number_set_by_the_reader_is_refused(store):  # noqa: ANN001
+def test_counter_on_a_number_set_by_the_reader_is_refused(store):
     # The reader's set() made N typed int without a converter: Counter's text "4" cannot go back in.
     t = _tree('<Sequence><Action ID="BlackboardValueReaderMongo" output_port="N" mongo_record_name="BB" '
               'mongo_param_name="N"/><Action ID="Counter" key="N"/></Sequence>', store)
@@ -236,12 +236,12 @@ def test_set_blackboard_output_key_in_braces_names_the_key_held_there():
     ("TRUE", BOOL, True), ("0", BOOL, False), ("12abc", INT, 12), (" -7", INT, -7), ("1.5m", DOUBLE, 1.5),
     (" 2.5", DOUBLE, 2.5), ("-1", UINT, 2**32 - 1), ("x", STRING, "x"), ("inf", DOUBLE, math.inf),
 ])
-def test_convert_from_string_is_bt_cpps(text, ctype, expected):  # noqa: ANN001
+def test_convert_from_string_is_bt_cpps(text, ctype, expected):
     assert convert_from_string(text, ctype) == expected
 
 
 @pytest.mark.parametrize("text,ctype", [("yes", BOOL), ("tRue", BOOL), ("abc", INT), ("3000000000", INT), ("x", DOUBLE)])
-def test_convert_from_string_refuses_what_bt_cpp_throws_on(text, ctype):  # noqa: ANN001
+def test_convert_from_string_refuses_what_bt_cpp_throws_on(text, ctype):
     with pytest.raises(ValueError):
         convert_from_string(text, ctype)
 
@@ -250,7 +250,7 @@ def test_convert_from_string_refuses_what_bt_cpp_throws_on(text, ctype):  # noqa
     (True, BOOL, STRING, "1"), (1.5, DOUBLE, STRING, "1.500000"), (3, INT, STRING, "3"), (2.0, DOUBLE, INT, 2),
     (3, INT, BOOL, True), (0.5, DOUBLE, BOOL, True), (3, INT, DOUBLE, 3.0), (True, BOOL, INT, 1), (4, LONG, INT, 4),
 ])
-def test_any_cast_converts_numbers_as_bt_cpp(value, vtype, target, expected):  # noqa: ANN001
+def test_any_cast_converts_numbers_as_bt_cpp(value, vtype, target, expected):
     assert any_cast(value, vtype, target) == expected
 
 
@@ -258,7 +258,7 @@ def test_any_cast_converts_numbers_as_bt_cpp(value, vtype, target, expected):  #
     (1.5, DOUBLE, INT, "Floating point truncated"), (-1, INT, UINT, "Value is negative"),
     (2**40, LONG, INT, "Value too large."), ("3", STRING, INT, "no known safe conversion"),
 ])
-def test_any_cast_refuses_as_bt_cpp(value, vtype, target, why):  # noqa: ANN001
+def test_any_cast_refuses_as_bt_cpp(value, vtype, target, why):
     with pytest.raises(ValueError, match=why):
         any_cast(value, vtype, target)
 

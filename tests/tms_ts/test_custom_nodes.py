@@ -16,7 +16,7 @@ from tms_ts.loader import load_tree
 
 
 @pytest.fixture
-def store(tmp_path):  # noqa: ANN001, ANN201
+def store(tmp_path):
     s = open_store(path=tmp_path / "db")
     s.upsert_parameter({"record_name": "GBB", "type": "dynamic", "FLG": False, "N": 3, "D": 1.5, "S": "text",
                         "ARR": [1, 2]})
@@ -24,14 +24,14 @@ def store(tmp_path):  # noqa: ANN001, ANN201
     s.close()
 
 
-def _run(xml_body: str, store, **bb):  # noqa: ANN001, ANN003, ANN202
+def _run(xml_body: str, store, **bb):
     t = load_tree(f'<root><BehaviorTree ID="B">{xml_body}</BehaviorTree></root>', TreeContext(store=store))
     for k, v in bb.items():
         t.ctx.blackboard.set(k, v)
     return t
 
 
-def test_reader_keeps_the_stored_type(store):  # noqa: ANN001
+def test_reader_keeps_the_stored_type(store):
     body = "<Sequence>" + "".join(
         f'<Action ID="BlackboardValueReaderMongo" output_port="{k.lower()}" mongo_record_name="GBB" mongo_param_name="{k}"/>'
         for k in ("FLG", "N", "D", "S")) + "</Sequence>"
@@ -43,13 +43,13 @@ def test_reader_keeps_the_stored_type(store):  # noqa: ANN001
 
 @pytest.mark.parametrize("record,field,why", [("NOPE", "FLG", "'NOPE' not found"), ("GBB", "MISSING", "no field"),
                                               ("GBB", "ARR", "unsupported type")])
-def test_reader_fails_on_missing_record_field_or_type(store, record, field, why):  # noqa: ANN001
+def test_reader_fails_on_missing_record_field_or_type(store, record, field, why):
     t = _run(f'<Action ID="BlackboardValueReaderMongo" output_port="x" mongo_record_name="{record}" '
              f'mongo_param_name="{field}"/>', store)
     assert t.tick() is FAILURE and why in t.root.feedback_message
 
 
-def test_writer_converts_text_and_resolves_keys(store):  # noqa: ANN001
+def test_writer_converts_text_and_resolves_keys(store):
     body = ("<Sequence>"
             '<Action ID="MongoValueWriter" input_value="true" mongo_record_name="GBB" mongo_param_name="FLG"/>'
             '<Action ID="MongoValueWriter" input_value="2.5" mongo_record_name="GBB" mongo_param_name="D"/>'
@@ -64,7 +64,7 @@ def test_writer_converts_text_and_resolves_keys(store):  # noqa: ANN001
     assert doc["S"] == "abc" and doc["K"] == 12 and "timestamps" in doc
 
 
-def test_writer_retries_a_missing_record_then_fails(store):  # noqa: ANN001
+def test_writer_retries_a_missing_record_then_fails(store):
     t = _run('<Action ID="MongoValueWriter" input_value="1" mongo_record_name="LATER" mongo_param_name="X"/>', store)
     clock = [0.0]
     t.ctx.clock = lambda: clock[0]

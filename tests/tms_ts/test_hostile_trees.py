@@ -46,7 +46,7 @@ def nested(depth: int) -> str:
     return doc("<Sequence>" * depth + "<AlwaysSuccess/>" + "</Sequence>" * depth)
 
 
-def refused(entry: str, xml: str, **kw) -> str:  # noqa: ANN003
+def refused(entry: str, xml: str, **kw) -> str:
     """The one-line TreeLoadError ``load_tree`` gives ``xml`` (any other exception fails the test)."""
     TRIED[entry] += 1
     with pytest.raises(TreeLoadError) as err:
@@ -56,7 +56,7 @@ def refused(entry: str, xml: str, **kw) -> str:  # noqa: ANN003
     return message
 
 
-def loads_or_refuses(entry: str, xml: str, **kw):  # noqa: ANN003, ANN201
+def loads_or_refuses(entry: str, xml: str, **kw):
     """Accepted (the tree) or a one-line TreeLoadError (None); nothing else may come out."""
     TRIED[entry] += 1
     try:
@@ -67,14 +67,14 @@ def loads_or_refuses(entry: str, xml: str, **kw):  # noqa: ANN003, ANN201
 
 
 @pytest.fixture(scope="module", autouse=True)
-def _report():  # noqa: ANN202
+def _report():
     yield
     print("\ninputs tried per entry:", dict(sorted(TRIED.items())))
 
 
 # -- limits ------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("depth", [MAX_TREE_DEPTH, 1000, 10_000, 100_000])
-def test_a_deep_tree_is_refused_at_its_line_and_column_without_recursing(depth) -> None:  # noqa: ANN001
+def test_a_deep_tree_is_refused_at_its_line_and_column_without_recursing(depth) -> None:
     # the 1000-deep tree raised RecursionError in the manager's callback; 100,000 deep is 2.2 MB (size limit first)
     message = refused("load_tree", nested(depth))
     if len(nested(depth)) > MAX_TREE_BYTES:
@@ -122,13 +122,13 @@ def test_subtree_chains_cannot_multiply_the_built_tree_past_its_limits() -> None
 
 @given(st.integers(MAX_TREE_DEPTH - 2, 30_000))
 @HYPO
-def test_any_depth_past_the_limit_is_a_tree_load_error(depth) -> None:  # noqa: ANN001
+def test_any_depth_past_the_limit_is_a_tree_load_error(depth) -> None:
     assert "MAX_TREE" in refused("load_tree", nested(depth))
 
 
 # -- names -------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", BAD_NAMES)
-def test_a_leaf_model_name_ros_refuses_is_refused_at_load_naming_leaf_line_and_name(name) -> None:  # noqa: ANN001
+def test_a_leaf_model_name_ros_refuses_is_refused_at_load_naming_leaf_line_and_name(name) -> None:
     message = refused("load_tree", doc(f"<Sequence>\n<AlwaysSuccess/>\n{leaf(model=name)}</Sequence>"))
     assert "LeafNodeZx200 (line 3, column 1)" in message and "model_name" in message, message
 
@@ -146,13 +146,13 @@ def test_a_task_parameter_model_name_is_checked_when_it_is_resolved() -> None:
 
 
 @pytest.mark.parametrize("subtask", ["", "st ic120", "1st", "st_ic120＿", "a" * 240])
-def test_bad_subtask_names_are_refused_at_load(subtask) -> None:  # noqa: ANN001
+def test_bad_subtask_names_are_refused_at_load(subtask) -> None:
     message = refused("load_tree", doc(leaf(subtask=subtask)))
     assert "subtask_name" in message or "action name" in message, message
 
 
 @pytest.mark.parametrize("record", ["", " pose", "pose ", "a" * 300])
-def test_bad_literal_record_names_are_refused_at_load(record) -> None:  # noqa: ANN001
+def test_bad_literal_record_names_are_refused_at_load(record) -> None:
     assert "record_name" in refused("load_tree", doc(leaf(record=record)))
 
 
@@ -163,7 +163,7 @@ def test_an_empty_record_is_allowed_where_the_subtask_reads_none() -> None:
 
 @given(st.text(min_size=0, max_size=40))
 @HYPO
-def test_any_model_name_either_loads_as_a_valid_ros_name_or_is_refused(name) -> None:  # noqa: ANN001
+def test_any_model_name_either_loads_as_a_valid_ros_name_or_is_refused(name) -> None:
     tree = loads_or_refuses("load_tree names", doc(leaf(model=name)))
     if tree is not None:  # what loads is what rclpy takes: no ValueError can come from it in a tick
         (the_leaf,) = tree.leaves
@@ -183,7 +183,7 @@ def test_unknown_type_misspelled_port_and_missing_subtree_name_their_line_and_co
 @given(st.sampled_from(["AlwaysSuccess", "Delay", "Sequence", "SetBlackboard", "Inverter"]),
        st.text(alphabet="abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=12))
 @HYPO
-def test_a_mutated_node_or_port_is_refused_naming_it(node_id, junk) -> None:  # noqa: ANN001
+def test_a_mutated_node_or_port_is_refused_naming_it(node_id, junk) -> None:
     message = refused("load_tree", doc(f'<Sequence><{node_id}{junk}X/></Sequence>'))
     assert f"{node_id}{junk}X" in message
     message = refused("load_tree", doc(f'<Sequence><AlwaysSuccess {junk}X="1"/></Sequence>'))
@@ -192,7 +192,7 @@ def test_a_mutated_node_or_port_is_refused_naming_it(node_id, junk) -> None:  # 
 
 @given(st.text(max_size=300))
 @HYPO
-def test_arbitrary_text_is_accepted_or_refused_never_raised(text) -> None:  # noqa: ANN001
+def test_arbitrary_text_is_accepted_or_refused_never_raised(text) -> None:
     loads_or_refuses("load_tree text", text)
     loads_or_refuses("load_tree text", doc(text))
 
@@ -235,7 +235,7 @@ def sequence_entry(data: str, task_id: int = -1) -> list:
 
 
 @pytest.mark.parametrize("task_id", [0, -1, -5, 2**31, 2**63, True, 1.5, "1"])
-def test_json_task_ids_outside_int32_are_refused(task_id) -> None:  # noqa: ANN001
+def test_json_task_ids_outside_int32_are_refused(task_id) -> None:
     data = json.dumps({"tasks": [{"task_id": task_id, "task_sequence": nested(1)}]})
     TRIED["/task_sequence"] += 1
     with pytest.raises(TaskSequenceError, match=r"tasks\[0\]"):
@@ -243,7 +243,7 @@ def test_json_task_ids_outside_int32_are_refused(task_id) -> None:  # noqa: ANN0
 
 
 @pytest.mark.parametrize("param", [0, -2, 2**31, 2**63])
-def test_the_task_id_parameter_outside_int32_is_refused(param) -> None:  # noqa: ANN001
+def test_the_task_id_parameter_outside_int32_is_refused(param) -> None:
     TRIED["/task_sequence"] += 1
     with pytest.raises(TaskSequenceError, match="parameter task_id"):
         parse_task_sequence(nested(1), param)
@@ -278,13 +278,13 @@ JSON_VALUES = st.recursive(st.none() | st.booleans() | st.integers(-2**70, 2**70
                 max_size=4),
        st.sampled_from([-1, 1, 0, 2**31, 2**63]))
 @HYPO
-def test_any_json_message_starts_valid_ids_or_is_refused(tasks, param) -> None:  # noqa: ANN001
+def test_any_json_message_starts_valid_ids_or_is_refused(tasks, param) -> None:
     sequence_entry(json.dumps({"tasks": tasks}), param)
 
 
 @given(JSON_VALUES | st.text(max_size=200))
 @HYPO
-def test_any_message_text_is_accepted_or_refused_never_raised(value) -> None:  # noqa: ANN001
+def test_any_message_text_is_accepted_or_refused_never_raised(value) -> None:
     sequence_entry(value if isinstance(value, str) else json.dumps(value))
 
 
@@ -295,7 +295,7 @@ def test_check_tree_is_load_tree_without_ros_or_db() -> None:
         check_tree(doc(leaf(model="d37pxi_24＿")), source="t.xml")
 
 
-def _depth(value) -> int:  # noqa: ANN001
+def _depth(value) -> int:
     if isinstance(value, list):
         return 1 + max((_depth(v) for v in value), default=0)
     if isinstance(value, dict):
@@ -310,7 +310,7 @@ NESTED_JSON = st.recursive(st.text(alphabet='[]{}"\\ab', max_size=6) | st.intege
 
 @given(NESTED_JSON)
 @HYPO
-def test_the_json_depth_check_is_exact_for_valid_json_whatever_its_strings_hold(value) -> None:  # noqa: ANN001
+def test_the_json_depth_check_is_exact_for_valid_json_whatever_its_strings_hold(value) -> None:
     # brackets, quotes and backslashes inside strings are no nesting; the check agrees with the real depth
     from tms_ts.limits import json_depth_exceeds
 

@@ -33,7 +33,7 @@ def _one_leaf(model: str, leaf: str, subtask: str, record: str) -> str:
             f"</Sequence></BehaviorTree></root>")
 
 
-def _seed(store) -> None:  # noqa: ANN001
+def _seed(store) -> None:
     store.upsert_parameter({"model_name": "ic120", "type": "static", "record_name": "load_point",
                             "x": 10.0, "y": 2.0, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0})
     store.upsert_parameter({"model_name": "zx200", "type": "static", "record_name": "initial_pose", "trajectory": 1,
@@ -42,12 +42,12 @@ def _seed(store) -> None:  # noqa: ANN001
     store.upsert_parameter({"record_name": "HANDOFF", "type": "dynamic", "IC120_TURN": True, "ZX200_TURN": False})
 
 
-def _state(system, task_id):  # noqa: ANN001, ANN202
+def _state(system, task_id):
     t = system.task(task_id)
     return None if t is None else t.state
 
 
-def test_two_tasks_hand_a_flag_back_and_forth_for_5_rounds(ts_system):  # noqa: ANN001
+def test_two_tasks_hand_a_flag_back_and_forth_for_5_rounds(ts_system):
     from tms_msg.msg import TaskIds, TaskState
 
     _seed(ts_system.store)
@@ -66,7 +66,7 @@ def test_two_tasks_hand_a_flag_back_and_forth_for_5_rounds(ts_system):  # noqa: 
     assert system.store.get_parameter("zx200", "initial_pose")["LOCK_FLG"] is False  # cleared on result
 
 
-def test_cancel_one_task_then_emergency_cancels_the_other(ts_system):  # noqa: ANN001
+def test_cancel_one_task_then_emergency_cancels_the_other(ts_system):
     from std_msgs.msg import Bool, Int32
 
     from tms_msg.msg import TaskIds, TaskState
@@ -97,7 +97,7 @@ def test_cancel_one_task_then_emergency_cancels_the_other(ts_system):  # noqa: A
     assert system.store.get_parameter("zx200", "initial_pose")["LOCK_FLG"] is False
 
 
-def test_emergency_escalates_when_a_subtask_never_confirms(ts_system):  # noqa: ANN001
+def test_emergency_escalates_when_a_subtask_never_confirms(ts_system):
     from std_msgs.msg import Bool
 
     from tms_msg.msg import TaskIds, TaskState
@@ -115,7 +115,7 @@ def test_emergency_escalates_when_a_subtask_never_confirms(ts_system):  # noqa: 
     system.wait(lambda: emg and emg[-1].data is True, 10, "/zx200/emg_stop true")
 
 
-def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):  # noqa: ANN001
+def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):
     from tms_msg.msg import TaskIds, TaskState
 
     _seed(ts_system.store)
@@ -137,7 +137,7 @@ def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):  #
     assert "GOAL" not in system.procs["stub"].output  # nothing reached planning
 
 
-def test_a_manager_stopped_mid_task_cancels_its_subtasks_and_locks_the_machines(ts_system):  # noqa: ANN001
+def test_a_manager_stopped_mid_task_cancels_its_subtasks_and_locks_the_machines(ts_system):
     """SIGINT to the manager (Ctrl-C, or a launch stopping): its running subtasks are canceled down to the
     planning servers and both machines' locks engaged before it exits 0, no traceback. With rclpy's own
     signal handler the context was gone before destroy_node, and neither went out."""
@@ -169,7 +169,7 @@ def test_a_manager_stopped_mid_task_cancels_its_subtasks_and_locks_the_machines(
         assert system.procs["stub"].wait_for(f"CANCELED {goal}", 10), system.procs["stub"].output
 
 
-def test_a_subtask_server_stopped_mid_goal_cancels_downstream_and_aborts_naming_why(ts_system):  # noqa: ANN001
+def test_a_subtask_server_stopped_mid_goal_cancels_downstream_and_aborts_naming_why(ts_system):
     """SIGINT to a subtask server while its goal runs: the planning goal is canceled, the task ends FAILURE saying
     the server was stopping, the server exits 0 with no traceback (it used to die in the shut-down context)."""
     import signal

@@ -21,7 +21,7 @@ ACTION = "/zx200/subtask_zx200_change_pose"
 
 
 @pytest.fixture
-def peer_stack(tmp_path, procs):  # noqa: ANN001, ANN201
+def peer_stack(tmp_path, procs):
     """The zx200 subtask servers over a planning stub whose goals run 30 s (a cancel ends them at once)."""
     from tms_db import open_store
 
@@ -42,7 +42,7 @@ def peer_stack(tmp_path, procs):  # noqa: ANN001, ANN201
     return stub, subtasks
 
 
-def _spin_until(node, predicate, timeout: float, what: str, procs=()):  # noqa: ANN001, ANN202
+def _spin_until(node, predicate, timeout: float, what: str, procs=()):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         node.executor_for_test.spin_once(timeout_sec=0.05)
@@ -52,7 +52,7 @@ def _spin_until(node, predicate, timeout: float, what: str, procs=()):  # noqa: 
     raise AssertionError(f"timed out after {timeout} s waiting for {what}\n{out}")
 
 
-def test_a_leaf_node_base_client_runs_a_subtask_and_its_cancel_is_confirmed(peer_stack, ros_node):  # noqa: ANN001
+def test_a_leaf_node_base_client_runs_a_subtask_and_its_cancel_is_confirmed(peer_stack, ros_node):
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
 
@@ -88,7 +88,7 @@ def test_a_leaf_node_base_client_runs_a_subtask_and_its_cancel_is_confirmed(peer
     assert took < 5.0, f"cancel confirmed only {took:.2f} s after the request"
 
 
-def test_a_leaf_node_base_client_gets_a_failure_as_false_and_its_reason_as_status(peer_stack, ros_node):  # noqa: ANN001
+def test_a_leaf_node_base_client_gets_a_failure_as_false_and_its_reason_as_status(peer_stack, ros_node):
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
 

@@ -23,18 +23,18 @@ pytestmark = pytest.mark.integration
 class _DropGoalResponses(ClientHandleProxy):
     """Wraps an rclpy action-client handle: every goal response is taken and discarded (a dropped reply)."""
 
-    def __init__(self, inner) -> None:  # noqa: ANN001
+    def __init__(self, inner) -> None:
         super().__init__(inner)
         self.dropped = 0
 
-    def take_goal_response(self, response_type):  # noqa: ANN001, ANN201
+    def take_goal_response(self, response_type):
         data = self._inner.take_goal_response(response_type)
         if all(data):
             self.dropped += 1
         return (None, None)
 
 
-def test_a_goal_whose_response_was_lost_is_cancelled_by_its_id(ts_system):  # noqa: ANN001
+def test_a_goal_whose_response_was_lost_is_cancelled_by_its_id(ts_system):
     from tms_ts.leaf import PENDING
     from tms_ts.nodes.ros_port import ManagerRosPort
 
@@ -42,10 +42,10 @@ def test_a_goal_whose_response_was_lost_is_cancelled_by_its_id(ts_system):  # no
                                       "x": 10.0, "y": 2.0, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0})
     system = ts_system.start(stub_duration_s=60.0)
     port = ManagerRosPort(system.node)
-    client = port._client("ic120", "st_ic120_navigate_anywhere")  # noqa: SLF001 - the handle to wrap
+    client = port._client("ic120", "st_ic120_navigate_anywhere")  # the handle to wrap
     system.wait(client.server_is_ready, 30, "st_ic120_navigate_anywhere")
-    dropper = _DropGoalResponses(client._client_handle)  # noqa: SLF001
-    client._client_handle = dropper  # noqa: SLF001
+    dropper = _DropGoalResponses(client._client_handle)
+    client._client_handle = dropper
 
     goal = port.send_subtask_goal("ic120", "st_ic120_navigate_anywhere", "load_point")
     stub = system.procs["stub"]

@@ -26,7 +26,7 @@ ENDS = '<root><BehaviorTree ID="{id}"><Sequence><AlwaysSuccess name="{name}"/></
 
 
 @pytest.fixture
-def manager(tmp_path, domain, ros_node, monkeypatch):  # noqa: ANN001, ANN201
+def manager(tmp_path, domain, ros_node, monkeypatch):
     import rclpy
     from rclpy.context import Context
     from rclpy.parameter import Parameter
@@ -47,7 +47,7 @@ def manager(tmp_path, domain, ros_node, monkeypatch):  # noqa: ANN001, ANN201
 
     real = module.load_tree
 
-    def load_tree(xml, ctx=None, **kwargs):  # noqa: ANN001, ANN003, ANN202
+    def load_tree(xml, ctx=None, **kwargs):
         if "SLOW" in xml:  # pure Python for SLOW_S: holds the GIL as a large tree's parse and build do
             end, x = time.monotonic() + SLOW_S, 0
             while time.monotonic() < end:
@@ -64,7 +64,7 @@ def manager(tmp_path, domain, ros_node, monkeypatch):  # noqa: ANN001, ANN201
     ex = make_executor("events", context=ctx)  # as the executable runs it
     ex.add_node(node)
 
-    def spin(seconds: float, until=None) -> bool:  # noqa: ANN001
+    def spin(seconds: float, until=None) -> bool:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             ex.spin_until_future_complete(Future(), timeout_sec=0.02)
@@ -79,12 +79,12 @@ def manager(tmp_path, domain, ros_node, monkeypatch):  # noqa: ANN001, ANN201
     rclpy.shutdown(context=ctx)
 
 
-def _ended(node, task_id: int) -> TaskState | None:  # noqa: ANN001
+def _ended(node, task_id: int) -> TaskState | None:
     entry = node.status.ended.get(task_id)
     return None if entry is None else entry.state
 
 
-def test_a_slow_load_delays_no_tick_no_cancel_and_no_emergency_stop(manager, ros_node):  # noqa: ANN001
+def test_a_slow_load_delays_no_tick_no_cancel_and_no_emergency_stop(manager, ros_node):
     from std_msgs.msg import Bool, Int32
 
     node = manager
@@ -96,9 +96,9 @@ def test_a_slow_load_delays_no_tick_no_cancel_and_no_emergency_stop(manager, ros
     assert node.spin(10, lambda: all(t in node.runs and node.runs[t].state == "running" for t in (1, 2)))
 
     node.start_task(3)  # SLOW_S of loading from here
-    assert node.spin(1.0, lambda: node.loader.pending == 1 and 3 in node._loading)  # noqa: SLF001
-    start, ticks0 = time.monotonic(), node._stats["ticks"]  # noqa: SLF001
-    node._stats["max_late_ms"] = 0.0  # noqa: SLF001 - the lateness while the tree loads, from here
+    assert node.spin(1.0, lambda: node.loader.pending == 1 and 3 in node._loading)
+    start, ticks0 = time.monotonic(), node._stats["ticks"]
+    node._stats["max_late_ms"] = 0.0  # the lateness while the tree loads, from here
     cancel.publish(Int32(data=1))
     # CANCELED within 1 s, the load still under way: the cancel did not wait for it
     assert node.spin(1.0, lambda: _ended(node, 1) is not None)
@@ -115,11 +115,11 @@ def test_a_slow_load_delays_no_tick_no_cancel_and_no_emergency_stop(manager, ros
     assert _ended(node, 3).state == TaskState.CANCELED
     assert _ended(node, 3).message == "canceled by /emergency_signal while its tree loaded (not started)"
     # ticks went on: at most 0.5 s late at any time (the load alone took SLOW_S), 80 % of them on time
-    assert node._stats["max_late_ms"] < 500.0, node._stats  # noqa: SLF001
-    assert node._stats["ticks"] - ticks0 >= 0.8 * window * 20.0, (node._stats, window)  # noqa: SLF001
+    assert node._stats["max_late_ms"] < 500.0, node._stats
+    assert node._stats["ticks"] - ticks0 >= 0.8 * window * 20.0, (node._stats, window)
 
 
-def test_a_load_that_raises_ends_that_start_only_and_an_unstored_tree_runs_under_an_ad_hoc_id(manager):  # noqa: ANN001
+def test_a_load_that_raises_ends_that_start_only_and_an_unstored_tree_runs_under_an_ad_hoc_id(manager):
     from std_msgs.msg import String
 
     node = manager
@@ -131,14 +131,14 @@ def test_a_load_that_raises_ends_that_start_only_and_an_unstored_tree_runs_under
     assert _ended(node, 4).message == "cannot start task 4: RecursionError: maximum recursion depth exceeded"
     assert _ended(node, 5).state == TaskState.SUCCESS
     assert _ended(node, 99).state == TaskState.FAILURE and "99" in _ended(node, 99).message
-    ticks = node._stats["ticks"]  # noqa: SLF001
+    ticks = node._stats["ticks"]
     # /task_sequence: parsed and matched against the stored tasks on the loader's thread too
-    node._on_task_sequence(String(data=ENDS.format(id="N", name="not stored")))  # noqa: SLF001
+    node._on_task_sequence(String(data=ENDS.format(id="N", name="not stored")))
     assert node.spin(10, lambda: _ended(node, -1) is not None)
     assert _ended(node, -1).state == TaskState.SUCCESS
     first = node.status.ended[5]
-    node._on_task_sequence(String(data=ENDS.format(id="E", name="fine")))  # noqa: SLF001 - task 5's tree: runs as 5
+    node._on_task_sequence(String(data=ENDS.format(id="E", name="fine")))  # task 5's tree: runs as 5
     assert node.spin(10, lambda: node.status.ended.get(5) not in (None, first))
     assert _ended(node, 5).state == TaskState.SUCCESS and -2 not in node.status.ended
     node.spin(0.5)
-    assert node._stats["ticks"] > ticks  # noqa: SLF001 - still ticking
+    assert node._stats["ticks"] > ticks  # still ticking

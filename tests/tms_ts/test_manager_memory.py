@@ -40,7 +40,7 @@ def _rss_mb(pid: int) -> float:
     raise AssertionError(f"no VmRSS for pid {pid}")
 
 
-def test_status_with_100_finished_runs_keeps_the_managers_memory_bounded(tmp_path, procs, ros_node):  # noqa: ANN001
+def test_status_with_100_finished_runs_keeps_the_managers_memory_bounded(tmp_path, procs, ros_node):
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from tms_db import open_store
@@ -60,7 +60,7 @@ def test_status_with_100_finished_runs_keeps_the_managers_memory_bounded(tmp_pat
     start = ros_node.create_publisher(TaskIds, "/tms_ts/start", reliable)
     ex = ros_node.executor_for_test
 
-    def spin(seconds: float, until=None) -> bool:  # noqa: ANN001
+    def spin(seconds: float, until=None) -> bool:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)

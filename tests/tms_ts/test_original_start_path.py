@@ -19,7 +19,7 @@ from tests.tms_ts.test_integration import _one_leaf, _seed, _state
 pytestmark = pytest.mark.integration
 
 
-def _gui_button(system, task_ids: list[int]) -> str:  # noqa: ANN001
+def _gui_button(system, task_ids: list[int]) -> str:
     """The original GUI's message for ``task_ids``, read through the DB reader as it reads them."""
     from tms_msg_db.srv import TmsdbGetTask
 
@@ -36,7 +36,7 @@ def _gui_button(system, task_ids: list[int]) -> str:  # noqa: ANN001
     return json.dumps({"tasks": tasks}, ensure_ascii=False)
 
 
-def _publish_task_sequence(system, data: str) -> None:  # noqa: ANN001
+def _publish_task_sequence(system, data: str) -> None:
     from std_msgs.msg import String
 
     pub = system.pubs.get("/task_sequence")
@@ -46,11 +46,11 @@ def _publish_task_sequence(system, data: str) -> None:  # noqa: ANN001
     pub.publish(String(data=data))
 
 
-def _goals(system) -> list[str]:  # noqa: ANN001
+def _goals(system) -> list[str]:
     return [line.split()[1] for line in system.procs["stub"].lines if line.startswith("GOAL ")]
 
 
-def _start_with_reader(ts_system, procs, manager_args: tuple[str, ...] = ()):  # noqa: ANN001, ANN202
+def _start_with_reader(ts_system, procs, manager_args: tuple[str, ...] = ()):
     _seed(ts_system.store)
     ts_system.store.add_task(_one_leaf("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere", "load_point"), task_id=1)
     ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=2)
@@ -61,7 +61,7 @@ def _start_with_reader(ts_system, procs, manager_args: tuple[str, ...] = ()):  #
     return system
 
 
-def test_the_original_guis_json_starts_its_tasks_and_an_xml_starts_the_stored_task(ts_system, procs):  # noqa: ANN001
+def test_the_original_guis_json_starts_its_tasks_and_an_xml_starts_the_stored_task(ts_system, procs):
     from tms_msg.msg import TaskState
 
     system = _start_with_reader(ts_system, procs)
@@ -83,7 +83,7 @@ def test_the_original_guis_json_starts_its_tasks_and_an_xml_starts_the_stored_ta
     assert system.procs["manager"].wait_for("/task_sequence: tasks[0] must be", 20), system.procs["manager"].output
 
 
-def test_the_manager_parameter_task_id_picks_its_entry_of_the_json(ts_system, procs):  # noqa: ANN001
+def test_the_manager_parameter_task_id_picks_its_entry_of_the_json(ts_system, procs):
     from tms_msg.msg import TaskState
 
     system = _start_with_reader(ts_system, procs, manager_args=("-p", "task_id:=2"))

@@ -44,7 +44,7 @@ CLAIM = """<root main_tree_to_execute="T"><BehaviorTree ID="T">
 
 
 @pytest.fixture
-def store(tmp_path):  # noqa: ANN201
+def store(tmp_path):
     from tms_db import open_store
 
     s = open_store(path=tmp_path / "db")
@@ -54,7 +54,7 @@ def store(tmp_path):  # noqa: ANN201
     s.close()
 
 
-def _claimers(store, gap: str) -> list[str]:  # noqa: ANN001
+def _claimers(store, gap: str) -> list[str]:
     """Two carriers wanting the free point in the same manager tick; who claimed it (set GOT)."""
     clock = [0.0]
     runs = []
@@ -94,7 +94,7 @@ class _Site:
     """Leaves complete after a few ticks; a carrier is inside the loading area from the start of its ENTER_PATH
     goal to the end of its LEAVE_PATH goal. A stand-in for the ZX200 task loads whoever arrived."""
 
-    def __init__(self, store) -> None:  # noqa: ANN001
+    def __init__(self, store) -> None:
         self.store = store
         self.goals: list[tuple[str, str, _Goal]] = []
         self.inside: set[str] = set()

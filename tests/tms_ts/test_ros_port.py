@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 
-def test_lock_engage_then_release_logs_both(ros_node) -> None:  # noqa: ANN001
+def test_lock_engage_then_release_logs_both(ros_node) -> None:
     """rclpy refuses a log call whose severity differs from the last call at the same line: engaging the lock
     (warning) and then releasing it (info) raised ValueError inside the manager's tick."""
     from tms_ts.nodes.ros_port import ManagerRosPort
@@ -16,7 +16,7 @@ def test_lock_engage_then_release_logs_both(ros_node) -> None:  # noqa: ANN001
         assert port.locked["zx200"] is False
 
 
-def test_planning_server_ready_sees_the_subtasks_planning_server_on_the_graph(ros_node) -> None:  # noqa: ANN001
+def test_planning_server_ready_sees_the_subtasks_planning_server_on_the_graph(ros_node) -> None:
     import time
 
     from rclpy.action import ActionServer

@@ -34,7 +34,7 @@ def _run(task_id: int, xml: str) -> TaskRun:
     return run
 
 
-def _snapshots(msg) -> dict[int, str]:  # noqa: ANN001
+def _snapshots(msg) -> dict[int, str]:
     return {t.task_id: t.tree_snapshot for t in msg.tasks}
 
 
@@ -111,7 +111,7 @@ def test_a_task_started_again_leaves_the_finished_list_and_a_loading_one_is_repo
         (3, TaskState.RUNNING, "loading: tree being loaded off the tick")]
 
 
-def _wait(predicate, timeout: float = 10.0) -> None:  # noqa: ANN001
+def _wait(predicate, timeout: float = 10.0) -> None:
     end = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < end, "timed out"
@@ -119,7 +119,7 @@ def _wait(predicate, timeout: float = 10.0) -> None:  # noqa: ANN001
 
 
 def test_the_loader_thread_survives_whatever_a_load_raises_and_keeps_the_order():
-    def load(request: LoadRequest):  # noqa: ANN202
+    def load(request: LoadRequest):
         for task_id in request.task_ids:
             if task_id in (1, 5):
                 raise RecursionError("maximum recursion depth exceeded")
@@ -144,7 +144,7 @@ def test_the_loader_refuses_beyond_max_pending_and_a_load_runs_on_its_own_thread
     release = threading.Event()
     threads = []
 
-    def load(request: LoadRequest):  # noqa: ANN202
+    def load(request: LoadRequest):
         threads.append(threading.current_thread().name)
         release.wait(10)
         yield Loaded(request.seq, request.task_ids[0])

@@ -25,7 +25,7 @@ ROWS_SAMPLES = {
 JOINTS = {"swing_joint": 0.1, "boom_joint": -0.4, "arm_joint": 1.3, "bucket_joint": 0.6}
 
 
-def _sample(spec) -> dict:  # noqa: ANN001
+def _sample(spec) -> dict:
     for kind in ("change_pose", "excavate", "release_simple"):
         if kind in spec.name:
             return ROWS_SAMPLES[kind.removesuffix("_simple")]
@@ -106,7 +106,7 @@ def test_two_machines_servers_started_by_hand_get_their_own_names() -> None:
 
 
 @pytest.fixture
-def lone_subtasks(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
+def lone_subtasks(tmp_path, procs, ros_node):
     """A zx200 ``tms_ts_subtasks`` whose planning server never comes (planning_wait_s 30 s)."""
     from tms_db import open_store
 
@@ -121,7 +121,7 @@ def lone_subtasks(tmp_path, procs, ros_node):  # noqa: ANN001, ANN201
     return proc
 
 
-def _spin_until(node, predicate, timeout: float, what: str):  # noqa: ANN001, ANN202
+def _spin_until(node, predicate, timeout: float, what: str):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         node.executor_for_test.spin_once(timeout_sec=0.05)
@@ -131,7 +131,7 @@ def _spin_until(node, predicate, timeout: float, what: str):  # noqa: ANN001, AN
 
 
 @pytest.mark.integration
-def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_with_its_code(lone_subtasks, ros_node):  # noqa: ANN001
+def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_with_its_code(lone_subtasks, ros_node):
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
 
@@ -146,13 +146,13 @@ def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_w
     _spin_until(ros_node, client.server_is_ready, 30, "the subtask server")
     feedback: list[str] = []
 
-    def send(record: str):  # noqa: ANN202
+    def send(record: str):
         future = client.send_goal_async(LeafNodeBase.Goal(model_name="zx200", record_name=record),
                                         feedback_callback=lambda msg: feedback.append(msg.feedback.status))
         _spin_until(ros_node, future.done, 10, "the goal response")
         return future.result()
 
-    def outcome(handle) -> SubtaskOutcome:  # noqa: ANN001 - the typed outcome beside the bool result
+    def outcome(handle) -> SubtaskOutcome:  # the typed outcome beside the bool result
         key = bytes(handle.goal_id.uuid)
         _spin_until(ros_node, lambda: key in outcomes, 5, "the goal's SubtaskOutcome")
         return outcomes[key]
@@ -186,7 +186,7 @@ def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_w
 
 
 @pytest.mark.integration
-def test_the_server_is_named_after_its_machine_and_its_start_up_parameters_refuse_a_set(lone_subtasks, ros_node):  # noqa: ANN001
+def test_the_server_is_named_after_its_machine_and_its_start_up_parameters_refuse_a_set(lone_subtasks, ros_node):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
 

@@ -24,7 +24,7 @@ def leaf(record: str = "initial_pose") -> str:
     return f'<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose" record_name="{record}"/>'
 
 
-def step_all(runs: list[TaskRun], seconds: float, spin) -> None:  # noqa: ANN001
+def step_all(runs: list[TaskRun], seconds: float, spin) -> None:
     """The manager's tick loop: step every run, never letting an exception out (the test fails if one does)."""
     end = time.monotonic() + seconds
     while time.monotonic() < end and not all(r.done for r in runs):
@@ -34,7 +34,7 @@ def step_all(runs: list[TaskRun], seconds: float, spin) -> None:  # noqa: ANN001
         spin()
 
 
-def test_a_bad_name_past_the_loader_ends_its_task_only_and_a_run_time_record_is_checked(ros_node) -> None:  # noqa: ANN001
+def test_a_bad_name_past_the_loader_ends_its_task_only_and_a_run_time_record_is_checked(ros_node) -> None:
     from rclpy.action import ActionServer
 
     from tms_msg_ts.action import LeafNodeBase
@@ -72,10 +72,10 @@ def test_a_cancel_whose_halt_raises_ends_that_task_and_returns() -> None:
     class HaltRaises(StatefulNode):
         PORTS: dict[str, Port] = {}
 
-        def on_start(self):  # noqa: ANN202
+        def on_start(self):
             return RUNNING
 
-        def on_running(self):  # noqa: ANN202
+        def on_running(self):
             return RUNNING
 
         def on_halted(self) -> None:

@@ -17,7 +17,7 @@ from tests.rosproc import executable
 TREES = Path(__file__).parent / "trees"
 
 
-def test_a_run_stopped_by_sigint_writes_its_report_marked_stopped(procs, ros_node, tmp_path):  # noqa: ANN001
+def test_a_run_stopped_by_sigint_writes_its_report_marked_stopped(procs, ros_node, tmp_path):
     from action_msgs.msg import GoalStatusArray
     from rosgraph_msgs.msg import Clock
 
@@ -33,7 +33,7 @@ def test_a_run_stopped_by_sigint_writes_its_report_marked_stopped(procs, ros_nod
                   "-p", 'wait_for_actions:=["/probe_action"]', "-p", "progress_period_s:=0.5"], name="experiment")
     sim_ns = 0
 
-    def run_for(seconds: float, until=lambda: False) -> None:  # noqa: ANN001
+    def run_for(seconds: float, until=lambda: False) -> None:
         nonlocal sim_ns
         end = time.monotonic() + seconds
         while time.monotonic() < end and not until():
@@ -56,7 +56,7 @@ def test_a_run_stopped_by_sigint_writes_its_report_marked_stopped(procs, ros_nod
     assert (reports[0].parent / "index.html").read_text().count("stopped before the end") == 2  # title and h1
 
 
-def test_without_wait_for_actions_it_waits_for_the_servers_the_tasks_trees_call(procs, ros_node, tmp_path):  # noqa: ANN001
+def test_without_wait_for_actions_it_waits_for_the_servers_the_tasks_trees_call(procs, ros_node, tmp_path):
     """No hand list: the tasks' trees in tms_db name the action servers (leaf subtasks and their planning actions);
     the tasks start only once each of them is on the graph."""
     from action_msgs.msg import GoalStatusArray
@@ -79,7 +79,7 @@ def test_without_wait_for_actions_it_waits_for_the_servers_the_tasks_trees_call(
                   "-p", "progress_period_s:=0.5"], name="experiment")
     sim_ns = 0
 
-    def run_for(seconds: float, until=lambda: False) -> None:  # noqa: ANN001
+    def run_for(seconds: float, until=lambda: False) -> None:
         nonlocal sim_ns
         end = time.monotonic() + seconds
         while time.monotonic() < end and not until():

@@ -78,7 +78,7 @@ def test_site_state_trail_thins_close_points_and_snapshot_is_json_ready():
     assert json.loads(json.dumps(s.snapshot()))["events"][0]["text"].startswith("task 99")
 
 
-def _machines(names):  # noqa: ANN001, ANN202
+def _machines(names):
     site = load_site()
     return [load_named(name, site=site) for name in names]
 

@@ -72,7 +72,7 @@ def _state(page, task_id: int) -> str:
     return cell.inner_text() if cell else ""
 
 
-def _wait(predicate, timeout: float, what: str, launcher) -> None:  # noqa: ANN001
+def _wait(predicate, timeout: float, what: str, launcher) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if predicate():

@@ -63,14 +63,14 @@ def foreign_site():
     pages: dict[str, bytes] = {}
 
     class Handler(http.server.BaseHTTPRequestHandler):
-        def do_GET(self) -> None:  # noqa: N802 - http.server's name
+        def do_GET(self) -> None:  # http.server's name
             body = pages.get(self.path.split("?")[0])
             self.send_response(200 if body else 404)
             self.send_header("Content-Type", "text/html; charset=utf-8")
             self.end_headers()
             self.wfile.write(body or b"")
 
-        def log_message(self, *args) -> None:  # noqa: ANN002 - keep pytest's output clean
+        def log_message(self, *args) -> None:  # keep pytest's output clean
             pass
 
     server = http.server.ThreadingHTTPServer(("127.0.0.1", free_port()), Handler)

@@ -7,7 +7,7 @@ import pytest
 from tests.rosproc import executable
 
 
-def _run(procs, args: list[str]) -> tuple[int | None, list[str]]:  # noqa: ANN001
+def _run(procs, args: list[str]) -> tuple[int | None, list[str]]:
     proc = procs([executable("tms_rc", "ic120_vessel"), "--ros-args", "-p", "machine:=ic120", *args])
     code = proc.wait(60)
     lines = [line for line in proc.output.splitlines() if line.strip()]

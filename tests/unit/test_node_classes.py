@@ -73,7 +73,7 @@ def test_every_node_module_defines_one_module_level_node_class():
 
 
 @pytest.fixture
-def context(domain, tmp_path):  # noqa: ANN001, ANN201
+def context(domain, tmp_path):
     import rclpy
     from rclpy.context import Context
 

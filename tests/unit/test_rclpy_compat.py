@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
-def context(domain):  # noqa: ANN001, ANN201
+def context(domain):
     import rclpy
     from rclpy.context import Context
 
@@ -30,7 +30,7 @@ def context(domain):  # noqa: ANN001, ANN201
     rclpy.try_shutdown(context=ctx)
 
 
-def _node(context, name: str):  # noqa: ANN001, ANN202
+def _node(context, name: str):
     import rclpy
 
     return rclpy.create_node(name, context=context, start_parameter_services=False, enable_rosout=False)

@@ -14,7 +14,7 @@ from tms_common.node import realtime_thread
 LOG = logging.getLogger("test_realtime_thread")
 
 
-def _in_thread(fn):  # noqa: ANN001, ANN202 - run fn in a fresh thread, return (result, policy after)
+def _in_thread(fn):  # run fn in a fresh thread, return (result, policy after)
     out: dict = {}
 
     def run() -> None:

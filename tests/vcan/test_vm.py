@@ -58,7 +58,7 @@ def _runner(*args: str | Path, timeout: float) -> subprocess.CompletedProcess[st
     return proc
 
 
-def _vm_module():  # noqa: ANN202 - the runner script loaded as a module
+def _vm_module():  # the runner script loaded as a module
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("run_vcan_vm", RUNNER)

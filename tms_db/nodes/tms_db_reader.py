@@ -60,7 +60,7 @@ class TmsDbReader(Node):
         self.create_service(TmsdbGetParameter, PARAMETER_SERVICE, self._get_parameter)
         self.get_logger().info(f"tms_db_reader ready: {TASK_SERVICE}, {PARAMETER_SERVICE}")
 
-    def _get_task(self, request, response):  # noqa: ANN001, ANN202
+    def _get_task(self, request, response):
         try:
             response.task = str(self.store.get_task(getattr(request, TASK_ID_FIELD)).get("task_sequence", ""))
         except StoreError as exc:
@@ -68,7 +68,7 @@ class TmsDbReader(Node):
             response.task = ""
         return response
 
-    def _get_parameter(self, request, response):  # noqa: ANN001, ANN202
+    def _get_parameter(self, request, response):
         try:
             doc = self.store.get_parameter(request.model_name or None, request.record_name)
         except StoreError as exc:

@@ -52,13 +52,13 @@ class TmsDbWriter(Node):
         self.create_service(SetParameter, "~/set_parameter", self._set_parameter)
         self.get_logger().info("tms_db_writer ready")
 
-    def _on_update(self, msg) -> None:  # noqa: ANN001
+    def _on_update(self, msg) -> None:
         try:
             apply_update(self.store, msg.model_name, msg.record_name, msg.fields_json, self.topic_upsert)
         except StoreError as exc:
             self.get_logger().error(f"parameter_update dropped: {exc}")
 
-    def _set_parameter(self, request, response):  # noqa: ANN001, ANN202
+    def _set_parameter(self, request, response):
         try:
             apply_update(self.store, request.model_name, request.record_name, request.fields_json, request.upsert)
         except StoreError as exc:

@@ -107,7 +107,7 @@ _STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CAN
 class Zx200PlannerNode(Node):
     """Validates and sequences ZX200 goals; motion is delegated to ``arm_controller/move``."""
 
-    def __init__(self, node_name: str = PLANNER_NODE, **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+    def __init__(self, node_name: str = PLANNER_NODE, **kwargs) -> None:  # rclpy Node kwargs
         super().__init__(node_name, **kwargs)
         params = StartupParams(self)
 
@@ -194,21 +194,21 @@ class Zx200PlannerNode(Node):
         return future.result() if future.done() else None
 
     # -------------------------------------------------------------- goals, cancel, stop (run_node's hook)
-    def _on_goal(self, _request) -> GoalResponse:  # noqa: ANN001
+    def _on_goal(self, _request) -> GoalResponse:
         if self._goals.stopping.is_set():
             self.get_logger().error(f"goal rejected: {self.get_name()} is stopping")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _on_cancel(self, _handle) -> CancelResponse:  # noqa: ANN001
+    def _on_cancel(self, _handle) -> CancelResponse:
         self._ticker.wake()  # forwarded to the controller now, not at the next tick
         return CancelResponse.ACCEPT
 
-    async def _execute(self, execute, action_type, name, handle):  # noqa: ANN001, ANN202
+    async def _execute(self, execute, action_type, name, handle):
         with self._goals.running():
             try:
                 return await execute(handle)
-            except Exception as exc:  # noqa: BLE001 - the goal ends with a failure code, never rclpy's empty result
+            except Exception as exc:  # the goal ends with a failure code, never rclpy's empty result
                 self.get_logger().error(f"{name} goal failed inside the planner: {traceback.format_exc()}")
                 if not handle.is_active:
                     raise
@@ -220,7 +220,7 @@ class Zx200PlannerNode(Node):
             f"stopping: canceling {n} running goal(s) at the controller"))
 
     # -------------------------------------------------------------- change_pose options (ours, beside the action)
-    def _on_options(self, request, response):  # noqa: ANN001, ANN202
+    def _on_options(self, request, response):
         tol = float(request.theta_w_tolerance)
         if not math.isfinite(tol) or tol < 0:
             response.accepted = False
@@ -232,13 +232,13 @@ class Zx200PlannerNode(Node):
         response.accepted = True
         return response
 
-    def _take_options(self, handle) -> tuple[bool, float]:  # noqa: ANN001
+    def _take_options(self, handle) -> tuple[bool, float]:
         """The options given for this goal's id (pass_through, theta_w_tolerance); the defaults without."""
         pass_through, tol, _ = self._options.pop(bytes(handle.goal_id.uuid), (False, 0.0, 0.0))
         return pass_through, tol
 
     # -------------------------------------------------------------- common execution
-    def _end(self, handle, action_type, code: int, message: str, name: str | None = None) -> object:  # noqa: ANN001
+    def _end(self, handle, action_type, code: int, message: str, name: str | None = None) -> object:
         """Publish the goal's outcome (code and text), then end it: SUCCEEDED, CANCELED or ABORTED by ``code``."""
         self._outcome_pub.publish(Zx200PlanningOutcome(
             action=f"{self.get_namespace().rstrip('/')}/{name or self._action_names[action_type]}", goal_id=handle.goal_id,
@@ -253,8 +253,8 @@ class Zx200PlannerNode(Node):
             handle.abort()
         return result
 
-    async def _run(self, handle, action_type, plan, needs_q: bool = True, name: str | None = None,  # noqa: ANN001
-                   report=None) -> object:  # noqa: ANN001
+    async def _run(self, handle, action_type, plan, needs_q: bool = True, name: str | None = None,
+                   report=None) -> object:
         t0 = time.monotonic()
         pass_through_end, self._pass_through_end = self._pass_through_end, None
         try:
@@ -289,7 +289,7 @@ class Zx200PlannerNode(Node):
         return self._end(handle, action_type, codes.SUCCESS, report() if report is not None else "done", name)
 
     @staticmethod
-    def _segments(targets) -> list:  # noqa: ANN001
+    def _segments(targets) -> list:
         """The plan as controller segments. Every segment but the last is a via point (approach,
         carry, ...: via_tolerance_*); so is a last one the planner marks (excavate's lift, release's
         open: the next goal goes on from it)."""
@@ -307,7 +307,7 @@ class Zx200PlannerNode(Node):
             out.append(seg)
         return out
 
-    async def _move(self, handle, action_type, targets, on_accepted) -> tuple[int, str]:  # noqa: ANN001
+    async def _move(self, handle, action_type, targets, on_accepted) -> tuple[int, str]:
         """Run the plan as one controller goal; the controller's phase feedback is forwarded."""
         goal = Zx200ArmMove.Goal(segments=self._segments(targets))
         fb = action_type.Feedback()
@@ -315,7 +315,7 @@ class Zx200PlannerNode(Node):
         handle.publish_feedback(fb)
         last_label = [fb.state]
 
-        def forward(msg) -> None:  # noqa: ANN001
+        def forward(msg) -> None:
             label = msg.feedback.label
             if label and label != last_label[0]:
                 last_label[0] = label
@@ -346,7 +346,7 @@ class Zx200PlannerNode(Node):
             message = f"{last_label[0]}: {message}"
         return code, message
 
-    async def _await_result(self, handle, gh) -> tuple[int, str]:  # noqa: ANN001
+    async def _await_result(self, handle, gh) -> tuple[int, str]:
         """Wait for the controller's result; recover a lost result from the goal status topic."""
         res_future = self._ticker.wake_on(gh.get_result_async())
         cancel_sent = False
@@ -387,11 +387,11 @@ class Zx200PlannerNode(Node):
         return code, message
 
     # -------------------------------------------------------------- the three actions
-    async def _change_pose(self, handle):  # noqa: ANN001, ANN202
+    async def _change_pose(self, handle):
         g = handle.request
         pass_through, theta_w_tolerance = self._take_options(handle)
 
-        def plan(q_plan):  # noqa: ANN001, ANN202
+        def plan(q_plan):
             return self.planner.change_pose(
                 joint_names=list(g.trajectory.joint_names),
                 joint_points=[list(p.positions) for p in g.trajectory.points],
@@ -406,13 +406,13 @@ class Zx200PlannerNode(Node):
 
         return await self._run(handle, TmsRpZx200ChangePose, plan)
 
-    async def _excavate(self, handle):  # noqa: ANN001, ANN202
+    async def _excavate(self, handle):
         p = handle.request.position_with_angle
         return await self._run(handle, TmsRpZx200ExcavateSimple, lambda _q_plan: self.planner.excavate(
             [p.position.x, p.position.y, p.position.z], p.theta_w, p.offset), needs_q=False)
 
-    async def _release(self, handle):  # noqa: ANN001, ANN202
-        def plan(q_plan):  # noqa: ANN001, ANN202
+    async def _release(self, handle):
+        def plan(q_plan):
             if q_plan is None:
                 raise PlanningError(f"no joint_states received within {JOINT_STATES_WAIT_S:g} s")
             return self.planner.release(handle.request.target_angle, q_plan)
@@ -449,11 +449,11 @@ class Zx200PlannerNode(Node):
         text = f"done; {r.checked} configurations checked, smallest clearance beyond padding {clearance}"
         return text + (f"; detours: {'; '.join(r.detours)}" if r.detours else "")
 
-    async def _change_pose_plan(self, handle):  # noqa: ANN001, ANN202
+    async def _change_pose_plan(self, handle):
         g = handle.request
         pass_through, theta_w_tolerance = self._take_options(handle)
 
-        def plan(q_plan):  # noqa: ANN001, ANN202
+        def plan(q_plan):
             scene = self._scene()
             targets = self.collision.change_pose(
                 scene,
@@ -469,10 +469,10 @@ class Zx200PlannerNode(Node):
 
         return await self._run(handle, TmsRpZx200ChangePose, plan, name=CHANGE_POSE_PLAN, report=self._plan_report)
 
-    async def _excavate_plan(self, handle):  # noqa: ANN001, ANN202
+    async def _excavate_plan(self, handle):
         p = handle.request.position_with_angle
 
-        def plan(q_plan):  # noqa: ANN001, ANN202
+        def plan(q_plan):
             scene = self._scene()
             targets = self.collision.excavate(scene, [p.position.x, p.position.y, p.position.z], p.theta_w, p.offset,
                                               q_plan)

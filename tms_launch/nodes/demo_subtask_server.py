@@ -39,7 +39,7 @@ class DemoSubtaskServer(Node):
     def _on_goal(self, goal: LeafNodeBase.Goal) -> GoalResponse:
         return GoalResponse.ACCEPT if goal.record_name else GoalResponse.REJECT
 
-    def _execute(self, handle):  # noqa: ANN001, ANN202
+    def _execute(self, handle):
         end = time.monotonic() + self._duration
         step = 0
         while True:

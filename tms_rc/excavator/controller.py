@@ -702,7 +702,7 @@ class ArmController:
             out[i] = next((c[i] for t, c in reversed(hist) if t <= cutoff), hist[0][1][i])
         return out
 
-    def _track(self, q, qp, dq, tip, jt, tasks) -> np.ndarray:  # noqa: ANN001 - internal
+    def _track(self, q, qp, dq, tip, jt, tasks) -> np.ndarray:  # internal
         cfg = self.cfg
         target = self._targets[self._seg]
         self._seg_time += self.elapsed

@@ -150,7 +150,7 @@ class ArmControllerNode(Node):
         self._pub.publish(msg)
         self._wake(self._tick_waiters)
 
-    async def _on_goal(self, goal) -> GoalResponse:  # noqa: ANN001
+    async def _on_goal(self, goal) -> GoalResponse:
         # Right after start-up the first joint_states may still be on its way (the plant, the CAN
         # converter and this node start together): wait a bounded time (wall clock) before refusing.
         if self._q is None:
@@ -166,7 +166,7 @@ class ArmControllerNode(Node):
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    async def _execute(self, handle):  # noqa: ANN001, ANN202
+    async def _execute(self, handle):
         result = Zx200ArmMove.Result()
         try:
             targets = targets_from_segments(handle.request.segments)
@@ -215,7 +215,7 @@ class ArmControllerNode(Node):
         if self._run is run and run.result is None and st.result is not None:
             run.result = (int(st.result), st.message)
 
-    async def _follow(self, handle, run: _Run, spans: SegmentSpans) -> tuple[int, str]:  # noqa: ANN001
+    async def _follow(self, handle, run: _Run, spans: SegmentSpans) -> tuple[int, str]:
         """Wait on the control ticks until ``run`` ends (its result), is preempted, or is canceled and at rest."""
         canceling = False
         last_feedback = -1e9

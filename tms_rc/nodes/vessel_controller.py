@@ -110,7 +110,7 @@ class VesselControllerNode(Node):
                                + (f", swing joint {swing.name}" if swing is not None else "") + ")")
 
     def _action(self, action_type: Any, name: str, axis: str) -> ActionServer:
-        async def execute(handle):  # noqa: ANN001, ANN202 - rclpy awaits a coroutine function
+        async def execute(handle):  # rclpy awaits a coroutine function
             return await self._execute(handle, action_type, axis)
 
         return ActionServer(self, action_type, name, execute_callback=execute,
@@ -162,7 +162,7 @@ class VesselControllerNode(Node):
         ax.active = (handle, fut, result)
         return fut, ""
 
-    async def _execute(self, handle, action_type: Any, axis: str):  # noqa: ANN001, ANN202
+    async def _execute(self, handle, action_type: Any, axis: str):
         ax = self.axes[axis]
         fut, why = self._start(ax, handle, handle.request.target_angle, lambda ok: action_type.Result(success=ok))
         if fut is None:
@@ -171,7 +171,7 @@ class VesselControllerNode(Node):
             return action_type.Result(success=False)
         return await fut
 
-    def _on_dump_up(self, request: DumpUp.Request, reply) -> None:  # noqa: ANN001 - reply(response), once
+    def _on_dump_up(self, request: DumpUp.Request, reply) -> None:  # reply(response), once
         ax = self.axes["vessel"]
         fut, why = self._start(ax, None, request.vessel_angle, lambda ok: ok)
         if fut is None:

@@ -73,7 +73,7 @@ class TrackedLocalization(Node):
         self._log.info(f"{self.machine} ({machine.kind}): EKF ready ({cfg.file}); waiting for the first GNSS fix "
                        f"(or an odom_pose in frame {self.map_frame!r}, passed through)")
 
-    def _now(self, header=None) -> float:  # noqa: ANN001
+    def _now(self, header=None) -> float:
         """Measurement time: the message stamp (com3_bridge's clock) if set, else this node's clock."""
         if header is not None and (header.stamp.sec or header.stamp.nanosec):
             return header.stamp.sec + header.stamp.nanosec * 1e-9

@@ -131,14 +131,14 @@ class TrackedNavigator(Node):
         self._log.info(f"map updated: {info.width} x {info.height} cells at {info.resolution:g} m")
 
     # --- actions -----------------------------------------------------------------------------
-    def _executor_for(self, kind: str):  # noqa: ANN202
+    def _executor_for(self, kind: str):
         # rclpy awaits the execute callback only if it *is* a coroutine function (not a lambda returning one)
-        async def execute(handle):  # noqa: ANN001, ANN202
+        async def execute(handle):
             return await self._execute(handle, kind)
 
         return execute
 
-    async def _execute(self, handle, kind: str):  # noqa: ANN001, ANN202 - rclpy goal handle / result
+    async def _execute(self, handle, kind: str):  # rclpy goal handle / result
         goal = handle.request
         action = kinds[kind]
         fut = Future()
@@ -193,7 +193,7 @@ class TrackedNavigator(Node):
         self.destroy_timer(timer)
         return bool(ok)
 
-    def _result(self, action, code: int, msg: str, missed: list | None = None):  # noqa: ANN001, ANN202
+    def _result(self, action, code: int, msg: str, missed: list | None = None):
         res = action.Result()
         res.error_code = int(code)
         res.error_msg = msg
@@ -273,7 +273,7 @@ class TrackedNavigator(Node):
         if act.ticks % 4 == 0:
             self._feedback(act, step, pose, now)
 
-    def _feedback(self, act: _Active, step, pose, now: float) -> None:  # noqa: ANN001
+    def _feedback(self, act: _Active, step, pose, now: float) -> None:
         fb = kinds[act.kind].Feedback()
         if act.kind == "follow_waypoints":
             fb.current_waypoint = int(step.current_index)

@@ -48,7 +48,7 @@ class _MemoryWalk(ControlNode):
     STOP_ON: Status
     GO_ON: Status
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.index = 0
 
@@ -142,7 +142,7 @@ class Parallel(ControlNode):
         "failure_threshold": Port("int", 1, "children that must fail (<0: n+t+1)"),
     }
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.skip: set[int] = set()
 
@@ -191,7 +191,7 @@ class IfThenElse(ControlNode):
 
     CHILDREN = (2, 3)
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.branch = 0
 
@@ -301,7 +301,7 @@ class _CountedLoop(DecoratorNode):
     COUNT_PORT: str
     GO_ON: Status
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.count = 0
 
@@ -350,7 +350,7 @@ class Delay(DecoratorNode):
 
     PORTS = {"delay_msec": Port("unsigned", description="delay before the child is ticked [ms]")}
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.deadline: float | None = None
 
@@ -380,7 +380,7 @@ class Timeout(DecoratorNode):
 
     PORTS = {"msec": Port("unsigned", description="time limit [ms]")}
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.deadline: float | None = None
 

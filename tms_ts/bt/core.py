@@ -286,7 +286,7 @@ class BtNode(Behaviour):
         """Hook: clear per-run state (indices, counters); composites also halt their children."""
 
     # -- py_trees compatibility -----------------------------------------------------------------
-    def tick(self):  # noqa: ANN201 - py_trees generator protocol
+    def tick(self):  # py_trees generator protocol
         """py_trees' generator protocol: one BT.CPP tick of this subtree, yielding the root."""
         self.execute_tick()
         yield self
@@ -295,7 +295,7 @@ class BtNode(Behaviour):
         """py_trees' stop: a halt in BT.CPP terms."""
         self.halt()
 
-    def iter_nodes(self):  # noqa: ANN201
+    def iter_nodes(self):
         """Depth-first iteration over this subtree."""
         yield self
         for child in self.children:

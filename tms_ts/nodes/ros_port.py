@@ -98,10 +98,10 @@ class RosGoal:
     def state(self, value: str) -> None:
         self._state = value
 
-    def _on_feedback(self, msg) -> None:  # noqa: ANN001
+    def _on_feedback(self, msg) -> None:
         self.feedback = msg.feedback.status
 
-    def _on_response(self, future) -> None:  # noqa: ANN001
+    def _on_response(self, future) -> None:
         handle = future.result()
         if handle is None or not handle.accepted:
             self._state = REJECTED
@@ -112,7 +112,7 @@ class RosGoal:
         if self._cancel_wanted:
             handle.cancel_goal_async()
 
-    def _on_result(self, future) -> None:  # noqa: ANN001
+    def _on_result(self, future) -> None:
         res = future.result()
         state = _STATUS.get(res.status, ABORTED)
         if state == SUCCEEDED:  # the goal status decides, as the original's leaf reads it (not the bool)

@@ -85,7 +85,7 @@ __all__ = ["TaskManager", "main"]
 class TaskManager(Node):
     """The task scheduler manager node (see the module docstring)."""
 
-    def __init__(self, node_name: str = "tms_ts_manager", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+    def __init__(self, node_name: str = "tms_ts_manager", **kwargs) -> None:  # rclpy Node kwargs
         super().__init__(node_name, **kwargs)
         p = StartupParams(self)  # every parameter is read once, here (read-only)
         self.tick_rate = p.number("tick_rate_hz", 20.0, lo=0.0, above=True)
@@ -225,7 +225,7 @@ class TaskManager(Node):
             return Loaded(seq, task_id, error=f"cannot start task {task_id}: {type(exc).__name__}: {exc}")
         return Loaded(seq, task_id, tree=tree)
 
-    def _stored_blackboard(self, task_id: int):  # noqa: ANN202
+    def _stored_blackboard(self, task_id: int):
         try:
             return self.store.get_task(task_id).get("blackboard")
         except RecordNotFound:

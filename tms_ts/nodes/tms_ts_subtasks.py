@@ -103,11 +103,11 @@ def node_name_from_args(argv: Sequence[str]) -> str:
     return "tms_ts_subtasks"
 
 
-def _uuid_key(goal_id) -> bytes:  # noqa: ANN001 - unique_identifier_msgs/UUID
+def _uuid_key(goal_id) -> bytes:  # unique_identifier_msgs/UUID
     return bytes(goal_id.uuid)
 
 
-def _feedback_text(fb) -> str:  # noqa: ANN001
+def _feedback_text(fb) -> str:
     for field in ("state", "current_waypoint", "distance_remaining", "current_error"):
         if hasattr(fb, field):
             return f"{field}={getattr(fb, field)}"
@@ -117,7 +117,7 @@ def _feedback_text(fb) -> str:  # noqa: ANN001
 class SubtaskServers(Node):
     """All subtask action servers of one machine (see the module docstring)."""
 
-    def __init__(self, node_name: str = "tms_ts_subtasks", **kwargs) -> None:  # noqa: ANN003 - rclpy Node kwargs
+    def __init__(self, node_name: str = "tms_ts_subtasks", **kwargs) -> None:  # rclpy Node kwargs
         super().__init__(node_name, **kwargs)
 
         p = StartupParams(self)
@@ -197,7 +197,7 @@ class SubtaskServers(Node):
         joints.update(zip(msg.name, (float(p) for p in msg.position), strict=False))
         self._joints, self._joints_t = joints, time.monotonic()
 
-    async def _resolve(self, gh, spec: SubtaskSpec, plan: Plan) -> Plan:  # noqa: ANN001
+    async def _resolve(self, gh, spec: SubtaskSpec, plan: Plan) -> Plan:
         """The plan finished against the machine's state (a fresh joint_states); SubtaskStateError when none."""
         asked = time.monotonic()
         deadline = asked + self.joint_states_wait_s
@@ -234,11 +234,11 @@ class SubtaskServers(Node):
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _on_cancel(self, _gh) -> CancelResponse:  # noqa: ANN001
+    def _on_cancel(self, _gh) -> CancelResponse:
         self._ticker.wake()  # the goal looks at its cancel request now, not at the next tick
         return CancelResponse.ACCEPT
 
-    def _finish(self, gh, spec: SubtaskSpec, code: int, message: str) -> LeafNodeBase.Result:  # noqa: ANN001
+    def _finish(self, gh, spec: SubtaskSpec, code: int, message: str) -> LeafNodeBase.Result:
         record = gh.request.record_name
         if spec.clears_lock_flg and code != R.RECORD_INVALID:
             try:
@@ -267,11 +267,11 @@ class SubtaskServers(Node):
         return self._goals.wind_down(self.stop_timeout_s + 1.0, lambda n: self.get_logger().warning(
             f"stopping: canceling {n} running goal(s) downstream"))
 
-    async def _execute(self, spec: SubtaskSpec, gh) -> LeafNodeBase.Result:  # noqa: ANN001
+    async def _execute(self, spec: SubtaskSpec, gh) -> LeafNodeBase.Result:
         with self._goals.running():
             return await self._execute_goal(gh, spec)
 
-    async def _send_options(self, gh, planning: str, options: dict, goal_id: UUID,  # noqa: ANN001
+    async def _send_options(self, gh, planning: str, options: dict, goal_id: UUID,
                             deadline: float) -> tuple[int, str] | None:
         """Give the goal's options to ``<planning>/options`` by goal id; (code, reason) when that fails."""
         client = self.options_clients[planning]
@@ -299,7 +299,7 @@ class SubtaskServers(Node):
         outcome = self.planning_outcomes.pop(key, None)
         return outcome.message if outcome is not None else "(no outcome text from the planner)"
 
-    async def _execute_goal(self, gh, spec: SubtaskSpec) -> LeafNodeBase.Result:  # noqa: ANN001
+    async def _execute_goal(self, gh, spec: SubtaskSpec) -> LeafNodeBase.Result:
         record = gh.request.record_name
         try:
             plan = self._plan(gh.request, spec)
@@ -337,7 +337,7 @@ class SubtaskServers(Node):
             if failed is not None:
                 return self._finish(gh, spec, *failed)
 
-        def on_feedback(msg) -> None:  # noqa: ANN001
+        def on_feedback(msg) -> None:
             gh.publish_feedback(LeafNodeBase.Feedback(status=_feedback_text(msg.feedback)))
 
         # the goal response is awaited even when a cancel comes meanwhile: its handle is what cancels planning
@@ -388,7 +388,7 @@ class SubtaskServers(Node):
             detail = f"{detail}: {await self._planning_text(goal_id)}"
         return self._finish(gh, spec, R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
 
-    async def _call_service(self, gh, spec: SubtaskSpec, plan: Plan, service: str) -> LeafNodeBase.Result:  # noqa: ANN001
+    async def _call_service(self, gh, spec: SubtaskSpec, plan: Plan, service: str) -> LeafNodeBase.Result:
         """A row whose downstream is a service: wait for it, call it, read its reply (cannot be canceled)."""
         record = gh.request.record_name
         client = self.service_clients[service]

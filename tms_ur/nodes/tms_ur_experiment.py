@@ -159,7 +159,7 @@ class ExperimentNode(Node):
         if {"vessel", "loaded", "dumped"} <= v.keys():
             self.rec.on_carrier_soil(self.sim_t, machine, v["vessel"], v["loaded"], v["dumped"])
 
-    def _stamp(self, header) -> float:  # noqa: ANN001
+    def _stamp(self, header) -> float:
         """A message's stamp [s of simulated time]; this node's clock when it is unset."""
         if header.stamp.sec or header.stamp.nanosec:
             return header.stamp.sec + header.stamp.nanosec * 1e-9
@@ -195,7 +195,7 @@ class ExperimentNode(Node):
         self.rec.on_truth_tip(self._stamp(msg.header), msg.point.x, msg.point.y, machine)
 
     # -- supervision ----------------------------------------------------------------------
-    def _db(self):  # noqa: ANN202
+    def _db(self):
         if self._store is None:
             self._store = open_store(uri=self.db_uri or None, path=self.db_path or None)
         return self._store

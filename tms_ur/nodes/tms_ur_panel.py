@@ -250,7 +250,7 @@ class _WebThread:
 
 
 
-async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN001
+async def _serve(node, ready: concurrent.futures.Future) -> None:
     from websockets.asyncio.server import serve
     from websockets.datastructures import Headers
     from websockets.http11 import Response
@@ -258,7 +258,7 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN00
     config: PanelConfig = node.config
     clients: set = set()
 
-    def process_request(connection, request):  # noqa: ANN001, ANN202
+    def process_request(connection, request):
         url = urlsplit(request.path)
         token = parse_qs(url.query).get("token", [None])[0]
         ok, reason = authorize(config, connection.remote_address[0], token)
@@ -274,12 +274,12 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN00
                                                 ("Cache-Control", "no-store")]), body)
         return connection.respond(404, "404 Not Found\n")
 
-    def access_of(ws) -> Access:  # noqa: ANN001
+    def access_of(ws) -> Access:
         request = ws.request
         token = parse_qs(urlsplit(request.path).query).get("token", [None])[0]
         return websocket_access(config, request.headers.get_all("Origin"), _one(request.headers, "Host"), token)
 
-    async def handler(ws) -> None:  # noqa: ANN001
+    async def handler(ws) -> None:
         access = access_of(ws)
         peer = ws.remote_address[0] if ws.remote_address else "?"
         origin = ", ".join(ws.request.headers.get_all("Origin")) or "none"
@@ -335,7 +335,7 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:  # noqa: ANN00
             broadcaster.cancel()
 
 
-def _one(headers, name: str) -> str | None:  # noqa: ANN001
+def _one(headers, name: str) -> str | None:
     """The header's value; None when absent or repeated (two Host headers name no single origin)."""
     values = headers.get_all(name)
     return values[0] if len(values) == 1 else None
