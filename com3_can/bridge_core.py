@@ -449,7 +449,10 @@ class BridgeCore:
             timed = [ch for ch in self._channels.values() if ch.timed_out]
             waiting = all(ch.last_cmd is None for ch in self._channels.values())
             if self._emg:
-                level, message = DIAG_ERROR, "emg_stop latched: neutral motion frames (publish false on emg_stop to clear)"
+                level, message = (
+                    DIAG_ERROR,
+                    "emg_stop latched: neutral motion frames (publish false on emg_stop to clear)",
+                )
                 if self._emg_reason:
                     message = f"{self._emg_reason}: {message}"
             elif timed:
@@ -461,7 +464,9 @@ class BridgeCore:
                 )
             elif waiting:
                 message = "ok: no command yet, neutral frames"
-            errors = sum(v for k, v in self.counters.items() if k.startswith("rx_") and k not in ("rx_ok", "rx_command_echo"))
+            errors = sum(
+                v for k, v in self.counters.items() if k.startswith("rx_") and k not in ("rx_ok", "rx_command_echo")
+            )
             if level == DIAG_OK and (self.counters["cmd_rejected"] or errors):
                 level = DIAG_WARN
                 message += f"; {self.counters['cmd_rejected']} command(s) rejected, {errors} bad frame(s) dropped"

@@ -284,7 +284,9 @@ class AliveCounter:
 
 def dbc_files() -> tuple[str, ...]:
     """The DBC files shipped in ``com3_can/dbc``."""
-    return tuple(sorted(p.name for p in resources.files("com3_can").joinpath("dbc").iterdir() if p.name.endswith(".dbc")))
+    return tuple(
+        sorted(p.name for p in resources.files("com3_can").joinpath("dbc").iterdir() if p.name.endswith(".dbc"))
+    )
 
 
 def dbc_file(kind: str) -> str:

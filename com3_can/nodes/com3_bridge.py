@@ -279,7 +279,9 @@ class Com3Bridge(Node):
         self._command(self.core.front_cmd, list(msg.joint_name), msg.control_type, list(msg.velocity), list(msg.effort))
 
     def _on_tracks(self, msg: Any) -> None:
-        self._command(self.core.tracks_cmd, list(msg.joint_name), msg.control_type, list(msg.velocity), list(msg.effort))
+        self._command(
+            self.core.tracks_cmd, list(msg.joint_name), msg.control_type, list(msg.velocity), list(msg.effort)
+        )
 
     def _on_cmd_vel(self, msg: Any) -> None:
         self._command(self.core.cmd_vel, msg.linear.x, msg.angular.z)

@@ -53,7 +53,9 @@ class TrackedProfile(ConverterProfile):
         if control_type != VELOCITY:
             raise Com3CommandError(f"{self.tracks_topic}: the {self.machine} takes VELOCITY track commands only")
         frame = core.codec.neutral(self.travel_frame)
-        frame.update({T.left_velocity_cmd: vals.get("left_track", 0.0), T.right_velocity_cmd: vals.get("right_track", 0.0)})
+        frame.update(
+            {T.left_velocity_cmd: vals.get("left_track", 0.0), T.right_velocity_cmd: vals.get("right_track", 0.0)}
+        )
         txs = core.accept(self.tracks_topic, "travel", {self.travel_frame: frame}, now)
         core.set_switch("velocity_mode", 1.0)
         return txs
@@ -125,8 +127,10 @@ class CrawlerCarrierProfile(TrackedProfile):
                                    f"got control_type {control_type}")
         if not names or len(set(names)) != len(names) or any(n not in allowed for n in names):
             if swing is None and V.rotate_joint in names:
-                raise Com3CommandError(f"{topic}: the {self.machine} has no {V.rotate_joint} (its body does not rotate); "
-                                       f"send joint_name [{V.command_joint!r}] only")
+                raise Com3CommandError(
+                    f"{topic}: the {self.machine} has no {V.rotate_joint} (its body does not rotate); "
+                    f"send joint_name [{V.command_joint!r}] only"
+                )
             want = f"{allowed}" if swing is None else f"some of {allowed}, each at most once"
             raise Com3CommandError(f"{topic}: joint_name {list(names)}; expected {want}")
         if len(position) != len(names):
