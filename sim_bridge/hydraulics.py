@@ -76,7 +76,8 @@ class JointBank:
         self.dt = dt
         self.pump_flow = pump_flow
         self.actuators = [
-            DeadTimeLag(d.dead_time, d.time_constant, j.velocity, dt) for j, d in zip(self.joints, self.drives, strict=True)
+            DeadTimeLag(d.dead_time, d.time_constant, j.velocity, dt)
+            for j, d in zip(self.joints, self.drives, strict=True)
         ]
         self.q = [0.0] * len(joints)
         self.v = [0.0] * len(joints)

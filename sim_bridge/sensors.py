@@ -48,4 +48,6 @@ class Gnss:
     def fix(self, x: float, y: float, z: float, noise: Noise) -> tuple[float, float, float]:
         """A noisy RTK fix of the antenna at map (x, y, z): (lat, lon, alt)."""
         s = noise.spec
-        return self.map_to_geodetic(x + noise.gauss(s.gnss_sigma_h), y + noise.gauss(s.gnss_sigma_h), z + noise.gauss(s.gnss_sigma_v))
+        return self.map_to_geodetic(
+            x + noise.gauss(s.gnss_sigma_h), y + noise.gauss(s.gnss_sigma_h), z + noise.gauss(s.gnss_sigma_v)
+        )

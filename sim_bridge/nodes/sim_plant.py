@@ -122,7 +122,9 @@ class SimPlantNode(Node):
         self._thread = threading.Thread(target=self._loop, name="plant_loop", daemon=True)
         self._thread.start()
         mode = f"replay of {replay}" if replay else "commands from CAN"
-        self.get_logger().info(f"sim_plant: running at speed {speed} ({'free-running' if speed == 0 else 'paced'}), {mode}")
+        self.get_logger().info(
+            f"sim_plant: running at speed {speed} ({'free-running' if speed == 0 else 'paced'}), {mode}"
+        )
 
     def _loop(self) -> None:
         realtime_thread(self._rt_priority, "sim_plant loop", self.get_logger())  # the loop thread only
@@ -185,7 +187,11 @@ class SimPlantNode(Node):
         for m, pub in self.carrier_soil_pub.items():
             msg = Float64MultiArray()
             msg.layout.dim = [MultiArrayDimension(label="vessel,loaded,dumped", size=3, stride=3)]
-            msg.data = [plant.soil.vessels.get(m, 0.0), plant.soil.loaded_by.get(m, 0.0), plant.soil.dumped_by.get(m, 0.0)]
+            msg.data = [
+                plant.soil.vessels.get(m, 0.0),
+                plant.soil.loaded_by.get(m, 0.0),
+                plant.soil.dumped_by.get(m, 0.0),
+            ]
             pub.publish(msg)
 
     def _cloud(self, points, frame: str, stamp):

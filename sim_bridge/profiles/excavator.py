@@ -53,7 +53,9 @@ class ExcavatorPlantProfile(PlantProfile):
         closes = []
         for j in d.joints:
             half, off = _LINK_BOX.get(j.child, ((0.2, 0.2, 0.2), (0, 0, 0)))
-            lines.append(f'{indent}<body name="{name}_{j.child}" pos="{vec(j.origin_xyz)}" euler="{vec(j.origin_rpy)}">')
+            lines.append(
+                f'{indent}<body name="{name}_{j.child}" pos="{vec(j.origin_xyz)}" euler="{vec(j.origin_rpy)}">'
+            )
             rng = "" if j.lower is None else f' range="{j.lower} {j.upper}" limited="true"'
             lines.append(f'{indent}  <joint name="{name}_{j.name}" type="hinge" axis="{vec(j.axis)}"{rng}/>')
             lines.append(f'{indent}  <geom type="box" size="{vec(half)}" pos="{vec(off)}" material="zx" contype="0" '
@@ -80,9 +82,12 @@ class ExcavatorPlantProfile(PlantProfile):
             side.pilot.update(v)
             if front_mode == 1:
                 vmax = {j.name: j.velocity for j in zx.description.joints}
-                zx.set_front_velocity({
-                    j.joint: vmax[j.joint] * (v[j.pilot_plus] - v[j.pilot_minus]) / PILOT_MAX_MPA for j in EXCAVATOR_FRONT
-                })
+                zx.set_front_velocity(
+                    {
+                        j.joint: vmax[j.joint] * (v[j.pilot_plus] - v[j.pilot_minus]) / PILOT_MAX_MPA
+                        for j in EXCAVATOR_FRONT
+                    }
+                )
         elif frame == F["travel_velocity"]:
             centre, yaw = v[T.centre_velocity_cmd], v[T.yaw_rate_cmd]
             left, right = v[T.left_velocity_cmd], v[T.right_velocity_cmd]
