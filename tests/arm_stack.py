@@ -98,7 +98,9 @@ class ArmStack:
         self.feedback: list[str] = []
         node.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip",
                                  lambda m: setattr(self, "tip", [m.point.x, m.point.y, m.point.z]), 10)
-        node.create_subscription(Float64MultiArray, "/sim/truth/soil", lambda m: setattr(self, "soil", list(m.data)), 10)
+        node.create_subscription(
+            Float64MultiArray, "/sim/truth/soil", lambda m: setattr(self, "soil", list(m.data)), 10
+        )
         node.create_subscription(JointState, "/zx200/joint_states", self._on_js, 50)
         self.outcomes: dict[bytes, Any] = {}
         node.create_subscription(Zx200PlanningOutcome, "/zx200/tms_rp_zx200_outcome",
@@ -157,7 +159,9 @@ class ArmStack:
     def result(self, handle: Any, timeout: float) -> tuple[int, PlanningResult]:
         """(GoalStatus, result with the planner's message) of an accepted goal, spinning until it ends."""
         fut = handle.get_result_async()
-        assert self.spin_until(fut.done, timeout), f"goal did not end within {timeout} s (feedback {self.feedback[-3:]})"
+        assert self.spin_until(fut.done, timeout), (
+            f"goal did not end within {timeout} s (feedback {self.feedback[-3:]})"
+        )
         res = fut.result()
         key = bytes(handle.goal_id.uuid)
         assert self.spin_until(lambda: key in self.outcomes, 5.0), "no Zx200PlanningOutcome for the goal"

@@ -126,7 +126,12 @@ class Proc:
     def __init__(self, cmd: list[str], env: dict[str, str], *, name: str | None = None) -> None:
         self.name = name or Path(cmd[0]).name
         self.popen = subprocess.Popen(
-            cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True
+            cmd,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
         )
         self.lines: list[str] = []
         self._cond = threading.Condition()

@@ -59,9 +59,23 @@ def _latency() -> str:
     with isolated_domain() as domain:
         group = f"239.74.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
         port = free_can_ports(domain, 1)[0]
-        bridge = Proc([str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200", "-p", "machine:=zx200",
-                       "-p", "can_interface:=udp_multicast", "-p", f"can_channel:={group}", "-p", f"can_port:={port}"],
-                      ros_env(domain))
+        bridge = Proc(
+            [
+                str(executable("com3_can", "com3_bridge")),
+                "--ros-args",
+                "-r",
+                "__ns:=/zx200",
+                "-p",
+                "machine:=zx200",
+                "-p",
+                "can_interface:=udp_multicast",
+                "-p",
+                f"can_channel:={group}",
+                "-p",
+                f"can_port:={port}",
+            ],
+            ros_env(domain),
+        )
         if not bridge.wait_for("com3_bridge ready", 30):
             bridge.kill()
             raise RuntimeError(f"com3_bridge did not start:\n{bridge.output}")

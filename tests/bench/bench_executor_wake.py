@@ -106,7 +106,9 @@ def main() -> None:
             per_wake: dict[str, list[float]] = {variant: [] for variant in totals}
             for _ in range(ROUNDS):
                 for variant in totals:
-                    proc = Proc([sys.executable, "-m", "tests.bench.bench_executor_wake", "node", variant], env, name=variant)
+                    proc = Proc(
+                        [sys.executable, "-m", "tests.bench.bench_executor_wake", "node", variant], env, name=variant
+                    )
                     proc.wait(SECONDS + 60)
                     proc.wait_for("RESULT", 10)  # the output thread may still be reading the last line
                     match = re.search(r"RESULT \S+ cpu_s=(\S+) wall_s=(\S+) timer=(\d+) moved=(\d+)", proc.output)
@@ -127,8 +129,10 @@ def main() -> None:
           f"{mean['deferred'] / mean['default']:.2f}, and /clock relayed {mean['relayed'] / mean['default']:.2f}, "
           f"events executor {mean['events'] / mean['default']:.2f} (events / relayed "
           f"{mean['events'] / mean['relayed']:.2f})")
-    print(f"100 Hz timer alone, CPU per wake: single {wake['timer100_single'] * 1e3:.3f} ms, events "
-          f"{wake['timer100_events'] * 1e3:.3f} ms; events/single {wake['timer100_events'] / wake['timer100_single']:.2f}")
+    print(
+        f"100 Hz timer alone, CPU per wake: single {wake['timer100_single'] * 1e3:.3f} ms, events "
+        f"{wake['timer100_events'] * 1e3:.3f} ms; events/single {wake['timer100_events'] / wake['timer100_single']:.2f}"
+    )
 
 
 if __name__ == "__main__":

@@ -107,7 +107,9 @@ def main() -> None:
         print(f"{name:13s}: sent {r['sent']:.0f}, received {r['received']:.0f} (lost {lost:.0f}), "
               f"sender's own echoes {r['echoes']:.0f}; {r['cpu_s'] / r['wall_s'] * 100:.1f} % of a core, "
               f"{r['cpu_s'] / max(1, r['received']) * 1e6:.1f} us CPU per frame", flush=True)
-    per_frame = {name: sum(r["cpu_s"] for r in rs) / max(1, sum(r["received"] for r in rs)) for name, rs in totals.items()}
+    per_frame = {
+        name: sum(r["cpu_s"] for r in rs) / max(1, sum(r["received"] for r in rs)) for name, rs in totals.items()
+    }
     print(f"CPU per frame (sender + receiver, all rounds): virtual {per_frame['virtual'] * 1e6:.1f} us, "
           f"udp_multicast {per_frame['udp_multicast'] * 1e6:.1f} us; "
           f"ratio virtual/udp_multicast {per_frame['virtual'] / per_frame['udp_multicast']:.2f}", flush=True)

@@ -109,7 +109,9 @@ def bench_ekf() -> None:
     _, err, tr, _ = _run(simulate(60.0), outage=(20.0, 30.0))
     print(f"10 s GNSS outage: max error {err[200:299].max():.3f} m, cov trace x{tr[298] / tr[199]:.0f}")
     _, err, _, res = _run(simulate(60.0), jump=(30.0, 33.0))
-    print(f"5 m GNSS jump for 3 s: {sum(not r.accepted for r in res)}/{len(res)} fixes rejected, max error {err[300:330].max():.3f} m")
+    print(
+        f"5 m GNSS jump for 3 s: {sum(not r.accepted for r in res)}/{len(res)} fixes rejected, max error {err[300:330].max():.3f} m"
+    )
 
 
 def _ekf_loop_route(seed: int):
@@ -171,8 +173,10 @@ def bench_route(runs: int = 20) -> None:
             fails += status != "SUCCEEDED"
             errs[name][0].append(exy)
             errs[name][1].append(eyaw)
-    print(f"paper route x{runs} (kinematic model + EKF in the loop; {time.perf_counter() - t0:.0f} s wall, "
-          f"{statistics.mean(sim_time):.0f} s simulated per run): {fails} failed legs, {hits_total} footprint collisions")
+    print(
+        f"paper route x{runs} (kinematic model + EKF in the loop; {time.perf_counter() - t0:.0f} s wall, "
+        f"{statistics.mean(sim_time):.0f} s simulated per run): {fails} failed legs, {hits_total} footprint collisions"
+    )
     for name, (exy, eyaw) in errs.items():
         print(f"  {name}: final error p95 {percentile(exy, 95):.3f} m / {percentile(eyaw, 95):.3f} rad "
               f"(max {max(exy):.3f} m / {max(eyaw):.3f} rad; goal < 0.2 m / 0.1 rad)")
@@ -362,20 +366,32 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
                     nominal &= t_e > last_fault + 5.0
                     nominal &= ~((t_e > t_e[ph == "outage"].min() - 1.0) & (t_e < last_fault))
                     out = (ph == "outage") | (ph == "settle")
-                    faults.append(dict(
-                        rejected=fault_rejected, outage_max=float(np.nanmax(exy[out])), cov0=float(cov[ph == "outage"][0]),
-                        cov1=float(cov[ph == "outage"][-1]), jump_max=float(np.nanmax(exy[(ph == "jump") | (ph == "after")]))))
+                    faults.append(
+                        dict(
+                            rejected=fault_rejected,
+                            outage_max=float(np.nanmax(exy[out])),
+                            cov0=float(cov[ph == "outage"][0]),
+                            cov1=float(cov[ph == "outage"][-1]),
+                            jump_max=float(np.nanmax(exy[(ph == "jump") | (ph == "after")])),
+                        )
+                    )
                     f = faults[-1]
                     print(f"  run {run + 1} faults: 10 s outage max error {f['outage_max']:.3f} m, cov trace "
                           f"{f['cov0']:.2e} -> {f['cov1']:.2e} m^2 (x{f['cov1'] / f['cov0']:.0f}); 5 m jump: max error "
                           f"{f['jump_max']:.3f} m, {f['rejected']} fixes reported rejected", flush=True)
                 all_exy.extend(exy[nominal].tolist())
                 all_eyaw.extend(eyaw[nominal].tolist())
-                run_rms.append((math.sqrt(float(np.mean(exy[nominal] ** 2))), math.sqrt(float(np.mean(eyaw[nominal] ** 2)))))
+                run_rms.append(
+                    (math.sqrt(float(np.mean(exy[nominal] ** 2))), math.sqrt(float(np.mean(eyaw[nominal] ** 2))))
+                )
                 if os.environ.get("IC120_BENCH_PLANT_DUMP"):  # raw data of the run, for offline analysis
-                    np.savez(Path(os.environ["IC120_BENCH_PLANT_DUMP"]) / f"run{run + 1:02d}.npz",
-                             est=np.array([(s[0], *s[2:]) for s in e]), phase=ph,
-                             truth_stamped=np.array(truth.stamped[i_truth:]), truth_recv=np.array(truth.recv_wall[i_truth:]))
+                    np.savez(
+                        Path(os.environ["IC120_BENCH_PLANT_DUMP"]) / f"run{run + 1:02d}.npz",
+                        est=np.array([(s[0], *s[2:]) for s in e]),
+                        phase=ph,
+                        truth_stamped=np.array(truth.stamped[i_truth:]),
+                        truth_recv=np.array(truth.recv_wall[i_truth:]),
+                    )
                 tt = np.array([p[1:] for p in truth.stamped[i_truth:]])
                 hits = int(costmap.footprint_hits(tt[:, 0], tt[:, 1], tt[:, 2]).sum())
                 run_hits.append(hits)
@@ -404,16 +420,20 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
         print("paper route through sim_plant: no run completed")
         return
     fails = sum(s != "SUCCEEDED" for s in statuses)
-    print(f"paper route x{n} through sim_plant over COM3 CAN (GNSS 2 cm, slip 5 %/15 %; {statistics.mean(sims):.0f} s "
-          f"simulated, {statistics.mean(walls):.0f} s wall per run; load at end {os.getloadavg()}): {fails} failed legs, "
-          f"{sum(run_hits)} footprint contacts with the mound / ZX200")
+    print(
+        f"paper route x{n} through sim_plant over COM3 CAN (GNSS 2 cm, slip 5 %/15 %; {statistics.mean(sims):.0f} s "
+        f"simulated, {statistics.mean(walls):.0f} s wall per run; load at end {os.getloadavg()}): {fails} failed legs, "
+        f"{sum(run_hits)} footprint contacts with the mound / ZX200"
+    )
     for name, (exy, eyaw) in errs.items():
         print(f"  {name}: final error p95 {percentile(exy, 95):.3f} m / {percentile(eyaw, 95):.3f} rad, max "
               f"{max(exy):.3f} m / {max(eyaw):.3f} rad (n={len(exy)}; goal < 0.2 m / 0.1 rad)")
     rms_xy = math.sqrt(float(np.mean(np.square(all_exy))))
     rms_yaw = math.sqrt(float(np.mean(np.square(all_eyaw))))
-    print(f"  localisation RMS along the route (all runs, {len(all_exy)} estimates, fault windows excluded): "
-          f"{rms_xy * 100:.2f} cm, {rms_yaw:.4f} rad; worst run {max(r[0] for r in run_rms) * 100:.2f} cm (goal < 5 cm)")
+    print(
+        f"  localisation RMS along the route (all runs, {len(all_exy)} estimates, fault windows excluded): "
+        f"{rms_xy * 100:.2f} cm, {rms_yaw:.4f} rad; worst run {max(r[0] for r in run_rms) * 100:.2f} cm (goal < 5 cm)"
+    )
     if faults:
         print(f"  GNSS faults in the plant (x{len(faults)}): 10 s outage max error "
               f"{max(f['outage_max'] for f in faults):.3f} m (goal < 0.5 m), covariance trace growth min "

@@ -85,7 +85,9 @@ def _action(domain: int) -> str:
         ex.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=ctx)
-    return f"action goal->result round trip (tms_msg_ts/LeafNodeBase, 0 s work) across processes: {summary_ms(rtts[5:])}"
+    return (
+        f"action goal->result round trip (tms_msg_ts/LeafNodeBase, 0 s work) across processes: {summary_ms(rtts[5:])}"
+    )
 
 
 def main() -> None:

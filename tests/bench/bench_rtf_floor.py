@@ -65,8 +65,12 @@ def _floor() -> None:
         rclpy.init(context=context, domain_id=domain)
         node = rclpy.create_node("rtf_floor_probe", context=context)
         sim_now = [0.0]
-        node.create_subscription(Clock, "/clock", lambda m: sim_now.__setitem__(0, m.clock.sec + m.clock.nanosec * 1e-9),
-                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+        node.create_subscription(
+            Clock,
+            "/clock",
+            lambda m: sim_now.__setitem__(0, m.clock.sec + m.clock.nanosec * 1e-9),
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
         stop = threading.Event()
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)

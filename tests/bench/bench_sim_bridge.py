@@ -78,10 +78,25 @@ def _jitter(seconds: float = 20.0) -> str:
         port = free_can_ports(domain, 1)[0]
         cfg = {"interface": "udp_multicast", "channel": f"239.76.1.{domain}", "port": port}
         bus = open_bus(cfg)
-        proc = Proc([str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", "speed:=1.0", "-p", "realtime_priority:=20",
-                     "-p", f"zx200_can_channel:={cfg['channel']}", "-p", f"zx200_can_port:={port}",
-                     "-p", f"ic120_can_channel:=239.76.2.{domain}", "-p", f"ic120_can_port:={port + 1}"],
-                    ros_env(domain))
+        proc = Proc(
+            [
+                str(executable("sim_bridge", "sim_plant")),
+                "--ros-args",
+                "-p",
+                "speed:=1.0",
+                "-p",
+                "realtime_priority:=20",
+                "-p",
+                f"zx200_can_channel:={cfg['channel']}",
+                "-p",
+                f"zx200_can_port:={port}",
+                "-p",
+                f"ic120_can_channel:=239.76.2.{domain}",
+                "-p",
+                f"ic120_can_port:={port + 1}",
+            ],
+            ros_env(domain),
+        )
         stamps: list[float] = []
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))  # the receiver is measured too

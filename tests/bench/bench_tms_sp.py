@@ -42,7 +42,9 @@ def main() -> None:
         vessel_err.append(abs(v.volume - 0.5 * vg.capacity))
     print(f"mound update (40k points): {summary_ms(t_mound)}")
     print(f"vessel update (8k points): {summary_ms(t_vessel)}")
-    print(f"mound volume error: mean {np.mean(vol_err):.3f} m3 of {m.bank_volume():.2f} m3, max {np.max(vol_err):.3f} m3")
+    print(
+        f"mound volume error: mean {np.mean(vol_err):.3f} m3 of {m.bank_volume():.2f} m3, max {np.max(vol_err):.3f} m3"
+    )
     print(f"target surface error: mean {100 * np.mean(surf_err):.1f} cm, max {100 * np.max(surf_err):.1f} cm")
     print(f"vessel volume error at 50% fill: mean {np.mean(vessel_err):.3f} m3, max {np.max(vessel_err):.3f} m3")
 

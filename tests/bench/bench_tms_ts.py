@@ -79,12 +79,14 @@ def _seed(db: str) -> None:
             model, leaf, subtask, record = (("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose")
                                             if i % 2 else ("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere",
                                                            "load_point"))
-            xml = (f'<root><BehaviorTree ID="B"><Repeat num_cycles="-1"><Sequence>'
-                   f'<Action ID="{leaf}" model_name="{model}" subtask_name="{subtask}" record_name="{record}"/>'
-                   f'<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" mongo_param_name="FLG"/>'
-                   f'<Action ID="MongoValueWriter" input_value="{i}" mongo_record_name="BENCH_BB" mongo_param_name="T{i}"/>'
-                   f'<Condition ID="ConditionalExpression" conditional_expression="flg == true"/>'
-                   f"</Sequence></Repeat></BehaviorTree></root>")
+            xml = (
+                f'<root><BehaviorTree ID="B"><Repeat num_cycles="-1"><Sequence>'
+                f'<Action ID="{leaf}" model_name="{model}" subtask_name="{subtask}" record_name="{record}"/>'
+                f'<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" mongo_param_name="FLG"/>'
+                f'<Action ID="MongoValueWriter" input_value="{i}" mongo_record_name="BENCH_BB" mongo_param_name="T{i}"/>'
+                f'<Condition ID="ConditionalExpression" conditional_expression="flg == true"/>'
+                f"</Sequence></Repeat></BehaviorTree></root>"
+            )
             store.add_task(xml, task_id=100 + i, description=f"bench task {i}")
 
 
@@ -150,10 +152,27 @@ def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0, checkpoint_s: f
 
     procs = _start_servers(domain, db, 0.2)
     env = ros_env(domain)
-    manager = Proc(["nice", "-n", str(nice), str(executable("tms_ts", "tms_ts_manager")), "--ros-args", "-p", f"db_path:={db}",
-                    "-p", "tick_rate_hz:=50.0", "-p", "server_wait_s:=30.0", "-p", f"realtime_priority:={rt}",
-                    "-p", f"db_checkpoint_period_s:={checkpoint_s}"], env,
-                   name="manager")
+    manager = Proc(
+        [
+            "nice",
+            "-n",
+            str(nice),
+            str(executable("tms_ts", "tms_ts_manager")),
+            "--ros-args",
+            "-p",
+            f"db_path:={db}",
+            "-p",
+            "tick_rate_hz:=50.0",
+            "-p",
+            "server_wait_s:=30.0",
+            "-p",
+            f"realtime_priority:={rt}",
+            "-p",
+            f"db_checkpoint_period_s:={checkpoint_s}",
+        ],
+        env,
+        name="manager",
+    )
     procs.append(manager)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
@@ -201,11 +220,16 @@ def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0, checkpoint_s: f
     ticks = last["ticks"] - base["ticks"]
     missed = last["missed"] - base["missed"]
     how = (f"SCHED_FIFO {rt}" if rt else f"nice {nice}") + (
-        f", WAL checkpoint every {checkpoint_s:g} s in a thread" if checkpoint_s else ", SQLite's automatic WAL checkpoint")
-    return (f"10 tasks at 50 Hz for {LOAD_SECONDS:g} s, manager at {how}: {ticks} ticks (expected {int(LOAD_SECONDS * 50)}), "
-            f"missed {missed}, mean tick {last['mean_tick_ms']:.2f} ms, max tick {last['max_tick_ms']:.1f} ms, "
-            f"max late {last['max_late_ms']:.1f} ms; tasks not running at the end: {len(failed)}; "
-            f"after /emergency_signal {canceled}/10 CANCELED")
+        f", WAL checkpoint every {checkpoint_s:g} s in a thread"
+        if checkpoint_s
+        else ", SQLite's automatic WAL checkpoint"
+    )
+    return (
+        f"10 tasks at 50 Hz for {LOAD_SECONDS:g} s, manager at {how}: {ticks} ticks (expected {int(LOAD_SECONDS * 50)}), "
+        f"missed {missed}, mean tick {last['mean_tick_ms']:.2f} ms, max tick {last['max_tick_ms']:.1f} ms, "
+        f"max late {last['max_late_ms']:.1f} ms; tasks not running at the end: {len(failed)}; "
+        f"after /emergency_signal {canceled}/10 CANCELED"
+    )
 
 
 def _manager_on(kind: str, domain: int, db: str) -> str:

@@ -38,9 +38,11 @@ RSS_OLD_SECONDS = float(os.environ.get("TS_RSS_OLD_S", "60"))
 #: tick lateness is taken from a tree's sending for at least this long (and until its start was over)
 WINDOW_S = 3.0
 
-RUNNING_TREE = ('<root><BehaviorTree ID="B"><ReactiveSequence>'
-                '<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" mongo_param_name="FLG"/>'
-                '<Sleep msec="3600000"/></ReactiveSequence></BehaviorTree></root>')
+RUNNING_TREE = (
+    '<root><BehaviorTree ID="B"><ReactiveSequence>'
+    '<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" mongo_param_name="FLG"/>'
+    '<Sleep msec="3600000"/></ReactiveSequence></BehaviorTree></root>'
+)
 
 
 def big_tree(nodes: int = BIG_NODES, tag: str = "") -> str:
@@ -188,7 +190,9 @@ def _outcome(manager: Proc, since: int) -> str | None:
     return next((ln for ln in manager.lines[since:] if any(o in ln for o in OUTCOMES)), None)
 
 
-def _send_big(probe: Probe, manager: Proc, xml: str, then: str | None, task_id: int) -> tuple[float, float, float | None, str]:
+def _send_big(
+    probe: Probe, manager: Proc, xml: str, then: str | None, task_id: int
+) -> tuple[float, float, float | None, str]:
     """Send ``xml`` on /task_sequence and, 0.5 s later, ``then`` ("cancel" task_id / "emg"); returns (sent, over,
     seconds until task_id showed CANCELED, the manager's line saying how the big tree's start ended)."""
     from tms_msg.msg import TaskState
@@ -257,8 +261,10 @@ def big_tree_run(label: str, code: str | None) -> list[str]:
         out.append(f"[{label}]   {what}: tick lateness over the {over - sent:.1f} s from its sending: "
                    f"{late_summary(lateness_ms(times, sent, over))}{stop}")
         out.append(f"[{label}]     manager: {line}")
-    out.append(f"[{label}]   tick lateness over the whole run ({t_end - t0:.0f} s): {late_summary(lateness_ms(times, t0, t_end))}; "
-               f"manager RSS at the end {rss:.0f} MB")
+    out.append(
+        f"[{label}]   tick lateness over the whole run ({t_end - t0:.0f} s): {late_summary(lateness_ms(times, t0, t_end))}; "
+        f"manager RSS at the end {rss:.0f} MB"
+    )
     return out
 
 
@@ -299,8 +305,10 @@ def rss_run(label: str, code: str | None, seconds: float, *, extra: tuple[str, .
     out.append(f"[{label}] {n} finished runs (1000 nodes each) in /tms_ts/status at 10 Hz for {seconds:.0f} s; "
                f"{last_tasks} tasks listed; manager RSS [MB]: {rss}; growth {growth:+.1f} MB "
                f"({growth / max(1.0, samples[-1][0]) * 60:+.2f} MB/min)")
-    out.append(f"[{label}]   status messages received: {len(probe.sizes)}, about {max(sizes) / 1e3:.1f} kB each at most; "
-               f"snapshots carried after the runs ended: {resent}")
+    out.append(
+        f"[{label}]   status messages received: {len(probe.sizes)}, about {max(sizes) / 1e3:.1f} kB each at most; "
+        f"snapshots carried after the runs ended: {resent}"
+    )
     return out
 
 

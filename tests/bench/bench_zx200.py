@@ -106,7 +106,9 @@ def _run(kin, cfg, q0, targets, solve_times, max_steps=8000, cpu_times=None, rec
         if cpu_times is not None:
             cpu_times.append(ctl.last_result.solve_cpu_s)
         # pump flow of the velocities that act together (delays equalised per joint: the solved u_prev)
-        if np.sum(cfg.flow_per_rad_s * np.abs(ctl.u_prev)) > cfg.pump_flow_lpm * 1.001 or np.any(np.abs(u) > kin.limits.velocity + 1e-9):
+        if np.sum(cfg.flow_per_rad_s * np.abs(ctl.u_prev)) > cfg.pump_flow_lpm * 1.001 or np.any(
+            np.abs(u) > kin.limits.velocity + 1e-9
+        ):
             violations += 1
         q, v = plant.step(u)
         if kin.limits.violation(q) is not None:
@@ -150,11 +152,16 @@ def core() -> None:
             q_goal, p_goal = random_reachable()
             try:
                 if kind == "joint":
-                    targets = planner.change_pose(joint_names=["swing_joint", "boom_joint", "arm_joint", "bucket_joint"],
-                                                  joint_points=[q_goal.tolist()], current_q=q_start)
+                    targets = planner.change_pose(
+                        joint_names=["swing_joint", "boom_joint", "arm_joint", "bucket_joint"],
+                        joint_points=[q_goal.tolist()],
+                        current_q=q_start,
+                    )
                 elif kind == "pose":
                     pose = kin.tip_pose(q_goal)
-                    targets = planner.change_pose(poses=[(pose.translation.tolist(), pin.Quaternion(pose.rotation).coeffs().tolist())])
+                    targets = planner.change_pose(
+                        poses=[(pose.translation.tolist(), pin.Quaternion(pose.rotation).coeffs().tolist())]
+                    )
                 else:
                     targets = planner.change_pose(positions_with_angle=[(p_goal.tolist(), kin.theta_w(q_goal))])
             except PlanningError as exc:
@@ -182,7 +189,9 @@ def core() -> None:
 
     q0 = kin.home.copy()
     p0 = kin.tip_position(q0)
-    status, q_end, viol, errs = _run(kin, cfg, q0, planner.change_pose(positions_with_angle=[((p0 + [-2.0, 0, 0]).tolist(), kin.theta_w(q0))]), [])
+    status, q_end, viol, errs = _run(
+        kin, cfg, q0, planner.change_pose(positions_with_angle=[((p0 + [-2.0, 0, 0]).tolist(), kin.theta_w(q0))]), []
+    )
     print(f"  2 m Cartesian move: RMS tracking error {1000 * math.sqrt(np.mean(np.square(errs))):.2f} mm, "
           f"max {1000 * max(errs):.2f} mm, result {status.result}, violations {viol}")
 
@@ -226,7 +235,13 @@ def plant() -> None:  # one campaign
         bus = ["-p", "zx200_can_interface:=udp_multicast", "-p", f"zx200_can_channel:=239.77.{domain}.9",
                "-p", f"zx200_can_port:={port}"]
         env = ros_env(domain)
-        procs = [Proc([str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", f"speed:={speed}", *bus], env, name="sim")]
+        procs = [
+            Proc(
+                [str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", f"speed:={speed}", *bus],
+                env,
+                name="sim",
+            )
+        ]
         try:
             assert procs[0].wait_for("sim_plant: running", 90), procs[0].output
             procs.append(Proc([str(executable("com3_can", "com3_bridge")), "--ros-args", "-r", "__ns:=/zx200",
@@ -235,10 +250,27 @@ def plant() -> None:  # one campaign
                                "-p", "use_sim_time:=true"], env, name="bridge"))
             # the planner's waits are wall time; on /clock it would wake every plant step for nothing (as in
             # config/launch/paper_experiment.yaml)
-            for pkg, exe, sim_time in (("tms_rc", "excavator_arm_controller", "true"), ("tms_if_opera", "zx200_planner", "false")):
-                procs.append(Proc([str(executable(pkg, exe)), "--ros-args", "-r", "__ns:=/zx200", "-p", f"use_sim_time:={sim_time}"],
-                                  env, name=exe))
-            for p, text in zip(procs[1:], ("com3_bridge ready", "excavator_arm_controller ready", "zx200_planner ready"), strict=True):
+            for pkg, exe, sim_time in (
+                ("tms_rc", "excavator_arm_controller", "true"),
+                ("tms_if_opera", "zx200_planner", "false"),
+            ):
+                procs.append(
+                    Proc(
+                        [
+                            str(executable(pkg, exe)),
+                            "--ros-args",
+                            "-r",
+                            "__ns:=/zx200",
+                            "-p",
+                            f"use_sim_time:={sim_time}",
+                        ],
+                        env,
+                        name=exe,
+                    )
+                )
+            for p, text in zip(
+                procs[1:], ("com3_bridge ready", "excavator_arm_controller ready", "zx200_planner ready"), strict=True
+            ):
                 assert p.wait_for(text, 60), p.output
             os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
             ctx = Context()
@@ -297,13 +329,19 @@ def plant() -> None:  # one campaign
                         # where the error lies: the controller's view (FK of the measured joints) or the plant's truth
                         fk_err = float(np.linalg.norm(kin.tip_position(q_end) - kin.tip_position(qg)))
                         truth_vs_fk = float(np.linalg.norm(np.array(st.tip) - kin.tip_position(q_end)))
-                        print(f"    miss: {kind} status {status} {res.message!r} {100 * perr:.1f} cm "
-                              f"{math.degrees(aerr):.2f} deg (FK of measured joints {100 * fk_err:.1f} cm off the target, "
-                              f"truth {100 * truth_vs_fk:.1f} cm off that FK), target q={np.round(qg, 3).tolist()}, "
-                              f"end q={np.round(q_end, 4).tolist()}", flush=True)
+                        print(
+                            f"    miss: {kind} status {status} {res.message!r} {100 * perr:.1f} cm "
+                            f"{math.degrees(aerr):.2f} deg (FK of measured joints {100 * fk_err:.1f} cm off the target, "
+                            f"truth {100 * truth_vs_fk:.1f} cm off that FK), target q={np.round(qg, 3).tolist()}, "
+                            f"end q={np.round(q_end, 4).tolist()}",
+                            flush=True,
+                        )
                 took = time.monotonic() - t0
-                print(f"  {kind:20s}: {ok}/{n} within 3 cm / 2 deg ({100.0 * ok / n:.0f}%), worst {100 * worst_p:.2f} cm / "
-                      f"{math.degrees(worst_a):.2f} deg, {took:.0f} s ({took / n:.1f} s per target)", flush=True)
+                print(
+                    f"  {kind:20s}: {ok}/{n} within 3 cm / 2 deg ({100.0 * ok / n:.0f}%), worst {100 * worst_p:.2f} cm / "
+                    f"{math.degrees(worst_a):.2f} deg, {took:.0f} s ({took / n:.1f} s per target)",
+                    flush=True,
+                )
             violations = count_violations(t_campaign)
             print(f"  limit violations over the run (joint_states samples): {violations} of "
                   f"{sum(1 for t, _, _ in st.dq_log if t >= t_campaign)}")

@@ -73,12 +73,18 @@ class Peer:
 
     def since(self, t0: float, arbitration_id: int | None = None) -> list[tuple[float, Any]]:
         with self._lock:
-            return [(t, m) for t, m in self.frames if t >= t0 and (arbitration_id is None or m.arbitration_id == arbitration_id)]
+            return [
+                (t, m)
+                for t, m in self.frames
+                if t >= t0 and (arbitration_id is None or m.arbitration_id == arbitration_id)
+            ]
 
     def send(self, arbitration_id: int, data: bytes, **kw: Any) -> None:
         import can
 
-        self.bus.send(can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=kw.pop("is_extended_id", True), **kw))
+        self.bus.send(
+            can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=kw.pop("is_extended_id", True), **kw)
+        )
 
     def close(self) -> None:
         self._stop.set()

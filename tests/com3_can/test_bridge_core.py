@@ -59,7 +59,10 @@ def test_front_effort_maps_to_pilot_pressure_with_dead_zone() -> None:
 @pytest.mark.parametrize(
     ("args", "match"),
     [
-        ((["boom_joint"], VELOCITY, [17.0], []), r"Velocity_Cmd_1\.boom_target_anguler_velocity: value 17.0 rad/s outside \[-16, 16\]"),
+        (
+            (["boom_joint"], VELOCITY, [17.0], []),
+            r"Velocity_Cmd_1\.boom_target_anguler_velocity: value 17.0 rad/s outside \[-16, 16\]",
+        ),
         ((["boom_joint"], VELOCITY, [math.nan], []), r"boom_joint velocity: value nan is not finite"),
         ((["stick_joint"], VELOCITY, [0.1], []), r"unknown joint\(s\) \['stick_joint'\]"),
         ((["boom_joint", "arm_joint"], VELOCITY, [0.1], []), r"2 joint names but 1 velocity values"),
@@ -89,7 +92,11 @@ def test_cmd_vel_and_tracks_on_both_machines() -> None:
     assert core.current_values("Machine_Setting_Cmd")["travel_signal_switch_command"] == 3
     core.tracks_cmd(["left_track", "right_track"], VELOCITY, [0.2, 0.3], [], now=0.01)
     v2 = core.current_values("Velocity_Cmd_2")
-    assert (v2["target_travel_left_velocity"], v2["target_travel_right_velocity"], v2["target_travel_center_velocity"]) == (0.2, 0.3, 0.0)
+    assert (
+        v2["target_travel_left_velocity"],
+        v2["target_travel_right_velocity"],
+        v2["target_travel_center_velocity"],
+    ) == (0.2, 0.3, 0.0)
     with pytest.raises(Com3CommandError, match=r"cmd_vel: .*target_travel_center_velocity: value 40"):
         core.cmd_vel(40.0, 0.0, now=0.02)
     car = ic()
@@ -236,17 +243,33 @@ def test_zx200_state_frames_to_joint_states_imu_odom_fix() -> None:
     vel = {"boom_relative_angular_velocity": 0.1, "arm_relative_angular_velocity": -0.2,
            "bucket_relative_angular_velocity": 0.3, "swing_relative_angular_velocity": 0.4}
     core.on_frame(codec.frame_id("Front_Angular_Velocity"), codec.encode("Front_Angular_Velocity", vel))
-    ang = {"boom_relative_angle": -0.5, "arm_relative_angle": 1.6, "bucket_relative_angle": 0.5, "swing_relative_angle": 0.25}
+    ang = {
+        "boom_relative_angle": -0.5,
+        "arm_relative_angle": 1.6,
+        "bucket_relative_angle": 0.5,
+        "swing_relative_angle": 0.25,
+    }
     (js,) = core.on_frame(codec.frame_id("Front_Angle"), codec.encode("Front_Angle", ang))
     assert isinstance(js, JointStateOut)
     assert js.name == ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
     assert js.position == pytest.approx((0.25, -0.5, 1.6, 0.5), abs=4e-4)
     assert js.velocity == pytest.approx((0.4, 0.1, -0.2, 0.3), abs=2e-4)
-    core.on_frame(codec.frame_id("Swing_Center_Position_1"), codec.encode("Swing_Center_Position_1", {"swing_center_position_x": 21405.178}))
-    core.on_frame(codec.frame_id("Swing_Center_Position_2"), codec.encode("Swing_Center_Position_2", {"swing_center_position_y": 14024.450}))
-    odom, fix = core.on_frame(codec.frame_id("Swing_Center_Position_3"), codec.encode("Swing_Center_Position_3", {"swing_center_position_z": 28.552}))
+    core.on_frame(
+        codec.frame_id("Swing_Center_Position_1"),
+        codec.encode("Swing_Center_Position_1", {"swing_center_position_x": 21405.178}),
+    )
+    core.on_frame(
+        codec.frame_id("Swing_Center_Position_2"),
+        codec.encode("Swing_Center_Position_2", {"swing_center_position_y": 14024.450}),
+    )
+    odom, fix = core.on_frame(
+        codec.frame_id("Swing_Center_Position_3"),
+        codec.encode("Swing_Center_Position_3", {"swing_center_position_z": 28.552}),
+    )
     assert isinstance(odom, OdomOut) and (odom.x, odom.y) == pytest.approx((10.0, -10.0), abs=1e-3)
-    assert isinstance(fix, FixOut) and (fix.latitude, fix.longitude) == pytest.approx((36.12626 - 9.0e-5, 140.07103 + 1.11e-4), abs=2e-5)
+    assert isinstance(fix, FixOut) and (fix.latitude, fix.longitude) == pytest.approx(
+        (36.12626 - 9.0e-5, 140.07103 + 1.11e-4), abs=2e-5
+    )
 
 
 def test_ic120_odometry_integrates_track_velocities_with_azimuth() -> None:
@@ -266,9 +289,16 @@ def test_ic120_odometry_integrates_track_velocities_with_azimuth() -> None:
         assert core.on_frame(codec.frame_id(name), codec.encode(name, vals)) == []
     (fix,) = core.on_frame(
         codec.frame_id("GNSS_Altitude_Status"),
-        codec.encode("GNSS_Altitude_Status", {"altitude": 30.0, "fix_status": 3, "num_satellites": 12, "horizontal_accuracy": 0.02}),
+        codec.encode(
+            "GNSS_Altitude_Status",
+            {"altitude": 30.0, "fix_status": 3, "num_satellites": 12, "horizontal_accuracy": 0.02},
+        ),
     )
-    assert (fix.latitude, fix.longitude, fix.status) == (pytest.approx(36.12626, abs=1e-9), pytest.approx(140.07103, abs=1e-9), 2)
+    assert (fix.latitude, fix.longitude, fix.status) == (
+        pytest.approx(36.12626, abs=1e-9),
+        pytest.approx(140.07103, abs=1e-9),
+        2,
+    )
 
 
 def test_machine_setting_and_bad_config() -> None:

@@ -61,8 +61,18 @@ def assert_commanded(frames: list, cmd_hex: str) -> None:
 
 
 def start_bridge(procs: Callable[..., Any], machine: str, cfg: dict[str, Any], **params: Any) -> Any:
-    cmd = [executable("com3_can", "com3_bridge"), "--ros-args", "-r", f"__ns:=/{machine}",
-           "-p", f"machine:={machine}", "-p", f"can_interface:={cfg['interface']}", "-p", f"can_channel:={cfg['channel']}"]
+    cmd = [
+        executable("com3_can", "com3_bridge"),
+        "--ros-args",
+        "-r",
+        f"__ns:=/{machine}",
+        "-p",
+        f"machine:={machine}",
+        "-p",
+        f"can_interface:={cfg['interface']}",
+        "-p",
+        f"can_channel:={cfg['channel']}",
+    ]
     if "port" in cfg:
         cmd += ["-p", f"can_port:={cfg['port']}"]
     for key, value in params.items():
@@ -137,8 +147,12 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
     cmd = front([0.5, 0.1, -0.2, 0.0])
     v1_id = ZX.frame_id("Velocity_Cmd_1")
     t_first = time.monotonic()
-    assert spin_until(ros_node, lambda: any(bytes(m.data).hex() == "c87d707b007de880" for _, m in peer.since(t_first, v1_id)),
-                      10 * SCALE, (0.1, lambda: pub.publish(cmd))), f"front_cmd never reached the wire\n{bridge.output}"
+    assert spin_until(
+        ros_node,
+        lambda: any(bytes(m.data).hex() == "c87d707b007de880" for _, m in peer.since(t_first, v1_id)),
+        10 * SCALE,
+        (0.1, lambda: pub.publish(cmd)),
+    ), f"front_cmd never reached the wire\n{bridge.output}"
     spin(ros_node, 0.2, (0.1, lambda: pub.publish(cmd)))
     t0 = time.monotonic()
     spin(ros_node, 2.0, (0.1, lambda: pub.publish(cmd)))
@@ -154,16 +168,32 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
         f"median period {statistics.median(gaps) * 1e3:.2f} ms (time scale {SCALE:g})")
     setting = [m for t, m in peer.since(t0, ZX.frame_id("Machine_Setting_Cmd")) if t < t1]
     alive = [int(ZX.decode(m.arbitration_id, bytes(m.data))[1]["alive_counter"]) for m in setting]
-    assert 30 / SCALE <= len(alive) <= 50, f"{len(alive)} Machine_Setting_Cmd in 2 s (50 ms cycle, time scale {SCALE:g})"
+    assert 30 / SCALE <= len(alive) <= 50, (
+        f"{len(alive)} Machine_Setting_Cmd in 2 s (50 ms cycle, time scale {SCALE:g})"
+    )
     steps = [AliveCounter.is_successor(a, b) for a, b in zip(alive, alive[1:], strict=False)]
     assert sum(steps) >= len(steps) - 1, f"alive counter not incrementing: {alive}"
     assert ZX.decode(setting[-1].arbitration_id, bytes(setting[-1].data))[1]["front_signal_switch_command"] == 2
 
     # 2. state frames -> joint_states
-    vel = ZX.encode("Front_Angular_Velocity", {"boom_relative_angular_velocity": 0.1, "arm_relative_angular_velocity": -0.2,
-                                               "bucket_relative_angular_velocity": 0.3, "swing_relative_angular_velocity": 0.4})
-    ang = ZX.encode("Front_Angle", {"boom_relative_angle": -0.5, "arm_relative_angle": 1.6, "bucket_relative_angle": 0.5,
-                                    "swing_relative_angle": 0.25})
+    vel = ZX.encode(
+        "Front_Angular_Velocity",
+        {
+            "boom_relative_angular_velocity": 0.1,
+            "arm_relative_angular_velocity": -0.2,
+            "bucket_relative_angular_velocity": 0.3,
+            "swing_relative_angular_velocity": 0.4,
+        },
+    )
+    ang = ZX.encode(
+        "Front_Angle",
+        {
+            "boom_relative_angle": -0.5,
+            "arm_relative_angle": 1.6,
+            "bucket_relative_angle": 0.5,
+            "swing_relative_angle": 0.25,
+        },
+    )
 
     def send_state() -> None:
         peer.send(ZX.frame_id("Front_Angular_Velocity"), vel)
@@ -228,7 +258,9 @@ def test_zx200_front_cmd_state_frames_emg_stop_and_watchdog(procs, ros_node, pee
         f"neutral {held:.3f} s after the command's first frame, {first_neutral - t_cmd:.3f} s after our publish "
         f"(time scale {SCALE:g})")
     assert all(bytes(m.data) == NEUTRAL_V1 for t, m in after if t >= first_neutral)
-    assert any("watchdog: no front_cmd" in d.status[0].message for d in diags), [d.status[0].message for d in diags[-5:]]
+    assert any("watchdog: no front_cmd" in d.status[0].message for d in diags), [
+        d.status[0].message for d in diags[-5:]
+    ]
 
 
 def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg) -> None:
@@ -276,7 +308,9 @@ def test_ic120_commands_states_and_garbled_frames(procs, ros_node, peer, can_cfg
     vc = peer.since(t0 + 0.5, IC.frame_id("Velocity_Cmd"))
     assert vc, bridge.output
     _, values = IC.decode(vc[-1][1].arbitration_id, bytes(vc[-1][1].data))
-    assert values["target_travel_center_velocity"] == pytest.approx(1.0) and values["target_travel_yaw_rate"] == pytest.approx(0.2)
+    assert values["target_travel_center_velocity"] == pytest.approx(1.0) and values[
+        "target_travel_yaw_rate"
+    ] == pytest.approx(0.2)
     _, vessel = IC.decode(IC.frame_id("Vessel_Cmd"), bytes(peer.since(t0 + 0.5, IC.frame_id("Vessel_Cmd"))[-1][1].data))
     assert vessel == {"target_vessel_angle": pytest.approx(0.5, abs=4e-4), "vessel_control_enable": 1}
 
@@ -362,7 +396,9 @@ def test_odom_period_publishes_fewer_odom_pose_messages_without_losing_odometry(
     ros_node.create_subscription(Odometry, "/ic120/odom_pose", odoms.append, 100)
     tv = IC.encode("Track_Velocity", {"left_track_velocity": 0.5, "right_track_velocity": 0.5})
     # one frame first, until the probe's subscription is matched and gets it
-    assert spin_until(ros_node, lambda: bool(odoms), 20 * SCALE, (0.05, lambda: peer.send(IC.frame_id("Track_Velocity"), tv)))
+    assert spin_until(
+        ros_node, lambda: bool(odoms), 20 * SCALE, (0.05, lambda: peer.send(IC.frame_id("Track_Velocity"), tv))
+    )
     x0, n0, t0 = odoms[-1].pose.pose.position.x, len(odoms), time.monotonic()
     frames = 0
 
@@ -389,7 +425,9 @@ def test_imu_period_thins_imu(procs, ros_node, peer, can_cfg) -> None:
     imus: list[Imu] = []
     ros_node.create_subscription(Imu, "/ic120/imu", imus.append, 100)
     rp = IC.encode("Roll_Pitch_Angle", {"roll_angle": 0.05, "pitch_angle": 0.0})
-    assert spin_until(ros_node, lambda: bool(imus), 20 * SCALE, (0.05, lambda: peer.send(IC.frame_id("Roll_Pitch_Angle"), rp)))
+    assert spin_until(
+        ros_node, lambda: bool(imus), 20 * SCALE, (0.05, lambda: peer.send(IC.frame_id("Roll_Pitch_Angle"), rp))
+    )
     n0, t0 = len(imus), time.monotonic()
     frames = 0
 
@@ -422,8 +460,12 @@ def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, ca
     zx_msg = ExcavatorCom3MachineSetting(engine_rpm=1500.0, power_eco_mode=True, travel_speed_mode=True,
                                          working_mode_notice=True, yellow_led_mode=2, horn=True)
     t0 = time.monotonic()
-    assert spin_until(ros_node, lambda: latest(ZX, t0).get("horn_cmd") == 1 and latest(ZX, t0).get("engine_rpm") == 1500,
-                      10 * SCALE, (0.2, lambda: zx_pub.publish(zx_msg))), zx_bridge.output
+    assert spin_until(
+        ros_node,
+        lambda: latest(ZX, t0).get("horn_cmd") == 1 and latest(ZX, t0).get("engine_rpm") == 1500,
+        10 * SCALE,
+        (0.2, lambda: zx_pub.publish(zx_msg)),
+    ), zx_bridge.output
     assert latest(ZX, t0)["yellow_led_mode"] == 2 and latest(ZX, t0)["working_mode_notice"] == 1
 
     ic_bridge = start_bridge(procs, "ic120", can_cfg)

@@ -23,7 +23,9 @@ def test_virtual_bus_round_trip() -> None:
 
 
 def test_config_errors_name_the_culprit() -> None:
-    with pytest.raises(ConfigError, match=r"CAN interface 'pcan' unknown; expected one of socketcan, udp_multicast, virtual"):
+    with pytest.raises(
+        ConfigError, match=r"CAN interface 'pcan' unknown; expected one of socketcan, udp_multicast, virtual"
+    ):
         open_bus({"interface": "pcan", "channel": "x"})
     with pytest.raises(ConfigError, match="'channel' is required"):
         open_bus({"interface": "virtual"})

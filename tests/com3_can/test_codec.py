@@ -166,7 +166,10 @@ def test_new_swing_and_blade_signals_round_trip() -> None:
         dz.encode("Blade_Cmd", {**blade, "blade_control_mode": 3.0})
     got = dz.decode(dz.frame_id("Blade_Angle"), dz.encode("Blade_Angle", {"blade_lift_angle": -0.41,
                                                                           "blade_lift_angular_velocity": 0.2}))
-    assert got == ("Blade_Angle", pytest.approx({"blade_lift_angle": -0.41, "blade_lift_angular_velocity": 0.2}, abs=4e-4))
+    assert got == (
+        "Blade_Angle",
+        pytest.approx({"blade_lift_angle": -0.41, "blade_lift_angular_velocity": 0.2}, abs=4e-4),
+    )
     # ids: J1939-style from SA 0x0A (commands) and 0xEA (dozer states); no id shared with the other DBCs
     for f in dz.command_frames:
         assert dz.frame_id(f) >> 26 == 6 and dz.frame_id(f) & 0xFF == 0x0A

@@ -18,7 +18,9 @@ from com3_can.codec import dbc_text, load_codec
 
 # The reference lives beside the checkout (shared/reference); a copy is kept in tests/com3_can/data so the
 # golden test also runs where shared/ is absent. TMS_SHARED points at another shared/ directory.
-_SHARED = Path(os.environ.get("TMS_SHARED", Path(__file__).resolve().parents[3] / "shared")) / "reference" / "com3_frames.csv"
+_SHARED = (
+    Path(os.environ.get("TMS_SHARED", Path(__file__).resolve().parents[3] / "shared")) / "reference" / "com3_frames.csv"
+)
 CSV = _SHARED if _SHARED.is_file() else Path(__file__).parent / "data" / "com3_frames.csv"
 
 

@@ -68,5 +68,7 @@ def test_the_import_graph_of_com3_can_is_acyclic() -> None:
     for name in sorted(graph):
         visit(name, ())
     # the core and the profiles meet only through the profile base: neither imports the other's module
-    assert "com3_can.bridge_core" not in {m for n, deps in graph.items() if n.startswith("com3_can.profiles") for m in deps}
+    assert "com3_can.bridge_core" not in {
+        m for n, deps in graph.items() if n.startswith("com3_can.profiles") for m in deps
+    }
     assert "com3_can.profiles" not in graph["com3_can.bridge_core"]

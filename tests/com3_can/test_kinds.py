@@ -60,11 +60,16 @@ def test_mst_rot_dump_cmd_commands_swing_and_vessel(kind: str) -> None:
 def test_mst_joint_states_carry_rotate_joint_first() -> None:
     core = _core("mst110cr")
     c = core.codec
-    core.on_frame(c.frame_id("Swing_Angle"), c.encode("Swing_Angle", {"swing_angle": 1.5, "swing_angular_velocity": 0.3}))
+    core.on_frame(
+        c.frame_id("Swing_Angle"), c.encode("Swing_Angle", {"swing_angle": 1.5, "swing_angular_velocity": 0.3})
+    )
     core.on_frame(c.frame_id("Vessel_Angle"), c.encode("Vessel_Angle", {"vessel_angle": 0.4,
                                                                         "vessel_angular_velocity": 0.0}))
-    outs = core.on_frame(c.frame_id("Track_Velocity"),
-                         c.encode("Track_Velocity", {"left_track_velocity": 0.5, "right_track_velocity": 0.5}), stamp=1.0)
+    outs = core.on_frame(
+        c.frame_id("Track_Velocity"),
+        c.encode("Track_Velocity", {"left_track_velocity": 0.5, "right_track_velocity": 0.5}),
+        stamp=1.0,
+    )
     js = next(o for o in outs if isinstance(o, JointStateOut))
     assert js.name == ("rotate_joint", "vessel_joint", "left_track", "right_track")
     assert js.position[:2] == pytest.approx((1.5, 0.4), abs=4e-4) and js.velocity[0] == pytest.approx(0.3, abs=2e-4)
@@ -106,8 +111,11 @@ def test_dozer_blade_cmd_and_travel() -> None:
     c = core.codec
     core.on_frame(c.frame_id("Blade_Angle"), c.encode("Blade_Angle", {"blade_lift_angle": -0.2,
                                                                       "blade_lift_angular_velocity": 0.0}))
-    outs = core.on_frame(c.frame_id("Track_Velocity"),
-                         c.encode("Track_Velocity", {"left_track_velocity": 1.0, "right_track_velocity": 1.0}), stamp=1.0)
+    outs = core.on_frame(
+        c.frame_id("Track_Velocity"),
+        c.encode("Track_Velocity", {"left_track_velocity": 1.0, "right_track_velocity": 1.0}),
+        stamp=1.0,
+    )
     js = next(o for o in outs if isinstance(o, JointStateOut))
     assert js.name == ("lift_joint", "left_track", "right_track") and js.position[0] == pytest.approx(-0.2, abs=4e-4)
     # travel and blade watchdogs are separate channels

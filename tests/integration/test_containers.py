@@ -44,12 +44,16 @@ def test_composed_nodes_share_a_process_and_talk_inside_it(procs, tmp_path):
     assert len(pids) == 2, pids
     # the listener hears the talker of its own process, through the one executor
     assert launcher.wait_for("[pair] heard seq=", timeout=30), launcher.output
-    assert re.search(r"^\[pair\] container of 2 node\(s\) in process \d+: /c/talker, /c/listener$", launcher.output, re.M)
+    assert re.search(
+        r"^\[pair\] container of 2 node\(s\) in process \d+: /c/talker, /c/listener$", launcher.output, re.M
+    )
     started = time.monotonic()
     _stop(launcher)
     assert time.monotonic() - started < 10.0
     assert not [p for p in pids if _alive(p)]
-    unclean = [ln for ln in launcher.output.splitlines() if any(w in ln for w in ("[FATAL]", "while stopping", "Destroyable"))]
+    unclean = [
+        ln for ln in launcher.output.splitlines() if any(w in ln for w in ("[FATAL]", "while stopping", "Destroyable"))
+    ]
     assert not unclean, unclean
     assert re.search(r"^\s+pair \(2 nodes\)\s+[0-9.]+ s\s+[0-9.]+ % of a core$", launcher.output, re.M), launcher.output
 

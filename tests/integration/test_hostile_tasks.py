@@ -29,7 +29,9 @@ GOOD = tree('<Sequence><SetLocalBlackboard output_key="N" value="3"/><Delay dela
             '</Sequence>')
 
 
-def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no_process_exits(procs, ros_node, tmp_path):
+def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no_process_exits(
+    procs, ros_node, tmp_path
+):
     from std_msgs.msg import String
 
     from tms_db import open_store
@@ -62,7 +64,11 @@ def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no
                 return
         raise AssertionError(f"timed out waiting for {what}; states {states}\n{manager.output[-3000:]}")
 
-    spin_until(lambda: start.get_subscription_count() > 0 and sequence.get_subscription_count() > 0, 30, "the manager's subscriptions")
+    spin_until(
+        lambda: start.get_subscription_count() > 0 and sequence.get_subscription_count() > 0,
+        30,
+        "the manager's subscriptions",
+    )
     # the good task first, so it is running while the bad ones come
     start.publish(TaskIds(task_ids=[3]))
     spin_until(lambda: 3 in states and states[3].state == TaskState.RUNNING, 20, "task 3 running")
@@ -72,12 +78,18 @@ def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no
                '{"tasks": ' + "[" * 100_000 + "]" * 100_000 + "}"]                       # JSON deeper than json.loads goes
     for data in hostile:
         sequence.publish(String(data=data))
-    spin_until(lambda: all(i in states and states[i].state != TaskState.RUNNING for i in (1, 2, 3)), 60, "tasks 1-3 ending")
+    spin_until(
+        lambda: all(i in states and states[i].state != TaskState.RUNNING for i in (1, 2, 3)), 60, "tasks 1-3 ending"
+    )
 
     # the bad tasks end FAILURE naming the leaf, its line and the bad name; the good one was not disturbed
     assert states[1].state == TaskState.FAILURE and BAD in states[1].message, states[1].message
     assert "LeafNodeD37pxi (line 1, column 69)" in states[1].message  # the stored one-line form's position and "no valid ROS name" in states[1].message
-    assert states[2].state == TaskState.FAILURE and BAD in states[2].message and "task parameter 'machine'" in states[2].message
+    assert (
+        states[2].state == TaskState.FAILURE
+        and BAD in states[2].message
+        and "task parameter 'machine'" in states[2].message
+    )
     assert states[3].state == TaskState.SUCCESS, states[3].message
     # the hostile /task_sequence messages were refused, each named in one log line; nothing crashed
     for text in ("MAX_TREE_DEPTH", "task id 2147483648 is out of range", "MAX_JSON_DEPTH"):

@@ -41,7 +41,10 @@ def _first(timeline: list, value: object) -> float | None:
 
 #: The two machines' buses over SocketCAN (``backend="socketcan"``): one vcan interface per machine, as on
 #: the real machines (each has its own CAN bus). Create them with ``ip link add dev vcanN type vcan``.
-VCAN = {"zx200": os.environ.get("TMS_PAPER_VCAN_ZX200", "vcan0"), "ic120": os.environ.get("TMS_PAPER_VCAN_IC120", "vcan1")}
+VCAN = {
+    "zx200": os.environ.get("TMS_PAPER_VCAN_ZX200", "vcan0"),
+    "ic120": os.environ.get("TMS_PAPER_VCAN_IC120", "vcan1"),
+}
 
 
 def _can_buses(domain: int, backend: str) -> dict[str, dict[str, object]]:

@@ -305,7 +305,11 @@ def test_cancel_mid_excavation_both_machines_rest_within_half_a_second(procs, do
               f"(ran at {(t_end - t_cancel) / (time.monotonic() - wall_cancel):.2f}x); messages "
               f"{probe.task(ZX200_TASK)[1]!r} / {probe.task(IC120_TASK)[1]!r}")
         for label in ("zx200/excavator_arm_controller", "zx200/zx200_planner", "subtasks_zx200", "tms_ts_manager"):
-            lines = [ln for ln in stack[label].output.splitlines() if any(w in ln.lower() for w in ("cancel", "stop", "lock"))]
+            lines = [
+                ln
+                for ln in stack[label].output.splitlines()
+                if any(w in ln.lower() for w in ("cancel", "stop", "lock"))
+            ]
             print(f"  {label}: " + " | ".join(lines[-4:]))
         assert before["zx_joint"] > REST_JOINT and before["ic_base"] > 0.05, before  # both were moving
         assert rest is not None, "the machines did not come to rest"

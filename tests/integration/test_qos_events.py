@@ -19,9 +19,13 @@ def test_deferred_incompatible_qos_events_still_reach_their_callbacks(ros_node):
         event_callbacks=PublisherEventCallbacks(incompatible_qos=lambda _e: seen.__setitem__("pub", seen["pub"] + 1)),
     )
     ros_node.create_subscription(
-        Float64, "qos_probe", lambda _m: None, QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, deadline=Duration(seconds=5)),
+        Float64,
+        "qos_probe",
+        lambda _m: None,
+        QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, deadline=Duration(seconds=5)),
         event_callbacks=SubscriptionEventCallbacks(
-            incompatible_qos=lambda _e: seen.__setitem__("sub", seen["sub"] + 1), deadline=lambda _e: None),
+            incompatible_qos=lambda _e: seen.__setitem__("sub", seen["sub"] + 1), deadline=lambda _e: None
+        ),
     )
 
     moved = defer_qos_incompatibility_events(ros_node, period_s=0.2)

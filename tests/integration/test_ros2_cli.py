@@ -69,7 +69,9 @@ def test_ros2_param_list_and_set_with_the_paper_launch_up(procs, domain, tmp_pat
     deadline = start + LIST_BUDGET_S
     clients = {name: ros_node.create_client(ListParameters, f"{name}/list_parameters") for name in sorted(on_graph)}
     try:
-        missing = [n for n, c in clients.items() if not c.wait_for_service(timeout_sec=max(0.0, deadline - time.monotonic()))]
+        missing = [
+            n for n, c in clients.items() if not c.wait_for_service(timeout_sec=max(0.0, deadline - time.monotonic()))
+        ]
         assert not missing, f"no list_parameters service: {missing}"
         futures = {n: c.call_async(ListParameters.Request(depth=ListParameters.Request.DEPTH_RECURSIVE))
                    for n, c in clients.items()}

@@ -23,7 +23,9 @@ def test_relayed_clock_fires_timers_at_simulated_times_without_waking_per_clock_
     relay = relay_clock(node)
     assert relay is not None
     own = [s for s in node.subscriptions if s.topic_name == "/clock"]
-    assert own and all(rclpy_compat.is_parked(s) for s in own), "the node's /clock subscription is still in its executor"
+    assert own and all(rclpy_compat.is_parked(s) for s in own), (
+        "the node's /clock subscription is still in its executor"
+    )
     pub = ros_node.create_publisher(Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
     deadline = time.monotonic() + 10
     while pub.get_subscription_count() < 1 and time.monotonic() < deadline:

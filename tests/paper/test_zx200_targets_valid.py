@@ -112,9 +112,12 @@ def test_every_sensed_excavation_target_passes_planner_validation():
         # the attack angle's bounds (a 20 deg target failed the task in the plant with a 0.5 rad tolerance).
         carry = _seed_zx200()[CFG.release_record]
         q_over_vessel = KIN.ik_position_with_angle(np.array([carry["x"], carry["y"], carry["z"]]), carry["theta_w"])
-        back = PLANNER.change_pose(positions_with_angle=[([approach["x"], approach["y"], approach["z"]], approach["theta_w"])],
-                                   current_q=q_over_vessel, pass_through=True,
-                                   theta_w_tolerance=approach["theta_w_tolerance"])
+        back = PLANNER.change_pose(
+            positions_with_angle=[([approach["x"], approach["y"], approach["z"]], approach["theta_w"])],
+            current_q=q_over_vessel,
+            pass_through=True,
+            theta_w_tolerance=approach["theta_w_tolerance"],
+        )
         q_above = PLANNER.excavate([fields["x"], fields["y"], fields["z"]], fields["theta_w"], fields["offset"])[0].q
         end = PLANNER.pass_through_end(back)
         assert abs(end[0] - q_above[0]) < 1e-9, (end, q_above)

@@ -150,7 +150,14 @@ def start_plant(procs, domain: int, tmp_path: Path) -> Iterator[Callable[..., Pl
         cfg_file = tmp_path / "plant.yaml"
         cfg_file.write_text(text)
         cfgs = _bus_cfgs(domain)
-        args = [str(executable("sim_bridge", "sim_plant")), "--ros-args", "-p", f"speed:={speed}", "-p", f"config:={cfg_file}"]
+        args = [
+            str(executable("sim_bridge", "sim_plant")),
+            "--ros-args",
+            "-p",
+            f"speed:={speed}",
+            "-p",
+            f"config:={cfg_file}",
+        ]
         for m, cfg in cfgs.items():
             args += ["-p", f"{m}_can_interface:={cfg['interface']}", "-p", f"{m}_can_channel:={cfg['channel']}"]
             if "port" in cfg:

@@ -33,7 +33,9 @@ def test_non_can_datagram_is_counted_and_valid_frames_still_apply():
         raw.sendto(b"RTPS\x02\x03not a can frame at all", (group, port))
         raw.close()
         codec = load_codec("zx200")
-        data = codec.encode("Velocity_Cmd_1", {f"{j}_target_anguler_velocity": 0.0 for j in ("swing", "boom", "arm", "bucket")})
+        data = codec.encode(
+            "Velocity_Cmd_1", {f"{j}_target_anguler_velocity": 0.0 for j in ("swing", "boom", "arm", "bucket")}
+        )
         sender.send(can.Message(arbitration_id=codec.frame_id("Velocity_Cmd_1"), data=data, is_extended_id=True))
         side = io.sides["zx200"]
         deadline = time.monotonic() + 5.0

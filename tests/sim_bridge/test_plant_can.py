@@ -98,7 +98,8 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
     def at_limits(_values: dict[str, float]) -> bool:
         a, w = zx.get("Front_Angle"), zx.get("Front_Angular_Velocity")
         return all(
-            abs(a[f"{FIELD[j]}_relative_angle"] - lim) < 0.002 and abs(w[f"{FIELD[j]}_relative_angular_velocity"]) < 0.001
+            abs(a[f"{FIELD[j]}_relative_angle"] - lim) < 0.002
+            and abs(w[f"{FIELD[j]}_relative_angular_velocity"]) < 0.001
             for j, lim in limits.items()
         )
 
@@ -155,7 +156,9 @@ def test_gnss_converts_back_to_truth_within_noise(start_plant, ros_node):
     plant = start_plant(speed=1.0)
     truth: dict[str, PoseStamped] = {}
     for m in ("zx200", "ic120"):
-        ros_node.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: truth.__setitem__(m, msg), 10)
+        ros_node.create_subscription(
+            PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: truth.__setitem__(m, msg), 10
+        )
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline and len(truth) < 2:
         ros_node.executor_for_test.spin_once(timeout_sec=0.1)

@@ -13,7 +13,9 @@ def test_mound_scan_integrates_to_the_mound_volume():
     field = HeightField(spec.soil)
     rng = np.random.default_rng(0)
     spacing = 0.2
-    pts = mound_scan(field, spec.soil.mound_center, spec.soil.mound_base_radius + 1.0, noise=0.0, rng=rng, spacing=spacing)
+    pts = mound_scan(
+        field, spec.soil.mound_center, spec.soil.mound_base_radius + 1.0, noise=0.0, rng=rng, spacing=spacing
+    )
     assert pts.shape[1] == 3 and len(pts) > 500
     volume = float((pts[:, 2] - spec.soil.ground_z).sum()) * spacing**2
     assert volume == pytest.approx(field.mound_volume(), rel=0.05)

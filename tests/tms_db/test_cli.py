@@ -81,7 +81,9 @@ def test_restore_reports_every_bad_line_and_document_and_loads_nothing(tmp_path)
     # all or nothing: a malformed line and a duplicate (named with the line of the first) refuse the whole file
     src = tmp_path / "d" / "rostmsdb"
     src.mkdir(parents=True)
-    (src / "parameter.json").write_text('{"record_name": "a"}\n{"record_name": \n{"record_name": "a"}\n{"record_name": "b"}\n')
+    (src / "parameter.json").write_text(
+        '{"record_name": "a"}\n{"record_name": \n{"record_name": "a"}\n{"record_name": "b"}\n'
+    )
     with open_store(path=tmp_path / "db") as store:
         result = restore(store, tmp_path / "d")
         assert result.counts == {"parameter": 0}
@@ -108,13 +110,22 @@ def test_cli_task_and_param_commands(tmp_path) -> None:
     params.write_text("parameters:\n  - {record_name: BB, FLG: false, N: 3, V: 2.5}\n"
                       "  - {model_name: ic120, record_name: LOAD_PATH, x: [1.0], y: 0.0}\n")
     r = tms_db(db, "param", "import", str(params))
-    assert r.returncode == 1 and "p.yaml:3: record 'LOAD_PATH' (model 'ic120'): field 'y': waypoint records need arrays" in r.stderr
+    assert (
+        r.returncode == 1
+        and "p.yaml:3: record 'LOAD_PATH' (model 'ic120'): field 'y': waypoint records need arrays" in r.stderr
+    )
     params.write_text("parameters:\n  - {record_name: BB, FLG: false, N: 3, V: 2.5}\n")
     assert tms_db(db, "param", "import", str(params)).returncode == 0
     r = tms_db(db, "param", "set", "BB", "FLG=true", "N=4", "S=hello")
     assert r.returncode == 0, r.stderr
     doc = json.loads(tms_db(db, "param", "get", "BB").stdout)
-    assert doc["FLG"] is True and doc["N"] == 4 and doc["V"] == 2.5 and doc["S"] == "hello" and "$date" in doc["timestamps"]
+    assert (
+        doc["FLG"] is True
+        and doc["N"] == 4
+        and doc["V"] == 2.5
+        and doc["S"] == "hello"
+        and "$date" in doc["timestamps"]
+    )
     r = tms_db(db, "param", "get", "NOPE", "--model-name", "zx200")
     assert r.returncode == 1 and "record 'NOPE' of model 'zx200' not found" in r.stderr
     r = tms_db(db, "dump", str(tmp_path / "dump"))
@@ -128,8 +139,10 @@ def test_seed(tmp_path, capsys) -> None:
     (tmp_path / "trees").mkdir()
     (tmp_path / "trees" / "t.xml").write_text(TREE)
     seed = tmp_path / "seed.yaml"
-    seed.write_text("tasks:\n  - {task_id: 10, file: trees/t.xml, description: dump haul}\n"
-                    "parameters:\n  - {model_name: zx200, type: static, record_name: release_angle, target_angle: 1.2}\n")
+    seed.write_text(
+        "tasks:\n  - {task_id: 10, file: trees/t.xml, description: dump haul}\n"
+        "parameters:\n  - {model_name: zx200, type: static, record_name: release_angle, target_angle: 1.2}\n"
+    )
     db = str(tmp_path / "db")
     for _ in range(2):  # idempotent
         assert cli_main(["--path", db, "seed", "paper", "--file", str(seed)]) == 0

@@ -54,7 +54,9 @@ def snapshot(db: Path) -> list[str]:
     if not (db / DB_FILE).exists():
         return []
     with open_store(path=db) as store:
-        return [f"{name}\t{dumps_doc(doc)}" for name in store.collection_names() for doc in store.export_collection(name)]
+        return [
+            f"{name}\t{dumps_doc(doc)}" for name in store.collection_names() for doc in store.export_collection(name)
+        ]
 
 
 def run(entry: str, db: Path, *args: str, source: Path | None = None, expect: int | None = None,
@@ -244,7 +246,10 @@ def test_restore_refuses_duplicates_keys_in_the_store_and_keeps_the_store_under_
     dup = {**docs[0], "_id": ObjectId()}
     src = dump_dir(tmp_path, {"parameter.json": "".join(dumps_doc(d) + "\n" for d in [*docs, dup]).encode()})
     r = run("restore", db, "restore", "--drop", str(src), expect=1)  # --drop is not applied either
-    assert "parameter.json: line 4" in r.stderr and "duplicate record 'R0' of model 'zx200' (the same as line 1)" in r.stderr
+    assert (
+        "parameter.json: line 4" in r.stderr
+        and "duplicate record 'R0' of model 'zx200' (the same as line 1)" in r.stderr
+    )
     # a key the store already holds (KEEP of zx200) refuses the whole restore, the new documents included
     (src / "rostmsdb" / "parameter.json").write_text(
         dumps_doc(docs[1]) + "\n" + dumps_doc({"model_name": "zx200", "record_name": "KEEP", "x": 5.0}) + "\n")
@@ -252,16 +257,22 @@ def test_restore_refuses_duplicates_keys_in_the_store_and_keeps_the_store_under_
     assert "line 2" in r.stderr and "record 'KEEP' of model 'zx200' already in the store" in r.stderr
 
 
-@pytest.mark.parametrize(("data", "needle"), [
-    ('{"record_name": "a"}\n{"record_name": "b", "t": "caf\xe9"}\n'.encode("latin-1"), "parameter.json:2: not UTF-8 text: byte 0xe9"),
-    (b"[" * 100_000 + b"]" * 100_000, "nested too deep"),
-    (b'{"record_name": "a", "v": ' + b"[" * 50_000 + b"]" * 50_000 + b"}\n", "nested too deep"),
-    (b'{"record_name": "a", "v": {"$numberDouble": "NaN"}}\n', "line 1"),
-    (b'[{"record_name": "a"}, 3]', "element 2 is not a document"),
-    (b'[{"record_name": "a"},', "malformed JSON array"),
-    (b'{"record_name": "a", "v": {"$oid": "zz"}}\n', "malformed Extended JSON"),
-    (b'{"record_name": "a", "big": "' + b"x" * (MAX_DOCUMENT_BYTES + 1) + b'"}\n', "MAX_DOCUMENT_BYTES"),
-])
+@pytest.mark.parametrize(
+    ("data", "needle"),
+    [
+        (
+            '{"record_name": "a"}\n{"record_name": "b", "t": "caf\xe9"}\n'.encode("latin-1"),
+            "parameter.json:2: not UTF-8 text: byte 0xe9",
+        ),
+        (b"[" * 100_000 + b"]" * 100_000, "nested too deep"),
+        (b'{"record_name": "a", "v": ' + b"[" * 50_000 + b"]" * 50_000 + b"}\n", "nested too deep"),
+        (b'{"record_name": "a", "v": {"$numberDouble": "NaN"}}\n', "line 1"),
+        (b'[{"record_name": "a"}, 3]', "element 2 is not a document"),
+        (b'[{"record_name": "a"},', "malformed JSON array"),
+        (b'{"record_name": "a", "v": {"$oid": "zz"}}\n', "malformed Extended JSON"),
+        (b'{"record_name": "a", "big": "' + b"x" * (MAX_DOCUMENT_BYTES + 1) + b'"}\n', "MAX_DOCUMENT_BYTES"),
+    ],
+)
 def test_restore_refuses_hostile_json_naming_file_and_place(tmp_path, data: bytes, needle: str) -> None:
     db = tmp_path / "db"
     populate(db)
@@ -276,11 +287,13 @@ def test_check_finds_bad_task_xml_and_record_types_stored_behind_the_store(tmp_p
     assert run("check", db, "check", expect=0).stdout.strip() == "consistent"
     # as an older version's restore could have left them: written straight into SQLite
     con = sqlite3.connect(db / DB_FILE)
-    rows = [("task", 8, None, None, '{"task_id":8,"type":"task","task_sequence":"<root><BehaviorTree>"}'),
-            ("task", 9, None, None, '{"task_id":9,"type":"task","task_sequence":' + repr_json(UNKNOWN_NODE_TREE) + "}"),
-            ("parameter", None, "", "T", '{"record_name":"T","type":5}'),
-            ("parameter", None, "ic120", "W", '{"model_name":"ic120","record_name":"W","type":"static","x":[1.0],"y":2}'),
-            ("parameter", None, "", None, '{"type":"dynamic","FLG":true}')]
+    rows = [
+        ("task", 8, None, None, '{"task_id":8,"type":"task","task_sequence":"<root><BehaviorTree>"}'),
+        ("task", 9, None, None, '{"task_id":9,"type":"task","task_sequence":' + repr_json(UNKNOWN_NODE_TREE) + "}"),
+        ("parameter", None, "", "T", '{"record_name":"T","type":5}'),
+        ("parameter", None, "ic120", "W", '{"model_name":"ic120","record_name":"W","type":"static","x":[1.0],"y":2}'),
+        ("parameter", None, "", None, '{"type":"dynamic","FLG":true}'),
+    ]
     with con:
         for coll, tid, model, record, body in rows:
             con.execute("INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
@@ -310,14 +323,28 @@ def seed_files(tmp_path: Path, params: str, tree: bytes | None = None) -> Path:
     return f
 
 
-@pytest.mark.parametrize(("params", "tree", "needle"), [
-    ("  - {record_name: A, x: 1}\n  - {record_name: B, x: .inf}\n", None, "seed.yaml:5: record 'B': field 'x': non-finite"),
-    ("  - {record_name: A, x: 1}\n  - {record_name: A, x: 2}\n", None, "seed.yaml:5: duplicate record 'A' of model '': also at line 4"),
-    ("  - {record_name: A, x: 1}\n", "<root><BehaviorTree>caf\u00e9</BehaviorTree></root>".encode("latin-1"),
-     "t.xml:1: not UTF-8 text: byte 0xe9"),
-    ("  - {record_name: A, x: 1}\n", b"<root><BehaviorTree><Sequence></root>", "XML does not parse"),
-    ("  - " + "[" * 200 + "]" * 200 + "\n", None, f"nested deeper than {MAX_YAML_DEPTH}"),
-])
+@pytest.mark.parametrize(
+    ("params", "tree", "needle"),
+    [
+        (
+            "  - {record_name: A, x: 1}\n  - {record_name: B, x: .inf}\n",
+            None,
+            "seed.yaml:5: record 'B': field 'x': non-finite",
+        ),
+        (
+            "  - {record_name: A, x: 1}\n  - {record_name: A, x: 2}\n",
+            None,
+            "seed.yaml:5: duplicate record 'A' of model '': also at line 4",
+        ),
+        (
+            "  - {record_name: A, x: 1}\n",
+            "<root><BehaviorTree>caf\u00e9</BehaviorTree></root>".encode("latin-1"),
+            "t.xml:1: not UTF-8 text: byte 0xe9",
+        ),
+        ("  - {record_name: A, x: 1}\n", b"<root><BehaviorTree><Sequence></root>", "XML does not parse"),
+        ("  - " + "[" * 200 + "]" * 200 + "\n", None, f"nested deeper than {MAX_YAML_DEPTH}"),
+    ],
+)
 def test_seed_checks_everything_before_storing_anything(tmp_path, params: str, tree: bytes | None, needle: str) -> None:
     db = tmp_path / "db"
     populate(db)
@@ -584,7 +611,9 @@ def test_zz_inputs_tried_per_entry() -> None:
     print("\ninputs tried per entry:", dict(TRIED))
     if len(GENERATED) < 3:
         pytest.skip("only part of this file ran (-k / a single test): the generated tests did not all run")
-    assert TRIED["param import"] >= EXAMPLES + 15 and TRIED["restore"] >= EXAMPLES + 10 and TRIED["seed"] >= EXAMPLES + 5
+    assert (
+        TRIED["param import"] >= EXAMPLES + 15 and TRIED["restore"] >= EXAMPLES + 10 and TRIED["seed"] >= EXAMPLES + 5
+    )
 
 
 def test_a_reader_that_closes_the_output_ends_the_run_quietly(tmp_path) -> None:

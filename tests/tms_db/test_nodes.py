@@ -91,7 +91,9 @@ def test_reader_and_writer_nodes(procs, ros_node, tmp_path) -> None:
         assert time.monotonic() < deadline, "tms_db_writer never subscribed"
         ros_node.executor_for_test.spin_once(timeout_sec=0.1)
     for n in range(1, 21):
-        pub.publish(ParameterUpdate(record_name="SAMPLE_GLOBAL_BLACKBOARD", fields_json=json.dumps({"sample_val_int": n})))
+        pub.publish(
+            ParameterUpdate(record_name="SAMPLE_GLOBAL_BLACKBOARD", fields_json=json.dumps({"sample_val_int": n}))
+        )
     pub.publish(ParameterUpdate(record_name="MISSING_GROUP", fields_json='{"F": true}'))
     deadline = time.monotonic() + 30
     while True:

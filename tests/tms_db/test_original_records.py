@@ -47,10 +47,12 @@ def test_binary_fields_and_any_type_through_the_store_api(store) -> None:
 
 
 def test_import_is_all_or_nothing_and_names_every_refused_document(store) -> None:
-    docs = [collision_record("66f0c0ffee00000000000111", "a"),
-            {"_id": ObjectId("66f0c0ffee00000000000112"), "record_name": "bad", "when": {1, 2}},
-            {"_id": ObjectId("66f0c0ffee00000000000113"), "model_name": "zx120", "type": "parameter", "parameter_id": 5},
-            {**collision_record("66f0c0ffee00000000000114", "a")}]  # same key as the first
+    docs = [
+        collision_record("66f0c0ffee00000000000111", "a"),
+        {"_id": ObjectId("66f0c0ffee00000000000112"), "record_name": "bad", "when": {1, 2}},
+        {"_id": ObjectId("66f0c0ffee00000000000113"), "model_name": "zx120", "type": "parameter", "parameter_id": 5},
+        {**collision_record("66f0c0ffee00000000000114", "a")},
+    ]  # same key as the first
     result = store.import_documents("parameter", docs)
     assert result.loaded == 0
     assert [(r.index, r.label, r.first) for r in result.rejected] == [(1, "_id 66f0c0ffee00000000000112", None),
@@ -99,11 +101,23 @@ def test_a_bad_document_is_reported_by_its_id_and_nothing_loads(tmp_path) -> Non
     src.mkdir(parents=True)
     (src / "parameter.json").write_text(
         "".join(dumps_doc(d) + "\n" for d in (good[0], duplicate, string_id, good[1])))
-    tasks = [{"_id": ObjectId("66f0c0ffee00000000000311"), "task_id": 1, "type": "task", "model_name": "zx200",
-              "description": "", "task_sequence": "<root><BehaviorTree/></root>"},
-             {"_id": ObjectId("66f0c0ffee00000000000312"), "task_id": "two", "type": "task", "task_sequence": "<root/>"},
-             {"_id": ObjectId("66f0c0ffee00000000000313"), "task_id": 3, "type": "task",
-              "task_sequence": "<root><BehaviorTree><Sequence></root>"}]
+    tasks = [
+        {
+            "_id": ObjectId("66f0c0ffee00000000000311"),
+            "task_id": 1,
+            "type": "task",
+            "model_name": "zx200",
+            "description": "",
+            "task_sequence": "<root><BehaviorTree/></root>",
+        },
+        {"_id": ObjectId("66f0c0ffee00000000000312"), "task_id": "two", "type": "task", "task_sequence": "<root/>"},
+        {
+            "_id": ObjectId("66f0c0ffee00000000000313"),
+            "task_id": 3,
+            "type": "task",
+            "task_sequence": "<root><BehaviorTree><Sequence></root>",
+        },
+    ]
     (src / "task.json").write_text("".join(dumps_doc(d) + "\n" for d in tasks))
     with open_store(path=tmp_path / "db") as store:
         result = restore(store, tmp_path / "d")
@@ -114,7 +128,10 @@ def test_a_bad_document_is_reported_by_its_id_and_nothing_loads(tmp_path) -> Non
                 "model 'zx200' (the same as line 1)") in text
         assert "parameter.json: line 3 (_id mesh-c): _id 'mesh-c' is not an ObjectId" in text
         assert "task.json: line 2 (_id 66f0c0ffee00000000000312): field 'task_id'" in text
-        assert "task.json: line 3 (_id 66f0c0ffee00000000000313): task_id 3: field 'task_sequence': XML does not parse" in text
+        assert (
+            "task.json: line 3 (_id 66f0c0ffee00000000000313): task_id 3: field 'task_sequence': XML does not parse"
+            in text
+        )
         # all or nothing: the good documents of both files are not stored either
         assert store.list_parameters() == [] and store.list_tasks() == []
         assert store.check() == []
@@ -124,7 +141,9 @@ def test_cli_restore_names_the_refused_documents_stores_nothing_and_exits_1(tmp_
     src = tmp_path / "d" / "rostmsdb"
     src.mkdir(parents=True)
     first = collision_record("66f0c0ffee00000000000401", "a")
-    (src / "parameter.json").write_text(dumps_doc(first) + "\n" + dumps_doc({**first, "_id": ObjectId("66f0c0ffee00000000000402")}) + "\n")
+    (src / "parameter.json").write_text(
+        dumps_doc(first) + "\n" + dumps_doc({**first, "_id": ObjectId("66f0c0ffee00000000000402")}) + "\n"
+    )
     exe = Path(sys.prefix) / "bin" / "tms-db"
     r = subprocess.run([str(exe), "--path", str(tmp_path / "db"), "restore", str(tmp_path / "d")],
                        capture_output=True, text=True, timeout=60, cwd=ROOT)

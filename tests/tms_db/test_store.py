@@ -101,7 +101,11 @@ def test_parameters_keep_types(store) -> None:
     assert require_numbers(pose, ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")) == (0.0, -0.5, 1, 0.25)
     points = require_arrays(store.get_parameter("ic120", "LOAD_PATH"), ("x", "y", "z", "qx", "qy", "qz", "qw"))
     assert points[2] == (3.0, 1, 0.0, 0.0, 0.0, 0.0, 1.0)
-    assert [d["record_name"] for d in store.list_parameters()] == ["initial_pose", "LOAD_PATH", "SAMPLE_GLOBAL_BLACKBOARD"]
+    assert [d["record_name"] for d in store.list_parameters()] == [
+        "initial_pose",
+        "LOAD_PATH",
+        "SAMPLE_GLOBAL_BLACKBOARD",
+    ]
     assert [d["record_name"] for d in store.list_parameters("ic120")] == ["LOAD_PATH"]
 
 
@@ -118,7 +122,9 @@ def test_upsert_replaces_same_key(store) -> None:
 
 def test_unknown_record_names_record_model_and_field(store) -> None:
     store.upsert_parameter(JOINT_POSE)
-    with pytest.raises(RecordNotFound, match=r"record 'initial_pose' of model 'ic120' .*exists for model\(s\) \['zx200'\]"):
+    with pytest.raises(
+        RecordNotFound, match=r"record 'initial_pose' of model 'ic120' .*exists for model\(s\) \['zx200'\]"
+    ):
         store.get_parameter("ic120", "initial_pose")
     with pytest.raises(RecordNotFound, match="record 'NOPE'"):
         store.get_record("NOPE")

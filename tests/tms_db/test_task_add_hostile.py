@@ -52,29 +52,61 @@ def seeded(tmp_path_factory) -> Path:
     src.write_text(TREE)
     assert tms_db(db, "task", "add", str(src), "--id", "4").returncode == 0
     with open_store(path=db) as store:
-        store.upsert_parameter({"record_name": "initial_pose", "model_name": "zx200", "trajectory": 1, "swing_joint": 0.0,
-                                "boom_joint": 0.0, "arm_joint": 0.0, "bucket_joint": 0.0})
+        store.upsert_parameter(
+            {
+                "record_name": "initial_pose",
+                "model_name": "zx200",
+                "trajectory": 1,
+                "swing_joint": 0.0,
+                "boom_joint": 0.0,
+                "arm_joint": 0.0,
+                "bucket_joint": 0.0,
+            }
+        )
     yield db
     print("\ninputs tried per entry:", TRIED)
 
 
 # (file name, file bytes, extra arguments, what the one line must say)
 CASES = [
-    ("deep1000.xml", doc("<Sequence>" * 1000 + "<AlwaysSuccess/>" + "</Sequence>" * 1000).encode(), (),
-     "<Sequence> (line 3, column 621) is nested 65 deep, over the limit of 64"),
+    (
+        "deep1000.xml",
+        doc("<Sequence>" * 1000 + "<AlwaysSuccess/>" + "</Sequence>" * 1000).encode(),
+        (),
+        "<Sequence> (line 3, column 621) is nested 65 deep, over the limit of 64",
+    ),
     ("deep10000.xml", doc("<Sequence>" * 10_000 + "</Sequence>" * 10_000).encode(), (), "MAX_TREE_DEPTH"),
-    ("huge.xml", doc("<Sequence>" + "".join(f'<AlwaysSuccess name="n{i:07d}"/>' for i in range(172_707)) + "</Sequence>").encode(),
-     (), "over the limit of 1,048,576 bytes"),
+    (
+        "huge.xml",
+        doc(
+            "<Sequence>" + "".join(f'<AlwaysSuccess name="n{i:07d}"/>' for i in range(172_707)) + "</Sequence>"
+        ).encode(),
+        (),
+        "over the limit of 1,048,576 bytes",
+    ),
     ("many.xml", doc("<Sequence>" + "<AlwaysSuccess/>" * 6000 + "</Sequence>").encode(), (), "MAX_TREE_NODES"),
-    ("fullwidth.xml", doc(f"<Sequence>\n  {leaf('d37pxi_24＿')}\n</Sequence>").encode(), (),
-     "LeafNodeZx200 (line 4, column 3): port 'model_name' = 'd37pxi_24＿' is no valid ROS name"),
+    (
+        "fullwidth.xml",
+        doc(f"<Sequence>\n  {leaf('d37pxi_24＿')}\n</Sequence>").encode(),
+        (),
+        "LeafNodeZx200 (line 4, column 3): port 'model_name' = 'd37pxi_24＿' is no valid ROS name",
+    ),
     ("space.xml", doc(leaf("zx 200")).encode(), (), "'zx 200' is no valid ROS name"),
     ("empty.xml", doc(leaf("")).encode(), (), "port 'model_name' must not be empty"),
     ("digit.xml", doc(leaf("2zx")).encode(), (), "token that starts with a number"),
     ("record.xml", doc(leaf(record=" pose")).encode(), (), "leading or trailing spaces"),
-    ("unknown.xml", doc("<Sequence>\n\n    <Dleay/>\n</Sequence>").encode(), (), "Dleay (line 5, column 5): unknown node ID"),
-    ("port.xml", doc('<Sequence>\n  <Delay delay_mesc="10">\n    <AlwaysSuccess/>\n  </Delay>\n</Sequence>').encode(), (),
-     "Delay (line 4, column 3): unknown port 'delay_mesc'"),
+    (
+        "unknown.xml",
+        doc("<Sequence>\n\n    <Dleay/>\n</Sequence>").encode(),
+        (),
+        "Dleay (line 5, column 5): unknown node ID",
+    ),
+    (
+        "port.xml",
+        doc('<Sequence>\n  <Delay delay_mesc="10">\n    <AlwaysSuccess/>\n  </Delay>\n</Sequence>').encode(),
+        (),
+        "Delay (line 4, column 3): unknown port 'delay_mesc'",
+    ),
     ("subtree.xml", doc('<SubTree ID="Gone"/>').encode(), (), "SubTree 'Gone' (line 3, column 1): no BehaviorTree"),
     ("param.xml", doc(leaf("{machine}")).encode(), (), "reads blackboard key 'machine'"),
     ("malformed.xml", b"<root>\n<BehaviorTree>\n  <Sequence>\n</root>\n", (), "malformed XML at line 4, column 3"),
@@ -87,8 +119,9 @@ CASES = [
 
 
 @pytest.mark.parametrize(("name", "data", "extra", "expected"), CASES, ids=[c[0] for c in CASES])
-def test_a_refused_tree_is_one_line_with_its_file_line_and_column_and_nothing_stored(seeded, tmp_path, name, data, extra,
-                                                                                     expected) -> None:
+def test_a_refused_tree_is_one_line_with_its_file_line_and_column_and_nothing_stored(
+    seeded, tmp_path, name, data, extra, expected
+) -> None:
     src = tmp_path / name
     src.write_bytes(data)
     before = content(seeded)
@@ -126,18 +159,27 @@ def test_the_same_trees_are_what_the_manager_refuses_and_a_valid_one_is_stored(s
 
 BODIES = st.one_of(
     st.integers(62, 5000).map(lambda d: "<Sequence>" * d + "<AlwaysSuccess/>" + "</Sequence>" * d),
-    st.sampled_from(["d37pxi_24＿", "zx 200", "", "1a", "a b", "ｚｘ", "zx200\u3000", "~x", "a//b"]).map(lambda m: leaf(m)),
-    st.text(alphabet="abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ", min_size=1, max_size=10).map(lambda t: f"<Q{t}/>"),
-    st.text(alphabet="abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=10).map(lambda t: f'<AlwaysSuccess {t}X="1"/>'),
+    st.sampled_from(["d37pxi_24＿", "zx 200", "", "1a", "a b", "ｚｘ", "zx200\u3000", "~x", "a//b"]).map(
+        lambda m: leaf(m)
+    ),
+    st.text(alphabet="abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ", min_size=1, max_size=10).map(
+        lambda t: f"<Q{t}/>"
+    ),
+    st.text(alphabet="abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=10).map(
+        lambda t: f'<AlwaysSuccess {t}X="1"/>'
+    ),
     st.text(alphabet="abcdefghijklmnopqrstuvwxyz", min_size=1, max_size=10).map(lambda t: f'<SubTree ID="{t}"/>'),
     st.text(max_size=60),
 )
 
 
 @given(BODIES, st.one_of(st.none(), st.integers(-2**70, 2**70)))
-@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-def test_any_generated_tree_is_stored_or_refused_in_one_line_and_never_half_applied(seeded, tmp_path, capsys, body,
-                                                                                   task_id) -> None:
+@settings(
+    max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+)
+def test_any_generated_tree_is_stored_or_refused_in_one_line_and_never_half_applied(
+    seeded, tmp_path, capsys, body, task_id
+) -> None:
     src = tmp_path / "gen.xml"
     src.write_text(doc(body), encoding="utf-8", errors="surrogatepass")
     before = content(seeded)

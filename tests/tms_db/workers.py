@@ -41,8 +41,16 @@ def read_acks(path: Path) -> tuple[Counter, dict[str, int]]:
     return counts, last
 
 
-def run_hammer(db: Path, workdir: Path, *, writers: int = 4, readers: int = 4, seconds: float = 5.0,
-               mode: str = "mixed", sample_reads: bool = False) -> tuple[list[dict], list[dict], list[Path], list[Path]]:
+def run_hammer(
+    db: Path,
+    workdir: Path,
+    *,
+    writers: int = 4,
+    readers: int = 4,
+    seconds: float = 5.0,
+    mode: str = "mixed",
+    sample_reads: bool = False,
+) -> tuple[list[dict], list[dict], list[Path], list[Path]]:
     """Run writers + readers concurrently for ``seconds``; returns their summaries, ack files, sample files."""
     hammer.prepare(str(db), writers)
     start_at = f"{time.time() + 2.0:.3f}"  # all workers start together, after interpreter start-up
@@ -57,7 +65,9 @@ def run_hammer(db: Path, workdir: Path, *, writers: int = 4, readers: int = 4, s
     return wsum, rsum, acks, samples
 
 
-def verify_store(db: Path, acks: list[Path], *, exact: bool, mode: str = "mixed", slack: int | None = None) -> list[str]:
+def verify_store(
+    db: Path, acks: list[Path], *, exact: bool, mode: str = "mixed", slack: int | None = None
+) -> list[str]:
     """Every acknowledged write is present (``exact``: and nothing else, i.e. no write in flight)."""
     problems = []
     with open_store(path=db) as store:

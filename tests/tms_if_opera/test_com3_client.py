@@ -83,4 +83,6 @@ def test_com3_msgs_joint_cmd_on_front_cmd_moves_the_plant_arm(procs, domain, ros
     t_stop = time.monotonic()
     _spin_until(ros_node, lambda: False, 3.0)
     settled = [q for t, q in boom if t > t_stop + 2.0]
-    assert settled and max(settled) - min(settled) < 0.01, f"boom still moving after the commands stopped: {settled[:5]}"
+    assert settled and max(settled) - min(settled) < 0.01, (
+        f"boom still moving after the commands stopped: {settled[:5]}"
+    )

@@ -57,7 +57,9 @@ class PlantContacts:
         self.carrier = [g for g in range(m.ngeom) if body(g).startswith("ic120_")]
         assert len(self.arm) == 4 and len(self.carrier) == 2, (self.arm, self.carrier)
 
-    def clearance(self, q: np.ndarray, ic_pose: tuple[float, float, float], ic_joints: dict[str, float]) -> tuple[float, float, str]:
+    def clearance(
+        self, q: np.ndarray, ic_pose: tuple[float, float, float], ic_joints: dict[str, float]
+    ) -> tuple[float, float, str]:
         """(smallest distance of any arm link box to the carrier, smallest distance minus the link's padding,
         the body of the latter)."""
         site = self.site
@@ -164,9 +166,11 @@ def test_change_pose_plan_swings_over_a_parked_carrier_without_contact(arm_stack
     contacts = sum(1 for r in results if r[0] <= 0.0)
     padded_contacts = sum(1 for r in results if r[1] < 0.0)
     swings = np.ptp([q[0] for q in samples])
-    print(f"\n{GOALS} change_pose_plan goals over the carrier in {elapsed:.1f} s wall; {len(dense)} plant configurations; "
-          f"contacts {contacts}, padded contacts {padded_contacts}; smallest plant distance {min_d:.3f} m, "
-          f"smallest beyond padding {worst[1]:.3f} m ({worst[2]}); swing range {swings:.2f} rad")
+    print(
+        f"\n{GOALS} change_pose_plan goals over the carrier in {elapsed:.1f} s wall; {len(dense)} plant configurations; "
+        f"contacts {contacts}, padded contacts {padded_contacts}; smallest plant distance {min_d:.3f} m, "
+        f"smallest beyond padding {worst[1]:.3f} m ({worst[2]}); swing range {swings:.2f} rad"
+    )
     assert swings > RIGHT - LEFT - 0.1, "the arm did not swing across the carrier"
     detours = stack.procs["planner"].output.count("over 'ic120' (record 'zx200_collision_objects')")
     assert detours >= GOALS, f"only {detours} of {GOALS} goals went over the carrier"

@@ -179,8 +179,9 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     assert carry_end_speed > 0.02, f"the pass-through carry waited for rest (joint speed {carry_end_speed:.3f} rad/s)"
     # planned from where the carry goes, not from the lagging joint_states: over the vessel already, so
     # the release opens at once (release_swing_in_open), with no swing back
-    assert stack.procs["planner"].wait_for("TmsRpZx200ReleaseSimple: planned from the previous goal's pass-through end", 5), \
-        stack.procs["planner"].output[-2000:]
+    assert stack.procs["planner"].wait_for(
+        "TmsRpZx200ReleaseSimple: planned from the previous goal's pass-through end", 5
+    ), stack.procs["planner"].output[-2000:]
     assert "open" in set(stack.feedback) and "swing" not in set(stack.feedback), stack.feedback
     stack.spin(3.0)
     vessel2 = stack.soil[2]

@@ -42,7 +42,10 @@ def test_ic120_description() -> None:
 
 
 def test_unknown_kind_names_the_file_searched() -> None:
-    with pytest.raises(ConfigError, match=r"zx999.yaml: no such machine description.*known kinds: \['d37pxi', 'ic120', 'mst110cr', 'mst2200vd', 'zx120', 'zx200'\]"):
+    with pytest.raises(
+        ConfigError,
+        match=r"zx999.yaml: no such machine description.*known kinds: \['d37pxi', 'ic120', 'mst110cr', 'mst2200vd', 'zx120', 'zx200'\]",
+    ):
         load_machine("zx999")
 
 
@@ -64,7 +67,9 @@ def test_typo_in_a_known_section_names_file_line_and_key(tmp_path: Path) -> None
 
 def test_bad_limit_and_axis(tmp_path: Path) -> None:
     path = _copy_with(tmp_path, "position: [-1.137, -0.1]", "position: [-0.1, -1.137]")
-    with pytest.raises(ConfigError, match=r"zx200.yaml:\d+: joints.boom_joint.position: lower limit must be below upper"):
+    with pytest.raises(
+        ConfigError, match=r"zx200.yaml:\d+: joints.boom_joint.position: lower limit must be below upper"
+    ):
         parse_machine(path)
     path = _copy_with(tmp_path, "axis: [0, 1, 0], position: [0.594", "axis: [1, 0, 0], position: [0.594")
     with pytest.raises(ConfigError, match=r"joints.arm_joint.axis: expected"):
@@ -88,7 +93,9 @@ def test_rotating_carriers_have_a_swing_in_bus_order(kind: str) -> None:
     # the vessel hangs on the rotating body: its hinge is relative to the slew centre
     v = m.joint("vessel_joint")
     assert v.parent == "body_link" and v.upper == pytest.approx(math.radians(60))
-    assert tuple(a + b for a, b in zip(v.origin_xyz, m.swing.origin_xyz, strict=True)) == pytest.approx(m.vessel.hinge_xyz)
+    assert tuple(a + b for a, b in zip(v.origin_xyz, m.swing.origin_xyz, strict=True)) == pytest.approx(
+        m.vessel.hinge_xyz
+    )
     assert m.drives["rotate_joint"].dead_time > 0 and m.home_pose == {"rotate_joint": 0.0, "vessel_joint": 0.0}
     assert m.vessel is not None and m.vessel.capacity == pytest.approx(6.0)
     assert m.dbc == "crawler_carrier_com3.dbc" and m.tf_prefix == f"{kind}_tf"
@@ -134,7 +141,9 @@ def test_swing_section_errors_name_file_line_and_key(tmp_path: Path) -> None:
     path = _copy_with(tmp_path, "  tracks: {dead_time_s: 0.2, time_constant_s: 0.4",
                       "  swing: {dead_time_s: 0.3, time_constant_s: 0.3, angle_gain: 2.0}\n"
                       "  tracks: {dead_time_s: 0.2, time_constant_s: 0.4", "ic120.yaml")
-    with pytest.raises(ConfigError, match=r"ic120.yaml:\d+: hydraulics.swing: hydraulics of a swing, but the machine has no swing"):
+    with pytest.raises(
+        ConfigError, match=r"ic120.yaml:\d+: hydraulics.swing: hydraulics of a swing, but the machine has no swing"
+    ):
         parse_machine(path)
 
 

@@ -27,7 +27,15 @@ def _random_front(kin, rng: np.random.Generator) -> np.ndarray:
 
 def test_zx200_names_are_zx200_ros2s() -> None:
     tree = load_tree("zx200")
-    assert tree.links == ("base_link", "track_link", "body_link", "boom_link", "arm_link", "bucket_link", "bucket_end_link")
+    assert tree.links == (
+        "base_link",
+        "track_link",
+        "body_link",
+        "boom_link",
+        "arm_link",
+        "bucket_link",
+        "bucket_end_link",
+    )
     assert [(j.name, j.kind) for j in tree.joints] == [
         ("base_joint", "fixed"), ("swing_joint", "continuous"), ("boom_joint", "revolute"), ("arm_joint", "revolute"),
         ("bucket_joint", "revolute"), ("bucket_end_joint", "fixed")]

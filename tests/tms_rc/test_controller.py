@@ -40,7 +40,9 @@ def run(kin, cfg, q0, targets, *, steps=4000, stop_at=None, plant_cfg=None):
         # Pump flow is drawn by the joints moving together: with the output delays equalised per joint
         # (joint i sent extra_i steps later so all act after the same total delay), the velocities that
         # act simultaneously are one solved vector, u_prev, not the mixed output vector sent this step.
-        assert np.sum(cfg.flow_per_rad_s * np.abs(ctl.u_prev)) <= cfg.pump_flow_lpm * (1 + 1e-3), f"pump flow at step {i}"
+        assert np.sum(cfg.flow_per_rad_s * np.abs(ctl.u_prev)) <= cfg.pump_flow_lpm * (1 + 1e-3), (
+            f"pump flow at step {i}"
+        )
         assert np.all(np.abs(u) <= kin.limits.velocity + 1e-9), f"velocity at step {i}"
         if len(log["u"]) > 1:
             acc = np.abs(log["u"][-1] - log["u"][-2]) / cfg.dt
@@ -81,7 +83,9 @@ def test_target_beyond_limits_is_held_at_limits_every_step(kin, cfg):
     # A joint target past the arm's dump (lower) limit: the position level wins over the joint task.
     q0 = kin.home
     target = np.array([0.0, -0.5, 0.2, 0.5])
-    ctl, q, log = run(kin, dataclasses.replace(cfg, segment_timeout_margin_s=3.0), q0, [JointTarget(target)], steps=3000)
+    ctl, q, log = run(
+        kin, dataclasses.replace(cfg, segment_timeout_margin_s=3.0), q0, [JointTarget(target)], steps=3000
+    )
     assert min(qq[2] for qq in log["q"]) >= kin.limits.lower[2]
     assert min(qq[2] for qq in log["q"]) < kin.limits.lower[2] + 0.05  # it did push towards the limit
     assert ctl.status.result == codes.TIMEOUT, ctl.status

@@ -168,7 +168,9 @@ def test_via_segments_use_the_via_tolerance(kin):
     # The same 3 cm as the LAST segment is held to the goal tolerance: TIMEOUT naming the tolerance.
     ctl, _ = _stuck_swing_run(kin, cfg, [JointTarget(via, "approach")], q0)
     assert ctl.status.result == codes.TIMEOUT, ctl.status
-    assert "approach" in ctl.status.message and f"tolerance {cfg.goal_tolerance_m:g} m" in ctl.status.message, ctl.status.message
+    assert "approach" in ctl.status.message and f"tolerance {cfg.goal_tolerance_m:g} m" in ctl.status.message, (
+        ctl.status.message
+    )
 
 
 def test_via_tolerance_must_be_positive(tmp_path):
@@ -235,7 +237,9 @@ def test_joint_speed_scale_is_one_number_or_per_joint_and_paces_each_joint(tmp_p
     path = tmp_path / "ctl.yaml"
     path.write_text(line.sub("joint_speed_scale: 0.5", text))
     assert load_controller_config(kin.machine, path).joint_speed_scale.tolist() == [0.5] * 4
-    path.write_text(line.sub("joint_speed_scale: {swing_joint: 1.2, boom_joint: 0.8, arm_joint: 0.8, bucket_joint: 0.8}", text))
+    path.write_text(
+        line.sub("joint_speed_scale: {swing_joint: 1.2, boom_joint: 0.8, arm_joint: 0.8, bucket_joint: 0.8}", text)
+    )
     with pytest.raises(ConfigError, match="joint_speed_scale: expected a fraction in"):
         load_controller_settings(path)
     path.write_text(line.sub("joint_speed_scale: {swing_joint: 0.9, boom_joint: 0.8}", text))

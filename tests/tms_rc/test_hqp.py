@@ -12,7 +12,13 @@ BOX = (np.vstack([np.eye(2), -np.eye(2)]), np.ones(4))  # |x_i| <= 1
 
 def make():
     return HierarchicalQP(
-        2, [LevelSpec("box", "ineq", 4), LevelSpec("high", "eq", 1), LevelSpec("low", "eq", 1), LevelSpec("least", "eq", 2)]
+        2,
+        [
+            LevelSpec("box", "ineq", 4),
+            LevelSpec("high", "eq", 1),
+            LevelSpec("low", "eq", 1),
+            LevelSpec("least", "eq", 2),
+        ],
     )
 
 
@@ -70,8 +76,14 @@ def test_bad_construction_is_refused():
 def _random_hierarchy(rng, closed_form):
     """The controller's shape on 4 joints: a coupling (pump-like) inequality, two boxes, equality tasks."""
     n = 4
-    levels = [LevelSpec("pump", "ineq", 2**n), LevelSpec("velocity", "ineq", 2 * n), LevelSpec("position", "ineq", 2 * n),
-              LevelSpec("task_1", "eq", 1), LevelSpec("task_3", "eq", 3), LevelSpec("least", "eq", n)]
+    levels = [
+        LevelSpec("pump", "ineq", 2**n),
+        LevelSpec("velocity", "ineq", 2 * n),
+        LevelSpec("position", "ineq", 2 * n),
+        LevelSpec("task_1", "eq", 1),
+        LevelSpec("task_3", "eq", 3),
+        LevelSpec("least", "eq", n),
+    ]
     return HierarchicalQP(n, levels, closed_form=closed_form)
 
 
@@ -83,9 +95,14 @@ def _random_tasks(rng, u_prev):
     hi = np.minimum(1.0, u_prev + a_step)
     lo = np.maximum(-1.0, u_prev - a_step)
     box = np.vstack([np.eye(n), -np.eye(n)])
-    return [(signs * flow, np.full(2**n, 4.0)), (box, np.concatenate([hi, -lo])), (box, rng.uniform(0.05, 2.0, 2 * n)),
-            (rng.normal(size=(1, n)), rng.normal(scale=0.1, size=1)), (rng.normal(size=(3, n)), rng.normal(scale=0.1, size=3)),
-            (np.eye(n), np.zeros(n))]
+    return [
+        (signs * flow, np.full(2**n, 4.0)),
+        (box, np.concatenate([hi, -lo])),
+        (box, rng.uniform(0.05, 2.0, 2 * n)),
+        (rng.normal(size=(1, n)), rng.normal(scale=0.1, size=1)),
+        (rng.normal(size=(3, n)), rng.normal(scale=0.1, size=3)),
+        (np.eye(n), np.zeros(n)),
+    ]
 
 
 def test_closed_form_gives_the_osqp_optimum_and_osqp_still_solves_active_levels():
@@ -138,7 +155,9 @@ def test_box_level_closed_form_is_the_nearest_point_and_inverted_box_goes_to_osq
     r = h.solve([(BOX[0], np.array([0.5, 0.4, -0.2, 0.3]))])
     assert r.closed_form == ["box"]
     assert r.x == pytest.approx([0.2 / (1 + 1e-4), 0.0], abs=1e-12)
-    ref = HierarchicalQP(2, [LevelSpec("box", "ineq", 4)], closed_form=False).solve([(BOX[0], np.array([0.5, 0.4, -0.2, 0.3]))])
+    ref = HierarchicalQP(2, [LevelSpec("box", "ineq", 4)], closed_form=False).solve(
+        [(BOX[0], np.array([0.5, 0.4, -0.2, 0.3]))]
+    )
     assert r.x == pytest.approx(ref.x, abs=2e-4)
     # inverted box (0.5 <= x0 <= 0.2): no closed form, OSQP balances the two slacks at the middle
     r = h.solve([(BOX[0], np.array([0.2, 1.0, -0.5, 1.0]))])

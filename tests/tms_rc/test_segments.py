@@ -13,8 +13,15 @@ from tms_rc.excavator.segments import CARTESIAN, JOINT, targets_from_segments
 
 
 def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5), theta_w=1.0, scale=0.0, via=False):
-    return SimpleNamespace(kind=kind, label=label, joint_positions=list(q), position=SimpleNamespace(x=p[0], y=p[1], z=p[2]),
-                           theta_w=theta_w, speed_scale=scale, via=via)
+    return SimpleNamespace(
+        kind=kind,
+        label=label,
+        joint_positions=list(q),
+        position=SimpleNamespace(x=p[0], y=p[1], z=p[2]),
+        theta_w=theta_w,
+        speed_scale=scale,
+        via=via,
+    )
 
 
 def test_joint_and_cartesian_segments_become_targets_in_order():

@@ -25,7 +25,9 @@ def _run(ctl: VesselController, q: float, target: float, rate: float) -> tuple[s
 
 
 def test_continuous_swing_takes_the_short_way_and_names_its_joint() -> None:
-    joint = Joint("rotate_joint", "body_link", "vessel_base_link", (0, 0, 0), (0, 0, 0), (0.0, 0.0, 1.0), None, None, 0.3, 0.3)
+    joint = Joint(
+        "rotate_joint", "body_link", "vessel_base_link", (0, 0, 0), (0, 0, 0), (0.0, 0.0, 1.0), None, None, 0.3, 0.3
+    )
     params = VesselParams.for_swing(joint, TUNING, "mst.yaml joints.rotate_joint")
     assert params.continuous and params.what == "rotate_joint"
     ctl = VesselController(params)

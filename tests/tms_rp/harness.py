@@ -42,4 +42,6 @@ def drive(nav: NavigatorCore, model: TrackedModel, poses, *, yaw_at_each: bool =
 
 
 def pose_error(model: TrackedModel, goal) -> tuple[float, float]:
-    return math.hypot(model.x - goal[0], model.y - goal[1]), abs((model.yaw - goal[2] + math.pi) % (2 * math.pi) - math.pi)
+    return math.hypot(model.x - goal[0], model.y - goal[1]), abs(
+        (model.yaw - goal[2] + math.pi) % (2 * math.pi) - math.pi
+    )

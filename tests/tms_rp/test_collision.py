@@ -69,21 +69,40 @@ def test_record_reads_the_originals_fields_and_link_padding(model: ArmCollisionM
     assert merged["bucket_link"] == 0.4 and merged["boom_link"] == 0.25 and merged["body_link"] == 0.0
 
 
-@pytest.mark.parametrize(("mutate", "field", "words"), [
-    (lambda d: d.pop("collision_objects"), "collision_objects", "missing"),
-    (lambda d: d["collision_objects"][0].__setitem__("primitive_type", 4), "collision_objects[0].primitive_type", "CONE"),
-    (lambda d: d["collision_objects"][0].__setitem__("dimensions", [1.0, 2.0]), "collision_objects[0].dimensions",
-     "BOX needs 3"),
-    (lambda d: d["collision_objects"][0]["dimensions"].__setitem__(1, -3.0), "collision_objects[0].dimensions[1]",
-     "> 0"),
-    (lambda d: d["collision_objects"][0]["pose"]["position"].pop("y"), "collision_objects[0].pose.position.y",
-     "missing"),
-    (lambda d: d["collision_objects"][0]["pose"]["orientation"].update(x=0, y=0, z=0, w=0),
-     "collision_objects[0].pose.orientation", "zero length"),
-    (lambda d: d["collision_objects"][0].__setitem__("id", ""), "collision_objects[0].id", "non-empty string"),
-    (lambda d: d.__setitem__("link_padding", {"cab_link": 0.2}), "link_padding.cab_link", "not a ZX200 link"),
-    (lambda d: d.__setitem__("link_padding", {"arm_link": "wide"}), "link_padding.arm_link", "finite number"),
-])
+@pytest.mark.parametrize(
+    ("mutate", "field", "words"),
+    [
+        (lambda d: d.pop("collision_objects"), "collision_objects", "missing"),
+        (
+            lambda d: d["collision_objects"][0].__setitem__("primitive_type", 4),
+            "collision_objects[0].primitive_type",
+            "CONE",
+        ),
+        (
+            lambda d: d["collision_objects"][0].__setitem__("dimensions", [1.0, 2.0]),
+            "collision_objects[0].dimensions",
+            "BOX needs 3",
+        ),
+        (
+            lambda d: d["collision_objects"][0]["dimensions"].__setitem__(1, -3.0),
+            "collision_objects[0].dimensions[1]",
+            "> 0",
+        ),
+        (
+            lambda d: d["collision_objects"][0]["pose"]["position"].pop("y"),
+            "collision_objects[0].pose.position.y",
+            "missing",
+        ),
+        (
+            lambda d: d["collision_objects"][0]["pose"]["orientation"].update(x=0, y=0, z=0, w=0),
+            "collision_objects[0].pose.orientation",
+            "zero length",
+        ),
+        (lambda d: d["collision_objects"][0].__setitem__("id", ""), "collision_objects[0].id", "non-empty string"),
+        (lambda d: d.__setitem__("link_padding", {"cab_link": 0.2}), "link_padding.cab_link", "not a ZX200 link"),
+        (lambda d: d.__setitem__("link_padding", {"arm_link": "wide"}), "link_padding.arm_link", "finite number"),
+    ],
+)
 def test_bad_record_names_record_and_field(mutate, field: str, words: str) -> None:
     doc = carrier_doc()
     mutate(doc)

@@ -115,7 +115,9 @@ def test_two_carriers_of_one_kind_navigate_and_dump_through_their_own_converters
 
     db = str(tmp_path / "db")
     store = open_store(path=db)
-    store.upsert_parameter({"model_name": "ic120_2", "type": "static", "record_name": "release_angle", "target_angle": 0.4})
+    store.upsert_parameter(
+        {"model_name": "ic120_2", "type": "static", "record_name": "release_angle", "target_angle": 0.4}
+    )
     store.close()
     plant = _plant(procs, tmp_path, dict.fromkeys(names, "ic120"), {**start, "zx200": "zx200_base"}, {"zx200": "zx200"})
     pcs = {n: _container(procs, f"{n}_pc", _stack(n, vessel=True)) for n in names}
@@ -129,7 +131,12 @@ def test_two_carriers_of_one_kind_navigate_and_dump_through_their_own_converters
         pose=pose_stamped(*goals[n]))) for n in names}
     for n in names:  # both drive at once, each through its own navigator and converter
         status, result = calls[n].wait(120.0)
-        assert status == 4 and result.error_code == 0, (n, result.error_msg, pcs[n].output[-3000:], plant.output[-2000:])
+        assert status == 4 and result.error_code == 0, (
+            n,
+            result.error_msg,
+            pcs[n].output[-3000:],
+            plant.output[-2000:],
+        )
     for n in names:
         assert spin_until(ros_node, lambda n=n: truth[n].pose is not None, 5.0)
         e_xy, e_yaw = _err(truth[n].pose, goals[n])

@@ -70,8 +70,16 @@ def test_localization_over_can_rms_outage_and_jump(procs, domain, ros_node, tmp_
     def on_est(m: Odometry) -> None:
         p = m.pose.pose
         est_recv.append(time.time())
-        est.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, phase["name"], p.position.x, p.position.y, yaw_of(p.orientation),
-                    m.pose.covariance[0] + m.pose.covariance[7]))
+        est.append(
+            (
+                m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
+                phase["name"],
+                p.position.x,
+                p.position.y,
+                yaw_of(p.orientation),
+                m.pose.covariance[0] + m.pose.covariance[7],
+            )
+        )
 
     node.create_subscription(NavSatFix, "/ic120/gnss/fix", on_fix, 50)
     node.create_subscription(Odometry, "/ic120/odometry/global", on_est, 50)
@@ -162,7 +170,9 @@ def test_navigation_and_vessel_over_can(procs, domain, ros_node):
 
         # The plant's truth topic can trail the converter's state frames the controller judged by when
         # the machine is loaded (seen: a 2.28 deg reading right after SUCCEEDED at load 30): wait for it.
-        spin_until(node, lambda t=target: (v := vessel_truth()) is not None and abs(abs(v) - t) < math.radians(2.0), 5.0)
+        spin_until(
+            node, lambda t=target: (v := vessel_truth()) is not None and abs(abs(v) - t) < math.radians(2.0), 5.0
+        )
         vessel = vessel_truth()
         assert vessel is not None
         assert abs(abs(vessel) - target) < math.radians(2.0), f"vessel truth {vessel} vs target {target}"
@@ -172,8 +182,9 @@ def test_navigation_and_vessel_over_can(procs, domain, ros_node):
     status, result = ActionCall(node, SetDumpAngle, "/ic120/set_dump_angle", g).wait(10.0)
     assert status == 6 and not result.success  # STATUS_ABORTED
     # the peer's result carries no reason: the server's log names the value and the range
-    assert spin_until(node, lambda: "FAILED" in ours["ic120_vessel"].output and "outside" in ours["ic120_vessel"].output,
-                      5.0), ours["ic120_vessel"].output[-2000:]
+    assert spin_until(
+        node, lambda: "FAILED" in ours["ic120_vessel"].output and "outside" in ours["ic120_vessel"].output, 5.0
+    ), ours["ic120_vessel"].output[-2000:]
 
 
 def test_bad_goals_blocked_path_and_cancel_over_can(procs, domain, ros_node):
@@ -253,5 +264,9 @@ def test_bad_goals_blocked_path_and_cancel_over_can(procs, domain, ros_node):
     t_cancel = time.monotonic()
     spin_for(node, 0.3)
     recent = [p for p in truth.poses if t_cancel - 0.3 <= p[0] <= t_cancel + 0.3]
-    moved = max(math.hypot(b[1] - a[1], b[2] - a[2]) for a, b in zip(recent, recent[1:], strict=False)) if len(recent) > 1 else 0.0
+    moved = (
+        max(math.hypot(b[1] - a[1], b[2] - a[2]) for a, b in zip(recent, recent[1:], strict=False))
+        if len(recent) > 1
+        else 0.0
+    )
     assert moved < 0.02 * 0.1, f"still moving at {moved / 0.05:.3f} m/s when CANCELED arrived"

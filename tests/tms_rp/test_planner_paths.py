@@ -36,8 +36,12 @@ def test_big_swing_goes_joint_space_to_the_ik_pose_then_straight_to_the_goal() -
 def test_small_moves_and_unknown_start_stay_a_straight_tip_line() -> None:
     q0 = KIN.ik_position_with_angle(LIFTED, 1.6)
     near = LIFTED + np.array([-0.5, 0.3, 0.2])  # swing change ~0.07 rad < joint_space_swing
-    assert [type(t) for t in PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q0)] == [CartesianTarget]
-    assert [type(t) for t in PLAN.change_pose(positions_with_angle=[(RELEASE_TIP.tolist(), CARRY_THETA_W)])] == [CartesianTarget]
+    assert [type(t) for t in PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q0)] == [
+        CartesianTarget
+    ]
+    assert [type(t) for t in PLAN.change_pose(positions_with_angle=[(RELEASE_TIP.tolist(), CARRY_THETA_W)])] == [
+        CartesianTarget
+    ]
 
 
 def test_release_opens_the_bucket_with_the_tip_held_over_the_release_point() -> None:
@@ -84,7 +88,9 @@ def test_pass_through_carry_ends_at_a_via_point_and_the_release_plans_from_it() 
     assert [type(t) for t in small] == [CartesianTarget] and small[0].via
     np.testing.assert_allclose(KIN.tip_position(PLAN.end_joints(small)), near, atol=1e-6)
     end = PLAN.pass_through_end(carry)
-    assert PLAN.pass_through_end(PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q_lifted)) is None
+    assert (
+        PLAN.pass_through_end(PLAN.change_pose(positions_with_angle=[(near.tolist(), 1.6)], current_q=q_lifted)) is None
+    )
     np.testing.assert_allclose(KIN.tip_position(end), RELEASE_TIP, atol=1e-6)
     # The carry's goal ended on the controller's prediction: the measured swing still lags ~0.25 rad.
     lagging = end - np.array([0.25, 0.05, -0.05, 0.02])

@@ -98,5 +98,7 @@ def test_rtk_relay_estimates_speed_and_yaw_rate_under_noise() -> None:
     # reversing reads negative, and a yaw across +-pi does not jump
     back = GlobalPoseRelay(1.0)
     for k in range(100):
-        v, w = back.update(k * 0.01, -0.3 * k * 0.01, 0.0, math.pi - 0.01 + 0.05 * k * 0.01 - (2 * math.pi if k > 20 else 0))
+        v, w = back.update(
+            k * 0.01, -0.3 * k * 0.01, 0.0, math.pi - 0.01 + 0.05 * k * 0.01 - (2 * math.pi if k > 20 else 0)
+        )
     assert v == pytest.approx(0.3, abs=0.01) and w == pytest.approx(0.05, abs=0.01)

@@ -71,7 +71,9 @@ def test_excavation_target_is_on_the_mound_in_reach_below_the_surface(seed):
     # The expected cut, integrated independently on the true surface (5 cm samples): the soil above the
     # drag level in the bucket-wide strip from the target towards the machine.
     ux, uy = (t.x - ax) / r, (t.y - ay) / r
-    s_along, s_across = np.meshgrid(np.arange(0.025, t.offset, 0.05), np.arange(-p.bucket_radius + 0.025, p.bucket_radius, 0.05))
+    s_along, s_across = np.meshgrid(
+        np.arange(0.025, t.offset, 0.05), np.arange(-p.bucket_radius + 0.025, p.bucket_radius, 0.05)
+    )
     xs, ys = t.x - ux * s_along - uy * s_across, t.y - uy * s_along + ux * s_across
     true_cut = float(np.clip(surface(xs, ys) - t.z, 0.0, None).sum() * 0.05 * 0.05)
     assert t.expected_volume == pytest.approx(true_cut, rel=0.2)
@@ -182,7 +184,9 @@ def test_release_target_goes_to_the_empty_end_of_the_vessel():
 def test_release_in_excavator_frame_and_swing_angle_at_loading_point():
     g = CFG.vessel_geom
     p1 = CFG.points["P1"]
-    pose, angle = release_in_excavator((0.0, 0.0, 1.0), p1, CFG.excavator_base, g, CFG.swing_axis_in_base, CFG.vessel.carry_theta_w)
+    pose, angle = release_in_excavator(
+        (0.0, 0.0, 1.0), p1, CFG.excavator_base, g, CFG.swing_axis_in_base, CFG.vessel.carry_theta_w
+    )
     centre = p1.to_map(g.origin_in_base())
     assert (pose["x"], pose["y"]) == pytest.approx((centre[0], centre[1]))  # zx200 base at the map origin
     assert pose["z"] == pytest.approx(g.hinge_xyz[2] + g.floor_above_hinge + 1.0)
@@ -239,10 +243,22 @@ def test_bad_parameters_name_the_key(tmp_path):
     for old, new, message in (
         ("reach_min: 4.0", "reach_min: 9.5", r"sensing.yaml:\d+: excavation: ExcavationParams: reach_min 9.5"),
         ("point: P1", "point: P9", r"sensing.yaml:\d+: arrival.point: 'P9' is not a pose"),
-        ("  min_cut: 0.2", "  min_cut: 0.2\n  bucket_radius: 0.5", r"sensing.yaml:\d+: excavation.bucket_radius: unknown key"),
+        (
+            "  min_cut: 0.2",
+            "  min_cut: 0.2\n  bucket_radius: 0.5",
+            r"sensing.yaml:\d+: excavation.bucket_radius: unknown key",
+        ),
         ("depth_steps: 5", "depth_steps: five", r"sensing.yaml:\d+: excavation.depth_steps: expected an integer"),
-        ("carriers: [ic120]", "carriers: [ic120, nobody]", r"sensing.yaml:\d+: carriers: 'nobody': .*no machine 'nobody'"),
-        ("carriers: [ic120]", "carriers: [zx120]", r"sensing.yaml:\d+: carriers: 'zx120': .*is a excavator, expected a crawler_dump"),
+        (
+            "carriers: [ic120]",
+            "carriers: [ic120, nobody]",
+            r"sensing.yaml:\d+: carriers: 'nobody': .*no machine 'nobody'",
+        ),
+        (
+            "carriers: [ic120]",
+            "carriers: [zx120]",
+            r"sensing.yaml:\d+: carriers: 'zx120': .*is a excavator, expected a crawler_dump",
+        ),
         ("excavator: zx200 ", "excavator: ic120 ", r"sensing.yaml:\d+: excavator: 'ic120': .*expected a excavator"),
     ):
         assert old in good, old
@@ -276,7 +292,9 @@ def test_excavation_target_holds_against_scan_noise_and_moves_once_dug():
     rng = np.random.default_rng(13)
     axis = CFG.swing_axis_map()
     free = [assess_mound(_mound_grid(_cone(), rng, noise=0.02), axis, CFG.excavation).target for _ in range(12)]
-    assert max(math.hypot(t.x - free[0].x, t.y - free[0].y) for t in free) > 0.2, "noise alone should move the best cell"
+    assert max(math.hypot(t.x - free[0].x, t.y - free[0].y) for t in free) > 0.2, (
+        "noise alone should move the best cell"
+    )
     spot = (free[0].x, free[0].y)
     held = [assess_mound(_mound_grid(_cone(), rng, noise=0.02), axis, CFG.excavation, previous_xy=spot).target
             for _ in range(12)]

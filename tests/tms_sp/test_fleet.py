@@ -50,7 +50,9 @@ class FleetWorld:
         xg, yg = self.spec.centres()
         m = cfg.mound
         self.surface = syn.truncated_cone(m.cx, m.cy, m.base_radius, m.top_radius, 0.6, m.ground_z)(xg, yg)
-        self.pose = {c: Pose2D(SITE[f"wait_{c}"]["x"], SITE[f"wait_{c}"]["y"], SITE[f"wait_{c}"]["yaw"]) for c in CARRIERS}
+        self.pose = {
+            c: Pose2D(SITE[f"wait_{c}"]["x"], SITE[f"wait_{c}"]["y"], SITE[f"wait_{c}"]["yaw"]) for c in CARRIERS
+        }
         self.vessel = dict.fromkeys(CARRIERS, 0.0)
         self.dumped = dict.fromkeys(CARRIERS, 0.0)
         self.bucket = 0.0

@@ -89,5 +89,8 @@ def test_strict_writes_name_fields_the_record_lacks(writer) -> None:
 
 def test_sensed_fields_match_case_insensitively_and_skip_bookkeeping() -> None:
     record = {"_id": 1, "record_name": "r", "type": "dynamic", "description": "d", "FLG": False, "x": 0.0}
-    assert sensed_fields(record, {"flg": True, "X": 2.0, "description": "new", "type": "static"}) == {"FLG": True, "x": 2.0}
+    assert sensed_fields(record, {"flg": True, "X": 2.0, "description": "new", "type": "static"}) == {
+        "FLG": True,
+        "x": 2.0,
+    }
     assert sensed_fields(record, {"flg": True, "x": 1.0}, keep=["FLG"]) == {"x": 1.0}

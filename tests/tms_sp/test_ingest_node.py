@@ -49,7 +49,9 @@ def test_sensing_msgs_publishers_set_flags_and_targets(procs, ros_node, tmp_path
     with open_store(path=db) as store:
         doc = store.get_record("GLOBAL_BLACKBOARD_EARTHWORK")
     assert doc["SENSING_LOADED_FLG"] is False and doc["CONTINUE_FLG"] is True  # kept; carried unchanged
-    assert ingest.wait_for("/tms_sp_change_pose: dropped: record (zx200, missing_pose) not in the DB", 10), ingest.output
+    assert ingest.wait_for("/tms_sp_change_pose: dropped: record (zx200, missing_pose) not in the DB", 10), (
+        ingest.output
+    )
 
     pubs["/tms_sp_change_pose"].publish(ChangePose(model_name="zx200", record_name="dig_pose", swing_joint=0.5,
                                                    boom_joint=-0.25, arm_joint=1.0, bucket_joint=0.75))
@@ -60,5 +62,10 @@ def test_sensing_msgs_publishers_set_flags_and_targets(procs, ros_node, tmp_path
              and s.get_parameter("zx200", "dig_pose")["swing_joint"] == 0.5, 30, "the targets", ingest)
     with open_store(path=db) as store:
         pose = store.get_parameter("zx200", "dig_pose")
-        assert (pose["boom_joint"], pose["arm_joint"], pose["bucket_joint"], pose["trajectory"]) == (-0.25, 1.0, 0.75, 1)
+        assert (pose["boom_joint"], pose["arm_joint"], pose["bucket_joint"], pose["trajectory"]) == (
+            -0.25,
+            1.0,
+            0.75,
+            1,
+        )
         assert store.get_parameter("ic120", "LOAD_PATH")["y"] == [3.0, 4.0]

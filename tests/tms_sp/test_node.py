@@ -31,7 +31,10 @@ def _cloud_fields(points: np.ndarray, frame: str = "map"):
 def test_pointcloud_decoding_and_errors():
     pts = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.5]])
     f = _cloud_fields(pts)
-    fields = [SimpleNamespace(name=n, offset=o, datatype=FLOAT32, count=1) for n, o in (("x", 0), ("y", 4), ("z", 8), ("intensity", 12))]
+    fields = [
+        SimpleNamespace(name=n, offset=o, datatype=FLOAT32, count=1)
+        for n, o in (("x", 0), ("y", 4), ("z", 8), ("intensity", 12))
+    ]
     msg = SimpleNamespace(fields=fields, **{k: v for k, v in f.items() if k != "frame"})
     assert np.allclose(xyz_from_cloud(msg), pts)
     msg.fields = fields[:2]
@@ -74,7 +77,9 @@ def test_sensing_node_writes_flags_and_targets(procs, ros_node, tmp_path):
     before = store.get_parameter("zx200", "target_excavate_pose")
     node = procs([executable("tms_sp", "tms_sp_sensing"), "--ros-args", "-p", f"db_path:={db}", "-p", "rate_hz:=4.0"])
     mound_pub = ros_node.create_publisher(type(_to_msg(np.zeros((1, 3)), "map")), "/sim/sensors/mound/points", 2)
-    vessel_pub = ros_node.create_publisher(type(_to_msg(np.zeros((1, 3)), "map")), "/sim/sensors/ic120/vessel_points", 2)
+    vessel_pub = ros_node.create_publisher(
+        type(_to_msg(np.zeros((1, 3)), "map")), "/sim/sensors/ic120/vessel_points", 2
+    )
     pose_pub = ros_node.create_publisher(PoseStamped, "/sim/truth/ic120/pose", 10)
     rng = np.random.default_rng(0)
     m = CFG.mound

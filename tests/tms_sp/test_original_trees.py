@@ -91,7 +91,10 @@ def test_the_originals_2024_12_trees_load_dig_haul_and_end_as_the_original_ends_
                    "zx200:after_release_soil_pose"]
     first = world.log.index(pass_leaves[0])
     assert world.log[first:first + len(pass_leaves)] == pass_leaves
-    assert passes >= 3 and world.vessel > 0.75 * cfg.vessel_geom.capacity * cfg.vessel.target_fill, (passes, world.vessel)
+    assert passes >= 3 and world.vessel > 0.75 * cfg.vessel_geom.capacity * cfg.vessel.target_fill, (
+        passes,
+        world.vessel,
+    )
     assert round_trips >= stop_after and world.dumped == 0.0
     # initial_pose was sent again and again while the ZX200 waited (each one a goal to the pose it held)
     assert world.log.count("zx200:initial_pose") > 3 * round_trips

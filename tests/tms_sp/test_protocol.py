@@ -90,7 +90,9 @@ class World:
         self.log.append(f"{goal.model}:{goal.record}")
         if goal.subtask in ("st_ic120_follow_waypoints", "st_ic120_navigate_anywhere"):
             last = (lambda k: doc[k][-1]) if isinstance(doc["x"], list) else (lambda k: doc[k])
-            self.ic120 = Pose2D(last("x"), last("y"), yaw_from_quaternion((last("qx"), last("qy"), last("qz"), last("qw"))))
+            self.ic120 = Pose2D(
+                last("x"), last("y"), yaw_from_quaternion((last("qx"), last("qy"), last("qz"), last("qw")))
+            )
         elif goal.subtask == "st_ic120_release_soil":
             self.vessel_angle = doc["target_angle"]
             if self.vessel_angle > 0.5:
@@ -114,7 +116,9 @@ class World:
             g = self.cfg.vessel_geom
             local = Pose2D(vessel_centre[0], vessel_centre[1], self.ic120.yaw).from_map(
                 np.array([*self.release_points[-1], 0.0]))
-            assert abs(local[0]) < g.inner_length / 2 and abs(local[1]) < g.inner_width / 2, "released beside the vessel"
+            assert abs(local[0]) < g.inner_length / 2 and abs(local[1]) < g.inner_width / 2, (
+                "released beside the vessel"
+            )
             self.vessel += self.bucket
             self.bucket = 0.0
 
@@ -129,7 +133,11 @@ class World:
     def vessel_scan(self, rng) -> np.ndarray:
         g = self.cfg.vessel_geom
         spec = g.grid_spec(self.cfg.resolution)
-        heap = syn.vessel_heap(self.vessel, g.inner_length, g.inner_width, spread=1.2) if self.vessel > 0 else (lambda x, y: 0 * x)
+        heap = (
+            syn.vessel_heap(self.vessel, g.inner_length, g.inner_width, spread=1.2)
+            if self.vessel > 0
+            else (lambda x, y: 0 * x)
+        )
         return syn.scan(heap, (spec.x_min, spec.x_max), (spec.y_min, spec.y_max), 3000, rng, noise=0.01, outliers=0.0)
 
 
@@ -154,7 +162,9 @@ def test_paper_trees_run_the_whole_earthwork_until_the_mound_is_depleted(tmp_pat
     trees = {}
     for task in load_seed()["tasks"]:
         xml = (ROOT / task["file"]).read_text()
-        trees[task["file"]] = tms_ts_loader.load_tree(xml, TreeContext(store=store, ros=world, clock=clock), source=task["file"])
+        trees[task["file"]] = tms_ts_loader.load_tree(
+            xml, TreeContext(store=store, ros=world, clock=clock), source=task["file"]
+        )
     rng = np.random.default_rng(0)
     timeline: list[tuple[float, str, bool]] = []
     last: dict[str, bool] = {}

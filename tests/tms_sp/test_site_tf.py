@@ -59,7 +59,11 @@ def test_map_to_bucket_tip_is_the_kinematics_on_the_excavator_pose(site_tf: Site
         q = rng.uniform([-math.pi, -1.1, 0.6, -0.6], [math.pi, -0.1, 2.6, 2.3])
         joints = site_tf.joint_states("zx200", [*FRONT, "left_track"], [*q, 9.0], 5.01)
         assert [(e.parent, e.child) for e in joints] == [
-            ("track_link", "body_link"), ("body_link", "boom_link"), ("boom_link", "arm_link"), ("arm_link", "bucket_link")]
+            ("track_link", "body_link"),
+            ("body_link", "boom_link"),
+            ("boom_link", "arm_link"),
+            ("arm_link", "bucket_link"),
+        ]
         tip = lookup(site_tf.static(0.0) + odom + joints, MAP, "bucket_end_link").translation
         expected = Transform.from_yaw(x, y, 0.0, yaw).apply(kin.tip_position(q))
         assert np.linalg.norm(np.array(tip) - expected) < 1e-9
@@ -101,7 +105,9 @@ def test_bad_input_is_refused_naming_machine_and_field(site_tf: SiteTf) -> None:
 def test_two_machines_with_the_same_frames_are_refused() -> None:
     zx = load_tree("zx200")
     twin = machine_tree(dataclasses.replace(zx.machine, name="zx200b"))
-    with pytest.raises(ConfigError, match="frame 'odom' of zx200b is also a frame of zx200; give one of them a tf_prefix"):
+    with pytest.raises(
+        ConfigError, match="frame 'odom' of zx200b is also a frame of zx200; give one of them a tf_prefix"
+    ):
         SiteTf([zx, twin], load_site())
     prefixed = machine_tree(dataclasses.replace(zx.machine, name="zx200b", tf_prefix="zx200b_tf"))
     assert SiteTf([zx, prefixed], load_site()).trees["zx200b"].frame("odom") == "zx200b_tf/odom"

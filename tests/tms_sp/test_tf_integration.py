@@ -111,7 +111,9 @@ def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(proc
     ros_node.create_subscription(PointStamped, "/sim/truth/zx200/bucket_tip", lambda m: tip_truth.append(m), 10)
     ros_node.create_subscription(JointState, "/zx200/joint_states", on_joints, 200)
     for m in ("zx200", "ic120"):
-        ros_node.create_subscription(PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: truth.__setitem__(m, msg), 10)
+        ros_node.create_subscription(
+            PoseStamped, f"/sim/truth/{m}/pose", lambda msg, m=m: truth.__setitem__(m, msg), 10
+        )
     joint_cmd = _front_cmd_type(ros_node)
     pub = ros_node.create_publisher(joint_cmd, "/zx200/front_cmd", 10)
     ic_base = "ic120_tf/base_link"
@@ -171,7 +173,9 @@ def test_tf_chain_follows_the_moving_arm_and_late_subscribers_get_the_urdfs(proc
     assert travel > 1.0, f"the bucket tip moved only {travel:.2f} m: the arm did not move"
     print(f"/tf chain map -> bucket_end_link vs kinematics: max {max(errors) * 1000:.3f} mm over {len(errors)} stamps, "
           f"tip travel {travel:.2f} m")
-    assert max(errors) < TIP_TOL_M, f"/tf chain vs kinematics: max {max(errors) * 1000:.1f} mm over {len(errors)} stamps"
+    assert max(errors) < TIP_TOL_M, (
+        f"/tf chain vs kinematics: max {max(errors) * 1000:.1f} mm over {len(errors)} stamps"
+    )
 
     # at rest, the /tf tip is where the plant has it: relative to the base within 1 cm (joints over CAN), in map
     # within the plant's RTK noise on the ZX200's position (config/sim/plant.yaml: 1 cm horizontal, 2 cm

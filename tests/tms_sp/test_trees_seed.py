@@ -96,7 +96,9 @@ def test_leaf_records_exist_in_the_seed_with_the_subtask_shape(path):
         doc = params.get((model, record))
         assert doc is not None, f"{path.name}: record ({model}, {record}) missing from config/seeds/paper.yaml"
         assert doc["type"] in ("static", "dynamic")
-        payload = {k: v for k, v in doc.items() if k not in ("model_name", "record_name", "type", "description", "LOCK_FLG")}
+        payload = {
+            k: v for k, v in doc.items() if k not in ("model_name", "record_name", "type", "description", "LOCK_FLG")
+        }
         if subtask == "st_ic120_follow_waypoints":
             assert set(payload) == {"x", "y", "z", "qx", "qy", "qz", "qw"}
             lengths = {len(v) for v in payload.values()}
@@ -113,10 +115,23 @@ def test_leaf_records_exist_in_the_seed_with_the_subtask_shape(path):
             assert doc["LOCK_FLG"] is False
         elif subtask == "subtask_zx200_change_pose":
             if payload.get("trajectory") == 1:
-                assert set(payload) == {"trajectory", "swing_joint", "boom_joint", "arm_joint", "bucket_joint", "bucket_end_joint"}
+                assert set(payload) == {
+                    "trajectory",
+                    "swing_joint",
+                    "boom_joint",
+                    "arm_joint",
+                    "bucket_joint",
+                    "bucket_end_joint",
+                }
             else:
                 assert payload.get("position_with_angle") == 1
-                assert set(payload) - {"pass_through", "theta_w_tolerance"} == {"position_with_angle", "x", "y", "z", "theta_w"}
+                assert set(payload) - {"pass_through", "theta_w_tolerance"} == {
+                    "position_with_angle",
+                    "x",
+                    "y",
+                    "z",
+                    "theta_w",
+                }
                 assert 0 <= payload.get("theta_w_tolerance", 0) <= 1.6, f"{record}: theta_w_tolerance [rad]"
             assert payload.get("pass_through", 0) in (0, 1, True, False), f"{record}: pass_through must be 0/1"
         else:  # pragma: no cover - a new subtask needs a shape check here
@@ -247,7 +262,10 @@ def test_ic120_route_matches_site_points_and_drives_in_reverse_where_it_must():
     for name in ("P1", "P5"):  # loading and dumping poses exactly as site.yaml says
         hits = [s for s in seq if math.hypot(s.x - p[name].x, s.y - p[name].y) < 1e-6]
         assert all(abs(wrap_angle(s.yaw - p[name].yaw)) < 1e-5 for s in hits)
-    assert math.hypot(seq[-1].x - seq[0].x, seq[-1].y - seq[0].y) < 1e-6 and abs(wrap_angle(seq[-1].yaw - seq[0].yaw)) < 1e-6
+    assert (
+        math.hypot(seq[-1].x - seq[0].x, seq[-1].y - seq[0].y) < 1e-6
+        and abs(wrap_angle(seq[-1].yaw - seq[0].yaw)) < 1e-6
+    )
     d15 = math.hypot(p["P5"].x - p["P1"].x, p["P5"].y - p["P1"].y)
     assert 30.0 <= d15 <= 40.0
 

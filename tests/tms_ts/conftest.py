@@ -75,8 +75,20 @@ def ts_system(tmp_path, procs, ros_node):
              "-p", f"ignore_cancel:={'true' if ignore_cancel else 'false'}"], name="stub", PYTHONPATH=str(ROOT))
         for machine in ("zx200", "ic120"):
             system.procs[machine] = procs(
-                [executable("tms_ts", "tms_ts_subtasks"), "--ros-args", "-p", f"machine:={machine}",
-                 "-p", f"db_path:={db}", "-p", f"stop_timeout_s:={stop_timeout_s}", "-p", "planning_wait_s:=20.0"], name=machine)
+                [
+                    executable("tms_ts", "tms_ts_subtasks"),
+                    "--ros-args",
+                    "-p",
+                    f"machine:={machine}",
+                    "-p",
+                    f"db_path:={db}",
+                    "-p",
+                    f"stop_timeout_s:={stop_timeout_s}",
+                    "-p",
+                    "planning_wait_s:=20.0",
+                ],
+                name=machine,
+            )
         system.procs["manager"] = procs(
             [executable("tms_ts", "tms_ts_manager"), "--ros-args", "-p", f"db_path:={db}",
              "-p", f"server_wait_s:={server_wait_s}", "-p", f"halt_timeout_s:={halt_timeout_s}",

@@ -64,14 +64,22 @@ class PlanningStub(Node):
         self.ignore_cancel = bool(self.declare_parameter("ignore_cancel", False).value)
         group = ReentrantCallbackGroup()
         self.action_servers = [
-            ActionServer(self, t, f"/{m}/{name}", execute_callback=lambda gh, n=f"/{m}/{name}", t=t: self._run(gh, n, t),
-                         cancel_callback=lambda _gh: CancelResponse.ACCEPT, callback_group=group)
+            ActionServer(
+                self,
+                t,
+                f"/{m}/{name}",
+                execute_callback=lambda gh, n=f"/{m}/{name}", t=t: self._run(gh, n, t),
+                cancel_callback=lambda _gh: CancelResponse.ACCEPT,
+                callback_group=group,
+            )
             for m in models
             for name, t in ACTIONS.items()
         ]
         # a change_pose's pass_through / theta_w_tolerance come by goal id before the goal: accepted, printed
         self.option_services = [
-            self.create_service(Zx200ChangePoseOptions, f"/{m}/{CHANGE_POSE_OPTIONS}", self._on_options, callback_group=group)
+            self.create_service(
+                Zx200ChangePoseOptions, f"/{m}/{CHANGE_POSE_OPTIONS}", self._on_options, callback_group=group
+            )
             for m in models
         ]
         _say(f"planning stub ready {models}")

@@ -87,7 +87,9 @@ def test_the_demo_trees_end_refused_by_keep_running_until_flgup_naming_node_line
     entry = tree.ctx.blackboard.get_any("TERMINATE_FLG")
     assert (entry.vtype, entry.value, entry.port_type) == (STRING, "true", None)
     msg = run.message
-    assert "KeepRunningUntilFlgup (task 2 line 3, column 5)" in msg and "Unsupported type for key [TERMINATE_FLG]" in msg
+    assert (
+        "KeepRunningUntilFlgup (task 2 line 3, column 5)" in msg and "Unsupported type for key [TERMINATE_FLG]" in msg
+    )
     assert "std::string 'true'" in msg and "SetBlackboard writes its value as a std::string" in msg
 
 
@@ -207,7 +209,9 @@ def test_counter_on_a_number_set_by_the_reader_is_refused(store):
     # The reader's set() made N typed int without a converter: Counter's text "4" cannot go back in.
     t = _tree('<Sequence><Action ID="BlackboardValueReaderMongo" output_port="N" mongo_record_name="BB" '
               'mongo_param_name="N"/><Action ID="Counter" key="N"/></Sequence>', store)
-    with pytest.raises(TreeRuntimeError, match=r"Counter \(line 1.*Declared type \[int\] != current type \[std::string\]"):
+    with pytest.raises(
+        TreeRuntimeError, match=r"Counter \(line 1.*Declared type \[int\] != current type \[std::string\]"
+    ):
         t.tick()
 
 
@@ -240,7 +244,9 @@ def test_convert_from_string_is_bt_cpps(text, ctype, expected):
     assert convert_from_string(text, ctype) == expected
 
 
-@pytest.mark.parametrize("text,ctype", [("yes", BOOL), ("tRue", BOOL), ("abc", INT), ("3000000000", INT), ("x", DOUBLE)])
+@pytest.mark.parametrize(
+    "text,ctype", [("yes", BOOL), ("tRue", BOOL), ("abc", INT), ("3000000000", INT), ("x", DOUBLE)]
+)
 def test_convert_from_string_refuses_what_bt_cpp_throws_on(text, ctype):
     with pytest.raises(ValueError):
         convert_from_string(text, ctype)

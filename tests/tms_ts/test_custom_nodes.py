@@ -32,9 +32,14 @@ def _run(xml_body: str, store, **bb):
 
 
 def test_reader_keeps_the_stored_type(store):
-    body = "<Sequence>" + "".join(
-        f'<Action ID="BlackboardValueReaderMongo" output_port="{k.lower()}" mongo_record_name="GBB" mongo_param_name="{k}"/>'
-        for k in ("FLG", "N", "D", "S")) + "</Sequence>"
+    body = (
+        "<Sequence>"
+        + "".join(
+            f'<Action ID="BlackboardValueReaderMongo" output_port="{k.lower()}" mongo_record_name="GBB" mongo_param_name="{k}"/>'
+            for k in ("FLG", "N", "D", "S")
+        )
+        + "</Sequence>"
+    )
     t = _run(body, store)
     assert t.tick() is SUCCESS
     assert t.ctx.blackboard.snapshot() == {"flg": False, "n": 3, "d": 1.5, "s": "text"}
@@ -111,9 +116,13 @@ def test_expression_evaluator_is_not_python_eval():
 
 
 def test_conditional_expression_bool_only_sees_bools():
-    t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not(B)"/>', None, A=True, B=False)
+    t = _run(
+        '<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not(B)"/>', None, A=True, B=False
+    )
     assert t.tick() is SUCCESS
-    t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not B"/>', None, A=True, B=False)
+    t = _run(
+        '<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and not B"/>', None, A=True, B=False
+    )
     assert t.tick() is FAILURE  # ExprTk: not is a function, "not B" does not parse
     t = _run('<Action ID="ConditionalExpressionBool" conditional_expression_bool="A and N"/>', None, A=True, N=1)
     assert t.tick() is FAILURE and "'N' is not a bool" in t.root.feedback_message
@@ -170,8 +179,10 @@ class _Inbox:
 def test_wait_for_click_is_non_blocking_and_honours_task_prefix():
     inbox = _Inbox()
     inbox.say("yes")  # before the node started: ignored
-    t = load_tree('<root><BehaviorTree ID="B"><Action ID="WaitForClick" button_info="Load done?"/></BehaviorTree></root>',
-                  TreeContext(ros=inbox, task_id=3))
+    t = load_tree(
+        '<root><BehaviorTree ID="B"><Action ID="WaitForClick" button_info="Load done?"/></BehaviorTree></root>',
+        TreeContext(ros=inbox, task_id=3),
+    )
     assert t.tick() is RUNNING and "Load done?" in t.root.feedback_message
     inbox.say("4:yes")  # for another task
     assert t.tick() is RUNNING

@@ -24,7 +24,9 @@ from tms_ts.names import ros_name_problem
 from tms_ts.task_sequence import parse_task_sequence
 
 TRIED: collections.Counter = collections.Counter()
-HYPO = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+HYPO = settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
+)
 
 BAD_NAMES = ["d37pxi_24＿", "zx 200", "", " ", "1zx200", "zx200//a", "zx-200", "zx200.a", "ｚｘ２００",
              "zx200\u200b", "{machine", "~zx200", "zx200 ", "a" * 300]
@@ -109,8 +111,13 @@ def test_too_many_elements_are_refused_at_the_element_that_crosses_the_limit() -
 
 def test_subtree_chains_cannot_multiply_the_built_tree_past_its_limits() -> None:
     # 10 trees, each holding its next one 3 times: 3**9 = 19,683 leaves from a 1 KB document ("billion laughs")
-    trees = "".join(f'<BehaviorTree ID="T{i}"><Sequence>' + f'<SubTree ID="T{i + 1}"/>' * 3 + "</Sequence></BehaviorTree>"
-                    for i in range(9)) + '<BehaviorTree ID="T9"><AlwaysSuccess/></BehaviorTree>'
+    trees = (
+        "".join(
+            f'<BehaviorTree ID="T{i}"><Sequence>' + f'<SubTree ID="T{i + 1}"/>' * 3 + "</Sequence></BehaviorTree>"
+            for i in range(9)
+        )
+        + '<BehaviorTree ID="T9"><AlwaysSuccess/></BehaviorTree>'
+    )
     message = refused("load_tree", f'<root main_tree_to_execute="T0">{trees}</root>')
     assert "MAX_TREE_NODES" in message and "SubTrees T0 -> " in message
     # a chain of SubTrees, each 20 deep: the built tree nests deeper than any one document
@@ -173,10 +180,14 @@ def test_any_model_name_either_loads_as_a_valid_ros_name_or_is_refused(name) -> 
 
 # -- unknown types, misspelled ports, missing SubTrees: the loader's own checks --------------------------
 def test_unknown_type_misspelled_port_and_missing_subtree_name_their_line_and_column() -> None:
-    for body, expected in (("<Sequence>\n  <NoSuchNode/>\n</Sequence>", "NoSuchNode (line 2, column 3): unknown node ID"),
-                           ('<Sequence>\n  <Delay delay_mss="5"><AlwaysSuccess/></Delay>\n</Sequence>',
-                            "Delay (line 2, column 3): unknown port 'delay_mss'"),
-                           ('<Sequence>\n  <SubTree ID="Gone"/>\n</Sequence>', "SubTree 'Gone' (line 2, column 3)")):
+    for body, expected in (
+        ("<Sequence>\n  <NoSuchNode/>\n</Sequence>", "NoSuchNode (line 2, column 3): unknown node ID"),
+        (
+            '<Sequence>\n  <Delay delay_mss="5"><AlwaysSuccess/></Delay>\n</Sequence>',
+            "Delay (line 2, column 3): unknown port 'delay_mss'",
+        ),
+        ('<Sequence>\n  <SubTree ID="Gone"/>\n</Sequence>', "SubTree 'Gone' (line 2, column 3)"),
+    ):
         assert expected in refused("load_tree", doc(body))
 
 
@@ -267,16 +278,28 @@ def test_a_message_over_the_size_limit_and_lone_surrogates_are_refused() -> None
         parse_task_sequence('{"tasks": [{"task_id": 1, "task_sequence": "<root>\\udc00</root>"}]}')
 
 
-JSON_VALUES = st.recursive(st.none() | st.booleans() | st.integers(-2**70, 2**70) | st.text(max_size=20),
-                           lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
-                           max_leaves=30)
+JSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers(-(2**70), 2**70) | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=30,
+)
 
 
-@given(st.lists(st.fixed_dictionaries({"task_id": st.integers(-2**70, 2**70) | JSON_VALUES,
-                                        "task_sequence": st.sampled_from([nested(2), nested(200), doc(leaf(model="d37pxi_24＿")),
-                                                                          doc("<Nope/>"), "<root>", ""]) | JSON_VALUES}),
-                max_size=4),
-       st.sampled_from([-1, 1, 0, 2**31, 2**63]))
+@given(
+    st.lists(
+        st.fixed_dictionaries(
+            {
+                "task_id": st.integers(-(2**70), 2**70) | JSON_VALUES,
+                "task_sequence": st.sampled_from(
+                    [nested(2), nested(200), doc(leaf(model="d37pxi_24＿")), doc("<Nope/>"), "<root>", ""]
+                )
+                | JSON_VALUES,
+            }
+        ),
+        max_size=4,
+    ),
+    st.sampled_from([-1, 1, 0, 2**31, 2**63]),
+)
 @HYPO
 def test_any_json_message_starts_valid_ids_or_is_refused(tasks, param) -> None:
     sequence_entry(json.dumps({"tasks": tasks}), param)
@@ -303,9 +326,13 @@ def _depth(value) -> int:
     return 0
 
 
-NESTED_JSON = st.recursive(st.text(alphabet='[]{}"\\ab', max_size=6) | st.integers(),
-                           lambda inner: st.lists(inner, max_size=2) | st.dictionaries(st.text(alphabet='[]{}"\\', max_size=3), inner, max_size=2),
-                           max_leaves=40)
+NESTED_JSON = st.recursive(
+    st.text(alphabet='[]{}"\\ab', max_size=6) | st.integers(),
+    lambda inner: (
+        st.lists(inner, max_size=2) | st.dictionaries(st.text(alphabet='[]{}"\\', max_size=3), inner, max_size=2)
+    ),
+    max_leaves=40,
+)
 
 
 @given(NESTED_JSON)

@@ -73,7 +73,9 @@ def test_cancel_one_task_then_emergency_cancels_the_other(ts_system):
 
     _seed(ts_system.store)
     ts_system.store.add_task(_one_leaf("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere", "load_point"), task_id=3)
-    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4)
+    ts_system.store.add_task(
+        _one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4
+    )
     system = ts_system.start(stub_duration_s=60.0)
     system.publish("/tms_ts/start", TaskIds(task_ids=[3, 4]))
     system.wait(lambda: len([ln for ln in system.procs["stub"].lines if ln.startswith("GOAL")]) == 2, 30,
@@ -84,7 +86,11 @@ def test_cancel_one_task_then_emergency_cancels_the_other(ts_system):
     system.publish("/tms_ts/cancel", Int32(data=3))
     system.wait(lambda: _state(system, 3) == TaskState.CANCELED, 30, "task 3 CANCELED")
     assert "confirmed stop" in system.task(3).message, system.task(3).message
-    assert system.procs["stub"].wait_for("CANCELED /ic120/navigate_to_pose", 10), (system.task(3).message, system.procs["ic120"].output, system.procs["stub"].output)
+    assert system.procs["stub"].wait_for("CANCELED /ic120/navigate_to_pose", 10), (
+        system.task(3).message,
+        system.procs["ic120"].output,
+        system.procs["stub"].output,
+    )
     system.spin(1.0)
     assert _state(system, 4) == TaskState.RUNNING, system.task(4)
     assert "CANCELED /zx200/tms_rp_zx200_change_pose" not in system.procs["stub"].output
@@ -103,7 +109,9 @@ def test_emergency_escalates_when_a_subtask_never_confirms(ts_system):
     from tms_msg.msg import TaskIds, TaskState
 
     _seed(ts_system.store)
-    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=7)
+    ts_system.store.add_task(
+        _one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=7
+    )
     system = ts_system.start(stub_duration_s=60.0, ignore_cancel=True, halt_timeout_s=2.0, stop_timeout_s=30.0)
     emg = []
     system.node.create_subscription(Bool, "/zx200/emg_stop", emg.append, 10)
@@ -120,7 +128,9 @@ def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):
 
     _seed(ts_system.store)
     ts_system.store.add_task(_one_leaf("ic120", "LeafNodeIc120", "st_ic120_teleport", "load_point"), task_id=5)
-    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "no_such_pose"), task_id=6)
+    ts_system.store.add_task(
+        _one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "no_such_pose"), task_id=6
+    )
     ts_system.store.upsert_parameter({"model_name": "zx200", "type": "static", "record_name": "half_pose",
                                       "target_angle": 0.5})  # a release record, not a pose
     ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "half_pose"), task_id=8)
@@ -129,8 +139,9 @@ def test_absent_server_and_missing_record_fail_naming_the_culprit(ts_system):
     system.wait(lambda: all(_state(system, i) == TaskState.FAILURE for i in (5, 6, 8, 99)), 60, "four failures")
     assert "/ic120/st_ic120_teleport" in system.task(5).message and "not available" in system.task(5).message
     # a record that fails validation: the goal is accepted and aborted with its code, the reason names the record
-    assert "aborted record 'no_such_pose': RECORD_INVALID: record 'no_such_pose': not found" in system.task(6).message, \
-        system.task(6).message
+    assert (
+        "aborted record 'no_such_pose': RECORD_INVALID: record 'no_such_pose': not found" in system.task(6).message
+    ), system.task(6).message
     assert "RECORD_INVALID: record 'half_pose' field 'trajectory|pose|position_with_angle'" in system.task(8).message, \
         system.task(8).message
     assert "99" in system.task(99).message
@@ -150,7 +161,9 @@ def test_a_manager_stopped_mid_task_cancels_its_subtasks_and_locks_the_machines(
 
     _seed(ts_system.store)
     ts_system.store.add_task(_one_leaf("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere", "load_point"), task_id=3)
-    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4)
+    ts_system.store.add_task(
+        _one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4
+    )
     locks: dict[str, list[bool]] = {"zx200": [], "ic120": []}
     for machine, seen in locks.items():
         ts_system.node.create_subscription(Bool, f"/{machine}/lock", lambda msg, seen=seen: seen.append(msg.data),
@@ -177,7 +190,9 @@ def test_a_subtask_server_stopped_mid_goal_cancels_downstream_and_aborts_naming_
     from tms_msg.msg import TaskIds, TaskState
 
     _seed(ts_system.store)
-    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4)
+    ts_system.store.add_task(
+        _one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=4
+    )
     system = ts_system.start(stub_duration_s=60.0)
     system.publish("/tms_ts/start", TaskIds(task_ids=[4]))
     system.wait(lambda: any(ln.startswith("GOAL") for ln in system.procs["stub"].lines), 30, "the planning goal")

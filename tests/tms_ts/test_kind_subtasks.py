@@ -27,12 +27,16 @@ def test_every_name_the_original_defines_is_served_by_its_kind() -> None:
                          ("ic120", "ic120")):
         assert {f"st_{prefix}_{t}" for t in TRAVEL} <= _names(kind), kind
     for prefix, kind in (("mst2200", "mst2200vd"), ("mst110cr", "mst110cr")):
-        assert {f"st_{prefix}_release_soil", f"st_{prefix}_swing", f"st_{prefix}_swing_align_to_heading"} <= _names(kind)
+        assert {f"st_{prefix}_release_soil", f"st_{prefix}_swing", f"st_{prefix}_swing_align_to_heading"} <= _names(
+            kind
+        )
     for m in ("zx200", "zx120"):
         assert {f"st_{m}_sample_{j}" for j in ("swing", "boom", "arm", "bucket")} <= _names(m)
     # the original's trees send the IC120's release to /mst2200: its kind serves that name too
     assert "st_ic120_release_soil" in _names("mst2200vd")
-    assert {"subtask_zx200_change_pose", "subtask_zx200_excavate_simple", "subtask_zx200_release_simple"} <= _names("zx200")
+    assert {"subtask_zx200_change_pose", "subtask_zx200_excavate_simple", "subtask_zx200_release_simple"} <= _names(
+        "zx200"
+    )
     assert _names("ic120") == {f"st_ic120_{t}" for t in TRAVEL} | {"st_ic120_release_soil"}
     assert not any(n.startswith(("st_ic120", "st_mst")) for n in _names("zx200"))
     assert _names("d37pxi") == {f"st_d37pxi_{t}" for t in TRAVEL}  # the original builds no D37PXi release

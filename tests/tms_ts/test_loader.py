@@ -38,7 +38,9 @@ def _err(xml: str) -> str:
 
 
 def test_unknown_node_id_names_id_and_line():
-    msg = _err('<root>\n<BehaviorTree ID="B">\n<Sequence>\n    <Action ID="MoveArm"/>\n</Sequence></BehaviorTree></root>')
+    msg = _err(
+        '<root>\n<BehaviorTree ID="B">\n<Sequence>\n    <Action ID="MoveArm"/>\n</Sequence></BehaviorTree></root>'
+    )
     assert "MoveArm" in msg and "line 4, column 5" in msg and "unknown node ID" in msg
 
 

@@ -56,7 +56,9 @@ def test_status_with_100_finished_runs_keeps_the_managers_memory_bounded(tmp_pat
 
     statuses: list[tuple[float, object]] = []
     reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-    ros_node.create_subscription(TaskStatus, "/tms_ts/status", lambda m: statuses.append((time.monotonic(), m)), reliable)
+    ros_node.create_subscription(
+        TaskStatus, "/tms_ts/status", lambda m: statuses.append((time.monotonic(), m)), reliable
+    )
     start = ros_node.create_publisher(TaskIds, "/tms_ts/start", reliable)
     ex = ros_node.executor_for_test
 

@@ -53,7 +53,9 @@ def _goals(system) -> list[str]:
 def _start_with_reader(ts_system, procs, manager_args: tuple[str, ...] = ()):
     _seed(ts_system.store)
     ts_system.store.add_task(_one_leaf("ic120", "LeafNodeIc120", "st_ic120_navigate_anywhere", "load_point"), task_id=1)
-    ts_system.store.add_task(_one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=2)
+    ts_system.store.add_task(
+        _one_leaf("zx200", "LeafNodeZx200", "subtask_zx200_change_pose", "initial_pose"), task_id=2
+    )
     reader = procs([executable("tms_db", "tms_db_reader"), "--ros-args", "-p", f"db_path:={ts_system.db}"],
                    name="reader")
     system = ts_system.start(stub_duration_s=0.2, manager_args=manager_args)

@@ -16,7 +16,9 @@ from tms_ts.status import ALL_TASKS, StatusBook, snapshot_text
 from tms_ts.task import TaskRun
 from tms_ts.tree_loading import Loaded, LoadRequest, TreeLoadWorker
 
-ENDS = '<root><BehaviorTree ID="B"><Sequence><AlwaysSuccess/><AlwaysSuccess name="two"/></Sequence></BehaviorTree></root>'
+ENDS = (
+    '<root><BehaviorTree ID="B"><Sequence><AlwaysSuccess/><AlwaysSuccess name="two"/></Sequence></BehaviorTree></root>'
+)
 SLEEPS = '<root><BehaviorTree ID="B"><Sequence><AlwaysSuccess/><Sleep msec="3600000"/></Sequence></BehaviorTree></root>'
 
 

@@ -59,7 +59,10 @@ def test_every_row_builds_its_own_actions_goal_and_reads_its_result() -> None:
         if hasattr(ok_result, "success"):
             ok_result.success = True
         elif hasattr(ok_result.error_code, "val"):
-            ok_result.error_code.val, failed_result.error_code.val = TmsRpErrorCodes.SUCCESS, Zx200PlanningOutcome.OUT_OF_REACH
+            ok_result.error_code.val, failed_result.error_code.val = (
+                TmsRpErrorCodes.SUCCESS,
+                Zx200PlanningOutcome.OUT_OF_REACH,
+            )
         else:
             failed_result.error_code = 9004
         assert spec.check(ok_result)[0] is True, spec.name
@@ -101,7 +104,10 @@ def test_two_machines_servers_started_by_hand_get_their_own_names() -> None:
     from tms_ts.nodes.tms_ts_subtasks import node_name_from_args
 
     assert node_name_from_args(["x", "--ros-args", "-p", "machine:=zx200", "-p", "db_path:=/tmp/d"]) == "zx200_subtasks"
-    assert node_name_from_args(["x", "--ros-args", "-p", "db_path:=/tmp/d", "--param", "machine:=ic120"]) == "ic120_subtasks"
+    assert (
+        node_name_from_args(["x", "--ros-args", "-p", "db_path:=/tmp/d", "--param", "machine:=ic120"])
+        == "ic120_subtasks"
+    )
     assert node_name_from_args(["x", "--ros-args", "--params-file", "f.yaml"]) == "tms_ts_subtasks"
 
 
@@ -165,7 +171,9 @@ def test_cancel_is_honoured_while_waiting_for_planning_and_a_bad_record_aborts_w
     assert result.result().status == GoalStatus.STATUS_ABORTED and result.result().result.result is False
     assert outcome(handle).error_code == SubtaskOutcome.RECORD_INVALID
     assert "'no_such_pose'" in outcome(handle).error_msg
-    assert outcome(handle).action == "/zx200/subtask_zx200_change_pose" and outcome(handle).record_name == "no_such_pose"
+    assert (
+        outcome(handle).action == "/zx200/subtask_zx200_change_pose" and outcome(handle).record_name == "no_such_pose"
+    )
     # the reason is also the last feedback, for a client that reads only the original's type
     _spin_until(ros_node, lambda: any(f.startswith("RECORD_INVALID: ") for f in feedback), 5, "the reason in feedback")
 

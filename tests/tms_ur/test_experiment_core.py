@@ -85,8 +85,13 @@ def test_report_writes_every_file(tmp_path):
 def test_leaf_times_come_from_the_running_leaves_of_each_task():
     rec = ExperimentRecorder()
     # task 2 runs excavate 10-25 s, carry 25-31 s, then excavate again 31-40 s; task 1 drives 0-40 s
-    for t, leaves in [(10.0, ["excavate"]), (20.0, ["excavate"]), (25.0, ["carry_over_vessel (task 2 line 1, column 3404)"]),
-                      (31.0, ["excavate"]), (40.0, [])]:
+    for t, leaves in [
+        (10.0, ["excavate"]),
+        (20.0, ["excavate"]),
+        (25.0, ["carry_over_vessel (task 2 line 1, column 3404)"]),
+        (31.0, ["excavate"]),
+        (40.0, []),
+    ]:
         rec.on_running_leaves(t, 2, leaves)
         rec.on_running_leaves(t, 1, ["drive_to_p5"] if t < 40.0 else [])
     times = rec.metrics()["leaf_time_s"]
@@ -183,7 +188,9 @@ def test_site_map_labels_do_not_overlap_and_the_plot_fills_the_figure(tmp_path):
     assert info["reach"] == pytest.approx(kin.envelope()["max_reach"])
     assert info["drawn"] == ["zx200", "ic120"]
     assert info["colors"] == {"zx200": "tab:blue", "ic120": "tab:orange"}
-    assert {f"zx200 swing reach ({info['reach']:.1f} m)", "zx200", "ic120 at loading", "ic120 vessel"} <= set(info["legend"])
+    assert {f"zx200 swing reach ({info['reach']:.1f} m)", "zx200", "ic120 at loading", "ic120 vessel"} <= set(
+        info["legend"]
+    )
 
 
 def test_site_map_draws_any_list_of_machines_by_type(tmp_path):

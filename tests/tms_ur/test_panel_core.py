@@ -48,9 +48,13 @@ def test_parse_commands_and_errors():
     assert parse_command('{"op": "start", "task_ids": [1, "2"]}').task_ids == (1, 2)
     assert parse_command('{"op": "cancel", "task_id": 7}').task_ids == (7,)
     assert parse_command('{"op": "emergency"}').op == "emergency"
-    for bad, msg in [("nope", "not JSON"), ('{"op": "fly"}', "unknown op 'fly'"), ('{"op": "start"}', "non-empty"),
-                     ('{"op": "cancel", "task_id": true}', "must be an integer"),
-                     ('{"op": "start", "task_ids": [0]}', r"out of range 1\.\.2147483647 \(task ids are positive int32\)")]:
+    for bad, msg in [
+        ("nope", "not JSON"),
+        ('{"op": "fly"}', "unknown op 'fly'"),
+        ('{"op": "start"}', "non-empty"),
+        ('{"op": "cancel", "task_id": true}', "must be an integer"),
+        ('{"op": "start", "task_ids": [0]}', r"out of range 1\.\.2147483647 \(task ids are positive int32\)"),
+    ]:
         with pytest.raises(CommandError, match=msg):
             parse_command(bad)
 

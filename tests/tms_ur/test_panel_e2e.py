@@ -115,7 +115,9 @@ def test_start_see_running_and_moving_then_emergency_stop_cancels_both(procs, do
     SCREENSHOT_DIR.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(SCREENSHOT_DIR / "panel_running.png"), full_page=True)
     page.keyboard.press("Escape")  # the emergency-stop shortcut
-    _wait(lambda: _state(page, 11) == "CANCELED" and _state(page, 12) == "CANCELED", 60, "both tasks CANCELED", launcher)
+    _wait(
+        lambda: _state(page, 11) == "CANCELED" and _state(page, 12) == "CANCELED", 60, "both tasks CANCELED", launcher
+    )
     x_stop = float(page.inner_text("#pose-ic120 td.x"))
     time.sleep(3.0)
     assert abs(float(page.inner_text("#pose-ic120 td.x")) - x_stop) < 0.05, "the IC120 kept moving after CANCELED"

@@ -19,7 +19,10 @@ def _action_server_calls() -> list[tuple[Path, ast.Call]]:
     for package in PACKAGES:
         for path in (ROOT / package).rglob("*.py"):
             for node in ast.walk(ast.parse(path.read_text(), str(path))):
-                if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) == "ActionServer":
+                if (
+                    isinstance(node, ast.Call)
+                    and getattr(node.func, "id", getattr(node.func, "attr", "")) == "ActionServer"
+                ):
                     calls.append((path, node))
     return calls
 
@@ -27,7 +30,12 @@ def _action_server_calls() -> list[tuple[Path, ast.Call]]:
 def test_every_action_server_passes_the_platform_result_timeout() -> None:
     calls = _action_server_calls()
     assert len(calls) >= 6, [str(p) for p, _ in calls]  # subtasks, planner, arm controller, navigator, vessel, demo
-    wrong = [f"{p.relative_to(ROOT)}:{c.lineno}" for p, c in calls
-             if not any(k.arg == "result_timeout" and isinstance(k.value, ast.Name) and k.value.id == "ACTION_RESULT_TIMEOUT_S"
-                        for k in c.keywords)]
+    wrong = [
+        f"{p.relative_to(ROOT)}:{c.lineno}"
+        for p, c in calls
+        if not any(
+            k.arg == "result_timeout" and isinstance(k.value, ast.Name) and k.value.id == "ACTION_RESULT_TIMEOUT_S"
+            for k in c.keywords
+        )
+    ]
     assert not wrong, f"ActionServer without result_timeout=ACTION_RESULT_TIMEOUT_S: {wrong}"

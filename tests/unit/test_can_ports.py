@@ -23,7 +23,10 @@ def test_free_can_ports_skip_held_ports_and_fail_when_too_few_are_left():
         held = [_hold(can_port(domain, k)) for k in range(CAN_PORTS_PER_DOMAIN - 2)]
         try:
             ports = free_can_ports(domain, 2)
-            assert sorted(ports) == [can_port(domain, CAN_PORTS_PER_DOMAIN - 2), can_port(domain, CAN_PORTS_PER_DOMAIN - 1)]
+            assert sorted(ports) == [
+                can_port(domain, CAN_PORTS_PER_DOMAIN - 2),
+                can_port(domain, CAN_PORTS_PER_DOMAIN - 1),
+            ]
             with pytest.raises(RuntimeError, match="only 2 of domain"):
                 free_can_ports(domain, 3)
         finally:

@@ -23,7 +23,9 @@ EXTENSIONS = (".py", ".yaml", ".yml", ".xml", ".dbc", ".md", ".png", ".pgm", ".s
 _LINK = re.compile(r"\]\(([^)\s]+)\)")
 _CODE = re.compile(r"`([^`\n]+)`")
 #: outside the repository: the shared design brief and its notes, and its letter names for contracts
-_OUTSIDE = re.compile(r"\.\./shared|(?<![\w/])reference/|DESIGN(\.md| §)|tms_reference\.md|contract \[?[A-Z]\]?(?![\w])")
+_OUTSIDE = re.compile(
+    r"\.\./shared|(?<![\w/])reference/|DESIGN(\.md| §)|tms_reference\.md|contract \[?[A-Z]\]?(?![\w])"
+)
 
 
 def documents() -> list[Path]:

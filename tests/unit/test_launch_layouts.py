@@ -91,7 +91,9 @@ def test_nodes_that_cannot_share_a_process_are_refused_naming_them(tmp_path, ext
 
 def test_a_container_name_must_be_an_identifier(tmp_path):
     text = "nodes:\n  - {name: a, package: tms_launch, executable: demo_talker, container: 'site server'}\n"
-    with pytest.raises(ConfigError, match=r"launch.yaml:2: node 'a': container name 'site server' must be an identifier"):
+    with pytest.raises(
+        ConfigError, match=r"launch.yaml:2: node 'a': container name 'site server' must be an identifier"
+    ):
         parse_launch_file(_write(tmp_path, text))
 
 
@@ -138,7 +140,10 @@ def test_cli_list_shows_each_layouts_processes_and_rejects_unknown_containers(ca
     assert [line.split("\t")[0] for line in lines] == ["plant", "zx200_pc", "ic120_pc", "site_server", "sensing_pc"]
     assert main(["--list", "--layout", "per-node", "--containers", "zx200_pc", str(PAPER)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines == ["excavator_arm_controller\tnode\t/zx200/excavator_arm_controller", "zx200_planner\tnode\t/zx200/zx200_planner"]
+    assert lines == [
+        "excavator_arm_controller\tnode\t/zx200/excavator_arm_controller",
+        "zx200_planner\tnode\t/zx200/zx200_planner",
+    ]
     assert main(["--list", "--containers", "nowhere", str(PAPER)]) == 2
     assert "no container(s) ['nowhere']" in capsys.readouterr().err
 

@@ -456,7 +456,9 @@ _PRIMITIVE = {
     "string": "string",
     **{t: t for t in ("int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")},
 }
-_LINE = re.compile(r"^(?P<type>[\w/]+)(?P<array>\[\d*\])?\s+(?P<name>\w+)\s*(?:(?P<const>=)\s*(?P<cval>\S+)|(?P<dval>\S+))?$")
+_LINE = re.compile(
+    r"^(?P<type>[\w/]+)(?P<array>\[\d*\])?\s+(?P<name>\w+)\s*(?:(?P<const>=)\s*(?P<cval>\S+)|(?P<dval>\S+))?$"
+)
 
 
 def _literal(text: str, base: str) -> object:
@@ -519,10 +521,14 @@ def test_peer_type_matches_the_peers_definition(key):
         fields, constants, defaults = _parse(section, package)
         got = list(cls.get_fields_and_field_types().items())
         assert got == fields, f"{key} {cls.__name__}: fields {got} differ from the peer's {fields}"
-        assert _constants(cls) == constants, f"{key} {cls.__name__}: constants {_constants(cls)} differ from the peer's {constants}"
+        assert _constants(cls) == constants, (
+            f"{key} {cls.__name__}: constants {_constants(cls)} differ from the peer's {constants}"
+        )
         instance = cls()
         for field, value in defaults.items():
-            assert getattr(instance, field) == value, f"{key} {cls.__name__}.{field}: default differs from the peer's {value!r}"
+            assert getattr(instance, field) == value, (
+                f"{key} {cls.__name__}.{field}: default differs from the peer's {value!r}"
+            )
 
 
 def test_table_covers_every_type_the_peer_packages_hold():
@@ -535,7 +541,9 @@ def test_table_covers_every_type_the_peer_packages_hold():
         for kind in ("msg", "srv", "action"):
             for path in (root / package / kind).glob(f"*.{kind}"):
                 found.add(f"{package}/{kind}/{path.stem}")
-    assert found == set(PEER), f"not in PEER: {sorted(found - set(PEER))}; in PEER without a file: {sorted(set(PEER) - found)}"
+    assert found == set(PEER), (
+        f"not in PEER: {sorted(found - set(PEER))}; in PEER without a file: {sorted(set(PEER) - found)}"
+    )
 
 
 def test_a_changed_copy_fails_the_comparison():
@@ -545,7 +553,9 @@ def test_a_changed_copy_fails_the_comparison():
 
     fields, _, _ = _parse(PEER["com3_msgs/msg/JointCmd"].replace("joint_name", "joint_names"), "com3_msgs")
     assert list(JointCmd.get_fields_and_field_types().items()) != fields
-    fields, _, _ = _parse(PEER["com3_msgs/msg/JointCmd"].replace("uint8 control_type", "int8 control_type"), "com3_msgs")
+    fields, _, _ = _parse(
+        PEER["com3_msgs/msg/JointCmd"].replace("uint8 control_type", "int8 control_type"), "com3_msgs"
+    )
     assert list(JointCmd.get_fields_and_field_types().items()) != fields
     result = PEER["nav2_msgs/action/NavigateToPose"].split("---")[1].replace("NONE=0", "NONE=1")
     assert _constants(NavigateToPose.Result) != _parse(result, "nav2_msgs")[1]

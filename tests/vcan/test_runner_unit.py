@@ -102,7 +102,10 @@ def test_junit_summary_and_progress_parsing(tmp_path):
     assert vm.junit_summary(tmp_path / "junit.xml") == {"tests": 5, "failures": 1, "errors": 0, "skipped": 1,
                                                         "passed": 3}
     (tmp_path / "progress").write_text("guest-started 31.2 \nfail 33.0 modprobe vcan failed: not found\n")
-    assert vm.read_progress(tmp_path / "progress") == [("guest-started", ""), ("fail", "modprobe vcan failed: not found")]
+    assert vm.read_progress(tmp_path / "progress") == [
+        ("guest-started", ""),
+        ("fail", "modprobe vcan failed: not found"),
+    ]
 
 
 def test_vng_command_boots_without_kvm_and_shares_only_the_output_dir_read_write(tmp_path):
