@@ -90,7 +90,9 @@ def _check_limits(text: str, file: str) -> None:
             total += 1
             depth += 1
             if depth > MAX_YAML_DEPTH:
-                raise ConfigError(f"{file}:{line}: YAML nested deeper than {MAX_YAML_DEPTH} levels (limit MAX_YAML_DEPTH)")
+                raise ConfigError(
+                    f"{file}:{line}: YAML nested deeper than {MAX_YAML_DEPTH} levels (limit MAX_YAML_DEPTH)"
+                )
             open_at.append((event.anchor, total - 1))
         elif isinstance(event, yaml.CollectionEndEvent):
             depth -= 1
@@ -144,7 +146,9 @@ def read_utf8(path: str | Path, what: str = "", limit: int | None = None, limit_
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
-        raise ConfigError(f"{label}:{line}: not UTF-8 text: byte 0x{data[exc.start]:02x} at byte offset {exc.start}") from None
+        raise ConfigError(
+            f"{label}:{line}: not UTF-8 text: byte 0x{data[exc.start]:02x} at byte offset {exc.start}"
+        ) from None
 
 
 def load_yaml(path: str | Path) -> tuple[Any, Where]:
@@ -184,7 +188,9 @@ def data_root() -> Path:
             share = Path(get_package_share_directory(DATA_PACKAGE))
         except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
             prefixes = os.environ.get("AMENT_PREFIX_PATH", "")
-            searched.append(f"ament share directory of {DATA_PACKAGE} (not registered under AMENT_PREFIX_PATH={prefixes!r})")
+            searched.append(
+                f"ament share directory of {DATA_PACKAGE} (not registered under AMENT_PREFIX_PATH={prefixes!r})"
+            )
         else:
             if (share / "config").is_dir():
                 # resolved, so messages name the real file (the share entries link into the checkout)

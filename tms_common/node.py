@@ -276,6 +276,8 @@ def _wait_for_callback_threads(spinner, timeout_s: float, *, run_queued: bool) -
     pool = executor_thread_pool(spinner)
     if pool is None:
         return
-    joiner = threading.Thread(target=pool.shutdown, kwargs={"wait": True, "cancel_futures": not run_queued}, daemon=True)
+    joiner = threading.Thread(
+        target=pool.shutdown, kwargs={"wait": True, "cancel_futures": not run_queued}, daemon=True
+    )
     joiner.start()
     joiner.join(timeout_s)

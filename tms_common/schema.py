@@ -109,7 +109,9 @@ def _convert(tp: Any, value: Any, where: Where, path: tuple[Any, ...], meta: dic
             if len(value) != len(args):
                 raise _error(where, path, f"expected a list of {len(args)} values, got {len(value)}: {value!r}")
             item_types = list(args)
-        return tuple(_convert(t, v, where, path + (i,), meta) for i, (t, v) in enumerate(zip(item_types, value, strict=True)))
+        return tuple(
+            _convert(t, v, where, path + (i,), meta) for i, (t, v) in enumerate(zip(item_types, value, strict=True))
+        )
     if origin is dict:
         if not isinstance(value, dict):
             raise _error(where, path, f"expected a mapping, got {value!r}")
@@ -211,7 +213,9 @@ class Reader:
             return read_schema(cls, self.data, self.where, self.path)
         return read_schema(cls, self.raw(key), self.where, self.path + (key,))
 
-    def number(self, key: str, *, lo: float | None = None, hi: float | None = None, default: float | None = None) -> float:
+    def number(
+        self, key: str, *, lo: float | None = None, hi: float | None = None, default: float | None = None
+    ) -> float:
         if default is not None and key not in self.data:
             return float(default)
         return float(_number(self.raw(key), self.where, self.path + (key,), False, lo, hi))

@@ -67,7 +67,9 @@ class ClockRelay:
             pass  # the node is being destroyed, or use_sim_time was set false (the clock ignores overrides then)
         except Exception as exc:  # the context or the subscription went away under us (shutdown): stop relaying
             if not self._stop.is_set() and self._context.ok():
-                self._logger.error(f"clock relay failed, simulated time no longer advances: {type(exc).__name__}: {exc}")
+                self._logger.error(
+                    f"clock relay failed, simulated time no longer advances: {type(exc).__name__}: {exc}"
+                )
                 raise
 
     def follow(self, node: Node) -> bool:
