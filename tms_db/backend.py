@@ -32,5 +32,7 @@ def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **
         if uri.startswith("file:"):
             path = uri.removeprefix("file://").removeprefix("file:")
         else:
-            raise StoreError(f"db uri {uri!r}: unsupported scheme; use mongodb://... or leave it empty for the embedded store")
+            raise StoreError(
+                f"db uri {uri!r}: unsupported scheme; use mongodb://... or leave it empty for the embedded store"
+            )
     return EmbeddedStore(Path(path).expanduser() if path else default_path(), **options)

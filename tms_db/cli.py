@@ -213,7 +213,9 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="tms-db", description="The TMS document store (tasks, parameters, blackboard).",
                 epilog="exit codes: " + "; ".join(f"{k} {v.split(' (')[0]}" for k, v in EXIT_CODES.items()))
     p.add_argument("--uri", default=os.environ.get("TMS_DB_URI") or None, help="mongodb://... (default $TMS_DB_URI)")
-    p.add_argument("--path", default=None, help="embedded store directory (default $TMS_DB_PATH or ~/.local/share/tms/db)")
+    p.add_argument(
+        "--path", default=None, help="embedded store directory (default $TMS_DB_PATH or ~/.local/share/tms/db)"
+    )
     sub = p.add_subparsers(dest="cmd", required=True)
 
     task = sub.add_parser("task", help="task trees").add_subparsers(dest="task_cmd", required=True)

@@ -143,7 +143,9 @@ def restore(store: Store, directory: str | Path, *, drop: bool = False,
     base = directory / (store.database or DATABASE)
     if not base.is_dir():
         base = directory
-    files = sorted(p for p in base.glob("*") if p.suffix in (".json", ".bson") and not p.name.endswith(".metadata.json"))
+    files = sorted(
+        p for p in base.glob("*") if p.suffix in (".json", ".bson") and not p.name.endswith(".metadata.json")
+    )
     if not files:
         raise StoreError(f"{directory}: no <collection>.json or .bson files (looked in {base})")
     result = RestoreResult()

@@ -152,7 +152,9 @@ def _key_columns(collection: str, doc: Mapping[str, Any]) -> tuple[Any, Any, Any
 class EmbeddedStore(Store):
     """Document store in ``<directory>/rostmsdb.sqlite3``; one connection per process, shared by its threads."""
 
-    def __init__(self, directory: str | os.PathLike, *, synchronous: str = "NORMAL", busy_timeout_s: float = 60.0) -> None:
+    def __init__(
+        self, directory: str | os.PathLike, *, synchronous: str = "NORMAL", busy_timeout_s: float = 60.0
+    ) -> None:
         self.directory = Path(directory)
         if synchronous.upper() not in ("NORMAL", "FULL"):
             raise StoreError(f"synchronous {synchronous!r}: expected NORMAL or FULL")
@@ -199,8 +201,12 @@ class EmbeddedStore(Store):
         text = str(exc) if not isinstance(exc, OSError) or exc.errno is None else (exc.strerror or str(exc))
         where = f"embedded store {self.file}" + (f": {doing}" if doing else "")
         code = getattr(exc, "sqlite_errorcode", None)
-        if (isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)) or code == sqlite3.SQLITE_FULL \
-                or "database or disk is full" in text or (isinstance(exc, sqlite3.OperationalError) and self._no_space()):
+        if (
+            (isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT))
+            or code == sqlite3.SQLITE_FULL
+            or "database or disk is full" in text
+            or (isinstance(exc, sqlite3.OperationalError) and self._no_space())
+        ):
             return StorageFullError(f"{where}: disk full (ENOSPC): {text}; nothing of this write was stored")
         if (isinstance(exc, OSError) and exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM)) \
                 or code == sqlite3.SQLITE_READONLY or "readonly database" in text \
@@ -213,7 +219,9 @@ class EmbeddedStore(Store):
             return self._conn
         conn = None
         try:
-            conn = sqlite3.connect(self.file, timeout=self._busy_timeout_s, isolation_level=None, check_same_thread=False)
+            conn = sqlite3.connect(
+                self.file, timeout=self._busy_timeout_s, isolation_level=None, check_same_thread=False
+            )
             conn.execute("PRAGMA journal_mode=WAL")
             conn.execute(f"PRAGMA synchronous={self._synchronous}")
             self._lock_fd = os.open(self.directory / LOCK_FILE, os.O_CREAT | os.O_RDWR, 0o666)
@@ -417,7 +425,9 @@ class EmbeddedStore(Store):
         def change(doc: dict) -> Any:
             current = doc.get(field, 0)
             if not is_number(current):
-                raise ValidationError(f"record {record_name!r}: field {field!r}: cannot increment non-number {current!r}")
+                raise ValidationError(
+                    f"record {record_name!r}: field {field!r}: cannot increment non-number {current!r}"
+                )
             doc[field] = current + by
             return doc[field]
 
@@ -438,7 +448,9 @@ class EmbeddedStore(Store):
         try:
             if row is not None:
                 doc.setdefault("_id", ObjectId(row[1]))
-                conn.execute("UPDATE documents SET oid=?, body=? WHERE seq=?", (str(doc["_id"]), encode_body(doc), row[0]))
+                conn.execute(
+                    "UPDATE documents SET oid=?, body=? WHERE seq=?", (str(doc["_id"]), encode_body(doc), row[0])
+                )
             else:
                 oid = str(doc.get("_id") or ObjectId())
                 conn.execute("INSERT INTO documents (collection, oid, model_name, record_name, body) "
@@ -464,8 +476,10 @@ class EmbeddedStore(Store):
 
         def delete(conn: sqlite3.Connection) -> None:
             if model_name:
-                cur = conn.execute("DELETE FROM documents WHERE collection='parameter' AND record_name=? AND model_name=?",
-                                   (record_name, model_name))
+                cur = conn.execute(
+                    "DELETE FROM documents WHERE collection='parameter' AND record_name=? AND model_name=?",
+                    (record_name, model_name),
+                )
             else:
                 cur = conn.execute("DELETE FROM documents WHERE seq = (SELECT seq FROM documents WHERE "
                                    "collection='parameter' AND record_name=? ORDER BY seq LIMIT 1)", (record_name,))

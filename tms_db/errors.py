@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from tms_common.errors import TmsError
 
-__all__ = ["StoreError", "RecordNotFound", "ValidationError", "InputRefusedError", "StorageFullError", "StorageReadOnlyError"]
+__all__ = [
+    "StoreError",
+    "RecordNotFound",
+    "ValidationError",
+    "InputRefusedError",
+    "StorageFullError",
+    "StorageReadOnlyError",
+]
 
 
 class StoreError(TmsError):

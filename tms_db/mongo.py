@@ -87,8 +87,11 @@ class MongoStore(Store):
         for _attempt in range(20):
             tid = task_id
             if tid is None:
-                existing = {d["task_id"]: d.get("task_sequence", "") for d in self._tasks.find({}, {"task_id": 1, "task_sequence": 1})
-                            if isinstance(d.get("task_id"), int)}
+                existing = {
+                    d["task_id"]: d.get("task_sequence", "")
+                    for d in self._tasks.find({}, {"task_id": 1, "task_sequence": 1})
+                    if isinstance(d.get("task_id"), int)
+                }
                 tid = choose_task_id(existing, doc["task_sequence"])
             elif self._tasks.find_one({"task_id": tid}) is not None:
                 if not replace:
@@ -283,7 +286,9 @@ class MongoStore(Store):
             k, exc = failed[-1]
             for err in exc.details.get("writeErrors", []):
                 doc = batches[k][1][err["index"]]
-                results[k].rejected.append(Rejected(err["index"], document_label(doc), err.get("errmsg", "write error")))
+                results[k].rejected.append(
+                    Rejected(err["index"], document_label(doc), err.get("errmsg", "write error"))
+                )
             return results
         # A standalone server (no transactions): validated above, so only a key already stored or the server can
         # fail; ordered inserts stop at the first failure, and the result says exactly what is stored.

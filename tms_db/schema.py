@@ -211,7 +211,9 @@ def normalise_task_xml(xml: str, task: str = "new task") -> str:
         root = ET.fromstring(xml)
     except ET.ParseError as exc:
         line, col = exc.position
-        raise ValidationError(f"{task}: field 'task_sequence': XML does not parse at line {line}, column {col}: {exc}") from None
+        raise ValidationError(
+            f"{task}: field 'task_sequence': XML does not parse at line {line}, column {col}: {exc}"
+        ) from None
     if root.find("BehaviorTree") is None and root.tag != "BehaviorTree":
         raise ValidationError(f"{task}: field 'task_sequence': no <BehaviorTree> element under <{root.tag}>")
     parts: list[str] = []

@@ -135,7 +135,9 @@ def check_import_document(collection: str, doc: Any) -> None:
         if isinstance(tid, bool) or not isinstance(tid, int) or tid <= 0:
             raise ValidationError(f"field 'task_id' must be a positive integer, got {tid!r}")
         if not isinstance(doc.get("task_sequence"), str):
-            raise ValidationError(f"field 'task_sequence' must be a string, got {type(doc.get('task_sequence')).__name__}")
+            raise ValidationError(
+                f"field 'task_sequence' must be a string, got {type(doc.get('task_sequence')).__name__}"
+            )
         normalise_task_xml(doc["task_sequence"], f"task_id {tid}")
     check_document_size(doc, "document")
 
@@ -204,7 +206,9 @@ def check_document(collection: str, doc: Mapping[str, Any]) -> list[str]:
             kind = doc.get("type")
             if kind is not None and not isinstance(kind, str):
                 return [f"parameter ({label}): field 'type' must be a string, got {kind!r}"]
-            if kind in ("static", "dynamic") and (not isinstance(doc.get("record_name"), str) or not doc["record_name"]):
+            if kind in ("static", "dynamic") and (
+                not isinstance(doc.get("record_name"), str) or not doc["record_name"]
+            ):
                 return [f"parameter ({label}): a {kind} record needs a non-empty 'record_name', got "
                         f"{doc.get('record_name')!r}"]
             if "record_name" in doc or kind in ("static", "dynamic"):
@@ -383,7 +387,9 @@ def build_task_doc(xml: str, task_id: int | None, description: str, model_name: 
             if not isinstance(key, str) or not key or key.startswith("$") or "." in key:
                 raise ValidationError(f"{label}: field 'blackboard': key {key!r} must be a name (no '$', '.')")
             if not isinstance(value, bool | int | float | str):
-                raise ValidationError(f"{label}: field 'blackboard': key {key!r} = {value!r} must be a bool, number or text")
+                raise ValidationError(
+                    f"{label}: field 'blackboard': key {key!r} = {value!r} must be a bool, number or text"
+                )
         doc["blackboard"] = dict(blackboard)
     if model_name is None:  # the machines its leaves name (model_name="{machine}": the task's parameter)
         doc["model_name"] = detect_model_names(sequence, blackboard)
@@ -396,7 +402,9 @@ def choose_task_id(existing: Mapping[int, str], sequence: str) -> int:
     """Smallest free positive id (the original generator's rule); refuse a tree already stored."""
     for tid, stored in existing.items():
         if sequence in stored:
-            raise StoreError(f"task already stored as task_id {tid} (same behavior tree); remove it or pass an explicit id")
+            raise StoreError(
+                f"task already stored as task_id {tid} (same behavior tree); remove it or pass an explicit id"
+            )
     tid = 1
     while tid in existing:
         tid += 1
