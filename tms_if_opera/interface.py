@@ -12,8 +12,19 @@ namespace ``/<model_name>``; what our subtasks need beyond them goes beside, und
 
 from __future__ import annotations
 
-__all__ = ["PLANNER_NODE", "CHANGE_POSE", "EXCAVATE_SIMPLE", "RELEASE_SIMPLE", "CHANGE_POSE_OPTIONS", "PLANNING_OUTCOME",
-           "OUTCOME_GRACE_S", "OPTIONS_TTL_S", "CHANGE_POSE_PLAN", "EXCAVATE_SIMPLE_PLAN", "CHANGE_POSE_PLAN_OPTIONS"]
+__all__ = [
+    "PLANNER_NODE",
+    "CHANGE_POSE",
+    "EXCAVATE_SIMPLE",
+    "RELEASE_SIMPLE",
+    "CHANGE_POSE_OPTIONS",
+    "PLANNING_OUTCOME",
+    "OUTCOME_GRACE_S",
+    "OPTIONS_TTL_S",
+    "CHANGE_POSE_PLAN",
+    "EXCAVATE_SIMPLE_PLAN",
+    "CHANGE_POSE_PLAN_OPTIONS",
+]
 
 #: the planning node's name (zx200_planner), in the machine's namespace beside the arm controller
 PLANNER_NODE = "zx200_planner"

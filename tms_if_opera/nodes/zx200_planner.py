@@ -240,9 +240,14 @@ class Zx200PlannerNode(Node):
     # -------------------------------------------------------------- common execution
     def _end(self, handle, action_type, code: int, message: str, name: str | None = None) -> object:
         """Publish the goal's outcome (code and text), then end it: SUCCEEDED, CANCELED or ABORTED by ``code``."""
-        self._outcome_pub.publish(Zx200PlanningOutcome(
-            action=f"{self.get_namespace().rstrip('/')}/{name or self._action_names[action_type]}", goal_id=handle.goal_id,
-            error_code=int(code), message=message))
+        self._outcome_pub.publish(
+            Zx200PlanningOutcome(
+                action=f"{self.get_namespace().rstrip('/')}/{name or self._action_names[action_type]}",
+                goal_id=handle.goal_id,
+                error_code=int(code),
+                message=message,
+            )
+        )
         result = action_type.Result()
         result.error_code.val = int(code)
         if code == codes.SUCCESS:
@@ -282,8 +287,9 @@ class Zx200PlannerNode(Node):
             "later (wall)"))
         if code != codes.SUCCESS:
             if self._goals.stopping.is_set() and not handle.is_cancel_requested:  # ended by our stop
-                return self._end(handle, action_type, codes.FAILURE, f"{self.get_name()} stopping (SIGINT/SIGTERM): {message}",
-                                 name)
+                return self._end(
+                    handle, action_type, codes.FAILURE, f"{self.get_name()} stopping (SIGINT/SIGTERM): {message}", name
+                )
             return self._end(handle, action_type, code, message, name)
         self._pass_through_end = self.planner.pass_through_end(targets)
         return self._end(handle, action_type, codes.SUCCESS, report() if report is not None else "done", name)
@@ -380,8 +386,12 @@ class Zx200PlannerNode(Node):
         if cancel_sent and outcome.status == GoalStatus.STATUS_CANCELED:  # the controller's CANCELED means at rest
             return codes.CANCELED, f"canceled, arm at rest (controller: {res.message or 'no message'})"
         # a controller goal that did not succeed never passes on SUCCESS or the empty result's 0
-        code, message = codes.reported(outcome.status == GoalStatus.STATUS_SUCCEEDED, res.error_code.val, res.message,
-                                       f"{_STATUS_NAMES.get(outcome.status, f'status {outcome.status}')} at the arm controller")
+        code, message = codes.reported(
+            outcome.status == GoalStatus.STATUS_SUCCEEDED,
+            res.error_code.val,
+            res.message,
+            f"{_STATUS_NAMES.get(outcome.status, f'status {outcome.status}')} at the arm controller",
+        )
         if cancel_sent:
             return code, f"cancel sent, but the controller ended the goal with status {outcome.status}: {message}"
         return code, message
@@ -464,7 +474,9 @@ class Zx200PlannerNode(Node):
                 positions_with_angle=[([p.position.x, p.position.y, p.position.z], p.theta_w)
                                       for p in g.position_with_angle_sequence],
                 current_q=q_plan, pass_through=pass_through, theta_w_tolerance=theta_w_tolerance)
-            self.get_logger().info(f"{CHANGE_POSE_PLAN}: {len(scene.objects)} collision object(s); {self._plan_report()}")
+            self.get_logger().info(
+                f"{CHANGE_POSE_PLAN}: {len(scene.objects)} collision object(s); {self._plan_report()}"
+            )
             return targets
 
         return await self._run(handle, TmsRpZx200ChangePose, plan, name=CHANGE_POSE_PLAN, report=self._plan_report)
