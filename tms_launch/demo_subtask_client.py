@@ -37,7 +37,9 @@ def main() -> int:
             print(f"no action server {opts.action!r}", flush=True)
             return 2
         goal = LeafNodeBase.Goal(model_name="demo", record_name=opts.record)
-        fut = client.send_goal_async(goal, feedback_callback=lambda fb: print(f"feedback {fb.feedback.status}", flush=True))
+        fut = client.send_goal_async(
+            goal, feedback_callback=lambda fb: print(f"feedback {fb.feedback.status}", flush=True)
+        )
         rclpy.spin_until_future_complete(node, fut, timeout_sec=opts.timeout)
         handle = fut.result()
         if handle is None or not handle.accepted:
@@ -58,7 +60,11 @@ def main() -> int:
         if res is None:
             print("no result", flush=True)
             return 4
-        names = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_ABORTED: "ABORTED"}
+        names = {
+            GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED",
+            GoalStatus.STATUS_CANCELED: "CANCELED",
+            GoalStatus.STATUS_ABORTED: "ABORTED",
+        }
         print(f"status {names.get(res.status, res.status)} result={res.result.result}", flush=True)
         expected = GoalStatus.STATUS_CANCELED if opts.cancel_after is not None else GoalStatus.STATUS_SUCCEEDED
         return 0 if res.status == expected else 5

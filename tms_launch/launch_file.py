@@ -245,7 +245,9 @@ def _container(launch: LaunchFile, name: str, nodes: tuple[NodeSpec, ...]) -> Pr
     )
 
 
-def processes(launch: LaunchFile, layout: str = "composed", containers: list[str] | None = None) -> tuple[ProcessSpec, ...]:
+def processes(
+    launch: LaunchFile, layout: str = "composed", containers: list[str] | None = None
+) -> tuple[ProcessSpec, ...]:
     """The processes that run ``launch`` in ``layout``, in start order.
 
     ``layout``: ``composed`` (each container one process, other nodes one each) or ``per-node`` (every node
@@ -303,7 +305,9 @@ def resolve_executable(package: str, executable: str) -> Path:
     try:
         prefix = Path(get_package_prefix(package))
     except PackageNotFoundError:
-        raise LookupError(f"package {package!r} is not in the ament index ({os.environ['AMENT_PREFIX_PATH']})") from None
+        raise LookupError(
+            f"package {package!r} is not in the ament index ({os.environ['AMENT_PREFIX_PATH']})"
+        ) from None
     path = prefix / "lib" / package / executable
     if not (path.is_file() and os.access(path, os.X_OK)):
         known = sorted(p.name for p in (prefix / "lib" / package).glob("*") if os.access(p, os.X_OK))
@@ -315,7 +319,9 @@ def _expect(where: Where, path: tuple[Any, ...], value: Any, kind: type | tuple[
     kinds = kind if isinstance(kind, tuple) else (kind,)
     # bool is an int in Python; a YAML `true` must not pass where a number is expected.
     if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-        raise where.error(path, f"{what} must be {getattr(kind, '__name__', kind)}, got {type(value).__name__} {value!r}")
+        raise where.error(
+            path, f"{what} must be {getattr(kind, '__name__', kind)}, got {type(value).__name__} {value!r}"
+        )
     return value
 
 
@@ -341,7 +347,10 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
             raise where.error(at, f"node #{index + 1} must be a mapping")
         for key in raw:
             if key not in NODE_KEYS:
-                raise where.error(at + (key,), f"node #{index + 1}: unknown key {key!r} (expected one of {', '.join(sorted(NODE_KEYS))})")
+                raise where.error(
+                    at + (key,),
+                    f"node #{index + 1}: unknown key {key!r} (expected one of {', '.join(sorted(NODE_KEYS))})",
+                )
         for key in ("name", "package", "executable"):
             if key not in raw:
                 raise where.error(at, f"node #{index + 1}: missing required key {key!r}")
@@ -358,8 +367,12 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
             exe_path = resolve_executable(raw["package"], raw["executable"])
         except LookupError as exc:
             raise where.error(at + ("executable",), f"node {name!r}: {exc}") from None
-        params = _expect(where, at + ("parameters",), raw.get("parameters", {}) or {}, dict, f"node {name!r}: 'parameters'")
-        files_raw = _expect(where, at + ("param_files",), raw.get("param_files", []) or [], list, f"node {name!r}: 'param_files'")
+        params = _expect(
+            where, at + ("parameters",), raw.get("parameters", {}) or {}, dict, f"node {name!r}: 'parameters'"
+        )
+        files_raw = _expect(
+            where, at + ("param_files",), raw.get("param_files", []) or [], list, f"node {name!r}: 'param_files'"
+        )
         param_files = []
         for i, f in enumerate(files_raw):
             p = Path(f) if Path(f).is_absolute() else root / f
@@ -369,10 +382,19 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
         args = _expect(where, at + ("arguments",), raw.get("arguments", []) or [], list, f"node {name!r}: 'arguments'")
         node_env = _expect(where, at + ("env",), raw.get("env", {}) or {}, dict, f"node {name!r}: 'env'")
         required = _expect(where, at + ("required",), raw.get("required", True), bool, f"node {name!r}: 'required'")
-        timeout = _expect(where, at + ("ready_timeout",), raw.get("ready_timeout", 90.0), (int, float), f"node {name!r}: 'ready_timeout'")
+        timeout = _expect(
+            where,
+            at + ("ready_timeout",),
+            raw.get("ready_timeout", 90.0),
+            (int, float),
+            f"node {name!r}: 'ready_timeout'",
+        )
         on_exit = _expect(where, at + ("on_exit",), raw.get("on_exit", "error"), str, f"node {name!r}: 'on_exit'")
         if on_exit not in ON_EXIT:
-            raise where.error(at + ("on_exit",), f"node {name!r}: on_exit must be one of {', '.join(sorted(ON_EXIT))}, got {on_exit!r}")
+            raise where.error(
+                at + ("on_exit",),
+                f"node {name!r}: on_exit must be one of {', '.join(sorted(ON_EXIT))}, got {on_exit!r}",
+            )
         nice = raw.get("nice")
         if nice is not None:
             _expect(where, at + ("nice",), nice, int, f"node {name!r}: 'nice'")
@@ -381,12 +403,16 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
         grace = _expect(where, at + ("stop_grace_s",), raw.get("stop_grace_s", DEFAULT_STOP_GRACE_S), (int, float),
                         f"node {name!r}: 'stop_grace_s'")
         if isinstance(grace, bool) or not 0 < grace <= 600:
-            raise where.error(at + ("stop_grace_s",), f"node {name!r}: stop_grace_s must be within (0, 600] s, got {grace}")
+            raise where.error(
+                at + ("stop_grace_s",), f"node {name!r}: stop_grace_s must be within (0, 600] s, got {grace}"
+            )
         container = raw.get("container")
         if container is not None:
             _expect(where, at + ("container",), container, str, f"node {name!r}: 'container'")
             if not container.isidentifier():
-                raise where.error(at + ("container",), f"node {name!r}: container name {container!r} must be an identifier")
+                raise where.error(
+                    at + ("container",), f"node {name!r}: container name {container!r} must be an identifier"
+                )
         nodes.append(
             NodeSpec(
                 name=name,

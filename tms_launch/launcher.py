@@ -343,7 +343,9 @@ class Launcher:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="tms-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="tms-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("launch_file", help="YAML launch file, e.g. config/launch/demo_three.yaml")
     parser.add_argument("--list", action="store_true", help="print the nodes of the file and exit")
     parser.add_argument("--layout", choices=LAYOUTS, default=None,
