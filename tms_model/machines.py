@@ -340,7 +340,9 @@ def _tf_prefix(top: Reader) -> str:
         return ""
     prefix = top.string("tf_prefix")
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", prefix):
-        raise top.key_error("tf_prefix", f"expected a frame name prefix such as <kind>_tf (no leading or trailing '/'), got {prefix!r}")
+        raise top.key_error(
+            "tf_prefix", f"expected a frame name prefix such as <kind>_tf (no leading or trailing '/'), got {prefix!r}"
+        )
     return prefix
 
 
@@ -350,7 +352,9 @@ def _dbc(top: Reader) -> str:
     c.only({"dbc"})
     name = c.string("dbc")
     if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*\.dbc", name):
-        raise c.key_error("dbc", f"expected a DBC file name in com3_can/dbc such as crawler_carrier_com3.dbc, got {name!r}")
+        raise c.key_error(
+            "dbc", f"expected a DBC file name in com3_can/dbc such as crawler_carrier_com3.dbc, got {name!r}"
+        )
     return name
 
 
@@ -362,7 +366,9 @@ def _masses(top: Reader) -> Mapping[str, float]:
 def _excavator(top: Reader, kind: str, source: str) -> Machine:
     front = top.names("front_joints")
     if len(front) != 4:
-        raise top.key_error("front_joints", f"an excavator has 4 front joints (swing, boom, arm, bucket), got {list(front)}")
+        raise top.key_error(
+            "front_joints", f"an excavator has 4 front joints (swing, boom, arm, bucket), got {list(front)}"
+        )
     jr = top.sub("joints")
     jr.only(set(front))
     joints = tuple(_joint(jr, name) for name in front)
@@ -449,7 +455,17 @@ def _crawler_dump(top: Reader, kind: str, source: str) -> Machine:
     hyd = top.sub("hydraulics")
     hyd.only({"source", "tracks", "vessel", "swing"})
     hv = hyd.sub("vessel")
-    hv.only({"dead_time_s", "time_constant_s", "angle_gain", "load_max_angle", "dump_start_angle", "dump_time_s", "dump_distance"})
+    hv.only(
+        {
+            "dead_time_s",
+            "time_constant_s",
+            "angle_gain",
+            "load_max_angle",
+            "dump_start_angle",
+            "dump_time_s",
+            "dump_distance",
+        }
+    )
     v = top.sub("vessel")
     v.only({"hinge_xyz", "max_angle", "velocity", "inner_length", "inner_width", "capacity",
             "floor_above_hinge", "rim_above_hinge"})

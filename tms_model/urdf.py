@@ -164,7 +164,9 @@ class MachineTree:
             if j.kind != FIXED:
                 lines.append(f'    <axis xyz="{_v(j.axis)}"/>')
             if j.kind == REVOLUTE:
-                lines.append(f'    <limit lower="{j.lower:.9g}" upper="{j.upper:.9g}" effort="0" velocity="{j.velocity:.9g}"/>')
+                lines.append(
+                    f'    <limit lower="{j.lower:.9g}" upper="{j.upper:.9g}" effort="0" velocity="{j.velocity:.9g}"/>'
+                )
             lines.append("  </joint>")
         lines.append("</robot>")
         return "\n".join(lines) + "\n"
@@ -237,7 +239,9 @@ def _dozer(m: Machine) -> MachineTree:
         TreeJoint("blade_joint", FIXED, lift.child, "blade_link", m.blade.edge_xyz),
     )
     visuals = (
-        Visual("body_link", "box", (fp.length * 0.7, fp.width * 0.8, TRACK_BOX_HEIGHT), (0.0, 0.0, TRACK_BOX_HEIGHT / 2)),
+        Visual(
+            "body_link", "box", (fp.length * 0.7, fp.width * 0.8, TRACK_BOX_HEIGHT), (0.0, 0.0, TRACK_BOX_HEIGHT / 2)
+        ),
         _cylinder(lift.child, m.blade.edge_xyz, 0.12),
         Visual("blade_link", "box", (0.2, m.blade.width, 0.9), (0.0, 0.0, 0.45)),
     )

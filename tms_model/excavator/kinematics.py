@@ -93,8 +93,12 @@ class ExcavatorKinematics:
             vel.append(joint.velocity)
             acc.append(joint.acceleration)
         bucket_joint = model.getJointId(JOINTS[3])
-        self.tip_frame = model.addFrame(pin.Frame("bucket_tip", bucket_joint, pin.SE3(np.eye(3), tip), pin.FrameType.OP_FRAME))
-        self.pin_frame = model.addFrame(pin.Frame("bucket_pin", bucket_joint, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+        self.tip_frame = model.addFrame(
+            pin.Frame("bucket_tip", bucket_joint, pin.SE3(np.eye(3), tip), pin.FrameType.OP_FRAME)
+        )
+        self.pin_frame = model.addFrame(
+            pin.Frame("bucket_pin", bucket_joint, pin.SE3.Identity(), pin.FrameType.OP_FRAME)
+        )
         self.model = model
         self.data = model.createData()
         self.limits = JointLimits(np.array(lower), np.array(upper), np.array(vel), np.array(acc))
