@@ -365,7 +365,9 @@ class _Pid:
         dt = self.dt if dt is None else dt
         if integrate:
             inside = np.abs(error) <= self.zone
-            self.integral = np.where(inside, np.clip(self.integral + error * dt, -self.limit, self.limit), self.integral)
+            self.integral = np.where(
+                inside, np.clip(self.integral + error * dt, -self.limit, self.limit), self.integral
+            )
         deriv = np.zeros_like(error) if self.prev is None or dt <= 0 else (error - self.prev) / dt
         self.prev = error.copy()
         return self.kp * error + self.ki * self.integral + self.kd * deriv
@@ -395,7 +397,12 @@ class ArmController:
         osqp_cfg = dataclasses.asdict(cfg.osqp)
         self.hqp_cartesian = HierarchicalQP(
             N,
-            [*self.SAFETY_LEVELS, LevelSpec("theta_w", "eq", 1), LevelSpec("position", "eq", 3), LevelSpec("least_motion", "eq", N)],
+            [
+                *self.SAFETY_LEVELS,
+                LevelSpec("theta_w", "eq", 1),
+                LevelSpec("position", "eq", 3),
+                LevelSpec("least_motion", "eq", N),
+            ],
             **osqp_cfg,
         )
         self.hqp_joint = HierarchicalQP(
@@ -666,7 +673,9 @@ class ArmController:
                 if self._in_flight:
                     in_flight = max(in_flight, float(np.max(np.abs(np.asarray(self._in_flight)))))
                 if np.max(np.abs(u)) < 1e-4 and np.max(np.abs(dq)) < self.cfg.rest_speed and in_flight < 1e-4:
-                    self.status = ControllerStatus(mode="idle", result=self._stop_code, message=st.message or "canceled")
+                    self.status = ControllerStatus(
+                        mode="idle", result=self._stop_code, message=st.message or "canceled"
+                    )
                 elif self._stop_time >= self.cfg.stop_timeout_s:
                     # Never hang in "stopping": the command is zero (or holding a limit) but the measured
                     # joints still move (plant not following, noisy joint_states). End with what we know.

@@ -93,9 +93,12 @@ class VesselControllerNode(Node):
             CARRIER_DUMP_JOINT, VESSEL_JOINT)}
         swing = vessel_swing_joint(desc)
         if swing is not None:
-            self.axes["swing"] = _Axis("set_swing_angle",
-                                       VesselController(VesselParams.for_swing(swing, tuning, f"{desc.source} joints.{swing.name}")),
-                                       CARRIER_ROTATE_JOINT, swing.name)
+            self.axes["swing"] = _Axis(
+                "set_swing_angle",
+                VesselController(VesselParams.for_swing(swing, tuning, f"{desc.source} joints.{swing.name}")),
+                CARRIER_ROTATE_JOINT,
+                swing.name,
+            )
         self.pub = self.create_publisher(JointCmd, "rot_dump_cmd", 10)
         self.create_subscription(JointState, "joint_states", self._on_joints, 20)
         self._servers = [self._action(SetDumpAngle, "set_dump_angle", "vessel")]
