@@ -125,7 +125,9 @@ class TrackedLocalization(Node):
         if not self.ekf.initialised:
             return
         # stamped with the odometry's measurement time, so consumers can align it with other data
-        stamp = msg.header.stamp if (msg.header.stamp.sec or msg.header.stamp.nanosec) else self.get_clock().now().to_msg()
+        stamp = (
+            msg.header.stamp if (msg.header.stamp.sec or msg.header.stamp.nanosec) else self.get_clock().now().to_msg()
+        )
         x, y, yaw = self.ekf.pose
         cov = self.ekf.cov
         out = Odometry()

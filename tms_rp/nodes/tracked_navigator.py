@@ -93,7 +93,9 @@ class TrackedNavigator(Node):
         self._pose_waiters: list = []
         self.pub_cmd = self.create_publisher(Twist, "cmd_vel", 10)
         self.create_subscription(Odometry, "odometry/global", self._on_pose, 20)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
         self.create_subscription(OccupancyGrid, "map", self._on_map, latched)
         self._servers = [
             ActionServer(self, action, name, execute_callback=self._executor_for(name),
@@ -102,7 +104,9 @@ class TrackedNavigator(Node):
             for name, action in kinds.items()
         ]
         self.create_timer(self.dt, self._tick)
-        self._log.info(f"navigator of {self.machine} ({self.cfg.machine.kind}, {self.cfg.file}) ready: map {self.cfg.map_yaml}, {self.cfg.controller.frequency:g} Hz")
+        self._log.info(
+            f"navigator of {self.machine} ({self.cfg.machine.kind}, {self.cfg.file}) ready: map {self.cfg.map_yaml}, {self.cfg.controller.frequency:g} Hz"
+        )
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -208,7 +212,9 @@ class TrackedNavigator(Node):
             # the waypoint follower stops at the first waypoint it cannot reach and names it, with the code the
             # navigation to it failed with
             i = min(self.core._index, len(act.extra["pose_msgs"]) - 1)
-            missed = [MissedWaypoint(index=act.extra["first"] + i, goal=act.extra["pose_msgs"][i], error_code=int(code))]
+            missed = [
+                MissedWaypoint(index=act.extra["first"] + i, goal=act.extra["pose_msgs"][i], error_code=int(code))
+            ]
             code = errors.WAYPOINTS_UNKNOWN
         if act.handle.is_active:
             getattr(act.handle, {"succeed": "succeed", "abort": "abort", "cancel": "canceled"}[how])()

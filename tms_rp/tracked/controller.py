@@ -169,7 +169,9 @@ class TrackedPurePursuit:
                     self._state = "track"
                 if self._state == "align" or abs(err) > p.rotate_to_heading_angle:
                     self._state = "align"
-                    w = math.copysign(min(p.rotate_speed, self.limits.max_yaw_rate, max(0.05, abs(err) * p.heading_gain)), err)
+                    w = math.copysign(
+                        min(p.rotate_speed, self.limits.max_yaw_rate, max(0.05, abs(err) * p.heading_gain)), err
+                    )
                     return self._limited(0.0, w, dt, "align", remaining, debug={"heading_error": err})
                 l2 = max(xr * xr + yr * yr, 1e-6)
                 kappa = 2.0 * yr / l2
@@ -179,7 +181,11 @@ class TrackedPurePursuit:
                     u *= (1.0 / abs(kappa)) / p.regulated_min_radius
                 if goal_dist < p.approach_distance:
                     u = max(u * goal_dist / p.approach_distance, p.min_approach_speed)
-                u = min(u, math.sqrt(2.0 * 0.5 * self.limits.max_accel * max(goal_dist - p.stop_distance, 0.0)) + p.min_approach_speed)
+                u = min(
+                    u,
+                    math.sqrt(2.0 * 0.5 * self.limits.max_accel * max(goal_dist - p.stop_distance, 0.0))
+                    + p.min_approach_speed,
+                )
                 w = u * kappa
                 if abs(w) > self.limits.max_yaw_rate:
                     w = math.copysign(self.limits.max_yaw_rate, w)
@@ -212,4 +218,6 @@ class TrackedPurePursuit:
         dv, dw = lim.max_accel * dt, lim.max_yaw_accel * dt
         self._v = max(self._v - dv, min(self._v + dv, v))
         self._w = max(self._w - dw, min(self._w + dw, w))
-        return Command(self._v, self._w, state, remaining, done and abs(self._v) < 1e-9 and abs(self._w) < 1e-9, debug or {})
+        return Command(
+            self._v, self._w, state, remaining, done and abs(self._v) < 1e-9 and abs(self._w) < 1e-9, debug or {}
+        )

@@ -205,7 +205,9 @@ class Costmap:
         cell = self.map.world_to_cell(x, y)
         return None if cell is None else int(self.cost[cell])
 
-    def footprint_points(self, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, *, padding: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    def footprint_points(
+        self, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, *, padding: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
         """World points sampling the (padded) rectangle's area at the map resolution for each pose."""
         half_l = 0.5 * self.footprint.length + padding
         half_w = 0.5 * self.footprint.width + padding

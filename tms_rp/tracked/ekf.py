@@ -64,7 +64,14 @@ class EkfParams:
     latency_window_s: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("gnss_sigma", "azimuth_sigma", "gate_chi2", "gate_chi2_yaw", "initial_yaw_sigma", "jump_threshold"):
+        for name in (
+            "gnss_sigma",
+            "azimuth_sigma",
+            "gate_chi2",
+            "gate_chi2_yaw",
+            "initial_yaw_sigma",
+            "jump_threshold",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"localization.{name} must be > 0, got {value!r}")

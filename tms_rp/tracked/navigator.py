@@ -53,7 +53,9 @@ class GoalChecker:
     def reset(self) -> None:
         self._xy_reached = False
 
-    def is_reached(self, pose: tuple[float, float, float], goal: tuple[float, float, float], *, check_yaw: bool = True) -> bool:
+    def is_reached(
+        self, pose: tuple[float, float, float], goal: tuple[float, float, float], *, check_yaw: bool = True
+    ) -> bool:
         if not self._xy_reached or not self.stateful:
             if math.hypot(goal[0] - pose[0], goal[1] - pose[1]) > self.xy_goal_tolerance:
                 return False
@@ -85,9 +87,18 @@ class ProgressChecker:
         return now - self._t <= self.movement_time_allowance
 
 
-def validate_pose(x: float, y: float, qz: float, qw: float, qx: float = 0.0, qy: float = 0.0, *, index: int = 0) -> tuple[float, float, float]:
+def validate_pose(
+    x: float, y: float, qz: float, qw: float, qx: float = 0.0, qy: float = 0.0, *, index: int = 0
+) -> tuple[float, float, float]:
     """A goal pose as (x, y, yaw); NaN/inf or a zero / non-unit quaternion raise :class:`InvalidGoalError`."""
-    values = {"position.x": x, "position.y": y, "orientation.x": qx, "orientation.y": qy, "orientation.z": qz, "orientation.w": qw}
+    values = {
+        "position.x": x,
+        "position.y": y,
+        "orientation.x": qx,
+        "orientation.y": qy,
+        "orientation.z": qz,
+        "orientation.w": qw,
+    }
     for name, v in values.items():
         if not math.isfinite(v):
             raise InvalidGoalError(f"pose {index}: {name} is not finite ({v})")
@@ -153,13 +164,19 @@ class NavigatorCore:
         if cm.map.world_to_cell(x, y) is None:
             ox, oy = cm.map.origin
             sx, sy = cm.map.size_m
-            raise GoalOutsideMapError(f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]")
+            raise GoalOutsideMapError(
+                f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]"
+            )
         if cm.obstacles[cm.map.world_to_cell(x, y)]:
             raise GoalOccupiedError(f"pose {index} ({x:.2f}, {y:.2f}) lies inside an obstacle")
         if bool(cm.footprint_hits(x, y, yaw)[0]):
-            raise GoalOccupiedError(f"pose {index} ({x:.2f}, {y:.2f}, yaw {yaw:.2f}): the machine footprint would overlap an obstacle")
+            raise GoalOccupiedError(
+                f"pose {index} ({x:.2f}, {y:.2f}, yaw {yaw:.2f}): the machine footprint would overlap an obstacle"
+            )
         if cm.blocked[cm.map.world_to_cell(x, y)]:
-            raise GoalOccupiedError(f"pose {index} ({x:.2f}, {y:.2f}) lies within the inflated footprint of an obstacle (cost {cm.cost_at(x, y)})")
+            raise GoalOccupiedError(
+                f"pose {index} ({x:.2f}, {y:.2f}) lies within the inflated footprint of an obstacle (cost {cm.cost_at(x, y)})"
+            )
 
     def start(self, poses: list[tuple[float, float, float]], *, yaw_at_each: bool) -> None:
         """Accept a goal: validates every pose first (nothing moves if one is bad)."""
@@ -252,7 +269,8 @@ class NavigatorCore:
             goal = self._poses[self._index]
             last = self._index == len(self._poses) - 1
             remaining = cmd.distance_remaining + sum(
-                math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(self._poses[self._index:], self._poses[self._index + 1:], strict=False)
+                math.hypot(b[0] - a[0], b[1] - a[1])
+                for a, b in zip(self._poses[self._index :], self._poses[self._index + 1 :], strict=False)
             )
             if cmd.done:
                 reached = self.goal_checker.is_reached(pose, goal, check_yaw=self._yaw_each or last)
@@ -261,7 +279,9 @@ class NavigatorCore:
                     self._retries += 1
                     if self._retries > self.max_retries:
                         err = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
-                        raise NavTimeoutError(f"pose {self._index} not reached within tolerance after {self.max_retries} retries (error {err:.3f} m)")
+                        raise NavTimeoutError(
+                            f"pose {self._index} not reached within tolerance after {self.max_retries} retries (error {err:.3f} m)"
+                        )
                     LOGGER.info("leg %d ended outside tolerance: retrying", self._index)
                     self._start_leg(pose)
                     return NavStep(cmd.v, cmd.w, "RUNNING", self._index, remaining)

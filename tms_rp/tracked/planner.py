@@ -82,7 +82,9 @@ def _graph(cost: np.ndarray, nodes: np.ndarray, cost_weight: float, step: float)
     return graph, index
 
 
-def _shortest(cost: np.ndarray, passable: np.ndarray, start: int, goal: int, cost_weight: float, step: float) -> np.ndarray | None:
+def _shortest(
+    cost: np.ndarray, passable: np.ndarray, start: int, goal: int, cost_weight: float, step: float
+) -> np.ndarray | None:
     """Flat cell indices of the cheapest path from ``start`` to ``goal`` over ``passable`` cells, or None."""
     nodes = np.flatnonzero(passable.ravel())
     graph, index = _graph(cost, nodes, cost_weight, step)
@@ -130,8 +132,14 @@ class GridPlanner:
         if blocked[g_cell]:
             g_cell = self._nearest_free(costmap, g_cell, self.params.goal_tolerance)
             if g_cell is None:
-                what = "an obstacle" if costmap.obstacles[omap.world_to_cell(*goal)] else "the inflated footprint of an obstacle"
-                raise GoalOccupiedError(f"goal ({goal[0]:.2f}, {goal[1]:.2f}) lies in {what} (cost {costmap.cost_at(*goal)})")
+                what = (
+                    "an obstacle"
+                    if costmap.obstacles[omap.world_to_cell(*goal)]
+                    else "the inflated footprint of an obstacle"
+                )
+                raise GoalOccupiedError(
+                    f"goal ({goal[0]:.2f}, {goal[1]:.2f}) lies in {what} (cost {costmap.cost_at(*goal)})"
+                )
         if blocked[s_cell]:
             s_cell = self._nearest_free(costmap, s_cell, 1.0)
             if s_cell is None:
@@ -191,7 +199,14 @@ class GridPlanner:
             cg = (g_cell[0] // k, g_cell[1] // k)
             passable = coarse < INSCRIBED
             passable[cs] = passable[cg] = True  # the blocks holding start and goal may touch inflation
-            coarse_cells = _shortest(coarse, passable, cs[0] * wc + cs[1], cg[0] * wc + cg[1], self.params.cost_weight, k * costmap.resolution)
+            coarse_cells = _shortest(
+                coarse,
+                passable,
+                cs[0] * wc + cs[1],
+                cg[0] * wc + cg[1],
+                self.params.cost_weight,
+                k * costmap.resolution,
+            )
             self.last_stats["coarse_nodes"] = int(passable.sum())
             if coarse_cells is None:
                 return None

@@ -98,7 +98,9 @@ class CollisionObject:
         x, y, z, w = (float(v) for v in quaternion_xyzw)
         rot = pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
         pos = np.asarray(position, dtype=float)
-        return CollisionObject(name, record, kind, dims, pos, rot, float(padding), shape, coal.Transform3s(rot, pos), bound)
+        return CollisionObject(
+            name, record, kind, dims, pos, rot, float(padding), shape, coal.Transform3s(rot, pos), bound
+        )
 
     def describe(self) -> str:
         return f"'{self.name}' (record '{self.record}')"
@@ -311,7 +313,9 @@ class ArmCollisionModel:
         """(rotation, translation) of every link frame in base_link at joint angles ``q``."""
         kin = self.kin
         pin.framesForwardKinematics(kin.model, kin.data, np.asarray(q, dtype=float))
-        frames = {link: (kin.data.oMi[jid].rotation, kin.data.oMi[jid].translation) for link, jid in self._joint_ids.items()}
+        frames = {
+            link: (kin.data.oMi[jid].rotation, kin.data.oMi[jid].translation) for link, jid in self._joint_ids.items()
+        }
         tip = kin.data.oMf[kin.tip_frame]
         frames["bucket_end_link"] = (tip.rotation, tip.translation)
         return frames

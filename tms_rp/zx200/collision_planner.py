@@ -98,8 +98,9 @@ class CollisionPlanner:
         out = [q_a]
         for s in np.linspace(0.0, 1.0, n + 1)[1:]:
             try:
-                q = self.kin.ik_position_with_angle(p_a + s * (target.position - p_a), th_a + s * (target.theta_w - th_a),
-                                                    check_limits=False)
+                q = self.kin.ik_position_with_angle(
+                    p_a + s * (target.position - p_a), th_a + s * (target.theta_w - th_a), check_limits=False
+                )
             except PlanningError:
                 continue  # the controller's own checks stop the arm there; nothing to check against objects
             q[0] = out[-1][0] + math.remainder(q[0] - out[-1][0], 2 * math.pi)

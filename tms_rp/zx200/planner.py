@@ -167,7 +167,10 @@ class Zx200Planner:
                     th = self._angle_within(pos, th, tolerance, f"{what} {k + 1}")
                 final = self._cartesian(pos, th, f"{what} {k + 1}", label=f"{what.split('_')[0]} {k + 1}")
                 q_goal = self.kin.ik_position_with_angle(final.position, final.theta_w)
-                swung = q_prev is not None and abs(math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)) > self.cfg.joint_space_swing
+                swung = (
+                    q_prev is not None
+                    and abs(math.remainder(q_goal[0] - q_prev[0], 2 * math.pi)) > self.cfg.joint_space_swing
+                )
                 if swung:
                     # A big swing: joint-space motion to the IK solution (as MoveIt plans a pose goal), the
                     # straight tip line only for the final approach. A straight line across a swing is
@@ -303,7 +306,9 @@ class Zx200Planner:
         # lift clear is a pass-through point: the carry (next goal) goes on from where the arm will be
         lift = self._cartesian(lifted, th_lift, "lift", label="curl and lift" if cfg.curl_during_lift else "lift",
                                speed_scale=dig, via=True)
-        curl = [] if cfg.curl_during_lift else [self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=dig)]
+        curl = (
+            [] if cfg.curl_during_lift else [self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=dig)]
+        )
         return [
             JointTarget(q_above, "approach"),
             self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig),
