@@ -72,7 +72,9 @@ def _plain(field: str, value: Any) -> Any:
         return value
     if isinstance(value, list | tuple):
         return [_plain(field, v) for v in value]
-    raise SensingError(f"message field {field!r}: a {type(value).__name__} is not a DB value (numbers, bools, strings, arrays)")
+    raise SensingError(
+        f"message field {field!r}: a {type(value).__name__} is not a DB value (numbers, bools, strings, arrays)"
+    )
 
 
 def message_values(fields: Mapping[str, Any]) -> dict[str, Any]:
@@ -100,7 +102,9 @@ class SensingWriter:
         """The dynamic record the values go to; SensingError naming it when missing or not dynamic."""
         where = f"record ({model_name or '*'}, {record_name})"
         try:
-            doc = self.store.get_parameter(model_name, record_name) if model_name else self.store.get_record(record_name)
+            doc = (
+                self.store.get_parameter(model_name, record_name) if model_name else self.store.get_record(record_name)
+            )
         except KeyError as exc:
             raise SensingError(f"{where} not in the DB: seed it first ({exc})") from None
         if doc.get("type") != DYNAMIC:

@@ -70,9 +70,13 @@ class ExcavationParams:
             if not getattr(self, name) > 0:
                 problems.append(f"{name} must be > 0, got {getattr(self, name)}")
         if self.max_penetration_depth < self.penetration_depth:
-            problems.append(f"max_penetration_depth {self.max_penetration_depth} < penetration_depth {self.penetration_depth}")
+            problems.append(
+                f"max_penetration_depth {self.max_penetration_depth} < penetration_depth {self.penetration_depth}"
+            )
         if not self.bucket_volume > 0 or self.depth_steps < 1:
-            problems.append(f"bucket_volume must be > 0 and depth_steps >= 1, got {self.bucket_volume}, {self.depth_steps}")
+            problems.append(
+                f"bucket_volume must be > 0 and depth_steps >= 1, got {self.bucket_volume}, {self.depth_steps}"
+            )
         for name in ("penetration_depth", "min_height", "min_volume", "distance_penalty", "target_hysteresis",
                      "depleted_hysteresis", "min_cut"):
             if getattr(self, name) < 0:

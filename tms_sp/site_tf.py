@@ -79,8 +79,10 @@ class SiteTf:
             for link in ("odom", *t.links):
                 frame = t.frame(link)
                 if frame in owner:
-                    raise ConfigError(f"{t.machine.source}: frame {frame!r} of {name} is also a frame of {owner[frame]}; "
-                                      f"give one of them a tf_prefix in its machine description")
+                    raise ConfigError(
+                        f"{t.machine.source}: frame {frame!r} of {name} is also a frame of {owner[frame]}; "
+                        f"give one of them a tf_prefix in its machine description"
+                    )
                 owner[frame] = name
         self._reference = {name: self._reference_offset(t) for name, t in self.trees.items()}
 

@@ -31,7 +31,9 @@ def render(cfg: SensingConfig, *, margin: float = 0.5, excavator_radius: float =
     xg, yg = np.meshgrid(xs, ys)
     m = cfg.mound
     ax, ay = cfg.swing_axis_map()
-    occupied = (np.hypot(xg - m.cx, yg - m.cy) <= m.base_radius + margin) | (np.hypot(xg - ax, yg - ay) <= excavator_radius)
+    occupied = (np.hypot(xg - m.cx, yg - m.cy) <= m.base_radius + margin) | (
+        np.hypot(xg - ax, yg - ay) <= excavator_radius
+    )
     img = np.where(occupied, 0, 254).astype(np.uint8)
     return img[::-1]  # PGM row 0 is the top (max y)
 

@@ -16,7 +16,9 @@ __all__ = ["truncated_cone", "scan", "vessel_heap", "dig_pit"]
 Surface = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-def truncated_cone(cx: float, cy: float, base_radius: float, top_radius: float, height: float, ground_z: float = 0.0) -> Surface:
+def truncated_cone(
+    cx: float, cy: float, base_radius: float, top_radius: float, height: float, ground_z: float = 0.0
+) -> Surface:
     """Height function of a truncated-cone mound on flat ground."""
 
     def z(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -38,7 +40,9 @@ def dig_pit(surface: Surface, px: float, py: float, radius: float, depth: float,
     return z
 
 
-def vessel_heap(volume: float, length: float, width: float, cx: float = 0.0, cy: float = 0.0, spread: float = 0.8) -> Surface:
+def vessel_heap(
+    volume: float, length: float, width: float, cx: float = 0.0, cy: float = 0.0, spread: float = 0.8
+) -> Surface:
     """A Gaussian heap of ``volume`` m^3 centred at ``(cx, cy)`` in the vessel frame (0 = floor)."""
     sigma = spread
 

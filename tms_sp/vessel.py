@@ -50,7 +50,11 @@ class VesselGeometry:
 
     def grid_spec(self, resolution: float) -> GridSpec:
         return GridSpec(
-            -self.inner_length / 2.0, -self.inner_width / 2.0, self.inner_length / 2.0, self.inner_width / 2.0, resolution
+            -self.inner_length / 2.0,
+            -self.inner_width / 2.0,
+            self.inner_length / 2.0,
+            self.inner_width / 2.0,
+            resolution,
         )
 
 
@@ -77,9 +81,13 @@ class VesselParams:
         if not 0 < self.target_fill <= 1.5:
             raise ValueError(f"VesselParams: target_fill must be in (0, 1.5], got {self.target_fill}")
         if self.wall_margin < 0 or self.clearance < 0:
-            raise ValueError(f"VesselParams: wall_margin/clearance must be >= 0, got {self.wall_margin}/{self.clearance}")
+            raise ValueError(
+                f"VesselParams: wall_margin/clearance must be >= 0, got {self.wall_margin}/{self.clearance}"
+            )
         if not 0 <= self.loaded_hysteresis < self.target_fill:
-            raise ValueError(f"VesselParams: loaded_hysteresis must be in [0, target_fill), got {self.loaded_hysteresis}")
+            raise ValueError(
+                f"VesselParams: loaded_hysteresis must be in [0, target_fill), got {self.loaded_hysteresis}"
+            )
         if self.release_hysteresis < 0:
             raise ValueError(f"VesselParams: release_hysteresis must be >= 0, got {self.release_hysteresis}")
 

@@ -59,7 +59,9 @@ class SensingIngest(Node):
             self.get_logger().debug(f"{topic.topic}: {fields.get('record_name')} <- {sorted(written)}")
         else:
             self.get_logger().warning(
-                f"{topic.topic}: record {fields.get('record_name')!r} has none of the message's fields", throttle_duration_sec=5.0)
+                f"{topic.topic}: record {fields.get('record_name')!r} has none of the message's fields",
+                throttle_duration_sec=5.0,
+            )
 
     def destroy_node(self) -> None:
         try:

@@ -107,7 +107,9 @@ class SensingNode(Node):
             pose_topics[c] = single["carrier_pose_topic"] or pose_topics[c]
         excavator_pose_topic = single["excavator_pose_topic"] or f"/sim/truth/{cfg.excavator}/pose"
         for c in self.carriers:
-            self.create_subscription(PointCloud2, self._vessel_topics[c], lambda m, c=c: self._vessel.__setitem__(c, m), 2)
+            self.create_subscription(
+                PointCloud2, self._vessel_topics[c], lambda m, c=c: self._vessel.__setitem__(c, m), 2
+            )
             self.create_subscription(PoseStamped, pose_topics[c], lambda m, c=c: self._on_carrier(c, m), 10)
         self.create_subscription(PoseStamped, excavator_pose_topic,
                                  lambda m: self.sensing.on_excavator_pose(pose2d(m)), 10)
