@@ -272,7 +272,9 @@ def convert_from_string(text: str, ctype: str) -> Any:
             return True
         if text in ("0", "false", "FALSE", "False"):
             return False
-        raise ValueError(f"expected a bool (true/false, 1/0), got {text!r} (convertFromString(): invalid bool conversion)")
+        raise ValueError(
+            f"expected a bool (true/false, 1/0), got {text!r} (convertFromString(): invalid bool conversion)"
+        )
     if ctype in _LIMITS:
         number = stoi_prefix(text)
         fn = {INT: "stoi", LONG: "stol", UINT: "stoul"}[ctype]

@@ -80,8 +80,10 @@ def _tokenise(text: str) -> list[_Tok]:
         if tok == "(":
             depth += 1
             if depth > MAX_EXPRESSION_PARENS:
-                raise ExpressionError(f"expression {text[:80]!r}...: parentheses nested deeper than "
-                                      f"{MAX_EXPRESSION_PARENS} at position {pos} (tms_ts.limits.MAX_EXPRESSION_PARENS)")
+                raise ExpressionError(
+                    f"expression {text[:80]!r}...: parentheses nested deeper than "
+                    f"{MAX_EXPRESSION_PARENS} at position {pos} (tms_ts.limits.MAX_EXPRESSION_PARENS)"
+                )
         elif tok == ")":
             depth -= 1
     tokens.append(_Tok("end", "", len(text)))

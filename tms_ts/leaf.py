@@ -57,7 +57,14 @@ from tms_ts.subtask_specs import SUBTASKS
 
 __all__ = ["SubtaskGoal", "RosPort", "LeafNode", "PendingStop", "poll_stops"]
 
-PENDING, ACCEPTED, REJECTED, SUCCEEDED, ABORTED, CANCELED = "pending", "accepted", "rejected", "succeeded", "aborted", "canceled"
+PENDING, ACCEPTED, REJECTED, SUCCEEDED, ABORTED, CANCELED = (
+    "pending",
+    "accepted",
+    "rejected",
+    "succeeded",
+    "aborted",
+    "canceled",
+)
 TERMINAL = frozenset({REJECTED, SUCCEEDED, ABORTED, CANCELED})
 
 
@@ -114,7 +121,9 @@ def poll_stops(ctx) -> bool:  # TreeContext (avoid import cycle in annotations)
             stop.outcome = f"{stop.leaf.action} confirmed stop ({stop.goal.state})"
         elif now >= stop.deadline:
             stop.resolved = stop.escalated = True
-            stop.outcome = f"{stop.leaf.action} did not confirm stop within {ctx.halt_timeout_s:g} s: emergency stop sent"
+            stop.outcome = (
+                f"{stop.leaf.action} did not confirm stop within {ctx.halt_timeout_s:g} s: emergency stop sent"
+            )
             if ctx.ros is not None:
                 ctx.ros.emergency_stop(stop.leaf.model_name, stop.outcome)
     return all(stop.resolved for stop in ctx.stops)
@@ -124,7 +133,9 @@ class LeafNode(StatefulNode):
     """Action client of ``/<model_name>/<subtask_name>``; see the module docstring."""
 
     PORTS = {
-        "model_name": Port("str", description="machine name = namespace of its subtask servers (literal, or a task parameter {key})"),
+        "model_name": Port(
+            "str", description="machine name = namespace of its subtask servers (literal, or a task parameter {key})"
+        ),
         "subtask_name": Port("str", description="subtask action name (literal, or a task parameter {key})"),
         "record_name": Port("str", description="DB record the subtask reads ({key} allowed)"),
     }
@@ -216,8 +227,10 @@ class LeafNode(StatefulNode):
         if state == PENDING:
             if self.ctx.clock() - self.sent_at > self.ctx.accept_timeout_s:
                 goal.cancel()
-                return self._fail(f"{self.action} did not accept the goal for record '{self.record}' "
-                                  f"within {self.ctx.accept_timeout_s:g} s (cancel sent by goal id, in case the server runs it)")
+                return self._fail(
+                    f"{self.action} did not accept the goal for record '{self.record}' "
+                    f"within {self.ctx.accept_timeout_s:g} s (cancel sent by goal id, in case the server runs it)"
+                )
             return RUNNING
         if state == ACCEPTED:
             ros = self._ros()

@@ -32,8 +32,20 @@ from typing import Any
 
 from tms_ts.errors import TreeLoadError
 
-__all__ = ["MAX_TREE_BYTES", "MAX_TREE_DEPTH", "MAX_TREE_NODES", "MAX_JSON_DEPTH", "TASK_ID_MIN", "TASK_ID_MAX",
-           "MAX_NAME_CHARS", "MAX_EXPRESSION_TOKENS", "MAX_EXPRESSION_PARENS", "check_tree_size", "task_id_problem", "json_depth_exceeds"]
+__all__ = [
+    "MAX_TREE_BYTES",
+    "MAX_TREE_DEPTH",
+    "MAX_TREE_NODES",
+    "MAX_JSON_DEPTH",
+    "TASK_ID_MIN",
+    "TASK_ID_MAX",
+    "MAX_NAME_CHARS",
+    "MAX_EXPRESSION_TOKENS",
+    "MAX_EXPRESSION_PARENS",
+    "check_tree_size",
+    "task_id_problem",
+    "json_depth_exceeds",
+]
 
 MAX_TREE_BYTES = 1_048_576
 MAX_TREE_DEPTH = 64

@@ -139,13 +139,18 @@ class _Builder:
             if child.tag == "BehaviorTree":
                 tree_id = child.attrib.get("ID")
                 if not tree_id:
-                    if "main_tree_to_execute" in doc.attrib or len([c for c in doc.children if c.tag == "BehaviorTree"]) > 1:
+                    if (
+                        "main_tree_to_execute" in doc.attrib
+                        or len([c for c in doc.children if c.tag == "BehaviorTree"]) > 1
+                    ):
                         raise self.error(child, "BehaviorTree", "has no ID")
                     tree_id = "__main__"
                 if tree_id in self.trees:
                     raise self.error(child, f"BehaviorTree '{tree_id}'", "defined twice")
                 if len(child.children) != 1:
-                    raise self.error(child, f"BehaviorTree '{tree_id}'", f"must have exactly 1 root node, has {len(child.children)}")
+                    raise self.error(
+                        child, f"BehaviorTree '{tree_id}'", f"must have exactly 1 root node, has {len(child.children)}"
+                    )
                 self.trees[tree_id] = child
             elif child.tag == "TreeNodesModel":
                 continue
@@ -162,12 +167,20 @@ class _Builder:
         self.nodes += 1
         if depth > MAX_TREE_DEPTH:
             via = f" (SubTrees {' -> '.join(stack)})" if len(stack) > 1 else ""
-            raise self.error(el, el.attrib.get("ID", el.tag), f"the built tree is {depth} levels deep here{via}, over the "
-                             f"limit of {MAX_TREE_DEPTH} (tms_ts.limits.MAX_TREE_DEPTH)")
+            raise self.error(
+                el,
+                el.attrib.get("ID", el.tag),
+                f"the built tree is {depth} levels deep here{via}, over the "
+                f"limit of {MAX_TREE_DEPTH} (tms_ts.limits.MAX_TREE_DEPTH)",
+            )
         if self.nodes > MAX_TREE_NODES:
             via = f" (SubTrees {' -> '.join(stack)})" if len(stack) > 1 else ""
-            raise self.error(el, el.attrib.get("ID", el.tag), f"the built tree has {self.nodes:,} nodes here{via}, over "
-                             f"the limit of {MAX_TREE_NODES:,} (tms_ts.limits.MAX_TREE_NODES)")
+            raise self.error(
+                el,
+                el.attrib.get("ID", el.tag),
+                f"the built tree has {self.nodes:,} nodes here{via}, over "
+                f"the limit of {MAX_TREE_NODES:,} (tms_ts.limits.MAX_TREE_NODES)",
+            )
         tag = el.tag
         attrs = dict(el.attrib)
         if tag in _FAMILY_TAGS or tag in _SUBTREE_TAGS:
@@ -219,7 +232,11 @@ class _Builder:
             problem = check(attrs)
             if problem:
                 if resolved:
-                    problem += " (read from task parameter " + ", ".join(f"'{k}' by port '{p}'" for p, k in resolved.items()) + ")"
+                    problem += (
+                        " (read from task parameter "
+                        + ", ".join(f"'{k}' by port '{p}'" for p, k in resolved.items())
+                        + ")"
+                    )
                 raise self.error(el, _describe(el, node_id), problem)
         lo, hi = cls.CHILDREN
         n = len(el.children)
@@ -288,7 +305,9 @@ class _Builder:
                 raise self.error(doc, "root", f"main_tree_to_execute is missing and there are {len(self.trees)} trees")
             main_id = next(iter(self.trees))
         if main_id not in self.trees:
-            raise self.error(doc, "root", f"main_tree_to_execute='{main_id}' names no BehaviorTree (have: {', '.join(self.trees)})")
+            raise self.error(
+                doc, "root", f"main_tree_to_execute='{main_id}' names no BehaviorTree (have: {', '.join(self.trees)})"
+            )
         body = self.trees[main_id]
         return self.build(body.children[0], ctx, (main_id,))
 

@@ -149,7 +149,9 @@ def build_change_pose(doc: dict, record: str) -> ChangePosePlan:
     if tolerance < 0:
         raise SubtaskRecordError(record, "theta_w_tolerance", f"must be >= 0 rad, got {tolerance}")
     if tolerance > 0 and target.mode == JOINTS:
-        raise SubtaskRecordError(record, "theta_w_tolerance", "applies to pose / position_with_angle targets, not joints")
+        raise SubtaskRecordError(
+            record, "theta_w_tolerance", "applies to pose / position_with_angle targets, not joints"
+        )
     return replace(target, pass_through=_bool(doc, record, "pass_through"), theta_w_tolerance=tolerance)
 
 
@@ -322,7 +324,9 @@ def swing_ok(result) -> tuple[bool, str]:  # com3_msgs SetSwingAngle.Result
 
 def dump_up_ok(response) -> tuple[bool, str]:  # com3_msgs DumpUp.Response
     """com3_msgs/srv/DumpUp: the reply's ``result`` (the server logs the reason)."""
-    return bool(response.result), "" if response.result else "result false (the vessel_target_pos server's log says why)"
+    return bool(
+        response.result
+    ), "" if response.result else "result false (the vessel_target_pos server's log says why)"
 
 
 def arm_ok(result) -> tuple[bool, str]:  # tms_msg Zx200ArmMove.Result

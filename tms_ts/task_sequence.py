@@ -59,7 +59,9 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
         raise TaskSequenceError(f"/task_sequence: parameter task_id: {task_id_problem(task_id)} (or -1: none)")
     text = data.strip()
     if not text:
-        raise TaskSequenceError("/task_sequence: empty message (expected a BehaviorTree XML or the JSON {\"tasks\": [...]})")
+        raise TaskSequenceError(
+            '/task_sequence: empty message (expected a BehaviorTree XML or the JSON {"tasks": [...]})'
+        )
     if not text.startswith("{"):
         if not text.startswith("<"):
             raise TaskSequenceError(f"/task_sequence: neither XML nor JSON: {text[:60]!r}")
@@ -70,21 +72,32 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise TaskSequenceError(f"/task_sequence: malformed JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+        raise TaskSequenceError(
+            f"/task_sequence: malformed JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+        ) from None
     except RecursionError:  # pragma: no cover - json_depth_exceeds refuses these first
         raise TaskSequenceError("/task_sequence: the JSON nests too deep (tms_ts.limits.MAX_JSON_DEPTH)") from None
     tasks = doc.get("tasks") if isinstance(doc, dict) else None
     if not isinstance(tasks, list):
-        raise TaskSequenceError("/task_sequence: JSON without a 'tasks' array (expected {\"tasks\": [{\"task_id\", \"task_sequence\"}]})")
+        raise TaskSequenceError(
+            '/task_sequence: JSON without a \'tasks\' array (expected {"tasks": [{"task_id", "task_sequence"}]})'
+        )
     entries = []
     for i, entry in enumerate(tasks):
-        if not isinstance(entry, dict) or not _is_id(entry.get("task_id")) or not isinstance(entry.get("task_sequence"), str):
+        if (
+            not isinstance(entry, dict)
+            or not _is_id(entry.get("task_id"))
+            or not isinstance(entry.get("task_sequence"), str)
+        ):
             raise TaskSequenceError(
-                f"/task_sequence: tasks[{i}] must be {{\"task_id\": <int>, \"task_sequence\": <XML string>}}, got {entry!r:.120}")
+                f'/task_sequence: tasks[{i}] must be {{"task_id": <int>, "task_sequence": <XML string>}}, got {entry!r:.120}'
+            )
         problem = task_id_problem(entry["task_id"])
         if problem:
             raise TaskSequenceError(f"/task_sequence: tasks[{i}]: {problem}")
-        entries.append(SequenceTask(entry["task_id"], _checked_text(entry["task_sequence"], f"tasks[{i}].task_sequence")))
+        entries.append(
+            SequenceTask(entry["task_id"], _checked_text(entry["task_sequence"], f"tasks[{i}].task_sequence"))
+        )
     if task_id == NO_TASK_ID:
         if not entries:
             raise TaskSequenceError("/task_sequence: the JSON's 'tasks' array is empty")
@@ -92,7 +105,8 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
     chosen = [e for e in entries if e.task_id == task_id]
     if not chosen:
         raise TaskSequenceError(
-            f"/task_sequence: task_id {task_id} (parameter task_id) is not in the JSON's tasks {[e.task_id for e in entries]}")
+            f"/task_sequence: task_id {task_id} (parameter task_id) is not in the JSON's tasks {[e.task_id for e in entries]}"
+        )
     return chosen[:1]
 
 

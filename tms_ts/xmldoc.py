@@ -53,11 +53,15 @@ def parse_xml(text: str, source: str = "<xml>") -> Element:
         count += 1
         line, column = parser.CurrentLineNumber, parser.CurrentColumnNumber + 1
         if len(stack) >= MAX_TREE_DEPTH:
-            raise TreeLoadError(f"{source}: <{tag}> (line {line}, column {column}) is nested {len(stack) + 1} deep, over "
-                                f"the limit of {MAX_TREE_DEPTH} nested elements (tms_ts.limits.MAX_TREE_DEPTH)")
+            raise TreeLoadError(
+                f"{source}: <{tag}> (line {line}, column {column}) is nested {len(stack) + 1} deep, over "
+                f"the limit of {MAX_TREE_DEPTH} nested elements (tms_ts.limits.MAX_TREE_DEPTH)"
+            )
         if count > MAX_TREE_NODES:
-            raise TreeLoadError(f"{source}: <{tag}> (line {line}, column {column}) is element {count:,}, over the limit "
-                                f"of {MAX_TREE_NODES:,} elements a document (tms_ts.limits.MAX_TREE_NODES)")
+            raise TreeLoadError(
+                f"{source}: <{tag}> (line {line}, column {column}) is element {count:,}, over the limit "
+                f"of {MAX_TREE_NODES:,} elements a document (tms_ts.limits.MAX_TREE_NODES)"
+            )
         el = Element(tag, dict(attrs), line, column)
         if stack:
             stack[-1].children.append(el)

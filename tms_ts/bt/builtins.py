@@ -160,7 +160,9 @@ class Parallel(ControlNode):
         failure_t = self._threshold("failure_threshold")
         n = len(self.children)
         if n < success_t:
-            raise TreeRuntimeError(f"{self.describe()}: {n} children < success_threshold {success_t}; can never succeed")
+            raise TreeRuntimeError(
+                f"{self.describe()}: {n} children < success_threshold {success_t}; can never succeed"
+            )
         if n < failure_t:
             raise TreeRuntimeError(f"{self.describe()}: {n} children < failure_threshold {failure_t}; can never fail")
         successes = failures = 0

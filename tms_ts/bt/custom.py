@@ -282,7 +282,9 @@ class ConditionalExpressionBool(ConditionalExpression):
     def _resolve(self, name: str) -> Any:
         value = self.ctx.blackboard.get(name)
         if not isinstance(value, bool):
-            raise ExpressionError(f"'{name}' is not a bool blackboard entry (got {value if value is not MISSING else 'nothing'!r})")
+            raise ExpressionError(
+                f"'{name}' is not a bool blackboard entry (got {value if value is not MISSING else 'nothing'!r})"
+            )
         return value
 
     def _tick(self) -> Status:

@@ -49,7 +49,11 @@ HEARTBEAT_TOPIC = "/tms_ts/subtask_heartbeat"
 HEARTBEAT_PERIOD_S = 0.05
 #: a heartbeat older than this [s wall] counts as silent (the leaf then waits server_lost_s more)
 HEARTBEAT_STALE_S = 0.6
-_STATUS = {GoalStatus.STATUS_SUCCEEDED: SUCCEEDED, GoalStatus.STATUS_CANCELED: CANCELED, GoalStatus.STATUS_ABORTED: ABORTED}
+_STATUS = {
+    GoalStatus.STATUS_SUCCEEDED: SUCCEEDED,
+    GoalStatus.STATUS_CANCELED: CANCELED,
+    GoalStatus.STATUS_ABORTED: ABORTED,
+}
 
 
 def _one_line(exc: Exception) -> str:

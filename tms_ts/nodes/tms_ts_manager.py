@@ -285,8 +285,9 @@ class TaskManager(Node):
             if task_id in self._loading or self.loader.pending:
                 # a tree loading for it (a /task_sequence one's id is known only once it loaded): it never starts
                 self._load_cancels[task_id] = (self._seq, "canceled by /tms_ts/cancel")
-                self.get_logger().info(f"cancel: task {task_id} is not running; if a tree loading now is task {task_id}, "
-                                       f"it will not start")
+                self.get_logger().info(
+                    f"cancel: task {task_id} is not running; if a tree loading now is task {task_id}, it will not start"
+                )
                 self._publish_status()
                 return
             self.get_logger().warning(f"cancel: task {msg.data} is not running")

@@ -145,7 +145,9 @@ class SubtaskServers(Node):
         group = ReentrantCallbackGroup()
         self._ticker = Ticker(self, TICK_S, callback_group=group)
         self.emg = self.create_publisher(Bool, f"/{self.model_name}/emg_stop", 10)
-        self.outcomes = self.create_publisher(SubtaskOutcome, f"/{self.model_name}/{SUBTASK_OUTCOME_TOPIC}", OUTCOME_QOS)
+        self.outcomes = self.create_publisher(
+            SubtaskOutcome, f"/{self.model_name}/{SUBTASK_OUTCOME_TOPIC}", OUTCOME_QOS
+        )
         self.planners: dict[str, RaceFreeActionClient] = {}
         self.service_clients: dict[str, object] = {}  # rows whose downstream is a service
         # joint_states only while a row that resolves against them waits for one (as the original's align
@@ -164,7 +166,9 @@ class SubtaskServers(Node):
             planning = f"/{self.model_name}/{spec.planning_action}"
             if spec.downstream == "service":
                 if planning not in self.service_clients:
-                    self.service_clients[planning] = self.create_client(spec.action_type, planning, callback_group=group)
+                    self.service_clients[planning] = self.create_client(
+                        spec.action_type, planning, callback_group=group
+                    )
             elif planning not in self.planners:
                 self.planners[planning] = RaceFreeActionClient(self, spec.action_type, planning, callback_group=group)
             if spec.options is not None and planning not in self.options_clients:
@@ -284,7 +288,9 @@ class SubtaskServers(Node):
                 return R.PLANNING_UNAVAILABLE, (f"planning server offers no {planning}/options within "
                                                 f"{self.planning_wait_s:g} s (the goal needs {options})")
             await self._ticker.next()
-        reply = await self._ticker.wake_on(client.call_async(Zx200ChangePoseOptions.Request(goal_id=goal_id, **options)))
+        reply = await self._ticker.wake_on(
+            client.call_async(Zx200ChangePoseOptions.Request(goal_id=goal_id, **options))
+        )
         if reply is None or not reply.accepted:
             why = reply.message if reply is not None else "no reply"
             return R.PLANNING_REJECTED, f"{planning}/options rejected {options}: {why}"
@@ -395,7 +401,9 @@ class SubtaskServers(Node):
         deadline = time.monotonic() + self.planning_wait_s
         while not client.service_is_ready():
             if gh.is_cancel_requested:
-                return self._finish(gh, spec, R.CANCELED, f"canceled while waiting for service {service} (nothing was sent)")
+                return self._finish(
+                    gh, spec, R.CANCELED, f"canceled while waiting for service {service} (nothing was sent)"
+                )
             if self._goals.stopping.is_set():
                 return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping while waiting for "
                                     f"service {service} (nothing was sent)")
@@ -412,10 +420,14 @@ class SubtaskServers(Node):
                                     f"{self.service_timeout_s:g} s for record '{record}'")
             if (gh.is_cancel_requested or self._goals.stopping.is_set()) and not told:
                 told = True
-                gh.publish_feedback(LeafNodeBase.Feedback(status=f"a {service} call cannot be canceled: waiting for its reply"))
+                gh.publish_feedback(
+                    LeafNodeBase.Feedback(status=f"a {service} call cannot be canceled: waiting for its reply")
+                )
             await self._ticker.next()
         if gh.is_cancel_requested:
-            return self._finish(gh, spec, R.CANCELED, f"canceled; service {service} replied (its call cannot be stopped)")
+            return self._finish(
+                gh, spec, R.CANCELED, f"canceled; service {service} replied (its call cannot be stopped)"
+            )
         if self._goals.stopping.is_set():
             return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping; service {service} replied")
         ok, detail = spec.check(future.result())
