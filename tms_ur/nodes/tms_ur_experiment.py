@@ -127,7 +127,9 @@ class ExperimentNode(Node):
             self.create_subscription(Float64MultiArray, f"/sim/truth/{m}/soil",
                                      lambda msg, m=m: self._on_carrier_soil(m, msg), 10)
         for m in self._kin:
-            self.create_subscription(PointStamped, f"/sim/truth/{m}/bucket_tip", lambda msg, m=m: self._on_tip(m, msg), 10)
+            self.create_subscription(
+                PointStamped, f"/sim/truth/{m}/bucket_tip", lambda msg, m=m: self._on_tip(m, msg), 10
+            )
             self.create_subscription(JointState, f"/{m}/joint_states", lambda msg, m=m: self._on_joints(m, msg), 10)
         self.create_timer(flags_period, self._sample_flags)
         self.create_timer(0.2, self._tick)
@@ -290,7 +292,8 @@ class ExperimentNode(Node):
         wall = time.monotonic() - self._t0[0]
         rtf = (self.sim_t - self._t0[1]) / wall if wall > 0 else 0.0
         phases = "; ".join(
-            f"task {tid} {info['state']}: {', '.join(info['running']) or '-'}" for tid, info in sorted(self.tasks.items())
+            f"task {tid} {info['state']}: {', '.join(info['running']) or '-'}"
+            for tid, info in sorted(self.tasks.items())
         )
         per = ""
         if self.carriers:
