@@ -16,7 +16,8 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
   ``layout.dim[0].label``) for every crawler carrier by name: its load now and the totals that landed in its
   vessel and that it dumped, every ``truth_period_s``,
 * ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/<carrier>/vessel_points``
-  (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name: LiDAR-like soil scans for tms_sp (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
+  (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name: LiDAR-like soil scans for tms_sp
+  (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
   simulated time (0.5 s; the mound's every ``mound_scan_period_s``, default the same), noise ``scan_noise_m``
   (0.02 m),
 * ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
