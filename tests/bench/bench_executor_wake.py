@@ -1,4 +1,5 @@
-"""CPU per executor wake of a converter-shaped node on simulated time: rclpy's defaults, polled QoS events, relayed /clock.
+"""CPU per executor wake of a converter-shaped node on simulated time: rclpy's defaults, polled QoS events, relayed
+/clock.
 
 A /clock publisher process advances simulated time 10 ms every 5 ms of wall time (200 messages/s); the node
 under test (its own process, ``use_sim_time``) has the com3_bridge's shape (5 publishers, 7 subscriptions on

@@ -1,7 +1,8 @@
 """ZX200 load passes in-process: tms_sp targets -> planner -> arm controller -> MuJoCo plant, no ROS/CAN.
 
 What one load pass of the paper experiment (trees/paper_zx200_load.xml: excavate, carry_over_vessel,
-release, let_the_soil_fall, return_over_mound) yields when only the cores are in the loop: the excavation target from tms_sp's mound
+release, let_the_soil_fall, return_over_mound) yields when only the cores are in the loop: the excavation target from
+tms_sp's mound
 processor on the plant's height field, the release target from its vessel processor (IC120 standing at
 P1), the planner's segments, the HQP controller at the paper launch's 50 Hz on the plant's clock, and
 the plant's hydraulics (dead times, lags, pump) and soil model. It isolates geometry and motion from the
@@ -11,7 +12,8 @@ transport and CPU of the full launch, so it shows what digging and release setti
     LOAD_PASS_LATE=0.4 python -m tests.bench load_pass   # 40 % of the control ticks a period late
     LOAD_PASS_PASS_THROUGH=0 python -m tests.bench load_pass   # the carry waits for rest at its goal
     LOAD_PASS_RETURN=0 python -m tests.bench load_pass   # no return leaf: the excavate's approach swings back
-    LOAD_PASS_SOIL_FALL=0.5 python -m tests.bench load_pass   # the delay before the swing back [s] (default: the tree's)
+    LOAD_PASS_SOIL_FALL=0.5 python -m tests.bench load_pass   # the delay before the swing back [s] (default: the
+    tree's)
     LOAD_PASS_TRANSPORT=2 python -m tests.bench load_pass   # measurements 2 periods old, commands 2 periods late
     LOAD_PASS_GAP=0.2 python -m tests.bench load_pass   # the controller idles this long [s] before each next goal
 

@@ -9,7 +9,8 @@ replays the QP problems of its first 12,000 control steps 5 times and reports th
 time: the solve's own cost, which a machine loaded by other jobs cannot inflate (the live figures can).
 Run: ``.venv/bin/python -m tests.bench zx200`` (``ZX200_BENCH_N`` = targets per kind, default 100, for the
 core; ``ZX200_BENCH_PLANT_N`` for the plant, default = ZX200_BENCH_N; ``ZX200_BENCH_PLANT=0`` skips the plant,
-``ZX200_BENCH_CORE=0`` the core; ``ZX200_BENCH_SPEED`` = the plant's real-time factor, default 1.0). A target that fails (rejected, timed out, no result) is counted and reported;
+``ZX200_BENCH_CORE=0`` the core; ``ZX200_BENCH_SPEED`` = the plant's real-time factor, default 1.0). A target that fails
+(rejected, timed out, no result) is counted and reported;
 it never aborts the campaign.
 In the plant: limit violations = joint_states samples outside the position limits (> 1 mrad) or above the
 velocity limits (> 2 %); the 2 m move reports the truth tip's RMS distance from the straight reference line;

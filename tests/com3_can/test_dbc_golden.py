@@ -1,4 +1,5 @@
-"""Golden test: our excavator DBC against every row of tests/com3_can/data/com3_frames.csv (the published COM3 layout), plus the known vector.
+"""Golden test: our excavator DBC against every row of tests/com3_can/data/com3_frames.csv (the published COM3 layout),
+plus the known vector.
 
 The csv was generated from the published COM3 excavator DBC; each row is one signal. We check what
 cantools parses from *our* DBC (id, DLC, direction, cycle time, start bit, length, byte order, sign,

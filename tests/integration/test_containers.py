@@ -19,8 +19,10 @@ pytestmark = pytest.mark.integration
 PAIR = """
 name: pair
 nodes:
-  - {name: talker, package: tms_launch, executable: demo_talker, namespace: /c, parameters: {rate_hz: 20.0}, container: pair}
-  - {name: listener, package: tms_launch, executable: demo_listener, namespace: /c, parameters: {log_every: 10}, container: pair}
+  - {name: talker, package: tms_launch, executable: demo_talker, namespace: /c, parameters: {rate_hz: 20.0}, \
+container: pair}
+  - {name: listener, package: tms_launch, executable: demo_listener, namespace: /c, parameters: {log_every: 10}, \
+container: pair}
   - {name: subtask_server, package: tms_launch, executable: demo_subtask_server, namespace: /c, container: server}
 """
 

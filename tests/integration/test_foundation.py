@@ -225,8 +225,10 @@ def test_launcher_gives_a_node_its_stop_grace_before_sigterm(procs, tmp_path):
 REVERSE_STOP = """
 shutdown: reverse
 nodes:
-  - {name: first, package: tms_launch, executable: demo_talker, namespace: /rev, parameters: {rate_hz: 5.0, shutdown_delay_s: 1.0}}
-  - {name: second, package: tms_launch, executable: demo_talker, namespace: /rev, parameters: {rate_hz: 5.0, shutdown_delay_s: 1.0}}
+  - {name: first, package: tms_launch, executable: demo_talker, namespace: /rev, parameters: {rate_hz: 5.0, \
+shutdown_delay_s: 1.0}}
+  - {name: second, package: tms_launch, executable: demo_talker, namespace: /rev, parameters: {rate_hz: 5.0, \
+shutdown_delay_s: 1.0}}
 """
 
 

@@ -11,9 +11,12 @@ ZX200_WITH_PALETTE = """<?xml version="1.0"?>
     <BehaviorTree ID="BehaviorTree">
         <Decorator ID="KeepRunningUntilFlgup" key="TERMINATE_FLG">
             <Sequence>
-                <Action ID="LeafNodeZx200" model_name="zx200" name="leaf_node_zx200" record_name="initial_pose" subtask_name="subtask_zx200_change_pose"/>
-                <Action ID="MongoValueWriter" input_value="true" mongo_param_name="INITIAL_POS_FLG" mongo_record_name="SAMPLE_BLACKBOARD_SHIMIZU"/>
-                <Action ID="LeafNodeZx200" model_name="zx200" name="leaf_node_zx200" record_name="target_excavate_pose" subtask_name="subtask_zx200_excavate_simple"/>
+                <Action ID="LeafNodeZx200" model_name="zx200" name="leaf_node_zx200" record_name="initial_pose" \
+subtask_name="subtask_zx200_change_pose"/>
+                <Action ID="MongoValueWriter" input_value="true" mongo_param_name="INITIAL_POS_FLG" \
+mongo_record_name="SAMPLE_BLACKBOARD_SHIMIZU"/>
+                <Action ID="LeafNodeZx200" model_name="zx200" name="leaf_node_zx200" \
+record_name="target_excavate_pose" subtask_name="subtask_zx200_excavate_simple"/>
                 <SetBlackboard output_key="TERMINATE_FLG" value="true"/>
             </Sequence>
         </Decorator>

@@ -1,5 +1,6 @@
 """Every new machine kind over COM3 CAN in the MuJoCo plant, driven by the original's subtask names, as real processes:
-MST110CR (``mst110cr_2``), MST2200VD (``mst2200``), D37PXi (``d37pxi_24``) and the ZX120, each by the name the original's
+MST110CR (``mst110cr_2``), MST2200VD (``mst2200``), D37PXi (``d37pxi_24``) and the ZX120, each by the name the
+original's
 trees use (the ZX200 and the IC120: tests/tms_rp/test_fleet_integration.py).
 
 Per kind: drives to a pose (``st_<prefix>_navigate_anywhere_deg``: subtask server -> navigator -> converter -> plant);

@@ -62,7 +62,8 @@ DEMO_SHAPE = """<root main_tree_to_execute="BehaviorTree">
   <BehaviorTree ID="BehaviorTree">
     <Decorator ID="KeepRunningUntilFlgup" key="TERMINATE_FLG">
       <Sequence>
-        <Action ID="BlackboardValueReaderMongo" mongo_param_name="CONTINUE_FLG" mongo_record_name="BB" output_port="CONTINUE_FLG"/>
+        <Action ID="BlackboardValueReaderMongo" mongo_param_name="CONTINUE_FLG" mongo_record_name="BB" \
+output_port="CONTINUE_FLG"/>
         <WhileDoElse>
           <Action ID="ConditionalExpression" conditional_expression="CONTINUE_FLG == true"/>
           <AlwaysSuccess/>

@@ -16,7 +16,8 @@ def _handoff_tree(model: str, leaf: str, subtask: str, record: str, mine: str, o
     <Repeat num_cycles="5">
       <Sequence>
         <Decorator ID="KeepRunningUntilFlgup" key="MY_TURN">
-          <Action ID="BlackboardValueReaderMongo" output_port="MY_TURN" mongo_record_name="HANDOFF" mongo_param_name="{mine}"/>
+          <Action ID="BlackboardValueReaderMongo" output_port="MY_TURN" mongo_record_name="HANDOFF" \
+mongo_param_name="{mine}"/>
         </Decorator>
         <Action ID="{leaf}" model_name="{model}" subtask_name="{subtask}" record_name="{record}"/>
         <Action ID="MongoValueWriter" input_value="false" mongo_record_name="HANDOFF" mongo_param_name="{mine}"/>

@@ -26,7 +26,8 @@ CLAIM = """<root main_tree_to_execute="T"><BehaviorTree ID="T">
     <Action ID="SetLocalBlackboard" output_key="GOT" value="false"/>
     <Decorator ID="KeepRunningUntilFlgup" key="GOT">
       <Sequence>
-        <Action ID="BlackboardValueReaderMongo" output_port="LOADAREA" mongo_record_name="BB" mongo_param_name="LOADAREA"/>
+        <Action ID="BlackboardValueReaderMongo" output_port="LOADAREA" mongo_record_name="BB" \
+mongo_param_name="LOADAREA"/>
         <IfThenElse>
           <Action ID="ConditionalExpression" conditional_expression="LOADAREA == false"/>
           <Sequence>

@@ -14,7 +14,8 @@ TREE = """<root main_tree_to_execute="T">
     <Sequence>
       <Action ID="LeafNodeIc120" name="enter" model_name="{machine}" record_name="ENTER_PATH"
               subtask_name="st_ic120_follow_waypoints"/>
-      <Action ID="MongoValueWriter" name="holder" input_value="{machine}" mongo_record_name="BB" mongo_param_name="WHO"/>
+      <Action ID="MongoValueWriter" name="holder" input_value="{machine}" mongo_record_name="BB" \
+mongo_param_name="WHO"/>
     </Sequence>
   </BehaviorTree>
 </root>"""

@@ -60,7 +60,8 @@ nodes:
   - {{name: subtasks_zx200, package: tms_ts, executable: tms_ts_subtasks, parameters: {{machine: zx200}}}}
   - {{name: subtasks_ic120, package: tms_ts, executable: tms_ts_subtasks, parameters: {{machine: ic120}}}}
   - {{name: tms_ts_manager, package: tms_ts, executable: tms_ts_manager}}
-  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}, machines: [zx200, ic120]}}}}
+  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}, machines: [zx200, \
+ic120]}}}}
 """
     path = tmp_path / "panel_e2e.yaml"
     path.write_text(text)
@@ -132,7 +133,8 @@ def test_starting_an_unknown_task_shows_the_schedulers_error(procs, browser_page
 parameters: {{db_path: "{db}"}}
 nodes:
   - {{name: tms_ts_manager, package: tms_ts, executable: tms_ts_manager}}
-  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}, machines: [zx200, ic120]}}}}
+  - {{name: tms_ur_panel, package: tms_ur, executable: tms_ur_panel, parameters: {{port: {port}, machines: [zx200, \
+ic120]}}}}
 """
     (tmp_path / "l.yaml").write_text(text)
     launcher = procs([VENV / "bin" / "tms-launch", str(tmp_path / "l.yaml")], name="tms-launch")

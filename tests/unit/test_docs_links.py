@@ -2,7 +2,8 @@
 
 README.md, docs/*.md and every package README: each markdown link target and each backquoted path that
 names a repository file or folder must exist, and no document points outside the repository
-(``../shared``, the design brief's ``reference/`` notes, its letter names for contracts). Paths are taken relative to the repository root
+(``../shared``, the design brief's ``reference/`` notes, its letter names for contracts). Paths are taken relative to
+the repository root
 or to the document's own folder. Generated places (``runs/``, ``.venv/``, ``build/``) and templates
 (``<machine>``, ``*``) are not checked.
 """

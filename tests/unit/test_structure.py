@@ -1,7 +1,8 @@
 """The code's shape as docs/architecture.md states it, read from the source (no import is executed):
 
 - a machine is known by its name: no string literal of a machine name or kind, and no machine type compared with
-  a literal (use the type constants of tms_model.machines), in shared code outside the kind registries (names come from config/, trees/ and parameters);
+  a literal (use the type constants of tms_model.machines), in shared code outside the kind registries (names come from
+  config/, trees/ and parameters);
 - dependencies point one way: a package imports only packages on lower levels of the module hierarchy, and the
   modules of one package import each other without a cycle;
 - no project import hides inside a function body (the way a cycle is papered over).
