@@ -7,7 +7,8 @@ Every YAML input (configuration files, seeds, ``tms-db param import``) is read u
 the parser's event stream before anything is built (the composer recurses on depth, and aliases share what they
 name, so an alias bomb of a few hundred bytes expands to millions of values once a consumer walks it):
 :data:`MAX_YAML_DEPTH` nesting levels, :data:`MAX_YAML_ALIASES` aliases and :data:`MAX_YAML_NODES` values with
-every alias expanded; a file of at most :data:`MAX_YAML_BYTES`. A file must be UTF-8; anything else is a ConfigError naming the file and the byte offset.
+every alias expanded; a file of at most :data:`MAX_YAML_BYTES`. A file must be UTF-8; anything else is a ConfigError
+naming the file and the byte offset.
 The project's own configuration files use at most depth 5, 845 values and no alias.
 """
 

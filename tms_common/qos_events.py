@@ -9,7 +9,8 @@ of a core; ``python -m tests.bench executor_wake``).
 
 :func:`defer_qos_incompatibility_events` takes those handlers, and only those (deadline, liveliness,
 message-lost and matched events keep their place in the wait set: their timing can matter), out of the
-executor's wait set and checks them from one steady-clock timer, so the warnings still appear, at most ``period_s`` late.
+executor's wait set and checks them from one steady-clock timer, so the warnings still appear, at most ``period_s``
+late.
 """
 
 from __future__ import annotations
