@@ -122,7 +122,8 @@ def import_parameters(store: Store, path: str | Path, docs: Any = None, where: A
 
 def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     """Load a seed file ``{tasks: [{task_id, file, description, model_name?, blackboard?}], parameters: [...]}``;
-    idempotent. A task's ``blackboard`` gives its parameters (initial blackboard entries, e.g. ``{machine: <machine name>}``).
+    idempotent. A task's ``blackboard`` gives its parameters (initial blackboard entries, e.g. ``{machine: <machine
+    name>}``).
 
     Task files are relative to the project root (else to the seed file's folder). Returns
     (tasks, parameters) loaded.
