@@ -9,7 +9,8 @@ id, before the goal; a goal without options runs with the defaults) and ``tms_rp
 goal ends; the original's result carries only ``error_code``). Each goal is planned
 and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
 goal ends at once (no motion) with ``error_code.val`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT
-(Zx200PlanningOutcome classes) and an outcome ``message`` naming the joint or distance. A valid goal's phases go to the arm controller's action
+(Zx200PlanningOutcome classes) and an outcome ``message`` naming the joint or distance. A valid goal's phases go to the
+arm controller's action
 ``arm_controller/move`` (node ``excavator_arm_controller``, tms_msg/action/Zx200ArmMove) as one goal of
 segments, so the arm passes the via phases without stopping; feedback ``state`` is the running phase
 (approach, penetrate, drag, curl, lift / swing, open / ...), forwarded from the controller. Cancel is
@@ -32,7 +33,8 @@ path it cannot clear ends with ``TmsRpErrorCodes.FAILURE`` and a message naming 
 Parameters (read-only, read at start-up, :class:`tms_common.params.StartupParams`): ``machine`` (the excavator
 on the site; default the namespace's last segment), ``machine_config``, ``planner_config``, ``controller_config``,
 ``collision_config`` (YAML paths; defaults in config/: the kind's description, config/tms_rp/<kind>_planner.yaml,
-config/tms_rc/excavator_arm_controller.yaml, config/tms_rp/<kind>_collision.yaml), ``collision_object_record_name`` (the original's; "" = no
+config/tms_rc/excavator_arm_controller.yaml, config/tms_rp/<kind>_collision.yaml), ``collision_object_record_name`` (the
+original's; "" = no
 objects), ``collision_object_dump_record_name`` (the original's mesh records: not supported, goals of the _plan
 actions are refused while it is set), ``db_uri`` / ``db_path`` (the store, ``tms_db.open_store``).
 """
