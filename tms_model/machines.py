@@ -12,7 +12,8 @@ and the UI all see one description of a machine. Three types of machine exist to
 Every kind names the DBC its COM3 bus speaks (``can: {dbc: <file in com3_can/dbc>}``, required).
 
 The ``type:`` key of the YAML names the type, and :data:`PARSERS` the parser of each type (the one place the
-types are listed: a new type is a constant, a parser and a row there); sections another package owns alone (e.g. ``sim``) are
+types are listed: a new type is a constant, a parser and a row there); sections another package owns alone (e.g.
+``sim``) are
 left to it, but inside the sections read here an unknown key is an error (a typo must not silently fall
 back to a default).
 """
