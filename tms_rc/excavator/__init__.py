@@ -6,5 +6,6 @@
   with PID feedback and dead-time compensation.
 * :mod:`tms_rc.excavator.segments`: an ``arm_controller/move`` goal's segments -> controller targets, validated.
 * :mod:`tms_rc.excavator.plant`: a first-order-lag + dead-time joint model for tests and benchmarks.
-* :mod:`tms_rc.nodes.excavator_arm_controller`: ``excavator_arm_controller`` (joint_states -> front_cmd, action ``arm_controller/move``).
+* :mod:`tms_rc.nodes.excavator_arm_controller`: ``excavator_arm_controller`` (joint_states -> front_cmd, action
+  ``arm_controller/move``).
 """

@@ -23,7 +23,8 @@ state + what the lag still moves + commands still in flight), joints' delays are
 output, and each reference starts at the predicted state, so the machine follows it one predictor
 horizon (``preview_s``) later.
 
-Pure Python (numpy, pinocchio via tms_model.excavator.kinematics, OSQP); the node is :mod:`tms_rc.nodes.excavator_arm_controller`.
+Pure Python (numpy, pinocchio via tms_model.excavator.kinematics, OSQP); the node is
+:mod:`tms_rc.nodes.excavator_arm_controller`.
 """
 
 from __future__ import annotations

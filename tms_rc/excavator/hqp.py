@@ -24,7 +24,8 @@ Exact shortcuts keep a 100 Hz step cheap (measured figures: tms_rc/excavator/REA
   constraint the levels above impose, that point is the optimum: it is computed in closed form
   (equality level: the regularised least-squares step, a 4x4 Cholesky solve; inequality level whose
   rows are the box ``[I; -I]``, as the velocity and position limits are: per joint, the box point
-  nearest 0, pulled towards 0 by the regularisation) and checked against those constraints; only when one of them is active does OSQP solve
+  nearest 0, pulled towards 0 by the regularisation) and checked against those constraints; only when one of them is
+  active does OSQP solve
   the level. This is the same optimum OSQP converges to (without its ``eps`` error and iteration
   tail: a box level used to take up to ``max_iter`` iterations while the arm accelerates);
 - every buffer is preallocated; each level's OSQP problem keeps one fixed sparsity pattern and gets

@@ -5,7 +5,8 @@ front joints), publishes ``front_cmd`` (com3_msgs/JointCmd, VELOCITY: OPERA com3
 to the COM3 converter, and serves the internal action ``arm_controller/move`` (tms_msg/action/Zx200ArmMove)
 that the planner (``zx200_planner``) uses: the segments of one planned action (tms_msg/msg/Zx200ArmSegment:
 joint or Cartesian, label, speed scale, via), run as one motion; feedback names the running segment. A
-malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.excavator.segments`). Cancel decelerates within the
+malformed segment rejects the whole goal before motion, naming the segment (:mod:`tms_rc.excavator.segments`). Cancel
+decelerates within the
 limits and the goal ends CANCELED only when the arm is at rest. One goal drives the arm at a time: a new goal
 preempts the running one, which ends ABORTED with FAILURE "preempted by a newer goal" (a result, never rclpy's
 empty one); a goal to the pose the arm already holds ends SUCCESS once it is confirmed there.

@@ -1,4 +1,5 @@
-"""``vessel_controller``: a crawler carrier's vessel (and vessel swing) servers (thin rclpy wrapper of VesselController).
+"""``vessel_controller``: a crawler carrier's vessel (and vessel swing) servers (thin rclpy wrapper of
+VesselController).
 
 Run in the machine's namespace: ``vessel_controller --ros-args -r __ns:=/ic120_1`` (the machine is the
 ``machine`` parameter, else the namespace's last segment; ``ic120_vessel`` is this node under its former
