@@ -9,7 +9,8 @@ Odometry in frame ``odom`` (a crawler carrier's converter integrates the track s
 Subscribes ``odom_pose`` (nav_msgs/Odometry, frame odom), ``gnss/fix`` (sensor_msgs/NavSatFix) and ``imu``
 (sensor_msgs/Imu, orientation yaw = azimuth, ENU). Publishes ``odometry/global`` (nav_msgs/Odometry,
 frame ``map``, child ``base_link``, pose covariance of x, y, yaw; twist copied from odometry; stamped with
-the odometry message's stamp) on every odometry message once a GNSS fix arrived, and ``map_to_odom`` (geometry_msgs/TransformStamped, the REP-105
+the odometry message's stamp) on every odometry message once a GNSS fix arrived, and ``map_to_odom``
+(geometry_msgs/TransformStamped, the REP-105
 map -> odom correction, which ``tms_sp_tf`` puts on /tf).
 
 An ``odom_pose`` already in frame ``map`` (an excavator's converter: RTK GNSS at the swing centre) needs no

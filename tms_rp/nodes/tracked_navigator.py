@@ -10,7 +10,8 @@ action names under the machine namespace, as a Nav2 bt_navigator / waypoint_foll
 ``odometry/global`` (from ic120_localization) and ``map`` (nav_msgs/OccupancyGrid, transient local: replaces
 the static map, e.g. when an obstacle appears; the running path is checked and replanned); output
 ``cmd_vel`` (geometry_msgs/Twist) to com3_bridge. Parameters: ``machine`` (name on the site; default: the
-namespace), ``nav_config`` (default config/nav/<kind>_nav.yaml over config/nav/tracked_nav.yaml), ``map_yaml`` (default: the config's ``costmap.map``), ``pose_timeout_s`` (1.0),
+namespace), ``nav_config`` (default config/nav/<kind>_nav.yaml over config/nav/tracked_nav.yaml), ``map_yaml`` (default:
+the config's ``costmap.map``), ``pose_timeout_s`` (1.0),
 ``pose_lost_timeout_s`` (10.0). A pose older than ``pose_timeout_s`` makes the machine brake and hold (a
 CPU-starved localisation or a DDS hiccup); it resumes when poses return, and the goal aborts with
 "localisation lost" only when no pose came for ``pose_lost_timeout_s``.

@@ -4,7 +4,8 @@ Nav2's RPP adapted to tracks: the machine can turn on the spot, so a large headi
 rotating in place ("align"); the path is then tracked forward or in *reverse* (the virtual robot frame is
 turned by pi, so the same curvature law drives backwards into the loading point). The speed is regulated
 by the path curvature and by the distance to the goal, then limited by the machine's speed, yaw-rate and
-acceleration limits (config/machines/<kind>.yaml ``tracks``, the nav file's ``tracks`` where it has none). At the end of the path translation stops
+acceleration limits (config/machines/<kind>.yaml ``tracks``, the nav file's ``tracks`` where it has none). At the end of
+the path translation stops
 and the machine turns to the goal heading ("final_rotate"). :meth:`TrackedPurePursuit.compute` is pure
 apart from the controller's own state: no I/O, the debug values are returned in the command.
 """

@@ -4,7 +4,8 @@ State ``[x, y, yaw, k]`` in ``map`` (REP-105), ``k`` being the odometry scale er
 machine moves ``(1 + k)`` times what the tracks report). Odometry is used as a *relative* motion: the pose
 change between two consecutive ``odom``-frame poses is expressed in the body frame, scaled by ``1 + k`` and
 applied to the estimate, with process noise proportional to the distance driven and the angle turned plus
-a small time-based random walk. Learning ``k`` while GNSS is good keeps a GNSS outage's drift small. GNSS fixes (already projected to the map frame) and azimuths correct the state
+a small time-based random walk. Learning ``k`` while GNSS is good keeps a GNSS outage's drift small. GNSS fixes (already
+projected to the map frame) and azimuths correct the state
 through filterpy's :class:`~filterpy.kalman.ExtendedKalmanFilter`; a measurement whose squared Mahalanobis
 distance exceeds the chi-square gate is rejected (a 5 m multipath jump), and after ``reinit_after_s`` of
 nothing but rejections the filter re-initialises on GNSS (the estimate, not the fix, was wrong).
