@@ -4,7 +4,8 @@ The flag rises when the carrier has stood within ``position_tolerance`` and ``ya
 loading point, slower than ``max_speed``, for ``hold_s`` seconds of (simulated) time; it falls as
 soon as any of these stops holding. The speed is the displacement over the last ``speed_window_s``
 (not between two consecutive poses): at a 50 Hz pose rate a millimetre of contact jitter of a
-standing machine would read as 0.05 m/s and make the flag flicker. Time is injected (``update(t, pose)``), so the same core runs
+standing machine would read as 0.05 m/s and make the flag flicker. Time is injected (``update(t, pose)``), so the same
+core runs
 on ``/clock`` time, wall time, or in a test.
 """
 

@@ -13,13 +13,15 @@ changed through a tms_db store (``open_store``), as the original tms_sp updaters
 * the flags SENSING_ARRIVAL_FLG, SENSING_LOADED_FLG, SENSING_CHECK_MOUND_FLG -> every global-blackboard
   record of ``blackboard_records`` (the records the running tasks read them from: the paper's trees name
   GLOBAL_BLACKBOARD_EARTHWORK, the original's 2024-12 trees SAMPLE_BLACKBOARD_SHIMIZU), written whenever a
-  record holds another value than the assessment (also after a tree reset the flag). Meanings as the seed paper's Table 7: SENSING_CHECK_MOUND_FLG is true
+  record holds another value than the assessment (also after a tree reset the flag). Meanings as the seed paper's Table
+  7: SENSING_CHECK_MOUND_FLG is true
   when there is *not* enough soil in the mound (initially false).
 
 ``<excavator>`` is the configuration's excavator name (sensing.yaml ``excavator``).
 
 Several carriers (the fleet experiment): the pose and vessel inputs are those of one carrier, ``carrier``
-(default: the configuration's first carrier). :meth:`SiteSensing.follow_holder` reads the carrier's name from a field of the
+(default: the configuration's first carrier). :meth:`SiteSensing.follow_holder` reads the carrier's name from a field of
+the
 global-blackboard record (``LOADAREA_MACHINE``: the carrier that claimed the loading point writes it) and
 :meth:`select_carrier` switches to it: a new arrival detector, that carrier's vessel geometry (``vessels``), and
 the release target and SENSING_LOADED_FLG assessed afresh from its own vessel.
