@@ -2,7 +2,8 @@
 
 ``<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose"
 record_name="{pose}"/>`` sends ``{model_name, record_name}`` to ``/<model_name>/<subtask_name>``
-(the original's tms_msg_ts/action/LeafNodeBase). Every ``LeafNode*`` id (LeafNodeIc120, LeafNodeZx200, LeafNodeMst2200, ...)
+(the original's tms_msg_ts/action/LeafNodeBase). Every ``LeafNode*`` id (LeafNodeIc120, LeafNodeZx200, LeafNodeMst2200,
+...)
 is this one class; ``model_name`` and ``subtask_name`` are read once, as the original constructor did: literals,
 or a ``{key}`` of the task's parameters (the task document's ``blackboard``), which the loader resolves when the
 tree is loaded (:mod:`tms_ts.loader`); ``record_name`` may be a ``{key}`` resolved at each start.

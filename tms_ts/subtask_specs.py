@@ -2,7 +2,8 @@
 
 ``SUBTASKS`` maps a subtask action name (served at ``/<model_name>/<name>``) to a :class:`SubtaskSpec`,
 the one place a subtask is defined: its name family, its planning action (relative to the machine
-namespace; or a service, ``downstream="service"``) and that action's type, ``build(doc, record_name) -> dict`` that validates the record and
+namespace; or a service, ``downstream="service"``) and that action's type, ``build(doc, record_name) -> dict`` that
+validates the record and
 returns the planning goal as plain data, ``goal(plan) -> <action>.Goal``, ``options(plan)`` for what a goal
 needs beyond the planning type (ZX200 change_pose: tms_msg/srv/Zx200ChangePoseOptions) and ``check(result)
 -> (ok, detail)`` that reads the planning result's own typed code. The ZX200 rows speak the original's

@@ -31,9 +31,11 @@ second manager) are not covered; the loading-point flag has none. trees/README.m
 Parameters: ``tick_rate_hz`` (20.0), ``status_rate_hz`` (2.0), ``server_wait_s`` (5.0),
 ``accept_timeout_s`` (1.0), ``halt_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``db_uri`` (""),
 ``db_path`` ("" = tms_db default), ``db_checkpoint_period_s`` (1.0; the embedded store's WAL checkpoint runs in a
-thread of its own this often instead of inside a flag write of the tick, :meth:`tms_db.store.Store.checkpoint_in_background`;
+thread of its own this often instead of inside a flag write of the tick,
+:meth:`tms_db.store.Store.checkpoint_in_background`;
 0 = SQLite's automatic checkpoint), ``realtime_priority`` (0 = off; 1-99: SCHED_FIFO for the thread that spins
-the manager, needs CAP_SYS_NICE, :func:`tms_common.node.realtime_thread`); all read-only (read at start-up). ``task_id`` (-1), the original's:
+the manager, needs CAP_SYS_NICE, :func:`tms_common.node.realtime_thread`); all read-only (read at start-up). ``task_id``
+(-1), the original's:
 which entry of a ``/task_sequence`` JSON to run (-1: every entry), and the id an XML runs under (-1: the
 stored task with that tree, else an ad-hoc negative id); read on every message, as the original does
 (:mod:`tms_ts.task_sequence`).

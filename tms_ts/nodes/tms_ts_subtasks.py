@@ -1,7 +1,8 @@
 """``tms_ts_subtasks``: the subtask action servers of one machine.
 
 For the machine called ``model_name`` it serves every subtask of its kind (:mod:`tms_ts.subtask_specs`
-``KIND_SUBTASKS``) at ``/<model_name>/<subtask_name>`` as the original's subtask nodes do: ``tms_msg_ts/action/LeafNodeBase``,
+``KIND_SUBTASKS``) at ``/<model_name>/<subtask_name>`` as the original's subtask nodes do:
+``tms_msg_ts/action/LeafNodeBase``,
 goal ``{model_name, record_name}``, result ``result`` true only when SUCCEEDED (false with ABORTED or
 CANCELED), feedback ``status``. Every goal is accepted (unless the server is stopping); a goal that cannot
 run ends ABORTED. Its typed outcome goes beside the original's bool: a ``tms_msg/SubtaskOutcome`` (goal id,
