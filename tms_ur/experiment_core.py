@@ -69,7 +69,8 @@ _TIP = "tip:"  # key prefix of an excavator's bucket-tip error series
 
 
 def tree_actions(tree: str, blackboard: dict[str, Any] | None = None) -> list[str]:
-    """The action servers task ``tree`` (its XML) calls, in order of first use: every leaf's ``/<model_name>/<subtask_name>``
+    """The action servers task ``tree`` (its XML) calls, in order of first use: every leaf's
+    ``/<model_name>/<subtask_name>``
     and, for a subtask of :data:`tms_ts.subtask_specs.SUBTASKS` whose downstream is an action, its planning action
     ``/<model_name>/<planning_action>``. A ``{key}`` port is read from the task's ``blackboard``; one it does not
     give (set by the tree itself) is left out."""
@@ -483,7 +484,8 @@ class ExperimentRecorder:
             if k not in ("flags_timeline", "task_states", "pass_events_s", "dump_events_s")
         )
         html = f"""<!doctype html><html><head><meta charset="utf-8"><title>{title}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:1em auto}} td,th{{text-align:left;padding:2px 8px;border-bottom:1px solid #ddd}}
+<style>body{{font-family:sans-serif;max-width:1100px;margin:1em auto}} \
+td,th{{text-align:left;padding:2px 8px;border-bottom:1px solid #ddd}}
 img{{max-width:100%;border:1px solid #ccc;margin:4px 0}}</style></head><body>
 <h1>{title}</h1><table>{rows}</table>
 <p><a href="metrics.json">metrics.json</a> (full timelines)</p>
