@@ -344,7 +344,8 @@ class BridgeCore:
             if not any(ch.last_cmd is not None and not ch.timed_out
                        and any(self._values[f] != self.codec.neutral(f) for f in ch.frames)
                        for ch in self._channels.values()):
-                return []  # not driven (no command, or a neutral one): nothing to stop; a motion command latches next check
+                # not driven (no command, or a neutral one): nothing to stop; a motion command latches next check
+                return []
             silent, self._site_seen, self._site_suspect = now - self._site_seen, None, False  # re-armed by a heartbeat
             self.counters["site_lost"] += 1
             if self._emg:
