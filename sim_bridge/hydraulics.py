@@ -69,7 +69,8 @@ class JointBank:
     def __init__(
         self, joints: Sequence[Joint], drives: Mapping[str, JointDrive], dt: float, *, pump_flow: float = math.inf
     ) -> None:
-        """``joints`` (geometry, limits) and ``drives`` (actuator per joint name) as the machine description has them."""
+        """``joints`` (geometry, limits) and ``drives`` (actuator per joint name) as the machine description has
+        them."""
         self.joints = tuple(joints)
         self.drives = tuple(drives[j.name] for j in joints)
         self.names = tuple(j.name for j in joints)

@@ -33,7 +33,8 @@ def build_mjcf(spec: PlantSpec) -> str:
         '<mujoco model="tms_site">',
         '  <compiler angle="radian" eulerseq="XYZ"/>',
         f'  <option timestep="{spec.dt}"/>',
-        '  <visual><global offwidth="1920" offheight="1080"/><headlight ambient="0.45 0.45 0.45" diffuse="0.6 0.6 0.6"/></visual>',
+        '  <visual><global offwidth="1920" offheight="1080"/><headlight ambient="0.45 0.45 0.45" diffuse="0.6 0.6 '
+        '0.6"/></visual>',
         "  <asset>",
         f'    <hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{soil.size_x / 2} {soil.size_y / 2} 10 0.5"/>',
         '    <material name="soil" rgba="0.55 0.42 0.28 1"/>',

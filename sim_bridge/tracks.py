@@ -27,7 +27,8 @@ class SkidSteer:
     """Planar pose (x, y, yaw) of a tracked base driven by left/right track speed commands."""
 
     def __init__(self, tracks: Tracks, drive: TrackDrive, dt: float, pose: tuple[float, float, float]) -> None:
-        """``tracks`` (gauge, speed limit) and ``drive`` (travel hydraulics, slip) as the machine description has them."""
+        """``tracks`` (gauge, speed limit) and ``drive`` (travel hydraulics, slip) as the machine description has
+        them."""
         self.tracks = tracks
         self.drive = drive
         self.dt = dt

@@ -45,7 +45,8 @@ class DozerPlantProfile(PlantProfile):
             f'        <joint name="{name}_{j.name}" type="hinge" axis="{vec(j.axis)}"{rng}/>',
             f'        <geom type="box" size="{b.edge_xyz[0] / 2} 0.1 0.1" pos="{b.edge_xyz[0] / 2} 0 0" material="dz" '
             'contype="0" conaffinity="0" mass="1"/>',
-            f'        <geom type="box" size="0.1 {b.width / 2} 0.45" pos="{vec((b.edge_xyz[0], b.edge_xyz[1], b.edge_xyz[2] + 0.45))}" '
+            f'        <geom type="box" size="0.1 {b.width / 2} 0.45" '
+            f'pos="{vec((b.edge_xyz[0], b.edge_xyz[1], b.edge_xyz[2] + 0.45))}" '
             'material="dz" contype="0" conaffinity="0" mass="1"/>',
             f'        <site name="{name}_blade_edge" pos="{vec(b.edge_xyz)}" size="0.08"/>',
             "      </body>",
