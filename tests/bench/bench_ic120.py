@@ -110,7 +110,8 @@ def bench_ekf() -> None:
     print(f"10 s GNSS outage: max error {err[200:299].max():.3f} m, cov trace x{tr[298] / tr[199]:.0f}")
     _, err, _, res = _run(simulate(60.0), jump=(30.0, 33.0))
     print(
-        f"5 m GNSS jump for 3 s: {sum(not r.accepted for r in res)}/{len(res)} fixes rejected, max error {err[300:330].max():.3f} m"
+        f"5 m GNSS jump for 3 s: {sum(not r.accepted for r in res)}/{len(res)} fixes rejected, max error "
+        f"{err[300:330].max():.3f} m"
     )
 
 
@@ -361,7 +362,8 @@ def bench_plant_route(runs: int, budget_s: float | None = None) -> None:
                 ph = np.array([s[1] for s in e])
                 cov = np.array([s[5] for s in e])
                 nominal = (ph == "normal") & np.isfinite(exy)
-                if run % 2 == 1 and (ph == "outage").any() and (ph == "after").any():  # the estimate re-converges within a few seconds of the faults: not nominal
+                # the estimate re-converges within a few seconds of the faults: not nominal
+                if run % 2 == 1 and (ph == "outage").any() and (ph == "after").any():
                     last_fault = t_e[ph == "after"].max()
                     nominal &= t_e > last_fault + 5.0
                     nominal &= ~((t_e > t_e[ph == "outage"].min() - 1.0) & (t_e < last_fault))

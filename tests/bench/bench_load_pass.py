@@ -225,8 +225,10 @@ def main() -> None:
         totals["vessel"] += into
         totals["pass_s"].append(pass_s)
         print(
-            f"  pass {k + 1}: target r {math.hypot(pos[0], pos[1]):.2f} m z {pos[2]:.2f} theta_w {th:.2f} drag {off:.2f}; "
-            f"cut {cut:.3f} m3 (bucket after dig {in_bucket:.3f}, after carry {carried:.3f}), into vessel {into:.3f} m3, "
+            f"  pass {k + 1}: target r {math.hypot(pos[0], pos[1]):.2f} m z {pos[2]:.2f} theta_w {th:.2f} "
+            f"drag {off:.2f}; "
+            f"cut {cut:.3f} m3 (bucket after dig {in_bucket:.3f}, after carry {carried:.3f}), "
+            f"into vessel {into:.3f} m3, "
             f"spilled off the mound {spilled_out:.3f} m3, mound {mound0:.2f} -> {ground.mound_volume():.2f} m3; "
             + ", ".join(f"{a} {s:.1f} s" for a, s in times.items())
             + f", pass {pass_s:.1f} s",

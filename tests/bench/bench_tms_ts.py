@@ -82,8 +82,10 @@ def _seed(db: str) -> None:
             xml = (
                 f'<root><BehaviorTree ID="B"><Repeat num_cycles="-1"><Sequence>'
                 f'<Action ID="{leaf}" model_name="{model}" subtask_name="{subtask}" record_name="{record}"/>'
-                f'<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" mongo_param_name="FLG"/>'
-                f'<Action ID="MongoValueWriter" input_value="{i}" mongo_record_name="BENCH_BB" mongo_param_name="T{i}"/>'
+                '<Action ID="BlackboardValueReaderMongo" output_port="flg" mongo_record_name="BENCH_BB" '
+                'mongo_param_name="FLG"/>'
+                f'<Action ID="MongoValueWriter" input_value="{i}" mongo_record_name="BENCH_BB" '
+                f'mongo_param_name="T{i}"/>'
                 f'<Condition ID="ConditionalExpression" conditional_expression="flg == true"/>'
                 f"</Sequence></Repeat></BehaviorTree></root>"
             )
@@ -225,7 +227,8 @@ def _ten_tasks(domain: int, db: str, nice: int = 0, rt: int = 0, checkpoint_s: f
         else ", SQLite's automatic WAL checkpoint"
     )
     return (
-        f"10 tasks at 50 Hz for {LOAD_SECONDS:g} s, manager at {how}: {ticks} ticks (expected {int(LOAD_SECONDS * 50)}), "
+        f"10 tasks at 50 Hz for {LOAD_SECONDS:g} s, manager at {how}: {ticks} ticks (expected "
+        f"{int(LOAD_SECONDS * 50)}), "
         f"missed {missed}, mean tick {last['mean_tick_ms']:.2f} ms, max tick {last['max_tick_ms']:.1f} ms, "
         f"max late {last['max_late_ms']:.1f} ms; tasks not running at the end: {len(failed)}; "
         f"after /emergency_signal {canceled}/10 CANCELED"

@@ -94,7 +94,8 @@ def tick_times(path: str) -> list[float]:
 
 
 def lateness_ms(times: list[float], start: float = 0.0, end: float = float("inf")) -> list[float]:
-    """Per tick starting in [start, end]: gap to the previous tick start minus the period [ms] (as the manager counts)."""
+    """Per tick starting in [start, end]: gap to the previous tick start minus the period [ms] (as the manager
+    counts)."""
     period = 1.0 / RATE_HZ
     return [max(0.0, (b - a - period) * 1e3) for a, b in zip(times, times[1:], strict=False) if start <= b <= end]
 
@@ -262,7 +263,8 @@ def big_tree_run(label: str, code: str | None) -> list[str]:
                    f"{late_summary(lateness_ms(times, sent, over))}{stop}")
         out.append(f"[{label}]     manager: {line}")
     out.append(
-        f"[{label}]   tick lateness over the whole run ({t_end - t0:.0f} s): {late_summary(lateness_ms(times, t0, t_end))}; "
+        f"[{label}]   tick lateness over the whole run ({t_end - t0:.0f} s): "
+        f"{late_summary(lateness_ms(times, t0, t_end))}; "
         f"manager RSS at the end {rss:.0f} MB"
     )
     return out

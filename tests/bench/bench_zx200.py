@@ -332,14 +332,16 @@ def plant() -> None:  # one campaign
                         truth_vs_fk = float(np.linalg.norm(np.array(st.tip) - kin.tip_position(q_end)))
                         print(
                             f"    miss: {kind} status {status} {res.message!r} {100 * perr:.1f} cm "
-                            f"{math.degrees(aerr):.2f} deg (FK of measured joints {100 * fk_err:.1f} cm off the target, "
+                            f"{math.degrees(aerr):.2f} deg "
+                            f"(FK of measured joints {100 * fk_err:.1f} cm off the target, "
                             f"truth {100 * truth_vs_fk:.1f} cm off that FK), target q={np.round(qg, 3).tolist()}, "
                             f"end q={np.round(q_end, 4).tolist()}",
                             flush=True,
                         )
                 took = time.monotonic() - t0
                 print(
-                    f"  {kind:20s}: {ok}/{n} within 3 cm / 2 deg ({100.0 * ok / n:.0f}%), worst {100 * worst_p:.2f} cm / "
+                    f"  {kind:20s}: {ok}/{n} within 3 cm / 2 deg ({100.0 * ok / n:.0f}%), "
+                    f"worst {100 * worst_p:.2f} cm / "
                     f"{math.degrees(worst_a):.2f} deg, {took:.0f} s ({took / n:.1f} s per target)",
                     flush=True,
                 )

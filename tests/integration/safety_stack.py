@@ -260,7 +260,8 @@ class Probe:
 
 
 def wait_servers(node, timeout: float, servers: dict[str, str] | None = None) -> list[str]:
-    """Wait until every action server of ``servers`` (default :data:`SERVERS`) is available; returns the missing ones."""
+    """Wait until every action server of ``servers`` (default :data:`SERVERS`) is available; returns the missing
+    ones."""
     import importlib
 
     from rclpy.action import ActionClient

@@ -207,7 +207,8 @@ nodes:
 
 
 def test_launcher_gives_a_node_its_stop_grace_before_sigterm(procs, tmp_path):
-    """A node with stop_grace_s 10 finishes its 6 s shutdown; one with the default 2.5 s gets SIGTERM, then SIGKILL at 4 s."""
+    """A node with stop_grace_s 10 finishes its 6 s shutdown; one with the default 2.5 s gets SIGTERM, then SIGKILL
+    at 4 s."""
     launcher = _launcher(procs, _write(tmp_path, SLOW_STOP))
     assert launcher.wait_for("all 2 node(s)", timeout=90), launcher.output
     # On the graph is not yet spinning: a SIGINT inside a node's __init__ ends it before it has a destroy_node.

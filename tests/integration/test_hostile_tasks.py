@@ -75,7 +75,7 @@ def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no
     start.publish(TaskIds(task_ids=[1, 2]))
     hostile = [tree("<Sequence>" * 1000 + "<AlwaysSuccess/>" + "</Sequence>" * 1000),  # raised RecursionError
                json.dumps({"tasks": [{"task_id": 2**31, "task_sequence": GOOD}]}),       # an id past int32
-               '{"tasks": ' + "[" * 100_000 + "]" * 100_000 + "}"]                       # JSON deeper than json.loads goes
+               '{"tasks": ' + "[" * 100_000 + "]" * 100_000 + "}"]  # JSON deeper than json.loads goes
     for data in hostile:
         sequence.publish(String(data=data))
     spin_until(
@@ -84,7 +84,8 @@ def test_an_invalid_model_name_fails_its_task_while_another_task_succeeds_and_no
 
     # the bad tasks end FAILURE naming the leaf, its line and the bad name; the good one was not disturbed
     assert states[1].state == TaskState.FAILURE and BAD in states[1].message, states[1].message
-    assert "LeafNodeD37pxi (line 1, column 69)" in states[1].message  # the stored one-line form's position and "no valid ROS name" in states[1].message
+    # the stored one-line form's position and "no valid ROS name" in states[1].message
+    assert "LeafNodeD37pxi (line 1, column 69)" in states[1].message
     assert (
         states[2].state == TaskState.FAILURE
         and BAD in states[2].message

@@ -1,4 +1,5 @@
-"""tms_common.sim_clock: a simulated-time node's clock is fed by the relay thread; its executor wakes for timers only."""
+"""tms_common.sim_clock: a simulated-time node's clock is fed by the relay thread; its executor wakes for timers
+only."""
 
 from __future__ import annotations
 

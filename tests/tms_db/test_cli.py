@@ -23,7 +23,8 @@ def tms_db(db: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run([str(exe), "--path", str(db), *args], capture_output=True, text=True, timeout=60, cwd=ROOT)
 
 
-# Documents in the original's shapes (irvs/ros2_tms_for_construction, tms_db), with _ids and a BSON Date as mongorestore gives.
+# Documents in the original's shapes (irvs/ros2_tms_for_construction, tms_db), with _ids and a BSON Date as
+# mongorestore gives.
 STAMP = dt.datetime(2025, 3, 14, 9, 26, 53, 589000, tzinfo=dt.UTC)
 ORIGINAL_TASK = {"_id": ObjectId("66f0c0ffee00000000000001"), "task_id": 9, "type": "task", "model_name": "zx200",
                  "description": "No Commented", "task_sequence": " ".join(TREE.split())}

@@ -60,7 +60,8 @@ def test_two_machines_in_leaf_order_each_once_across_subtrees():
 def test_a_task_parameter_names_the_machine_and_without_it_the_leaf_names_none(store):
     xml = (
         '<root><BehaviorTree ID="B"><Sequence>'
-        '<Action ID="LeafNodeIc120" model_name="{machine}" record_name="ENTER_PATH" subtask_name="st_ic120_follow_waypoints"/>'
+        '<Action ID="LeafNodeIc120" model_name="{machine}" record_name="ENTER_PATH" '
+        'subtask_name="st_ic120_follow_waypoints"/>'
         '<Action ID="LeafNodeZx200" model_name="zx200" record_name="p" subtask_name="subtask_zx200_change_pose"/>'
         "</Sequence></BehaviorTree></root>"
     )

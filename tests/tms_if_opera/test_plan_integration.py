@@ -167,7 +167,8 @@ def test_change_pose_plan_swings_over_a_parked_carrier_without_contact(arm_stack
     padded_contacts = sum(1 for r in results if r[1] < 0.0)
     swings = np.ptp([q[0] for q in samples])
     print(
-        f"\n{GOALS} change_pose_plan goals over the carrier in {elapsed:.1f} s wall; {len(dense)} plant configurations; "
+        f"\n{GOALS} change_pose_plan goals over the carrier in {elapsed:.1f} s wall; "
+        f"{len(dense)} plant configurations; "
         f"contacts {contacts}, padded contacts {padded_contacts}; smallest plant distance {min_d:.3f} m, "
         f"smallest beyond padding {worst[1]:.3f} m ({worst[2]}); swing range {swings:.2f} rad"
     )

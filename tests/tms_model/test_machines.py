@@ -44,7 +44,8 @@ def test_ic120_description() -> None:
 def test_unknown_kind_names_the_file_searched() -> None:
     with pytest.raises(
         ConfigError,
-        match=r"zx999.yaml: no such machine description.*known kinds: \['d37pxi', 'ic120', 'mst110cr', 'mst2200vd', 'zx120', 'zx200'\]",
+        match=r"zx999.yaml: no such machine description.*known kinds: "
+        r"\['d37pxi', 'ic120', 'mst110cr', 'mst2200vd', 'zx120', 'zx200'\]",
     ):
         load_machine("zx999")
 

@@ -35,7 +35,8 @@ def test_reader_keeps_the_stored_type(store):
     body = (
         "<Sequence>"
         + "".join(
-            f'<Action ID="BlackboardValueReaderMongo" output_port="{k.lower()}" mongo_record_name="GBB" mongo_param_name="{k}"/>'
+            f'<Action ID="BlackboardValueReaderMongo" output_port="{k.lower()}" mongo_record_name="GBB" '
+            f'mongo_param_name="{k}"/>'
             for k in ("FLG", "N", "D", "S")
         )
         + "</Sequence>"

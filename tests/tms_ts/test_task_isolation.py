@@ -21,7 +21,10 @@ def doc(body: str) -> str:
 
 
 def leaf(record: str = "initial_pose") -> str:
-    return f'<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose" record_name="{record}"/>'
+    return (
+        f'<Action ID="LeafNodeZx200" model_name="zx200" subtask_name="subtask_zx200_change_pose" '
+        f'record_name="{record}"/>'
+    )
 
 
 def step_all(runs: list[TaskRun], seconds: float, spin) -> None:
