@@ -88,7 +88,8 @@ def check_parameters(path: str | Path, docs: Any, where: Any, key_path: tuple = 
         except ValidationError as exc:
             problems.append(f"{path}:{line}: {exc}")
             continue
-        if "_id" in doc and type(doc["_id"]).__name__ != "ObjectId":  # YAML has no ObjectId: a stored text _id breaks reads
+        # YAML has no ObjectId: a stored text _id breaks reads
+        if "_id" in doc and type(doc["_id"]).__name__ != "ObjectId":
             problems.append(f"{path}:{line}: record {doc['record_name']!r}: field '_id' {doc['_id']!r} is not an "
                             "ObjectId (YAML cannot give one; leave '_id' out and the store assigns it)")
             continue

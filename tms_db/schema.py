@@ -134,7 +134,8 @@ def validate_parameter(doc: Mapping[str, Any]) -> None:
         for name, value in payload.items():
             if not isinstance(value, list | tuple):
                 raise ValidationError(
-                    f"{where}: field {name!r}: waypoint records need arrays of numbers in every field, got scalar {value!r}"
+                    f"{where}: field {name!r}: waypoint records need arrays of numbers in every field, got scalar "
+                    f"{value!r}"
                 )
             for i, item in enumerate(value):
                 if not is_number(item):
