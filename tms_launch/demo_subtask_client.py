@@ -1,4 +1,5 @@
-"""``demo_subtask_client``: sends one demonstration ``tms_msg_ts/LeafNodeBase`` goal (a command-line tool, not a node class)."""
+"""``demo_subtask_client``: sends one demonstration ``tms_msg_ts/LeafNodeBase`` goal (a command-line tool, not a node
+class)."""
 
 from __future__ import annotations
 
