@@ -726,7 +726,8 @@ class ArmController:
         assert spline is not None
         # Integrate only once the reference holds its end point and the error is inside the
         # PID's i_zone: while the arm moves, the error is mostly the tracking lag of the dead time
-        # (1.3 s on the swing), and integrating it wound the integrator up to its clamp in every move; at the goal that wound-up term (ki x i_limit) then balanced
+        # (1.3 s on the swing), and integrating it wound the integrator up to its clamp in every move; at the goal
+        # that wound-up term (ki x i_limit) then balanced
         # kp x error, so the arm sat millimetres to centimetres off and only crept in as the integral
         # bled off at the rate of that small error (tens of seconds: the paper demo's swing stuck at
         # 0.008 rad for 26 s). The plant integrates velocity, so P alone has no steady-state error;
