@@ -98,7 +98,8 @@ class TrackedLocalization(Node):
         if not result.accepted and self.ekf.stats.gnss_rejected - self._rejected_logged >= 10:
             self._rejected_logged = self.ekf.stats.gnss_rejected
             self._log.warning(
-                f"GNSS outlier rejected (Mahalanobis^2 {result.mahalanobis2:.1f}); {self.ekf.stats.gnss_rejected} so far"
+                f"GNSS outlier rejected (Mahalanobis^2 {result.mahalanobis2:.1f}); "
+                f"{self.ekf.stats.gnss_rejected} so far"
             )
 
     def _on_imu(self, msg: Imu) -> None:

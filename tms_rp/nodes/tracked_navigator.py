@@ -106,7 +106,8 @@ class TrackedNavigator(Node):
         ]
         self.create_timer(self.dt, self._tick)
         self._log.info(
-            f"navigator of {self.machine} ({self.cfg.machine.kind}, {self.cfg.file}) ready: map {self.cfg.map_yaml}, {self.cfg.controller.frequency:g} Hz"
+            f"navigator of {self.machine} ({self.cfg.machine.kind}, {self.cfg.file}) ready: map {self.cfg.map_yaml}, "
+            f"{self.cfg.controller.frequency:g} Hz"
         )
 
     def _now(self) -> float:
@@ -168,7 +169,8 @@ class TrackedNavigator(Node):
             if self._pose is None or self._now() - self._pose_t > self.pose_timeout:
                 if not await self._wait_pose(POSE_WAIT):
                     raise errors.LocalizationError(
-                        f"no pose on odometry/global for {POSE_WAIT:g} s: is the localisation of {self.machine} running?"
+                        f"no pose on odometry/global for {POSE_WAIT:g} s: is the localisation "
+                        f"of {self.machine} running?"
                     )
             self.core.start(poses, yaw_at_each=kind != "navigate_through_poses")
         except errors.NavError as exc:

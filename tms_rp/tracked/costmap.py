@@ -141,7 +141,8 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
 
 
 def save_map(omap: OccupancyMap, yaml_path: str | Path) -> None:
-    """Write ``omap`` as PGM + YAML (Nav2 map_saver conventions: free 254, occupied 0, unknown 205, free_thresh 0.196 as map_saver)."""
+    """Write ``omap`` as PGM + YAML (Nav2 map_saver conventions: free 254, occupied 0, unknown 205, free_thresh 0.196 as
+    map_saver)."""
     from PIL import Image
 
     yaml_path = Path(yaml_path)

@@ -65,7 +65,8 @@ class GoalChecker:
 
 @dataclass
 class ProgressChecker:
-    """Nav2 SimpleProgressChecker: at least ``required_movement`` (m, or rad of turning) per ``movement_time_allowance`` s."""
+    """Nav2 SimpleProgressChecker: at least ``required_movement`` (m, or rad of turning) per
+    ``movement_time_allowance`` s."""
 
     required_movement: float = 0.2
     movement_time_allowance: float = 20.0
@@ -165,7 +166,8 @@ class NavigatorCore:
             ox, oy = cm.map.origin
             sx, sy = cm.map.size_m
             raise GoalOutsideMapError(
-                f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]"
+                f"pose {index} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, "
+                f"{oy + sy:.1f}]"
             )
         if cm.obstacles[cm.map.world_to_cell(x, y)]:
             raise GoalOccupiedError(f"pose {index} ({x:.2f}, {y:.2f}) lies inside an obstacle")
@@ -175,7 +177,8 @@ class NavigatorCore:
             )
         if cm.blocked[cm.map.world_to_cell(x, y)]:
             raise GoalOccupiedError(
-                f"pose {index} ({x:.2f}, {y:.2f}) lies within the inflated footprint of an obstacle (cost {cm.cost_at(x, y)})"
+                f"pose {index} ({x:.2f}, {y:.2f}) lies within the inflated footprint of an obstacle (cost "
+                f"{cm.cost_at(x, y)})"
             )
 
     def start(self, poses: list[tuple[float, float, float]], *, yaw_at_each: bool) -> None:
@@ -263,7 +266,8 @@ class NavigatorCore:
                     LOGGER.info("path blocked at (%.2f, %.2f): replanned", *blocked_at)
             if not self.progress.check(pose, now):
                 raise NavTimeoutError(
-                    f"no progress: moved less than {self.progress.required_movement} m in {self.progress.movement_time_allowance} s"
+                    f"no progress: moved less than {self.progress.required_movement} m in "
+                    f"{self.progress.movement_time_allowance} s"
                 )
             cmd = self.controller.compute(pose, dt)
             goal = self._poses[self._index]
@@ -280,7 +284,8 @@ class NavigatorCore:
                     if self._retries > self.max_retries:
                         err = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
                         raise NavTimeoutError(
-                            f"pose {self._index} not reached within tolerance after {self.max_retries} retries (error {err:.3f} m)"
+                            f"pose {self._index} not reached within tolerance after {self.max_retries} retries (error "
+                            f"{err:.3f} m)"
                         )
                     LOGGER.info("leg %d ended outside tolerance: retrying", self._index)
                     self._start_leg(pose)

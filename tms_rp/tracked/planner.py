@@ -123,7 +123,8 @@ class GridPlanner:
                 ox, oy = omap.origin
                 sx, sy = omap.size_m
                 raise GoalOutsideMapError(
-                    f"{name} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, {oy + sy:.1f}]"
+                    f"{name} ({x:.2f}, {y:.2f}) is outside the map [{ox:.1f}, {ox + sx:.1f}] x [{oy:.1f}, "
+                    f"{oy + sy:.1f}]"
                 )
         blocked = costmap.blocked
         s_cell = omap.world_to_cell(*start)
@@ -147,7 +148,8 @@ class GridPlanner:
         labels = costmap.labels
         if labels[s_cell] != labels[g_cell]:
             raise NoValidPathError(
-                f"goal ({goal[0]:.2f}, {goal[1]:.2f}) is unreachable: not connected to the start ({start[0]:.2f}, {start[1]:.2f})"
+                f"goal ({goal[0]:.2f}, {goal[1]:.2f}) is unreachable: not connected to the start ({start[0]:.2f}, "
+                f"{start[1]:.2f})"
             )
         h, w = blocked.shape
         s_flat, g_flat = s_cell[0] * w + s_cell[1], g_cell[0] * w + g_cell[1]
