@@ -74,7 +74,10 @@ def record_name_problem(record_name: str, *, required: bool) -> str | None:
     if not record_name:
         return "port 'record_name' is empty, and this subtask reads a record" if required else None
     if len(record_name) > MAX_NAME_CHARS:
-        return f"port 'record_name' is {len(record_name)} characters long, over the limit of {MAX_NAME_CHARS} (tms_ts.limits)"
+        return (
+            f"port 'record_name' is {len(record_name)} characters long, "
+            f"over the limit of {MAX_NAME_CHARS} (tms_ts.limits)"
+        )
     if record_name != record_name.strip():
         return f"port 'record_name' = {record_name!r} has leading or trailing spaces"
     if not record_name.isprintable():

@@ -185,7 +185,8 @@ build_release, build_dump, build_swing = build_angle("release"), build_angle("du
 
 
 def build_swing_align(doc: dict, record: str) -> SwingAlignPlan:
-    """The original's align subtask reads no record: the target comes from joint_states (:func:`resolve_swing_align`)."""
+    """The original's align subtask reads no record: the target comes from joint_states
+    (:func:`resolve_swing_align`)."""
     return SwingAlignPlan()
 
 

@@ -90,7 +90,8 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
             or not isinstance(entry.get("task_sequence"), str)
         ):
             raise TaskSequenceError(
-                f'/task_sequence: tasks[{i}] must be {{"task_id": <int>, "task_sequence": <XML string>}}, got {entry!r:.120}'
+                f'/task_sequence: tasks[{i}] must be {{"task_id": <int>, "task_sequence": <XML string>}}, got '
+                f'{entry!r:.120}'
             )
         problem = task_id_problem(entry["task_id"])
         if problem:
@@ -105,7 +106,8 @@ def parse_task_sequence(data: str, task_id: int = NO_TASK_ID) -> list[SequenceTa
     chosen = [e for e in entries if e.task_id == task_id]
     if not chosen:
         raise TaskSequenceError(
-            f"/task_sequence: task_id {task_id} (parameter task_id) is not in the JSON's tasks {[e.task_id for e in entries]}"
+            f"/task_sequence: task_id {task_id} (parameter task_id) is not in the JSON's tasks "
+            f"{[e.task_id for e in entries]}"
         )
     return chosen[:1]
 

@@ -230,7 +230,8 @@ class BtNode(Behaviour):
                     f"{self.describe()}: port '{port}' reads blackboard key '{value}', which is not set"
                 )
             raise TreeRuntimeError(
-                f"{self.describe()}: port '{port}' reads blackboard key '{value}', which a port declared ({found.port_type or 'untyped'}) "
+                f"{self.describe()}: port '{port}' reads blackboard key '{value}', which a port declared "
+                f"({found.port_type or 'untyped'}) "
                 'but nothing has set yet (BT.CPP 3.8: "was found, but its content was not initialized correctly")'
             )
         target = PORT_CPP_TYPES[spec.type] if spec is not None else None
