@@ -336,7 +336,8 @@ class ExperimentNode(Node):
                   f"point: {metrics['min_carrier_distance_near_loading_point_m']} m "
                   f"({metrics['min_carrier_distance_at']})", flush=True)
         print(
-            f"[experiment] {'DONE' if ok else 'FAILED'}: {metrics['cycles']} cycle(s), {metrics['soil_moved_m3']} m3 moved, "
+            f"[experiment] {'DONE' if ok else 'FAILED'}: {metrics['cycles']} cycle(s), "
+            f"{metrics['soil_moved_m3']} m3 moved, "
             f"real-time factor {metrics['real_time_factor']}, load pass {metrics['load_pass_time_s']}, report {index}",
             flush=True,
         )
