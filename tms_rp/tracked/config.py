@@ -4,7 +4,7 @@ One stack serves every tracked machine; what differs per kind is data:
 
 * the machine's description (``tms_model.fleet.load_named(name)``): footprint, ``tracks`` speed limits (and
   accelerations where the description gives them), the vessel of a carrier, the tf prefix of the name;
-* its nav file ``config/nav/<kind>_nav.yaml`` (the IC120's is ``ic120_nav.yaml``): the algorithm tuning. A
+* its nav file ``config/nav/<kind>_nav.yaml`` (the IC120 has none: the default is tuned on it): the algorithm tuning. A
   kind without one uses the documented default ``config/nav/tracked_nav.yaml``; a kind's file may hold only
   what differs from the default: each of its sections is merged key by key over the default's.
 
