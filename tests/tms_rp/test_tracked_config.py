@@ -18,7 +18,7 @@ from tms_rp.tracked.rtk import GlobalPoseRelay
 
 def test_each_kind_reads_its_nav_file_over_the_default_and_its_description() -> None:
     ic, ic1, zx = (load_nav_config(machine=n) for n in ("ic120", "ic120_1", "zx200"))
-    assert Path(ic.file).name == Path(ic1.file).name == "ic120_nav.yaml"
+    assert Path(ic.file).name == Path(ic1.file).name == "tracked_nav.yaml"  # the IC120 runs on the default
     assert (ic.footprint.length, ic.footprint.width) == (6.05, 3.37)  # config/machines/ic120.yaml
     assert ic.machine.frame("base_link") == "ic120_tf/base_link"
     assert ic1.machine.frame("base_link") == "ic120_1_tf/base_link" and ic1.machine.model_name == "ic120_1"
