@@ -13,7 +13,7 @@ entity whose callback group's ``can_execute`` returns False (:func:`park`).
 On the rclpy version these were verified against (:data:`TESTED_RCLPY`, the ``ros-jazzy-rclpy`` pin of
 constraints.txt) :data:`INTERNALS` is True and the callers take the fast path. On any other version they
 take the public path (handlers stay in the executor, the node keeps its own ``/clock`` subscription, the
-pool is not joined), and the first caller logs one warning naming the version. tests/unit/test_rclpy_compat.py
+pool is not joined), and the first caller logs one warning naming the version. tests/tms_common/test_rclpy_compat.py
 runs each workaround against the installed rclpy and fails when an upgrade changes what it relies on.
 """
 

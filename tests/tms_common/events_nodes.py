@@ -1,6 +1,6 @@
-"""Two nodes on the ``events`` executor for tests/unit/test_rclpy_compat.py, each its own process through run_node.
+"""Two nodes on the ``events`` executor for tests/tms_common/test_rclpy_compat.py, each its own process through run_node.
 
-``python -m tests.unit.events_nodes talker``: publishes ``std_msgs/Header`` on ``events_chatter`` from a 20 Hz
+``python -m tests.tms_common.events_nodes talker``: publishes ``std_msgs/Header`` on ``events_chatter`` from a 20 Hz
 timer (rclpy's default SIGINT handling). ``... listener``: counts them, prints ``heard N`` every 5th, stopped
 in context (SIGINT reaches it through ``call_soon``, not a guard condition) with an ``on_stop_requested``
 hook that asks twice; prints ``listener: destroyed with context ok`` when ``destroy_node`` runs.

@@ -39,7 +39,7 @@ def _node(context, name: str):
 def test_the_tested_version_is_the_pinned_and_installed_one():
     pins = dict(re.findall(r"(?m)^([A-Za-z0-9_.-]+)==(\S+)", (ROOT / "constraints.txt").read_text()))
     assert pins.get("ros-jazzy-rclpy") == rclpy_compat.TESTED_RCLPY, (
-        "constraints.txt pins another rclpy: re-run tests/unit/test_rclpy_compat.py against it, then update "
+        "constraints.txt pins another rclpy: re-run tests/tms_common/test_rclpy_compat.py against it, then update "
         "rclpy_compat.TESTED_RCLPY")
     assert rclpy_compat.RCLPY_VERSION == rclpy_compat.TESTED_RCLPY
     assert rclpy_compat.INTERNALS and rclpy_compat.use_internals("test")
@@ -158,8 +158,8 @@ def test_events_executor_delivers_a_timer_driven_publisher_and_stops_on_sigint(p
     stop-in-context path goes through call_soon): two run_node processes on ``events``."""
     import signal
 
-    listener = procs([sys.executable, "-m", "tests.unit.events_nodes", "listener"])
-    talker = procs([sys.executable, "-m", "tests.unit.events_nodes", "talker"])
+    listener = procs([sys.executable, "-m", "tests.tms_common.events_nodes", "listener"])
+    talker = procs([sys.executable, "-m", "tests.tms_common.events_nodes", "talker"])
     assert listener.wait_for("heard 10", 60), listener.output
     talker.signal(signal.SIGINT)
     assert talker.wait(20) == 0, talker.output

@@ -232,3 +232,9 @@ def test_the_store_is_used_through_its_public_api_only() -> None:
                         isinstance(node, ast.ImportFrom) and node.module != "tms_db" and name.startswith("tms_db.")):
                     found.append(f"{rel}:{node.lineno}: {name}")
     assert not found, "imports of tms_db's modules (use `from tms_db import ...`):\n" + "\n".join(found)
+
+
+def test_tests_mirror_the_packages() -> None:
+    """tests/<package> for every package (tests/integration, paper, project, hosts, vcan, bench cut across them)."""
+    missing = [p for p in LEVELS if not (ROOT / "tests" / p).is_dir()]
+    assert not missing, f"packages without tests/<package>: {missing}"
