@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from tms_common.config import data_root
+from tms_common.errors import ConfigError
 from tms_model.excavator.codes import FAILURE
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
@@ -119,9 +121,9 @@ def test_padded_arm_encloses_the_plants_link_boxes(kin, model: ArmCollisionModel
 
     cfg = load_collision_config(kin.machine.kind)
     for link, (half, off) in _LINK_BOX.items():
-        box = cfg.links[link]["box"]
-        assert np.all(np.abs(np.array(off) - np.array(box["offset"])) + np.array(half)
-                      <= np.array(box["size"]) / 2 + 1e-9), link
+        box = cfg.links[link].box
+        assert np.all(np.abs(np.array(off) - np.array(box.offset)) + np.array(half)
+                      <= np.array(box.size) / 2 + 1e-9), link
 
 
 def test_distance_to_a_box_is_measured_with_the_padding(kin, model: ArmCollisionModel) -> None:
@@ -218,3 +220,19 @@ def test_cartesian_segments_are_checked_on_the_tip_line(kin, cp) -> None:
     assert np.all(np.diff(tips[:, 2]) > 0) and len(qs) >= 100
     line = cp.joint_line(q_a, np.asarray(JointTarget(kin.home).q))
     assert np.max(np.abs(np.diff(line, axis=0))) <= cp.cfg.path_step_rad + 1e-9
+
+
+def test_a_bad_collision_file_names_file_line_and_key(tmp_path) -> None:
+    good = (data_root() / "config" / "tms_rp" / "zx200_collision.yaml").read_text()
+    for old, new, message in (
+        ("  bucket_end_link: {sphere: 0.1}", "  cab_link: {sphere: 0.1}", r"links.cab_link: not an arm link"),
+        ("  bucket_end_link: {sphere: 0.1}", "  bucket_end_link: {cone: 0.1}",
+         r":\d+: links.bucket_end_link.cone: unknown"),
+        ("lift_levels: 12", "lift_levels: many", r":\d+: lift_levels: expected an integer"),
+        ("detour_margin: 0.15", "detour_margin: 0.15\ndetour_margn: 0.1", r":\d+: detour_margn: unknown key"),
+    ):
+        assert old in good, old
+        bad = tmp_path / "zx200_collision.yaml"
+        bad.write_text(good.replace(old, new))
+        with pytest.raises(ConfigError, match=message):
+            load_collision_config("zx200", bad)

@@ -33,8 +33,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from tms_common.config import config_path, load_yaml
-from tms_common.errors import ConfigError
+from tms_common.config import config_path
+from tms_common.schema import load_schema, setting
 from tms_model.excavator.codes import FAILURE, PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 
@@ -202,15 +202,40 @@ class LinkShape:
 
 
 @dataclass(frozen=True)
-class CollisionConfig:
-    """``config/tms_rp/<kind>_collision.yaml``: an excavator kind's arm shapes and path checks."""
+class BoxShape:
+    """A box of full lengths ``size`` centred at ``offset`` in the link's frame [m]."""
 
-    links: dict[str, list[dict]]
-    link_padding: dict[str, float]
-    path_step_rad: float = 0.005
-    detour_margin: float = 0.15
-    lift_levels: int = 12
+    size: tuple[float, float, float] = setting(lo=0.0)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class LinkShapes:
+    """A link's shapes, their union: a box, a capsule of ``capsule`` radius from the link's pin to the next (the
+    bucket: to its tip), a sphere of ``sphere`` radius at the origin [m]."""
+
+    box: BoxShape | None = None
+    capsule: float | None = setting(None, lo=0.0)
+    sphere: float | None = setting(None, lo=0.0)
+
+
+@dataclass(frozen=True)
+class CollisionConfig:
+    """``config/tms_rp/<kind>_collision.yaml``: an excavator kind's arm shapes and path checks (read through
+    tms_common.schema: an unknown key, link or shape names the file and line)."""
+
+    links: dict[str, LinkShapes]
+    link_padding: dict[str, float] = setting(lo=0.0)
+    path_step_rad: float = setting(0.005, lo=1e-4)
+    detour_margin: float = setting(0.15, lo=0.0)
+    lift_levels: int = setting(12, lo=1)
     carry_front: tuple[float, float, float] = (-1.08, 1.9, 1.9)
+
+    def __post_init__(self) -> None:
+        for key in ("links", "link_padding"):
+            for link in getattr(self, key):
+                if link not in ARM_LINKS:
+                    raise ValueError(f"{key}.{link}: not an arm link (one of {', '.join(ARM_LINKS)})")
 
 
 def collision_config_path(kind: str) -> Path:
@@ -219,33 +244,8 @@ def collision_config_path(kind: str) -> Path:
 
 
 def load_collision_config(kind: str, path: str | Path | None = None) -> CollisionConfig:
-    """Read the collision YAML of excavator ``kind`` (or ``path``); unknown keys, links or shapes are reported
-    naming the file and key."""
-    path = Path(path) if path is not None else collision_config_path(kind)
-    data, _ = load_yaml(path)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping")
-    known = CollisionConfig.__dataclass_fields__
-    for key in data:
-        if key not in known:
-            raise ConfigError(f"{path}: unknown key {key!r} (known: {', '.join(known)})")
-    for key in ("links", "link_padding"):
-        if not isinstance(data.get(key), dict):
-            raise ConfigError(f"{path}: {key} must be a mapping link -> ...")
-        for link in data[key]:
-            if link not in ARM_LINKS:
-                raise ConfigError(f"{path}: {key}.{link}: not a ZX200 link (one of {', '.join(ARM_LINKS)})")
-    for link, shapes in data["links"].items():
-        if not isinstance(shapes, dict) or not set(shapes) <= {"box", "capsule", "sphere"}:
-            raise ConfigError(f"{path}: links.{link}: expected box / capsule / sphere, got {shapes!r}")
-    try:
-        return CollisionConfig(
-            links=data["links"], link_padding={k: float(v) for k, v in data["link_padding"].items()},
-            path_step_rad=float(data.get("path_step_rad", 0.005)), detour_margin=float(data.get("detour_margin", 0.15)),
-            lift_levels=int(data.get("lift_levels", 12)),
-            carry_front=tuple(float(v) for v in data.get("carry_front", (-1.08, 1.9, 1.9))))
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{path}: bad value: {exc}") from None
+    """Read the collision YAML of excavator ``kind`` (or ``path``); errors are ``file:line: key.path: problem``."""
+    return load_schema(CollisionConfig, Path(path) if path is not None else collision_config_path(kind))
 
 
 # ---------------------------------------------------------------------------------------------- the arm
@@ -285,12 +285,12 @@ class ArmCollisionModel:
         self._joint_ids = {link: kin.model.getJointId(j) for link, j in _LINK_JOINT.items()}
         self.shapes: list[tuple[str, Any, np.ndarray, np.ndarray, float]] = []  # link, coal shape, R, t (link), bound
         for link, spec in self.cfg.links.items():
-            if "box" in spec:
-                size = np.array(spec["box"]["size"], dtype=float)
-                off = np.array(spec["box"].get("offset", (0.0, 0.0, 0.0)), dtype=float)
+            if spec.box is not None:
+                size = np.array(spec.box.size, dtype=float)
+                off = np.array(spec.box.offset, dtype=float)
                 self.shapes.append((link, coal.Box(*size), np.eye(3), off, float(np.linalg.norm(size) / 2)))
-            if "capsule" in spec:
-                r = float(spec["capsule"])
+            if spec.capsule is not None:
+                r = spec.capsule
                 v = next_pin[link]
                 length = float(np.linalg.norm(v))
                 z = v / length
@@ -298,8 +298,8 @@ class ArmCollisionModel:
                 x = x / np.linalg.norm(x)
                 rot = np.column_stack([x, np.cross(z, x), z])  # capsule axis (z) along the pin-to-pin vector
                 self.shapes.append((link, coal.Capsule(r, length), rot, v / 2, length / 2 + r))
-            if "sphere" in spec:
-                r = float(spec["sphere"])
+            if spec.sphere is not None:
+                r = spec.sphere
                 self.shapes.append((link, coal.Sphere(r), np.eye(3), np.zeros(3), r))
         self._req = coal.DistanceRequest()
         self._res = coal.DistanceResult()
