@@ -1,4 +1,5 @@
-"""Two nodes on the ``events`` executor for tests/tms_common/test_rclpy_compat.py, each its own process through run_node.
+"""Two nodes on the ``events`` executor for tests/tms_common/test_rclpy_compat.py, each its own process
+through run_node.
 
 ``python -m tests.tms_common.events_nodes talker``: publishes ``std_msgs/Header`` on ``events_chatter`` from a 20 Hz
 timer (rclpy's default SIGINT handling). ``... listener``: counts them, prints ``heard N`` every 5th, stopped
