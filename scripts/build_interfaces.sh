@@ -10,7 +10,7 @@
 # The peers' packages keep the peer's package name (none of them is in the ROS wheels); tms_msg holds
 # only what has no peer definition.
 set -euo pipefail
-INTERFACE_PACKAGES=(tf2_msgs com3_msgs nav2_msgs tms_msg_ts tms_msg_rp tms_msg_db sensing_msgs tms_msg)
+INTERFACE_PACKAGES=(tf2_msgs com3_msgs nav2_msgs tms_msg_ts tms_msg_rp tms_msg_db tms_msg_ur sensing_msgs tms_msg)
 
 # The import each package must answer after install (one type is enough to prove the generated code loads).
 probe() {
@@ -20,7 +20,8 @@ probe() {
     nav2_msgs) echo 'from nav2_msgs.action import NavigateToPose' ;;
     tms_msg_ts) echo 'from tms_msg_ts.action import LeafNodeBase' ;;
     tms_msg_rp) echo 'from tms_msg_rp.action import TmsRpZx200ChangePose' ;;
-    tms_msg_db) echo 'from tms_msg_db.srv import TmsdbGetTask' ;;
+    tms_msg_db) echo 'from tms_msg_db.srv import TmsdbGetTask; from tms_msg_db.action import TmsdbTerrainImage' ;;
+    tms_msg_ur) echo 'from tms_msg_ur.srv import TmsdbTerrainDBPoseWriteSrv' ;;
     sensing_msgs) echo 'from sensing_msgs.msg import Flgs' ;;
     tms_msg) echo 'from tms_msg.msg import SubtaskOutcome' ;;
     *) echo "build_interfaces: no import probe for $1" >&2; return 1 ;;

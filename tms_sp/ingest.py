@@ -47,18 +47,21 @@ def _updater(subtask: str, type_name: str) -> SensingTopic:
 
 
 FLAGS_TOPIC = SensingTopic("/Flgs", "Flgs202508", by_model=False)
-#: The original's sensing topics that write the DB, one per updater node of its tms_sp_sensing. Its
-#: ``/tms_sp_follow_waypoints_deg`` and ``/tms_sp_navigate_anywhere_deg`` are left out: their messages
-#: (FollowWaypointsDeg, NavigateAnywhereDeg) carry no model_name / record_name to find a record by.
+#: The original's sensing topics that write the DB, one per updater node of its tms_sp_sensing (its newest main).
 SENSING_TOPICS: tuple[SensingTopic, ...] = (
     _updater("change_pose", "ChangePose"),
     _updater("excavate_simple", "ExcavateSimple"),
     _updater("release_simple", "ReleaseSimple"),
     _updater("release_soil", "ReleaseSoil"),
+    _updater("release_angle", "ReleaseAngle"),
     _updater("follow_waypoints", "FollowWaypoints"),
+    _updater("follow_waypoints_deg", "FollowWaypointsDeg"),
+    _updater("navigate_anywhere", "NavigateAnywhere"),
+    _updater("navigate_anywhere_deg", "NavigateAnywhereDeg"),
     _updater("navigate_through_poses", "NavigateThroughPoses"),
     _updater("navigate_through_poses_deg", "NavigateThroughPosesDeg"),
     _updater("dig_cycle", "DigCycle"),
+    _updater("dig_locations", "DigLocations"),
     _updater("release_locations", "ReleaseLocations"),
     FLAGS_TOPIC,
 )

@@ -300,7 +300,6 @@ class Com3Bridge(Node):
             "travel_speed_mode": float(msg.travel_speed_mode),  # true = turtle = DBC 1
             "working_mode_notice": float(msg.working_mode_notice),
             "yellow_led_mode": float(msg.yellow_led_mode),
-            "horn_cmd": float(msg.horn),
             "front_signal_switch_command": float(msg.front_control_mode),
             "travel_signal_switch_command": float(msg.tracks_control_mode),
         })

@@ -458,11 +458,11 @@ def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, ca
     zx_pub = ros_node.create_publisher(ExcavatorCom3MachineSetting, "/zx200/machine_setting", 10)
     wait_subscribers(ros_node, zx_pub)
     zx_msg = ExcavatorCom3MachineSetting(engine_rpm=1500.0, power_eco_mode=True, travel_speed_mode=True,
-                                         working_mode_notice=True, yellow_led_mode=2, horn=True)
+                                         working_mode_notice=True, yellow_led_mode=2, front_control_mode=2)
     t0 = time.monotonic()
     assert spin_until(
         ros_node,
-        lambda: latest(ZX, t0).get("horn_cmd") == 1 and latest(ZX, t0).get("engine_rpm") == 1500,
+        lambda: latest(ZX, t0).get("front_signal_switch_command") == 2 and latest(ZX, t0).get("engine_rpm") == 1500,
         10 * SCALE,
         (0.2, lambda: zx_pub.publish(zx_msg)),
     ), zx_bridge.output

@@ -30,7 +30,6 @@ PEER: dict[str, str] = {
         bool travel_speed_mode
         bool working_mode_notice
         uint8 yellow_led_mode
-        bool horn
         uint8 front_control_mode
         uint8 tracks_control_mode
     """,
@@ -41,26 +40,12 @@ PEER: dict[str, str] = {
         bool dump_mode
         bool eco_mode
         bool speed_mode
+        bool engine_on
+        uint8 state_number
+        uint16 engine_rpm
     """,
     "com3_msgs/msg/FluidPressureArray": """
         sensor_msgs/FluidPressure[] array
-    """,
-    "com3_msgs/msg/BulldozerCom3MachineSetting": """
-        bool track_lock
-        bool blade_lock
-        float64 engine_rpm
-        uint8 front_control_mode
-    """,
-    "com3_msgs/msg/BulldozerState": """
-        uint8 machine_mode
-        uint8 state_code
-        bool angle_left
-        bool angle_right
-        int8 decel
-        uint8 nfr
-        int8 turn
-        int8 lift
-        int8 tilt
     """,
     "com3_msgs/srv/DumpUp": """
         float64 vessel_angle
@@ -97,29 +82,6 @@ PEER: dict[str, str] = {
         ---
         int32 current_pos
     """,
-    "tms_msg_ts/action/SimpleConnectorHFSMBTH": """
-        int32 task_id
-        string model_name
-        string record_name
-        ---
-        uint8 result_code
-        ---
-    """,
-    "tms_msg_ts/action/TsDoSubtask": """
-        string arg_json
-        ---
-        string message
-        ---
-        string message
-    """,
-    "tms_msg_ts/action/TsReq": """
-        int32 task_id
-        string arg_json
-        ---
-        string message
-        ---
-        string message
-    """,
     "tms_msg_ts/srv/BlackboardParameters": """
         string port_name
         ---
@@ -130,41 +92,6 @@ PEER: dict[str, str] = {
         float64 vessel_angle
         ---
         bool result
-    """,
-    "tms_msg_ts/srv/TaskTextRecognize": """
-        string data
-        bool is_announce
-        ---
-        string data
-    """,
-    "tms_msg_ts/srv/TmsSaFindObjects": """
-        uint32[] search_furnitures_id
-        ---
-        uint32 success
-        string message
-        uint32[] object_id
-        float32[] object_x
-        float32[] object_y
-        float32[] object_z
-        uint32[] furnitures_id
-    """,
-    "tms_msg_ts/srv/TsDoTask": """
-        string arg_json
-        ---
-        string message
-    """,
-    "tms_msg_ts/srv/TsReq": """
-        uint64 rostime
-        int32 task_id
-        int32 robot_id
-        int32 object_id
-        int32 user_id
-        int32 place_id
-        int32 priority
-        string data
-        ---
-        int32 result
-        float32[] val
     """,
     # ---- irvs/ros2_tms_for_construction, tms_msg/tms_msg_rp
     "tms_msg_rp/msg/TmsRpErrorCodes": """
@@ -202,8 +129,7 @@ PEER: dict[str, str] = {
     """,
     # ---- irvs/ros2_tms_for_construction, tms_msg/tms_msg_db
     "tms_msg_db/srv/TmsdbGetTask": """
-        string type
-        int32 id
+        int32 task_id
         ---
         string task
     """,
@@ -213,6 +139,178 @@ PEER: dict[str, str] = {
         ---
         string[] keys
         string[] values
+    """,
+    "tms_msg_db/msg/Tmsdb": """
+        string time
+        string type
+        int32 id
+        string name
+        string msg
+    """,
+    "tms_msg_db/msg/TmsdbQuery": """
+        string time
+        string type
+        string writemode
+        int32 id
+        string record_name
+        string vehicle_name
+        string msg
+        geometry_msgs/PoseStamped add_path
+        sensor_msgs/JointState add_joints
+    """,
+    "tms_msg_db/msg/TmsdbGridFS": """
+        string time
+        string type
+        int32 id
+        string filename
+        sensor_msgs/PointCloud2 pointcloud2
+    """,
+    "tms_msg_db/msg/TmsdbCollision": """
+        string model_name
+        string type
+        string filepath
+    """,
+    "tms_msg_db/msg/TmsdbTerrainImageMsg": """
+        string time
+        string type
+        int32 id
+        string filename
+        float32 terrainheight
+        float32 terrainwidth
+        float32 terrainelevation
+        float32 offset_x
+        float32 offset_y
+        sensor_msgs/Image image
+    """,
+    "tms_msg_db/msg/ColoredMesh": """
+        shape_msgs/MeshTriangle[] triangles
+        geometry_msgs/Point[] vertices
+        std_msgs/ColorRGBA[] vertex_colors
+        geometry_msgs/Vector3[] vertex_normals
+    """,
+    "tms_msg_db/srv/TmsdbGetData": """
+        string type
+        int32 id
+        bool latest_only
+        string flgorparam
+        string name
+        string[] recordnames
+        ---
+        tms_msg_db/Tmsdb[] tmsdbs
+    """,
+    "tms_msg_db/srv/TmsdbGridFSGetData": """
+        string type
+        int32 id
+        string filename
+        ---
+        bool result
+    """,
+    "tms_msg_db/srv/TerrainStaticSrv": """
+        string type
+        ---
+        sensor_msgs/PointCloud2 pointcloud2
+    """,
+    "tms_msg_db/srv/DemSrv": """
+        string type
+        ---
+        nav_msgs/OccupancyGrid occupancy_grid
+    """,
+    "tms_msg_db/srv/ColoredMeshSrv": """
+        string type
+        ---
+        tms_msg_db/ColoredMesh colored_mesh
+    """,
+    "tms_msg_db/srv/TmsdbTerrainImageSrv": """
+        string type
+        int32 id
+        string filename
+        ---
+        string time
+        string type
+        int32 id
+        string filename
+        float32 terrainheight
+        float32 terrainwidth
+        float32 terrainelevation
+        float32 offset_x
+        float32 offset_y
+        sensor_msgs/Image image
+    """,
+    "tms_msg_db/action/TmsdbGridFS": """
+        string type
+        int32 id
+        string filename
+        bool latest_only
+        ---
+        bool result
+        string msg
+        sensor_msgs/PointCloud2 pointcloud2
+        ---
+        bool result
+        string msg
+        sensor_msgs/PointCloud2 pointcloud2
+    """,
+    "tms_msg_db/action/TmsdbTerrainImage": """
+        string type
+        int32 id
+        string filename
+        bool latest_only
+        ---
+        bool result
+        string msg
+        string time
+        string type
+        string filename
+        float32 terrainheight
+        float32 terrainwidth
+        float32 terrainelevation
+        float32 offset_x
+        float32 offset_y
+        sensor_msgs/Image image
+        ---
+        bool result
+        string msg
+        string time
+        string type
+        int32 id
+        string filename
+        float32 terrainheight
+        float32 terrainwidth
+        float32 terrainelevation
+        float32 offset_x
+        float32 offset_y
+        sensor_msgs/Image image
+    """,
+    # ---- irvs/ros2_tms_for_construction, tms_msg/tms_msg_ur
+    "tms_msg_ur/msg/Demo202412": """
+        string task_sequence1
+        string task_sequence2
+    """,
+    "tms_msg_ur/msg/TmsdbPoseWriteMsg": """
+        string type
+        string machine_name
+        string machine_kinds
+        string record_name
+        string record_type
+        string description
+        string write_target
+        geometry_msgs/PoseStamped pose
+        sensor_msgs/JointState joints
+    """,
+    "tms_msg_ur/srv/TmsdbTerrainDBPoseWriteSrv": """
+        string type
+        string machine_name
+        string machine_kinds
+        string record_name
+        string record_type
+        string description
+        string write_target
+        geometry_msgs/PoseStamped pose
+        sensor_msgs/JointState joints
+        ---
+        string id
+        string log_data
+        bool written
     """,
     # ---- irvs/ros2_tms_for_construction, tms_ts/sensing_msgs
     "sensing_msgs/msg/ChangePose": """
@@ -240,22 +338,19 @@ PEER: dict[str, str] = {
     "sensing_msgs/msg/Flgs": """
         string record_name
         bool loaded_flg
-        bool continue_flg
-        bool sensing_arrival_flg
-        bool sensing_loaded_flg
-        bool sensing_check_mound_flg
         string[] keep_val_flgs
     """,
     "sensing_msgs/msg/Flgs202506": """
         string record_name
         bool continue_flg
+        bool standby_excavation_flg
+        bool standby_release_flg
         string[] keep_val_flgs
     """,
     "sensing_msgs/msg/Flgs202508": """
         string record_name
         bool continue_flg
         bool sensing_arrival_flg
-        bool sensing_loaded_flg
         string[] keep_val_flgs
     """,
     "sensing_msgs/msg/FollowWaypoints": """
@@ -270,12 +365,16 @@ PEER: dict[str, str] = {
         float64[] qw
     """,
     "sensing_msgs/msg/FollowWaypointsDeg": """
+        string model_name
+        string record_name
         float64[] x
         float64[] y
         float64[] z
         float64[] yaw
     """,
     "sensing_msgs/msg/NavigateAnywhereDeg": """
+        string model_name
+        string record_name
         float64 x
         float64 y
         float64 z
@@ -324,26 +423,6 @@ PEER: dict[str, str] = {
         string record_name
         int32 sample_parameter_value
     """,
-    "sensing_msgs/msg/TargetPoint": """
-        float64 x
-        float64 y
-        float64 z
-        float64 theta_w
-    """,
-    "sensing_msgs/msg/TargetPointArray": """
-        TargetPoint[] points
-    """,
-    "sensing_msgs/msg/Zx120EndEffector": """
-        string[] keep_pos
-        int32 parameter_id
-        int32 x
-        int32 y
-        int32 z
-        int32 qx
-        int32 qy
-        int32 qz
-        int32 qw
-    """,
     "sensing_msgs/msg/Zx200CollisionObjectsIc120": """
         string model_name
         string record_name
@@ -362,6 +441,27 @@ PEER: dict[str, str] = {
         float32 y
         float32 z
         float32 theta_w
+    """,
+    "sensing_msgs/msg/DigLocations": """
+        string model_name
+        string record_name
+        string num
+    """,
+    "sensing_msgs/msg/NavigateAnywhere": """
+        string model_name
+        string record_name
+        float64 x
+        float64 y
+        float64 z
+        float64 qx
+        float64 qy
+        float64 qz
+        float64 qw
+    """,
+    "sensing_msgs/msg/ReleaseAngle": """
+        string model_name
+        string record_name
+        float64 target_angle
     """,
     # ---- ros-navigation/navigation2 (jazzy), nav2_msgs
     "nav2_msgs/msg/MissedWaypoint": """
@@ -537,7 +637,9 @@ def test_table_covers_every_type_the_peer_packages_hold():
 
     root = Path(__file__).resolve().parents[2]
     found = set()
-    for package in ("com3_msgs", "tms_msg_ts", "tms_msg_rp", "tms_msg_db", "sensing_msgs", "nav2_msgs", "tf2_msgs"):
+    for package in (
+        "com3_msgs", "tms_msg_ts", "tms_msg_rp", "tms_msg_db", "tms_msg_ur", "sensing_msgs", "nav2_msgs", "tf2_msgs"
+    ):
         for kind in ("msg", "srv", "action"):
             for path in (root / package / kind).glob(f"*.{kind}"):
                 found.add(f"{package}/{kind}/{path.stem}")

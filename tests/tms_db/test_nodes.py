@@ -30,8 +30,6 @@ def test_reader_and_writer_nodes(procs, ros_node, tmp_path) -> None:
     from tms_msg.srv import SetParameter
     from tms_msg_db.srv import TmsdbGetParameter, TmsdbGetTask
 
-    # the original's clients set task_id; the stored TmsdbGetTask.srv names the field id: the type says which
-    id_field = "task_id" if "task_id" in TmsdbGetTask.Request.get_fields_and_field_types() else "id"
 
     db = tmp_path / "db"
     with open_store(path=db) as store:
@@ -45,9 +43,9 @@ def test_reader_and_writer_nodes(procs, ros_node, tmp_path) -> None:
     set_param = ros_node.create_client(SetParameter, "/tms_db_writer/set_parameter")
 
 
-    reply = _call(ros_node, get_task, TmsdbGetTask.Request(**{id_field: 5}))
+    reply = _call(ros_node, get_task, TmsdbGetTask.Request(task_id=5))
     assert 'record_name="initial_pose"' in reply.task and reply.task.startswith("<root"), reader.output
-    reply = _call(ros_node, get_task, TmsdbGetTask.Request(**{id_field: 6}))
+    reply = _call(ros_node, get_task, TmsdbGetTask.Request(task_id=6))
     assert reply.task == ""  # the original's answer for an unknown id
     assert reader.wait_for("task_id 6: no such task", timeout=10), reader.output
 

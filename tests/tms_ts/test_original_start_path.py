@@ -23,13 +23,11 @@ def _gui_button(system, task_ids: list[int]) -> str:
     """The original GUI's message for ``task_ids``, read through the DB reader as it reads them."""
     from tms_msg_db.srv import TmsdbGetTask
 
-    # the GUI sets task_id; the stored TmsdbGetTask.srv names the field id: the type says which
-    id_field = "task_id" if "task_id" in TmsdbGetTask.Request.get_fields_and_field_types() else "id"
     client = system.node.create_client(TmsdbGetTask, "/tms_db_reader_task")
     assert client.wait_for_service(timeout_sec=30), "/tms_db_reader_task not available"
     tasks = []
     for task_id in task_ids:
-        future = client.call_async(TmsdbGetTask.Request(**{id_field: task_id}))
+        future = client.call_async(TmsdbGetTask.Request(task_id=task_id))
         system.wait(future.done, 30, f"TmsdbGetTask({task_id})")
         assert future.result().task, f"task {task_id} empty from /tms_db_reader_task"
         tasks.append({"task_id": task_id, "task_sequence": future.result().task})

@@ -233,12 +233,12 @@ def test_range_constants_match_the_generated_interfaces():
     from std_msgs.msg import Int32
 
     from tms_msg.msg import TaskIds, TaskState
-    from tms_msg_ts.action import TsReq
+    from tms_msg_db.srv import TmsdbGetTask
 
     assert TaskIds.get_fields_and_field_types()["task_ids"] == "sequence<int32>"
     assert TaskState.get_fields_and_field_types()["task_id"] == "int32"
     assert Int32.get_fields_and_field_types()["data"] == "int32"
-    assert TsReq.Goal.get_fields_and_field_types()["task_id"] == "int32"
+    assert TmsdbGetTask.Request.get_fields_and_field_types()["task_id"] == "int32"
     assert (INT32_MIN, INT32_MAX) == (-(2**31), 2**31 - 1) and TASK_ID_RANGE == (1, INT32_MAX)
 
 

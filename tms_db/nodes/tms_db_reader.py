@@ -26,12 +26,9 @@ from tms_db.errors import StoreError
 from tms_db.nodes.common import declare_and_open
 from tms_msg_db.srv import TmsdbGetParameter, TmsdbGetTask
 
-__all__ = ["main", "TmsDbReader", "TASK_SERVICE", "TASK_ID_FIELD", "PARAMETER_SERVICE", "parameter_pairs"]
+__all__ = ["main", "TmsDbReader", "TASK_SERVICE", "PARAMETER_SERVICE", "parameter_pairs"]
 
 TASK_SERVICE = "/tms_db_reader_task"
-#: The request field holding the task id. The original's clients (its GUI button) and its reader set
-#: ``task_id``; the stored tms_msg_db/srv/TmsdbGetTask.srv names it ``id``: whichever the built type has.
-TASK_ID_FIELD = "task_id" if "task_id" in TmsdbGetTask.Request.get_fields_and_field_types() else "id"
 PARAMETER_SERVICE = "/tms_db_reader_parameter"
 #: Fields the original's parameter reader leaves out of its answer.
 _NOT_ANSWERED = frozenset({"_id", "model_name", "type", "record_name"})
@@ -62,7 +59,7 @@ class TmsDbReader(Node):
 
     def _get_task(self, request, response):
         try:
-            response.task = str(self.store.get_task(getattr(request, TASK_ID_FIELD)).get("task_sequence", ""))
+            response.task = str(self.store.get_task(request.task_id).get("task_sequence", ""))
         except StoreError as exc:
             self.get_logger().warning(f"{TASK_SERVICE}: {exc}")
             response.task = ""
