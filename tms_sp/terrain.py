@@ -33,6 +33,7 @@ from __future__ import annotations
 import io
 import math
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +48,7 @@ __all__ = [
     "HEIGHT_SCALE", "MAX_RELIEF", "STATIC_ID", "DYNAMIC_ID", "TerrainError", "Heightmap", "heightmap_from_points",
     "read_las", "encode_png", "decode_png", "heightmap_from_png", "heightmap_from_file", "file_fields",
     "heightmap_from_blob", "store_heightmap", "latest_heightmap", "dem", "colored_mesh", "cloud_xyzrgb",
-    "image_8bit", "MeshArrays",
+    "image_8bit", "MeshArrays", "DynamicTerrain", "now_text",
 ]
 
 HEIGHT_SCALE = 4096.0  # pixel units per metre above z_min (las2heightmap: ``iz = z * 4096``)
@@ -190,19 +191,20 @@ def heightmap_from_png(data: bytes, *, x_min: float, y_min: float, size_x: float
 
 
 def heightmap_from_file(path: str | Path, *, cell: float, x_min: float = 0.0, y_min: float = 0.0,
-                        size_x: float = 0.0, size_y: float = 0.0, z_min: float = 0.0) -> Heightmap:
-    """A LAS/LAZ survey (by suffix ``.las`` / ``.laz``; rasterised at ``cell``) or a 16-bit PNG heightmap (placed by
-    the other arguments; ``size_x`` / ``size_y`` 0 = ``cell`` per pixel)."""
+                        size_x: float = 0.0, size_y: float = 0.0, z_min: float | None = None) -> Heightmap:
+    """A LAS/LAZ survey (by suffix ``.las`` / ``.laz``; rasterised at ``cell``; ``z_min`` None = its lowest point) or
+    a 16-bit PNG heightmap (placed by the other arguments; ``size_x`` / ``size_y`` 0 = ``cell`` per pixel; ``z_min``
+    None = 0)."""
     p = Path(path)
     if p.suffix.lower() in (".las", ".laz"):
-        return heightmap_from_points(read_las(p), cell=cell, source=str(p))
+        return heightmap_from_points(read_las(p), cell=cell, z_min=z_min, source=str(p))
     if not p.is_file():
         raise TerrainError(f"{p}: no such heightmap file")
     data = p.read_bytes()
     units = decode_png(data, source=str(p))
     rows, cols = units.shape
     return heightmap_from_png(data, x_min=x_min, y_min=y_min, size_x=size_x or cols * cell,
-                              size_y=size_y or rows * cell, z_min=z_min, source=str(p))
+                              size_y=size_y or rows * cell, z_min=0.0 if z_min is None else z_min, source=str(p))
 
 
 # ---- the GridFS file document -------------------------------------------------------------------------------------
@@ -325,3 +327,42 @@ def cloud_xyzrgb(hm: Heightmap) -> tuple[bytes, int]:
     rgb = _height_colors(zc).reshape(-1, 3)
     arr = np.column_stack([xc.ravel(), yc.ravel(), zc.ravel(), rgb]).astype("<f4")
     return arr.tobytes(), int(arr.shape[0])
+
+
+# ---- the dynamic terrain from sensing scans ----------------------------------------------------------------------
+def now_text() -> str:
+    """The original's ``time`` field: local wall time, ISO 8601 with microseconds (sorts as it reads)."""
+    return datetime.now().isoformat(timespec="microseconds")
+
+
+@dataclass
+class DynamicTerrain:
+    """Scans of the site (map-frame points) -> ``type: dynamic`` heightmaps in the store, the newest ``keep`` kept.
+
+    ``box`` is the region rasterised at ``cell``; ``z_min`` is pixel 0 (the site's ground, so that static and
+    dynamic heightmaps of one site compare pixel for pixel when the static one was made with the same ``z_min``)."""
+
+    store: Any
+    box: GridSpec
+    cell: float
+    z_min: float
+    keep: int = 20
+    filename: str = "dynamic_terrain.png"
+    ident: int = DYNAMIC_ID
+    written: int = 0
+
+    def __post_init__(self) -> None:
+        if self.keep < 1:
+            raise TerrainError(f"dynamic terrain: keep must be >= 1, got {self.keep}")
+        if not self.cell > 0:
+            raise TerrainError(f"dynamic terrain: cell must be > 0, got {self.cell}")
+
+    def on_points(self, points: np.ndarray, *, time: str | None = None, source: str = "scan") -> str:
+        """Rasterise one scan and store it; the new file id. TerrainError naming ``source`` for an unusable scan
+        (nothing stored then)."""
+        hm = heightmap_from_points(points, cell=self.cell, box=self.box, z_min=self.z_min, source=source,
+                                   min_coverage=0.2)
+        file_id = store_heightmap(self.store, hm, kind="dynamic", ident=self.ident, filename=self.filename,
+                                  time=time or now_text(), keep=self.keep)
+        self.written += 1
+        return file_id
