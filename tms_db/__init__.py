@@ -12,10 +12,10 @@ node's ``db_uri`` / ``db_path`` parameters and the store they name), :class:`Sto
 """
 
 from tms_db.backend import open_store
-from tms_db.errors import RecordNotFound, StoreError, ValidationError
+from tms_db.errors import BlobTooLarge, RecordNotFound, StoreError, ValidationError
 from tms_db.nodes.common import declare_and_open
 from tms_db.schema import normalise_task_xml
 from tms_db.store import DATABASE, Store, default_path
 
-__all__ = ["open_store", "declare_and_open", "Store", "StoreError", "RecordNotFound", "ValidationError",
+__all__ = ["open_store", "declare_and_open", "Store", "StoreError", "RecordNotFound", "ValidationError", "BlobTooLarge",
            "normalise_task_xml", "DATABASE", "default_path"]

@@ -24,8 +24,19 @@ def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **
     """Open the store: ``mongodb://`` / ``mongodb+srv://`` URIs via pymongo, otherwise the embedded store.
 
     ``path`` (embedded only) is a directory, created if missing; default :func:`tms_db.store.default_path`.
-    ``options`` go to the backend (``database=`` for MongoDB, default ``rostmsdb`` or the URI's database).
+    ``options`` go to the backend (``database=`` for MongoDB, default ``rostmsdb`` or the URI's database), except
+    ``max_blob_bytes`` (both backends: the largest blob ``put_blob`` stores, default 64 MiB).
     """
+    max_blob = options.pop("max_blob_bytes", None)
+    if max_blob is not None and (isinstance(max_blob, bool) or not isinstance(max_blob, int) or max_blob < 0):
+        raise StoreError(f"max_blob_bytes {max_blob!r}: must be an integer >= 0")
+    store = _open(uri, path, options)
+    if max_blob is not None:
+        store.max_blob_bytes = max_blob
+    return store
+
+
+def _open(uri: str | None, path: str | os.PathLike | None, options: dict[str, Any]) -> Store:
     if uri:
         if uri.startswith(("mongodb://", "mongodb+srv://")):
             return MongoStore(uri, **options)

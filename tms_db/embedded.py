@@ -36,6 +36,7 @@ from typing import Any, TypeVar
 
 from bson import Binary, Decimal128, ObjectId
 
+from tms_db.data import BLOB_CHUNK_BYTES, BLOB_COLLECTIONS, INSERTED_FIELD, blob_sort_key
 from tms_db.errors import RecordNotFound, StorageFullError, StorageReadOnlyError, StoreError, ValidationError
 from tms_db.schema import is_number, validate_fields, validate_parameter
 from tms_db.store import (
@@ -84,7 +85,24 @@ CREATE UNIQUE INDEX IF NOT EXISTS task_by_id ON documents (task_id) WHERE collec
 CREATE UNIQUE INDEX IF NOT EXISTS parameter_by_key ON documents (record_name, model_name)
     WHERE collection = 'parameter';
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS data_by_id_time ON documents
+    (collection, json_extract(body, '$.id'), json_extract(body, '$.time') DESC)
+    WHERE collection NOT IN ('task', 'parameter');
+CREATE TABLE IF NOT EXISTS blob_files (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    oid TEXT NOT NULL UNIQUE,
+    body TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS blob_chunks (
+    oid TEXT NOT NULL UNIQUE,
+    file_oid TEXT NOT NULL,
+    n INTEGER NOT NULL,
+    data BLOB NOT NULL,
+    PRIMARY KEY (file_oid, n)
+);
 """
+#: The condition every query on data collections repeats word for word, so SQLite can use the partial index.
+_DATA = "collection NOT IN ('task', 'parameter')"
 
 
 def _default(value: Any) -> Any:
@@ -488,11 +506,136 @@ class EmbeddedStore(Store):
 
         self._transaction(delete)
 
+    # ---- environment data ------------------------------------------------------------------------
+    # Data collections are rows of ``documents`` like task and parameter; the partial expression index
+    # ``data_by_id_time`` on (collection, id, time) serves the original reader's query.
+    def _insert_data(self, doc: dict) -> str:
+        oid = str(ObjectId())
+        body = encode_body(doc)
+        self._transaction(lambda conn: conn.execute(
+            "INSERT INTO documents (collection, oid, body) VALUES (?, ?, ?)", (doc["type"], oid, body)))
+        return oid
+
+    def _find_data(self, kind: str, ident: int, name: str, latest_only: bool) -> list[dict]:
+        if ident > _INT64_MAX or ident < -_INT64_MAX - 1:
+            return []
+        sql = (f"SELECT oid, body FROM documents WHERE collection=? AND {_DATA} AND json_extract(body, '$.id')=? "
+               "AND json_type(body, '$.id') IN ('integer', 'real')")
+        args: tuple = (kind, ident)
+        if name:
+            sql += " AND json_extract(body, '$.name')=? AND json_type(body, '$.name')='text'"
+            args += (name,)
+        if latest_only:
+            sql += " ORDER BY json_extract(body, '$.time') DESC, seq DESC LIMIT 1"
+        else:
+            sql += " ORDER BY json_extract(body, '$.time'), seq"
+        return [decode_body(*row) for row in self._query(sql, args)]
+
+    def _data_types(self) -> list[str]:
+        return [r[0] for r in self._query(f"SELECT DISTINCT collection FROM documents WHERE {_DATA} "
+                                          "ORDER BY collection")]
+
+    def _prune_data(self, kind: str, cutoff: _dt.datetime | None, max_count: int | None) -> int:
+        def prune(conn: sqlite3.Connection) -> int:
+            removed = 0
+            if cutoff is not None:  # the stamp is {"$date": ISO text}, which orders as the time it names
+                stamp = _default(cutoff)["$date"]
+                removed += conn.execute(
+                    f"DELETE FROM documents WHERE collection=? AND {_DATA} AND "
+                    f"json_extract(body, '$.{INSERTED_FIELD}.\"$date\"') < ?", (kind, stamp)).rowcount
+            if max_count is not None:
+                removed += conn.execute(
+                    f"DELETE FROM documents WHERE seq IN (SELECT seq FROM documents WHERE collection=? AND {_DATA} "
+                    "ORDER BY json_extract(body, '$.time') DESC, seq DESC LIMIT -1 OFFSET ?)", (kind, max_count)
+                ).rowcount
+            return removed
+
+        return self._transaction(prune)
+
+    # ---- blobs -----------------------------------------------------------------------------------
+    # GridFS's layout in two tables: ``blob_files`` (the file document) and ``blob_chunks`` (255 kB pieces), both
+    # written in one transaction, so a crash mid-put leaves no half file.
+    @staticmethod
+    def _write_chunk(conn: sqlite3.Connection, file_oid: str, n: int, data: bytes) -> None:
+        conn.execute("INSERT INTO blob_chunks (oid, file_oid, n, data) VALUES (?, ?, ?, ?)",
+                     (str(ObjectId()), file_oid, n, data))
+
+    def _put_blob(self, data: bytes, filename: str | None, fields: dict) -> str:
+        oid = str(ObjectId())
+        doc: dict[str, Any] = {"chunkSize": BLOB_CHUNK_BYTES, "length": len(data), "uploadDate": now_utc()}
+        if filename is not None:
+            doc["filename"] = filename
+        doc.update(fields)
+        body = encode_body(doc)
+
+        def put(conn: sqlite3.Connection) -> None:
+            conn.execute("INSERT INTO blob_files (oid, body) VALUES (?, ?)", (oid, body))
+            for n, start in enumerate(range(0, len(data), BLOB_CHUNK_BYTES)):
+                self._write_chunk(conn, oid, n, data[start:start + BLOB_CHUNK_BYTES])
+
+        self._transaction(put)
+        return oid
+
+    def _find_blobs(self, flt: dict) -> list[dict]:
+        found = []
+        for seq, oid, body in self._query("SELECT seq, oid, body FROM blob_files"):
+            doc = decode_body(oid, body)
+            if all(values_equal(doc.get(k, _MISSING), v) for k, v in flt.items()):
+                found.append((blob_sort_key(doc, seq), doc))
+        found.sort(key=lambda item: item[0])
+        return [{**doc, "_id": str(doc["_id"])} for _key, doc in found]
+
+    def _get_blob(self, oid: Any, file_id: str) -> bytes:
+        def read(conn: sqlite3.Connection) -> bytes:  # one transaction: the file and its chunks from one snapshot
+            row = conn.execute("SELECT body FROM blob_files WHERE oid=?", (str(oid),)).fetchone()
+            if row is None:
+                raise RecordNotFound(f"blob {file_id!r}: no such blob")
+            length = json.loads(row[0]).get("length")
+            chunks = conn.execute("SELECT n, data FROM blob_chunks WHERE file_oid=? ORDER BY n", (str(oid),)).fetchall()
+            if [n for n, _ in chunks] != list(range(len(chunks))):
+                raise StoreError(f"blob {file_id!r}: chunks missing (have {[n for n, _ in chunks]})")
+            data = b"".join(d for _, d in chunks)
+            if length != len(data):
+                raise StoreError(f"blob {file_id!r}: {len(data)} bytes in its chunks, its file document says {length}")
+            return data
+
+        with self._lock:
+            conn = self._connect()
+            try:
+                conn.execute("BEGIN")
+                try:
+                    return read(conn)
+                finally:
+                    conn.execute("COMMIT")
+            except sqlite3.Error as exc:
+                raise self._storage_error(exc) from None
+
+    def _delete_blob(self, oid: Any, file_id: str) -> None:
+        def delete(conn: sqlite3.Connection) -> None:
+            if conn.execute("DELETE FROM blob_files WHERE oid=?", (str(oid),)).rowcount == 0:
+                raise RecordNotFound(f"blob {file_id!r}: no such blob")
+            conn.execute("DELETE FROM blob_chunks WHERE file_oid=?", (str(oid),))
+
+        self._transaction(delete)
+
     # ---- collections -----------------------------------------------------------------------------
     def collection_names(self) -> list[str]:
-        return [r[0] for r in self._query("SELECT DISTINCT collection FROM documents ORDER BY collection")]
+        names = [r[0] for r in self._query("SELECT DISTINCT collection FROM documents ORDER BY collection")]
+        if self._query("SELECT 1 FROM blob_files LIMIT 1"):  # blobs dump as GridFS's two collections, as mongodump
+            names += [n for n in BLOB_COLLECTIONS if self._query(
+                f"SELECT 1 FROM {'blob_files' if n == 'fs.files' else 'blob_chunks'} LIMIT 1")]
+        return sorted(names)
 
     def export_collection(self, name: str) -> Iterator[dict]:
+        if name == "fs.files":
+            for oid, body in self._query("SELECT oid, body FROM blob_files ORDER BY seq"):
+                yield decode_body(oid, body)
+            return
+        if name == "fs.chunks":
+            for oid, file_oid, n, data in self._query(
+                    "SELECT oid, file_oid, n, data FROM blob_chunks ORDER BY file_oid, n"):
+                yield {"_id": ObjectId(oid), "files_id": ObjectId(file_oid), "n": n, "data": bytes(data)}
+            return
         for row in self._query("SELECT oid, body FROM documents WHERE collection=? ORDER BY seq", (name,)):
             yield decode_body(*row)
 
@@ -509,23 +652,46 @@ class EmbeddedStore(Store):
                 raise ValidationError(f"_id {oid!r} is not an ObjectId (the embedded store keys documents by ObjectId)")
             encode_body(doc)  # TypeError / ValueError: a value JSON cannot keep (a set, NaN)
 
-        results = [ImportResult(rejected=prevalidate_import(name, docs, storable)) for name, docs in batches]
+        def storable_chunk(doc: Mapping[str, Any]) -> None:
+            storable(doc)
+            if not isinstance(doc.get("files_id"), ObjectId):
+                raise ValidationError(f"field 'files_id' {doc.get('files_id')!r} is not an ObjectId")
+            if isinstance(doc.get("n"), bool) or not isinstance(doc.get("n"), int) or doc["n"] < 0:
+                raise ValidationError(f"field 'n' {doc.get('n')!r} is not a chunk number")
+            if not isinstance(doc.get("data"), bytes):
+                raise ValidationError(f"field 'data' is not binary data ({type(doc.get('data')).__name__})")
+
+        results = [ImportResult(rejected=prevalidate_import(name, docs, storable_chunk if name == "fs.chunks"
+                                                            else storable)) for name, docs in batches]
         if any(r.rejected for r in results):
             return results
 
         def put(conn: sqlite3.Connection) -> list[ImportResult]:
             if drop:
                 for name in dict.fromkeys(n for n, _ in batches):
-                    conn.execute("DELETE FROM documents WHERE collection=?", (name,))
+                    if name in BLOB_COLLECTIONS:  # GridFS's collections are the blob tables
+                        conn.execute(f"DELETE FROM {'blob_files' if name == 'fs.files' else 'blob_chunks'}")
+                    else:
+                        conn.execute("DELETE FROM documents WHERE collection=?", (name,))
             for (name, docs), result in zip(batches, results, strict=True):
                 for i, doc in enumerate(docs):
                     tid, model, record = _key_columns(name, doc)
                     try:
-                        conn.execute("INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
-                                     "VALUES (?, ?, ?, ?, ?, ?)",
-                                     (name, str(doc.get("_id") or ObjectId()), tid, model, record, encode_body(doc)))
+                        if name == "fs.files":
+                            conn.execute("INSERT INTO blob_files (oid, body) VALUES (?, ?)",
+                                         (str(doc.get("_id") or ObjectId()), encode_body(doc)))
+                        elif name == "fs.chunks":
+                            conn.execute("INSERT INTO blob_chunks (oid, file_oid, n, data) VALUES (?, ?, ?, ?)",
+                                         (str(doc.get("_id") or ObjectId()), str(doc["files_id"]), doc["n"],
+                                          doc["data"]))
+                        else:
+                            conn.execute(
+                                "INSERT INTO documents (collection, oid, task_id, model_name, record_name, body) "
+                                "VALUES (?, ?, ?, ?, ?, ?)",
+                                (name, str(doc.get("_id") or ObjectId()), tid, model, record, encode_body(doc)))
                     except sqlite3.IntegrityError:
-                        key = f"task_id {tid}" if name == "task" else f"record {record!r} of model {model!r}"
+                        key = (f"task_id {tid}" if name == "task" else f"record {record!r} of model {model!r}"
+                               if name == "parameter" else "chunk (files_id, n)" if name == "fs.chunks" else "key")
                         result.rejected.append(Rejected(i, document_label(doc), f"_id or {key} already in the store "
                                                                                 "or in another input"))
                     else:
@@ -562,6 +728,23 @@ class EmbeddedStore(Store):
             if _key_columns(collection, doc) != (tid, model, record):
                 problems.append(f"{collection} row {seq} (_id {oid}): index columns do not match the document")
             problems += check_document(collection, doc)
+        problems += self._check_blobs()
+        return problems
+
+    def _check_blobs(self) -> list[str]:
+        """Every blob's chunks are numbered 0.. without gaps and add up to its length; no chunk without its file."""
+        problems = []
+        chunks: dict[str, list[tuple[int, int]]] = {}
+        for file_oid, n, size in self._query("SELECT file_oid, n, length(data) FROM blob_chunks ORDER BY file_oid, n"):
+            chunks.setdefault(file_oid, []).append((n, size))
+        for oid, body in self._query("SELECT oid, body FROM blob_files ORDER BY seq"):
+            have = chunks.pop(oid, [])
+            length = json.loads(body).get("length")
+            if [n for n, _ in have] != list(range(len(have))) or sum(size for _, size in have) != length:
+                problems.append(f"fs.files (_id {oid}): length {length!r}, chunks {[n for n, _ in have]} holding "
+                                f"{sum(size for _, size in have)} bytes")
+        problems += [f"fs.chunks: {len(have)} chunk(s) of file {oid}, which does not exist"
+                     for oid, have in chunks.items()]
         return problems
 
     def checkpoint_in_background(self, period_s: float) -> None:

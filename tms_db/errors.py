@@ -16,6 +16,7 @@ __all__ = [
     "InputRefusedError",
     "StorageFullError",
     "StorageReadOnlyError",
+    "BlobTooLarge",
 ]
 
 
@@ -49,3 +50,13 @@ class StorageFullError(StoreError):
 
 class StorageReadOnlyError(StoreError):
     """The store's directory (or file system) cannot be written."""
+
+
+class BlobTooLarge(ValidationError):  # noqa: N818 - name fixed by the cross-package contract
+    """A blob over the store's ``max_blob_bytes``; the message names filename, size and limit; nothing stored."""
+
+    def __init__(self, message: str, *, filename: str | None, size: int, limit: int) -> None:
+        super().__init__(message)
+        self.filename = filename
+        self.size = size
+        self.limit = limit

@@ -14,6 +14,7 @@ from typing import Any
 import bson
 import bson.errors
 
+from tms_db.data import INSERTED_FIELD, RESERVED_TYPES
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
 from tms_db.schema import is_number, validate_fields, validate_parameter
 from tms_db.store import (
@@ -242,6 +243,73 @@ class MongoStore(Store):
         current = self._current(record_name, model_name)
         if current is None or self._params.delete_one({"_id": current["_id"]}).deleted_count == 0:
             raise self._not_found(record_name, model_name)
+
+    # ---- environment data (the original's tms_db_writer / tms_db_reader) --------------------------
+    def _insert_data(self, doc: dict) -> str:
+        collection = self._db[doc["type"]]
+        if doc["type"] not in self._time_indexed:  # the original's set_time_index, once per collection and process
+            collection.create_index([("time", self._pymongo.DESCENDING)])
+            self._time_indexed.add(doc["type"])
+        return str(collection.insert_one(doc).inserted_id)
+
+    @property
+    def _time_indexed(self) -> set[str]:
+        if not hasattr(self, "_time_indexed_set"):
+            self._time_indexed_set: set[str] = set()
+        return self._time_indexed_set
+
+    def _find_data(self, kind: str, ident: int, name: str, latest_only: bool) -> list[dict]:
+        flt: dict[str, Any] = {"id": ident, "name": name} if name else {"id": ident}
+        order = -1 if latest_only else 1
+        cursor = self._db[kind].find(flt).sort([("time", order), ("_id", order)])
+        return list(cursor.limit(1) if latest_only else cursor)
+
+    def _data_types(self) -> list[str]:
+        return sorted(n for n in self._db.list_collection_names()
+                      if n not in RESERVED_TYPES and not n.startswith("system.")
+                      and self._db[n].estimated_document_count() > 0)
+
+    def _prune_data(self, kind: str, cutoff: Any, max_count: int | None) -> int:
+        collection = self._db[kind]
+        removed = 0
+        if cutoff is not None:
+            removed += collection.delete_many({INSERTED_FIELD: {"$lt": cutoff}}).deleted_count
+        if max_count is not None:
+            old = [d["_id"] for d in collection.find({}, {"_id": 1}).sort([("time", -1), ("_id", -1)]).skip(max_count)]
+            if old:
+                removed += collection.delete_many({"_id": {"$in": old}}).deleted_count
+        return removed
+
+    # ---- blobs: pymongo's GridFS on this database -------------------------------------------------
+    @property
+    def _fs(self) -> Any:
+        import gridfs
+
+        if not hasattr(self, "_gridfs"):
+            self._gridfs = gridfs.GridFS(self._db)
+        return self._gridfs
+
+    def _put_blob(self, data: bytes, filename: str | None, fields: dict) -> str:
+        if filename is not None:
+            fields = {"filename": filename, **fields}
+        return str(self._fs.put(data, **fields))  # GridFS removes the chunks it wrote when a put fails
+
+    def _find_blobs(self, flt: dict) -> list[dict]:
+        files = self._db["fs.files"].find(flt).sort([("time", 1), ("uploadDate", 1), ("_id", 1)])
+        return [{**{k: v for k, v in d.items() if k != "md5"}, "_id": str(d["_id"])} for d in files]
+
+    def _get_blob(self, oid: Any, file_id: str) -> bytes:
+        import gridfs.errors
+
+        try:
+            return self._fs.get(oid).read()
+        except gridfs.errors.NoFile:
+            raise RecordNotFound(f"blob {file_id!r}: no such blob") from None
+
+    def _delete_blob(self, oid: Any, file_id: str) -> None:
+        if self._db["fs.files"].find_one({"_id": oid}, {"_id": 1}) is None:
+            raise RecordNotFound(f"blob {file_id!r}: no such blob")
+        self._fs.delete(oid)
 
     # ---- collections -----------------------------------------------------------------------------
     def collection_names(self) -> list[str]:

@@ -19,7 +19,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tms_db.errors import StoreError, ValidationError
+from bson import ObjectId
+from bson.errors import InvalidId
+
+from tms_db.data import (
+    DEFAULT_MAX_BLOB_BYTES,
+    check_blob,
+    check_blob_filter,
+    check_data_document,
+    check_data_query,
+    check_prune,
+)
+from tms_db.errors import RecordNotFound, StoreError, ValidationError
 from tms_db.schema import (
     check_document_size,
     detect_model_names,
@@ -31,7 +42,7 @@ from tms_db.schema import (
 __all__ = [
     "Store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS",
     "ImportResult", "Rejected", "check_import_document", "document_label", "prevalidate_import", "import_key",
-    "parameter_key", "check_document",
+    "parameter_key", "check_document", "parse_file_id",
 ]
 
 DATABASE = "rostmsdb"
@@ -218,6 +229,16 @@ def check_document(collection: str, doc: Mapping[str, Any]) -> list[str]:
     return []
 
 
+def parse_file_id(file_id: Any) -> Any:
+    """The ObjectId a blob's id text names; RecordNotFound naming it when it cannot name one."""
+    if isinstance(file_id, ObjectId):
+        return file_id
+    try:
+        return ObjectId(file_id)
+    except (InvalidId, TypeError):
+        raise RecordNotFound(f"blob {file_id!r}: no such blob (not a file id)") from None
+
+
 class Store(abc.ABC):
     """Tasks, parameters and the global blackboard; one implementation per backend.
 
@@ -226,6 +247,8 @@ class Store(abc.ABC):
     """
 
     database: str = DATABASE
+    #: [bytes] the largest blob ``put_blob`` stores (an ``open_store`` option)
+    max_blob_bytes: int = DEFAULT_MAX_BLOB_BYTES
 
     # ---- tasks ------------------------------------------------------------------------------------
     @abc.abstractmethod
@@ -346,6 +369,90 @@ class Store(abc.ABC):
     @abc.abstractmethod
     def _put_parameters(self, checked: list[dict]) -> int:
         """Write documents :meth:`_checked_parameter` returned, all in one transaction; the number written."""
+
+    # ---- environment data (the original's Tmsdb collections) -----------------------------------------
+    def insert_data(self, doc: Mapping[str, Any]) -> str:
+        """Store a ``Tmsdb``-shaped document ``{time, type, id, name, msg, ...}`` in the collection named by its
+        ``type``, as the original's ``tms_db_writer`` (``msg`` already decoded from JSON), with a descending index on
+        ``time``; the store adds :data:`tms_db.data.INSERTED_FIELD` (UTC datetime) for :meth:`prune_data`. Refused
+        with ValidationError naming the field (:func:`tms_db.data.check_data_document`). Returns the new ``_id``."""
+        return self._insert_data(check_data_document(doc, now_utc()))
+
+    def find_data(self, type: str, id: int, *, name: str = "", latest_only: bool = False) -> list[dict]:
+        """As the original's ``tms_db_reader``: documents of collection ``type`` with ``{"id": id}`` (and
+        ``{"name": name}`` when ``name`` is not empty), ascending by ``time`` (then insertion order);
+        ``latest_only``: ``[the newest]`` or ``[]``. An unknown collection gives ``[]``."""
+        check_data_query(type, id, name)
+        return self._find_data(type, id, name, latest_only)
+
+    def data_types(self) -> list[str]:
+        """The data collections that hold documents (not ``task``, ``parameter``, GridFS's), sorted."""
+        return self._data_types()
+
+    def prune_data(self, type: str, *, max_age_s: float | None = None, max_count: int | None = None) -> int:
+        """Retention: remove documents of collection ``type`` stored more than ``max_age_s`` ago (by the store's
+        insertion stamp; documents without one, e.g. restored from the original's dumps, are kept) and those
+        beyond the newest ``max_count`` by ``time``; in one transaction (embedded). Returns how many were
+        removed."""
+        check_prune(type, max_age_s, max_count)
+        cutoff = None if max_age_s is None else now_utc() - _dt.timedelta(seconds=max_age_s)
+        return self._prune_data(type, cutoff, max_count)
+
+    # ---- binary objects (GridFS) --------------------------------------------------------------------
+    def put_blob(self, data: bytes, *, filename: str | None, **fields: Any) -> str:
+        """Store ``data`` as ``gridfs.GridFS.put(data, filename=..., **fields)``: ``fields`` (the original: time,
+        type, id) become top-level fields of the file document. Over :attr:`max_blob_bytes`:
+        :class:`tms_db.errors.BlobTooLarge` naming filename, size and limit, nothing stored. All or nothing.
+        Returns the file id as text."""
+        check_blob(data, filename, fields, self.max_blob_bytes)
+        return self._put_blob(bytes(data), filename, dict(fields))
+
+    def find_blobs(self, filter: Mapping[str, Any] | None = None, *, latest_only: bool = False) -> list[dict]:
+        """File documents (no data): ``_id`` (text), ``filename``, ``length``, ``chunkSize``, ``uploadDate`` and the
+        fields given to :meth:`put_blob`, matching ``filter`` (equality on top-level fields), ascending by ``time``
+        then ``uploadDate``; ``latest_only``: ``[the newest]`` or ``[]``."""
+        found = self._find_blobs(check_blob_filter(filter))
+        return found[-1:] if latest_only else found
+
+    def get_blob(self, file_id: str) -> bytes:
+        """The bytes of blob ``file_id``; RecordNotFound naming the id."""
+        return self._get_blob(parse_file_id(file_id), file_id)
+
+    def delete_blob(self, file_id: str) -> None:
+        """Delete blob ``file_id`` (file document and chunks together); RecordNotFound naming the id."""
+        self._delete_blob(parse_file_id(file_id), file_id)
+
+    @abc.abstractmethod
+    def _insert_data(self, doc: dict) -> str:
+        """Insert a checked data document; its ``_id`` as text."""
+
+    @abc.abstractmethod
+    def _find_data(self, kind: str, ident: int, name: str, latest_only: bool) -> list[dict]:
+        """:meth:`find_data` after its checks."""
+
+    @abc.abstractmethod
+    def _data_types(self) -> list[str]:
+        """:meth:`data_types`."""
+
+    @abc.abstractmethod
+    def _prune_data(self, kind: str, cutoff: _dt.datetime | None, max_count: int | None) -> int:
+        """Delete documents stamped before ``cutoff`` and those past the newest ``max_count``; how many."""
+
+    @abc.abstractmethod
+    def _put_blob(self, data: bytes, filename: str | None, fields: dict) -> str:
+        """Store checked blob arguments, all or nothing; the file id as text."""
+
+    @abc.abstractmethod
+    def _find_blobs(self, flt: dict) -> list[dict]:
+        """Every file document matching ``flt``, in :meth:`find_blobs`' order."""
+
+    @abc.abstractmethod
+    def _get_blob(self, oid: Any, file_id: str) -> bytes:
+        """Bytes of blob ``oid``; RecordNotFound naming ``file_id``."""
+
+    @abc.abstractmethod
+    def _delete_blob(self, oid: Any, file_id: str) -> None:
+        """Delete blob ``oid``; RecordNotFound naming ``file_id``."""
 
     @abc.abstractmethod
     def check(self) -> list[str]:
