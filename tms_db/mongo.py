@@ -8,6 +8,8 @@ first; that check is advisory under concurrent writers, the update itself is ato
 
 from __future__ import annotations
 
+import functools
+import inspect
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
@@ -16,7 +18,7 @@ import bson.errors
 
 from tms_db.data import INSERTED_FIELD, RESERVED_TYPES
 from tms_db.errors import RecordNotFound, StoreError, ValidationError
-from tms_db.schema import is_number, validate_fields, validate_parameter
+from tms_db.schema import is_number, is_waypoint_record, validate_fields, validate_parameter
 from tms_db.store import (
     DATABASE,
     ImportResult,
@@ -30,19 +32,83 @@ from tms_db.store import (
     document_label,
     now_utc,
     param_filter_text,
+    parameter_key,
     prevalidate_import,
 )
 
 #: MongoDB's code for "Transaction numbers are only allowed on a replica set member or mongos" (a standalone server)
 _NO_TRANSACTIONS = 20
+#: [s] how long a call waits for a server to answer before StoreError (serverSelectionTimeoutMS, connectTimeoutMS)
+SERVER_TIMEOUT_S = 5.0
+#: [s] the longest a server that is connected may take over one reply (socketTimeoutMS): a hung server, a big restore
+SOCKET_TIMEOUT_S = 30.0
 
-__all__ = ["MongoStore"]
+__all__ = ["MongoStore", "SERVER_TIMEOUT_S", "SOCKET_TIMEOUT_S"]
 
 
+def _redacted(uri: str) -> str:
+    """``uri`` without its password (``mongodb://user:***@host``): messages and logs name the server, never it."""
+    scheme, sep, rest = uri.partition("://")
+    userinfo, at, hosts = rest.partition("@")
+    if not at or ":" not in userinfo.split("/")[0]:
+        return uri
+    return f"{scheme}{sep}{userinfo.split(':', 1)[0]}:***@{hosts}"
+
+
+def _reason(exc: Exception, timeout_s: float | None) -> str:
+    """A pymongo error in one line: a server gone or not answering says so and after how long."""
+    text = " ".join(str(exc).split())
+    if len(text) > 300:
+        text = text[:300] + " ..."
+    kind = type(exc).__name__
+    if kind in ("ServerSelectionTimeoutError", "AutoReconnect", "ConnectionFailure", "NetworkTimeout",
+                "ExecutionTimeout", "WaitQueueTimeoutError") or "Timeout" in kind:
+        after = f" within {timeout_s:g} s" if timeout_s and kind == "ServerSelectionTimeoutError" else ""
+        return f"the server did not answer{after} ({kind}: {text})"
+    return f"{kind}: {text}"
+
+
+def _call_text(name: str, args: tuple, kwargs: dict) -> str:
+    """``get_task(5)``: what a failed call was doing, each argument shortened (imports carry whole documents)."""
+    def short(value: Any) -> str:
+        text = repr(value)
+        return text if len(text) <= 60 else text[:57] + "..."
+    return f"{name}({', '.join([*map(short, args), *(f'{k}={short(v)}' for k, v in kwargs.items())])})"
+
+
+def _reporting_server_errors(cls: type) -> type:
+    """Wrap every public method of ``cls`` so a pymongo error (server gone, refused command) leaves it as a
+    :class:`StoreError` naming the server, the call and the cause, never as a raw pymongo traceback."""
+    def guard(name: str, method: Any) -> Any:
+        if inspect.isgeneratorfunction(method):
+            @functools.wraps(method)
+            def generator(self: MongoStore, *args: Any, **kwargs: Any) -> Any:
+                try:
+                    yield from method(self, *args, **kwargs)
+                except self._errors.PyMongoError as exc:
+                    raise self._server_error(_call_text(name, args, kwargs), exc) from None
+            return generator
+
+        @functools.wraps(method)
+        def call(self: MongoStore, *args: Any, **kwargs: Any) -> Any:
+            try:
+                return method(self, *args, **kwargs)
+            except self._errors.PyMongoError as exc:
+                raise self._server_error(_call_text(name, args, kwargs), exc) from None
+        return call
+
+    for name in dir(cls):
+        method = getattr(cls, name)
+        if not name.startswith("_") and inspect.isfunction(method) and name not in ("close",):
+            setattr(cls, name, guard(name, method))
+    return cls
+
+
+@_reporting_server_errors
 class MongoStore(Store):
     """Store in MongoDB database ``database`` (default: the URI's database, else ``rostmsdb``)."""
 
-    def __init__(self, uri: str, *, database: str | None = None, timeout_s: float = 5.0) -> None:
+    def __init__(self, uri: str, *, database: str | None = None, timeout_s: float = SERVER_TIMEOUT_S) -> None:
         # the client is loaded only for a mongodb:// URI: the embedded store needs just bson
         import pymongo
         from pymongo import uri_parser
@@ -53,26 +119,44 @@ class MongoStore(Store):
         try:
             parsed = uri_parser.parse_uri(uri)
         except (PyMongoError, ValueError) as exc:
-            raise StoreError(f"db uri {uri!r}: {exc}") from None
+            raise StoreError(f"db uri {_redacted(uri)!r}: {exc}") from None
         self.database = database or parsed.get("database") or DATABASE
         self.uri = uri
+        # bounded waits (the URI's own options win): a server that is gone is reported after timeout_s, not never
+        given = {k.lower() for k in parsed.get("options", {})}
+        bounds = {k: int(v * 1000) for k, v in (("serverSelectionTimeoutMS", timeout_s),
+                                                 ("connectTimeoutMS", timeout_s),
+                                                 ("socketTimeoutMS", SOCKET_TIMEOUT_S)) if k.lower() not in given}
+        self.timeout_s = timeout_s
         try:
-            self._client = pymongo.MongoClient(uri, tz_aware=True, serverSelectionTimeoutMS=int(timeout_s * 1000))
+            self._client = pymongo.MongoClient(uri, tz_aware=True, **bounds)
+            self.timeout_s = self._client.options.server_selection_timeout  # the URI's, when it gives one
             self._client.admin.command("ping")
         except PyMongoError as exc:
-            raise StoreError(f"MongoDB at {uri!r} unreachable: {exc}") from None
+            raise StoreError(f"MongoDB {_redacted(uri)}: opening the store failed: {_reason(exc, self.timeout_s)}"
+                             ) from None
         self._db = self._client[self.database]
         self._tasks = self._db["task"]
         self._params = self._db["parameter"]
-        for coll, keys, name in ((self._tasks, [("task_id", 1)], "task_by_id"),
-                                 (self._params, [("record_name", 1), ("model_name", 1)], "parameter_by_key")):
+        # Unique keys, as the embedded store's: without them two concurrent upserts of one task id or record both
+        # insert, and a restore of a record already stored adds a second one. Partial: the original's older
+        # records have no record_name (keyed by parameter_id), and any number of those may exist.
+        for coll, keys, name, partial in (
+            (self._tasks, [("task_id", 1)], "task_by_id", {"task_id": {"$type": "number"}}),
+            (self._params, [("record_name", 1), ("model_name", 1)], "parameter_by_key",
+             {"record_name": {"$type": "string"}}),
+        ):
             try:
-                coll.create_index(keys, name=name)
-            except PyMongoError:  # an existing database with other indexes still works
+                coll.create_index(keys, name=name, unique=True, partialFilterExpression=partial)
+            except PyMongoError:  # an existing database with duplicate keys or other indexes still works
                 pass
 
-    def __repr__(self) -> str:
-        return f"MongoStore({self.uri!r}, database={self.database!r})"
+    def __repr__(self) -> str:  # nodes log it: never the URI's password
+        return f"MongoStore({_redacted(self.uri)!r}, database={self.database!r})"
+
+    def _server_error(self, what: str, exc: Exception) -> StoreError:
+        return StoreError(f"MongoDB {_redacted(self.uri)} (database {self.database!r}): {what} failed: "
+                          f"{_reason(exc, self.timeout_s)}")
 
     # ---- tasks -----------------------------------------------------------------------------------
     def get_task(self, task_id: int) -> dict:
@@ -155,15 +239,25 @@ class MongoStore(Store):
         merged = dict(current or self._filter(record_name, model_name))
         merged.update(fields)
         merged["timestamps"] = now_utc()
+        stamp = self._stamp(merged)
         validate_parameter(merged)
         doc = self._params.find_one_and_update(
             {"_id": current["_id"]} if current else self._filter(record_name, model_name),
-            {"$set": dict(fields), "$currentDate": {"timestamps": True}},
+            {"$set": dict(fields), **stamp},
             upsert=upsert, return_document=self._pymongo.ReturnDocument.AFTER,
         )
         if doc is None:
             raise self._not_found(record_name, model_name, fields)
         return doc
+
+    @staticmethod
+    def _stamp(merged: dict) -> dict:
+        """The update's ``timestamps`` part: ``$currentDate``, except in a waypoint record, which the original's
+        array reader reads field by field as arrays (a Date there throws): no stamp, an old one removed."""
+        if is_waypoint_record(merged):
+            merged.pop("timestamps", None)
+            return {"$unset": {"timestamps": ""}}
+        return {"$currentDate": {"timestamps": True}}
 
     def compare_and_set(self, record_name: str, field: str, expected: Any, new: Any, *,
                         model_name: str | None = None) -> bool:
@@ -173,10 +267,11 @@ class MongoStore(Store):
         if current is None:
             raise self._not_found(record_name, model_name, (field,))
         merged = {**current, field: new}
+        stamp = self._stamp(merged)
         validate_parameter(merged)
         res = self._params.update_one(
             {"_id": current["_id"], field: {"$eq": expected}},
-            {"$set": {field: new}, "$currentDate": {"timestamps": True}},
+            {"$set": {field: new}, **stamp},
         )
         return res.modified_count == 1 or res.matched_count == 1
 
@@ -329,6 +424,10 @@ class MongoStore(Store):
                 raise ValidationError(str(exc)) from None
 
         results = [ImportResult(rejected=prevalidate_import(name, docs, storable)) for name, docs in batches]
+        if not any(r.rejected for r in results) and not drop:
+            # every key already stored, as the embedded store reports them (the unique indexes stop at the first)
+            for result, (name, docs) in zip(results, batches, strict=True):
+                result.rejected += self._already_stored(name, docs)
         if any(r.rejected for r in results):
             return results
         failed: list[tuple[int, Exception]] = []
@@ -382,6 +481,36 @@ class MongoStore(Store):
                 results[k].not_written = list(range(index + 1, len(docs)))
                 stopped = True
         return results
+
+    def _already_stored(self, name: str, docs: list[Any]) -> list[Rejected]:
+        """The documents of an import whose ``_id``, ``task_id`` or (model_name, record_name) collection ``name``
+        already holds (a missing model_name counts as "", as in the embedded store)."""
+        coll = self._db[name]
+
+        def taken(field: str, values: list[Any], key: Any) -> set:
+            found: set = set()
+            for k in range(0, len(values), 5000):  # a query stays far below the 16 MiB BSON limit
+                found |= {key(d) for d in coll.find({field: {"$in": values[k:k + 5000]}}, {field: 1, "model_name": 1})}
+            return found
+
+        ids = taken("_id", [d["_id"] for d in docs if "_id" in d], lambda d: str(d["_id"]))
+        tids = taken("task_id", [d["task_id"] for d in docs if "task_id" in d], lambda d: d.get("task_id")) \
+            if name == "task" else set()
+        keys = taken("record_name", sorted({k[1] for d in docs if (k := parameter_key(d))}), parameter_key) \
+            if name == "parameter" else set()
+        rejected = []
+        for i, doc in enumerate(docs):
+            if "_id" in doc and str(doc["_id"]) in ids:
+                what = f"_id {doc['_id']}"
+            elif name == "task" and doc.get("task_id") in tids:
+                what = f"task_id {doc['task_id']!r}"
+            elif name == "parameter" and parameter_key(doc) in keys:
+                model, record = parameter_key(doc)
+                what = f"record {record!r} of model {model!r}"
+            else:
+                continue
+            rejected.append(Rejected(i, document_label(doc), f"{what} already in the store"))
+        return rejected
 
     def check(self) -> list[str]:
         problems = []
