@@ -15,9 +15,12 @@ encoding, which this module reproduces:
   heightmap client packs as 0.
 
 Cells: ``cell`` [m] square (the original: the image size, 2048 x 2048, fixes the cell). A cell's height is the
-median of its points; a cell no point hit takes its nearest measured cell's height (las2heightmap takes the median
-of the 7 x 7 pixels around, 0 when none; nearest fills any gap), then a 3 x 3 median filter removes isolated
-spikes (:func:`tms_sp.heightgrid.rasterize`, which sensing uses too).
+median of its points; a cell no point hit is interpolated linearly between the measured cells around it (outside
+their hull: the nearest measured cell), then a 3 x 3 median filter removes isolated spikes. las2heightmap instead
+gives every pixel the median of the points in the 7 x 7 pixels around it, 0 when there is none: a smoothing whose
+width is set by the pixel size. Interpolation keeps a slope a slope where a scan is sparser than the cells (the
+plant scans one point per 0.2 m; sensing's nearest fill, :func:`tms_sp.heightgrid.rasterize`, makes 6 cm steps
+on the mound's slopes at 0.1 m cells).
 
 From a heightmap: the DEM as ``nav_msgs/OccupancyGrid`` data the original's ``DemSrv`` returns (cells linearly
 scaled to -128..127 between the lowest and highest cell, its ``cv2.normalize(dem, -128, 127, NORM_MINMAX)``;
@@ -40,9 +43,12 @@ from typing import Any
 import laspy
 import numpy as np
 from PIL import Image, UnidentifiedImageError
+from scipy import ndimage
+from scipy.interpolate import griddata
+from scipy.stats import binned_statistic_2d
 
 from tms_sp.errors import SensingError
-from tms_sp.heightgrid import GridSpec, rasterize
+from tms_sp.heightgrid import GridSpec
 
 __all__ = [
     "HEIGHT_SCALE", "MAX_RELIEF", "STATIC_ID", "DYNAMIC_ID", "TerrainError", "Heightmap", "heightmap_from_points",
@@ -138,14 +144,42 @@ def heightmap_from_points(points: np.ndarray, *, cell: float, box: GridSpec | No
         box = GridSpec(x0, y0, x0 + nx * cell, y0 + ny * cell, cell)
     else:
         box = GridSpec(box.x_min, box.y_min, box.x_max, box.y_max, cell)
-    try:
-        grid = rasterize(pts, box, sensor=source, min_coverage=min_coverage)
-    except SensingError as exc:
-        raise TerrainError(str(exc)) from None
+    z = _rasterize(pts, box, source, min_coverage)
     base = float(pts[:, 2].min()) if z_min is None else float(z_min)
-    return Heightmap(z=np.flipud(grid.z).copy(), x_min=box.x_min, y_min=box.y_min,
+    return Heightmap(z=np.flipud(z).copy(), x_min=box.x_min, y_min=box.y_min,
                      x_max=box.x_min + box.nx * box.resolution, y_max=box.y_min + box.ny * box.resolution,
                      z_min=base)
+
+
+def _rasterize(pts: np.ndarray, box: GridSpec, source: str, min_coverage: float) -> np.ndarray:
+    """``z[row, col]`` (row 0 = south): cell medians, empty cells linearly interpolated between the measured cells'
+    centres (nearest outside their hull), then a 3 x 3 median filter against isolated spikes."""
+    inside = ((pts[:, 0] >= box.x_min) & (pts[:, 0] < box.x_max) & (pts[:, 1] >= box.y_min)
+              & (pts[:, 1] < box.y_max))
+    pts = pts[inside]
+    if len(pts) == 0:
+        raise TerrainError(f"{source}: no point inside x [{box.x_min:.2f}, {box.x_max:.2f}] "
+                           f"y [{box.y_min:.2f}, {box.y_max:.2f}]")
+    x_edges = box.x_min + np.arange(box.nx + 1) * box.resolution
+    y_edges = box.y_min + np.arange(box.ny + 1) * box.resolution
+    z = np.asarray(binned_statistic_2d(pts[:, 1], pts[:, 0], pts[:, 2], statistic="median",
+                                       bins=[y_edges, x_edges]).statistic, dtype=float)
+    measured = np.isfinite(z)
+    coverage = float(measured.mean())
+    if coverage < min_coverage:
+        raise TerrainError(f"{source}: only {coverage:.0%} of {z.size} cells measured ({len(pts)} points), "
+                           f"need {min_coverage:.0%}")
+    if not measured.all():
+        xc, yc = box.centres()
+        known = np.column_stack([xc[measured], yc[measured]])
+        holes = np.column_stack([xc[~measured], yc[~measured]])
+        filled = (griddata(known, z[measured], holes, method="linear") if measured.sum() >= 3
+                  else np.full(len(holes), np.nan))
+        gaps = ~np.isfinite(filled)
+        if gaps.any():  # outside the measured cells' hull (or too few for triangles): the nearest
+            filled[gaps] = griddata(known, z[measured], holes[gaps], method="nearest")
+        z[~measured] = filled
+    return ndimage.median_filter(z, size=3, mode="nearest")
 
 
 # ---- heightmap <-> 16-bit PNG -------------------------------------------------------------------------------------

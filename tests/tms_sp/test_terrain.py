@@ -64,13 +64,24 @@ def test_las_to_heightmap_png_round_trip_within_the_encoding(tmp_path):
     assert back.height_at(105.05, 203.05) == pytest.approx(_surface(105.05, 203.05), abs=0.02)
 
 
-def test_laz_and_array_inputs_and_empty_cells_filled_from_the_nearest(tmp_path):
+def test_array_input_and_empty_cells_interpolated():
     pts = _mound_points(np.random.default_rng(2), spacing=0.1)
-    # a hole of 1 m x 1 m with no point: filled from the nearest measured cells
-    hole = (np.abs(pts[:, 0] - 101.5) < 0.5) & (np.abs(pts[:, 1] - 201.5) < 0.5)
-    hm = tr.heightmap_from_points(pts[~hole], cell=0.2)
+    # holes with no point: a 1 m square on flat ground, a 0.6 m one on the 0.5 m/m slope; interpolated
+    flat = (np.abs(pts[:, 0] - 100.8) < 0.5) & (np.abs(pts[:, 1] - 200.8) < 0.5)
+    slope = (np.abs(pts[:, 0] - 105.5) < 0.3) & (np.abs(pts[:, 1] - 203.0) < 0.3)
+    hm = tr.heightmap_from_points(pts[~(flat | slope)], cell=0.2)
     assert np.isfinite(hm.z).all()
-    assert hm.height_at(101.5, 201.5) == pytest.approx(10.0, abs=1e-6)
+    assert hm.height_at(100.8, 200.8) == pytest.approx(10.0, abs=1e-6)
+    xc, yc = hm.centres()
+    row, col = int((hm.y_max - 203.0) / hm.cell_y), int((105.5 - hm.x_min) / hm.cell_x)
+    # (the hole's edge cells hold part of their points only: a slope x a few cm of bias)
+    assert hm.z[row, col] == pytest.approx(_surface(xc[row, col], yc[row, col]), abs=0.05)
+    # sparse points (one per 0.2 m) on 0.1 m cells: the slope stays a slope, no steps of nearest filling
+    sparse = _mound_points(np.random.default_rng(3), spacing=0.2)
+    # one cell in four holds a point (at its centre), the others are interpolated: the slope without steps
+    fine = tr.heightmap_from_points(sparse, cell=0.1, box=GridSpec(99.95, 199.95, 107.95, 205.95, 0.1))
+    xc, yc = fine.centres()
+    assert np.percentile(np.abs(fine.z - _surface(xc, yc)), 90) < 0.02
     box = GridSpec(102.0, 201.0, 106.0, 205.0, 0.2)
     sub = tr.heightmap_from_points(pts, cell=0.25, box=box, z_min=9.0)
     assert (sub.cols, sub.rows, sub.z_min) == (16, 16, 9.0)
