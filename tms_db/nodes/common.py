@@ -11,10 +11,10 @@ from tms_db.store import Store
 __all__ = ["declare_and_open"]
 
 
-def declare_and_open(node: Any) -> Store:
-    """Declare ``db_uri`` / ``db_path`` on ``node`` and open the store they name."""
+def declare_and_open(node: Any, **options: Any) -> Store:
+    """Declare ``db_uri`` / ``db_path`` on ``node`` and open the store they name (``options``: :func:`open_store`'s)."""
     uri = declare_startup(node, "db_uri", "").value
     path = declare_startup(node, "db_path", "").value
-    store = open_store(uri=uri or None, path=path or None)
+    store = open_store(uri=uri or None, path=path or None, **options)
     node.get_logger().info(f"document store: {store!r}")
     return store

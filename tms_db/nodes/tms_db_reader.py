@@ -9,7 +9,11 @@
   value as Python's ``str`` gives it (``True``, ``1.5``). An empty ``model_name`` looks the record up by
   ``record_name`` alone (a global-blackboard group). A missing record answers empty lists.
 
-Both names are absolute, as the original's nodes (``tms_db_reader_task``, ``tms_db_reader_parameter``)
+* ``/tms_db_reader`` (tms_msg_db/srv/TmsdbGetData), the original's ``tms_db_reader``: the documents of collection
+  ``type`` with ``id`` (and ``name`` when not empty) as ``Tmsdb`` (``msg`` their JSON), ascending by ``time``, or
+  only the newest when ``latest_only`` (:func:`tms_db.boundary.read_data`); a refused request is logged, empty.
+
+The names are absolute, as the original's nodes (``tms_db_reader_task``, ``tms_db_reader_parameter``)
 serve them from their own names. What is not found is logged naming the task id / record. Parameters:
 ``db_uri``, ``db_path``.
 """
@@ -22,9 +26,11 @@ from typing import Any
 from rclpy.node import Node
 
 from tms_common.node import run_node
+from tms_db.boundary import DATA_SERVICE, read_data
 from tms_db.errors import StoreError
 from tms_db.nodes.common import declare_and_open
-from tms_msg_db.srv import TmsdbGetParameter, TmsdbGetTask
+from tms_msg_db.msg import Tmsdb
+from tms_msg_db.srv import TmsdbGetData, TmsdbGetParameter, TmsdbGetTask
 
 __all__ = ["main", "TmsDbReader", "TASK_SERVICE", "PARAMETER_SERVICE", "parameter_pairs"]
 
@@ -55,7 +61,8 @@ class TmsDbReader(Node):
         self.store = declare_and_open(self)
         self.create_service(TmsdbGetTask, TASK_SERVICE, self._get_task)
         self.create_service(TmsdbGetParameter, PARAMETER_SERVICE, self._get_parameter)
-        self.get_logger().info(f"tms_db_reader ready: {TASK_SERVICE}, {PARAMETER_SERVICE}")
+        self.create_service(TmsdbGetData, DATA_SERVICE, self._get_data)
+        self.get_logger().info(f"tms_db_reader ready: {TASK_SERVICE}, {PARAMETER_SERVICE}, {DATA_SERVICE}")
 
     def _get_task(self, request, response):
         try:
@@ -72,6 +79,15 @@ class TmsDbReader(Node):
             self.get_logger().warning(f"{PARAMETER_SERVICE}: {exc}")
             return response
         response.keys, response.values = parameter_pairs(doc)
+        return response
+
+    def _get_data(self, request, response):
+        try:
+            found = read_data(self.store, request.type, request.id, request.name, request.latest_only)
+        except StoreError as exc:
+            self.get_logger().warning(f"{DATA_SERVICE}: {exc}")
+            return response
+        response.tmsdbs = [Tmsdb(**fields) for fields in found]
         return response
 
     def destroy_node(self) -> None:
