@@ -21,9 +21,10 @@ import subprocess
 import sys
 import tempfile
 import time
+import uuid
 from pathlib import Path
 
-__all__ = ["MongoServer", "MongoServerError", "SERVER_EXE"]
+__all__ = ["MongoServer", "MongoServerError", "SERVER_EXE", "with_database", "unique_database"]
 
 #: the server's console script, next to this interpreter (the venv's)
 SERVER_EXE = Path(sys.executable).with_name("secantusd-py")
@@ -32,6 +33,19 @@ _START_TIMEOUT_S = 60.0
 
 class MongoServerError(RuntimeError):
     """The test server could not be started (message: the command and the tail of its output)."""
+
+
+def unique_database() -> str:
+    """A database name no other test uses (each test gets its own, dropped afterwards)."""
+    return f"tms_test_{uuid.uuid4().hex[:12]}"
+
+
+def with_database(uri: str, database: str) -> str:
+    """``uri`` naming ``database`` (replacing the one it names), its options kept: the URI a worker process opens."""
+    head, sep, query = uri.partition("?")
+    scheme, _, rest = head.partition("://")
+    hosts = rest.split("/", 1)[0]
+    return f"{scheme}://{hosts}/{database}" + (f"?{query}" if sep else "")
 
 
 def _free_port() -> int:

@@ -7,24 +7,19 @@ a fresh database per test, dropped afterwards.
 
 from __future__ import annotations
 
-import uuid
 from collections.abc import Iterator
 
 import pytest
 
+from tests.mongo_server import unique_database
 from tms_db import Store, open_store
-
-
-def mongo_database() -> str:
-    """A database name no other test uses."""
-    return f"tms_test_{uuid.uuid4().hex[:12]}"
 
 
 @pytest.fixture(params=["embedded", "mongodb"])
 def store(request: pytest.FixtureRequest, tmp_path) -> Iterator[Store]:
     if request.param == "mongodb":
         uri = request.getfixturevalue("mongodb_uri")
-        name = mongo_database()
+        name = unique_database()
         s = open_store(uri=uri, database=name)
         yield s
         s._client.drop_database(name)  # test cleanup

@@ -1,4 +1,6 @@
-"""Worker processes that hammer one embedded store: used by the concurrency/durability tests and the bench.
+"""Worker processes that hammer one store: used by the concurrency/durability tests and the bench.
+
+``--path`` is an embedded store's directory or a ``mongodb://`` URI naming its database (:func:`open_at`).
 
 ``python -m tests.tms_db.hammer writer --path DB --wid 0 --seconds 5 --ack FILE [--start-at T] [--mode mixed|flags]``
 ``python -m tests.tms_db.hammer reader --path DB --writers 4 --seconds 5 [--start-at T] [--samples FILE]``
@@ -20,14 +22,20 @@ import os
 import sys
 import time
 
-from tms_db import open_store
+from tms_db import Store, open_store
 
 SETUP_RECORDS = ("HAMMER", "FLAGS")
 
 
+def open_at(location: str | os.PathLike) -> Store:
+    """The store at ``location``: a ``mongodb://`` URI, else an embedded store's directory."""
+    text = str(location)
+    return open_store(uri=text) if text.startswith(("mongodb://", "mongodb+srv://")) else open_store(path=text)
+
+
 def prepare(path: str, writers: int) -> None:
     """Create the records the workers use."""
-    with open_store(path=path) as store:
+    with open_at(path) as store:
         store.upsert_parameter({"record_name": "HAMMER", "type": "dynamic", "counter": 0, "cas": 0})
         store.upsert_parameter({"record_name": "FLAGS", "type": "dynamic", **{f"w{k}": 0 for k in range(writers)}})
         for k in range(writers):
@@ -46,7 +54,7 @@ def _wait_start(start_at: float) -> None:
 
 
 def writer(args: argparse.Namespace) -> dict:
-    store = open_store(path=args.path)
+    store = open_at(args.path)
     ack = os.open(args.ack, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
     _wait_start(args.start_at)
     deadline = time.monotonic() + args.seconds
@@ -90,7 +98,7 @@ def check_w(doc: dict) -> str | None:
 
 
 def reader(args: argparse.Namespace) -> dict:
-    store = open_store(path=args.path)
+    store = open_at(args.path)
     _wait_start(args.start_at)
     deadline = time.monotonic() + args.seconds
     last_seq = [0] * args.writers

@@ -1,4 +1,5 @@
-"""Concurrency and durability of the embedded store across real processes (issue 7 "What must be shown").
+"""Concurrency and durability of the store across real processes (issue 7 "What must be shown"), on both backends:
+the embedded store in a directory, MongoDB on the session's server (a database of the test's own).
 
 The 30 s, 4 + 4 process campaign is ``python -m tests.bench tms_db``; this is its shorter version.
 """
@@ -8,17 +9,32 @@ from __future__ import annotations
 import random
 import signal
 import time
+from collections.abc import Iterator
 
 import pytest
 
+from tests.mongo_server import unique_database, with_database
+from tests.tms_db.hammer import open_at
 from tests.tms_db.workers import run_hammer, spawn, verify_store
 from tms_db import open_store
 
 pytestmark = pytest.mark.slow
 
 
-def test_four_writers_four_readers_lose_nothing(tmp_path) -> None:
-    db = tmp_path / "db"
+@pytest.fixture(params=["embedded", "mongodb"])
+def backend(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
+    """Where the workers' store is: a directory, or a MongoDB URI naming a fresh database (dropped afterwards)."""
+    if request.param == "embedded":
+        yield str(tmp_path / "db")
+        return
+    uri = with_database(request.getfixturevalue("mongodb_uri"), unique_database())
+    yield uri
+    with open_store(uri=uri) as store:
+        store._client.drop_database(store.database)  # test cleanup
+
+
+def test_four_writers_four_readers_lose_nothing(backend, tmp_path) -> None:
+    db = backend
     wsum, rsum, acks, _ = run_hammer(db, tmp_path, writers=4, readers=4, seconds=6.0)
     assert all(w["inc"] > 20 and w["flag"] > 20 for w in wsum), wsum  # every writer made progress
     assert all(r["reads"] > 100 for r in rsum), rsum
@@ -26,8 +42,8 @@ def test_four_writers_four_readers_lose_nothing(tmp_path) -> None:
     assert verify_store(db, acks, exact=True) == []  # no lost update, every acknowledged write present
 
 
-def test_sigkilled_writer_loses_no_acknowledged_write(tmp_path) -> None:
-    db = tmp_path / "db"
+def test_sigkilled_writer_loses_no_acknowledged_write(backend, tmp_path) -> None:
+    db = backend
     from tests.tms_db import hammer
 
     hammer.prepare(str(db), 2)
@@ -47,7 +63,7 @@ def test_sigkilled_writer_loses_no_acknowledged_write(tmp_path) -> None:
         assert victim.returncode == -signal.SIGKILL
         kills += 1
         # the store reopens and is consistent while the other writer keeps going
-        with open_store(path=db) as store:
+        with open_at(db) as store:
             assert store.check() == []
     steady.wait(60)
     assert steady.returncode == 0
@@ -56,6 +72,6 @@ def test_sigkilled_writer_loses_no_acknowledged_write(tmp_path) -> None:
     # restarts continue its numbering, so its last acknowledged seq/flag must be there (or one more),
     # and the shared counters hold every acknowledged increment (plus at most one per kill).
     assert verify_store(db, acks, exact=False, slack=kills) == []
-    with open_store(path=db) as store:
+    with open_at(db) as store:
         doc = store.get_record("W0")
         assert doc["neg"] == -doc["seq"] and doc["arr"] == [doc["seq"]] * 7  # whole, never torn

@@ -1,4 +1,5 @@
-"""Start hammer worker processes and check the store afterwards (shared by tests and the bench)."""
+"""Start hammer worker processes and check the store afterwards (shared by tests and the bench); ``db`` is an
+embedded store's directory or a ``mongodb://`` URI with its database (:func:`tests.tms_db.hammer.open_at`)."""
 
 from __future__ import annotations
 
@@ -11,12 +12,11 @@ from pathlib import Path
 
 from tests.rosproc import ROOT
 from tests.tms_db import hammer
-from tms_db import open_store
 
 PY = sys.executable
 
 
-def spawn(role: str, path: Path, *extra: str) -> subprocess.Popen:
+def spawn(role: str, path: Path | str, *extra: str) -> subprocess.Popen:
     return subprocess.Popen([PY, "-m", "tests.tms_db.hammer", role, "--path", str(path), *extra], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
@@ -42,7 +42,7 @@ def read_acks(path: Path) -> tuple[Counter, dict[str, int]]:
 
 
 def run_hammer(
-    db: Path,
+    db: Path | str,
     workdir: Path,
     *,
     writers: int = 4,
@@ -66,11 +66,11 @@ def run_hammer(
 
 
 def verify_store(
-    db: Path, acks: list[Path], *, exact: bool, mode: str = "mixed", slack: int | None = None
+    db: Path | str, acks: list[Path], *, exact: bool, mode: str = "mixed", slack: int | None = None
 ) -> list[str]:
     """Every acknowledged write is present (``exact``: and nothing else, i.e. no write in flight)."""
     problems = []
-    with open_store(path=db) as store:
+    with hammer.open_at(db) as store:
         problems += store.check()
         totals: Counter = Counter()
         for w, path in enumerate(acks):
