@@ -177,3 +177,38 @@ def test_heightmaps_in_the_store_latest_by_type_and_pruned(tmp_path):
         assert len(store.find_blobs({"type": "static"})) == 1  # nothing stored by the refused call
     finally:
         store.close()
+
+
+def test_reader_core_images_as_the_original_and_errors(tmp_path):
+    """tms_db.heightmap, the core of tms_db_reader_heightmap: newest by type, bgr8 as the original's reader, mono16."""
+    from tms_db.errors import RecordNotFound, ValidationError
+    from tms_db.heightmap import find_heightmap, image_of
+
+    store = open_store(path=tmp_path / "db")
+    try:
+        hm = tr.Heightmap(z=np.array([[0.0, 1.0, 2.5]]), x_min=0.0, y_min=0.0, x_max=3.0, y_max=1.0, z_min=0.0)
+        tr.store_heightmap(store, hm, kind="static", ident=3030, filename="a.png", time="2026-01-01T00:00:01.000000")
+        hm2 = tr.Heightmap(z=np.array([[0.5, 1.0, 2.0]]), x_min=0.0, y_min=0.0, x_max=3.0, y_max=1.0, z_min=0.0)
+        tr.store_heightmap(store, hm2, kind="static", ident=3030, filename="b.png", time="2026-01-01T00:00:02.000000")
+        doc, data = find_heightmap(store, "static")
+        assert doc["filename"] == "b.png"  # the newest by time
+        doc, data = find_heightmap(store, "static", 3030, "a.png")
+        mono = image_of(data, "mono16")
+        assert (mono["encoding"], mono["width"], mono["height"], mono["step"]) == ("mono16", 3, 1, 6)
+        assert np.frombuffer(mono["data"], "<u2").tolist() == [0, 4096, 10240]
+        bgr = image_of(data)
+        assert (bgr["encoding"], bgr["step"]) == ("bgr8", 9)
+        assert np.frombuffer(bgr["data"], np.uint8).tolist() == [0, 0, 0, 16, 16, 16, 40, 40, 40]
+        tex = io.BytesIO()
+        Image.fromarray(np.array([[[255, 0, 10]]], dtype=np.uint8)).save(tex, format="PNG")
+        assert np.frombuffer(image_of(tex.getvalue())["data"], np.uint8).tolist() == [10, 0, 255]  # RGB -> BGR
+        with pytest.raises(RecordNotFound, match=r"no 'dynamic' terrain stored with id 3031"):
+            find_heightmap(store, "dynamic", 3031)
+        with pytest.raises(ValidationError, match=r"terrain type 'mesh': must be one of static, heightmap"):
+            find_heightmap(store, "mesh")
+        with pytest.raises(ValidationError, match=r"x.png: the stored file is not a PNG image"):
+            image_of(b"not an image", source="x.png")
+        with pytest.raises(ValidationError, match=r"image encoding 'rgb8'"):
+            image_of(data, "rgb8")
+    finally:
+        store.close()
