@@ -8,8 +8,11 @@ Payload families checked here:
 * Cartesian pose ``pose: 1`` + ``x, y, z, qx, qy, qz, qw`` numbers;
 * ``position_with_angle: 1`` + ``x, y, z, theta_w`` numbers; ``target_angle`` a number;
 * array family (waypoints): once any pose key (``x, y, z, qx, qy, qz, qw, yaw, theta_w``) holds an
-  array, every payload field must be an array of numbers, all of the same length (the original's
-  C++ getter crashes on a scalar there; we refuse the document instead).
+  array, every field but :data:`ARRAY_READER_SKIPS` (``_id, model_name, type, record_name``) must be an array of
+  numbers, the pose keys all of the same length: the original's C++ getter
+  (``tms_ts_subtask/subtask_node_base.hpp``, ``CustomGetParamFromDB``) calls ``get_array()`` on every other field
+  and throws on anything else, ``description`` and ``timestamps`` included; we refuse the document instead
+  (the store writes no ``timestamps`` into such a record, see :func:`is_waypoint_record`).
 
 Anything else (global-blackboard groups, the original's collision-object records) may hold any
 JSON/BSON value: bool, int, float, string, null, arrays, sub-documents, datetimes, binary data
@@ -31,7 +34,9 @@ from tms_db.errors import ValidationError
 
 __all__ = [
     "META_FIELDS",
+    "ARRAY_READER_SKIPS",
     "POSE_KEYS",
+    "is_waypoint_record",
     "MAX_DOCUMENT_BYTES",
     "document_size",
     "check_document_size",
@@ -47,6 +52,8 @@ __all__ = [
 
 #: Fields that are bookkeeping, not payload (the original getters skip them).
 META_FIELDS = frozenset({"_id", "model_name", "type", "record_name", "description", "timestamps"})
+#: Fields the original's waypoint (array) reader skips; it reads every other field of such a record as an array.
+ARRAY_READER_SKIPS = frozenset({"_id", "model_name", "type", "record_name"})
 #: Keys whose values are poses (scalar family) or waypoint arrays (array family).
 POSE_KEYS = ("x", "y", "z", "qx", "qy", "qz", "qw", "yaw", "theta_w")
 _FAMILIES = {
@@ -128,14 +135,17 @@ def validate_parameter(doc: Mapping[str, Any]) -> None:
         _check_value(where, name, value)
 
     payload = {k: v for k, v in doc.items() if k not in META_FIELDS}
-    if any(isinstance(payload.get(k), list | tuple) for k in POSE_KEYS):
-        # Array family: the original getter reads every payload field as an array of numbers.
+    if is_waypoint_record(doc):
+        # Array family: the original getter reads every field but ARRAY_READER_SKIPS as an array of numbers.
         length = None
-        for name, value in payload.items():
+        for name, value in doc.items():
+            if name in ARRAY_READER_SKIPS:
+                continue
             if not isinstance(value, list | tuple):
                 raise ValidationError(
-                    f"{where}: field {name!r}: waypoint records need arrays of numbers in every field, got scalar "
-                    f"{value!r}"
+                    f"{where}: field {name!r}: waypoint records need arrays of numbers in every field but "
+                    f"{', '.join(sorted(ARRAY_READER_SKIPS))} (the original's array reader throws on anything else), "
+                    f"got {type(value).__name__} {value!r:.60}"
                 )
             for i, item in enumerate(value):
                 if not is_number(item):
@@ -152,6 +162,11 @@ def validate_parameter(doc: Mapping[str, Any]) -> None:
             require_numbers(doc, (marker,) + fields)
     if "target_angle" in payload:
         require_numbers(doc, ("target_angle",))
+
+
+def is_waypoint_record(doc: Mapping[str, Any]) -> bool:
+    """True for the array family: any pose key (:data:`POSE_KEYS`) holds an array."""
+    return any(isinstance(doc.get(k), list | tuple) for k in POSE_KEYS)
 
 
 def validate_fields(record: str, fields: Mapping[str, Any], *, protected: Iterable[str] = ("_id",)) -> None:
