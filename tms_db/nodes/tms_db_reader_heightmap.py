@@ -27,7 +27,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from tms_common.errors import ConfigError
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_db.errors import StoreError
 from tms_db.heightmap import ENCODINGS, find_heightmap, image_of
@@ -49,7 +49,8 @@ class TmsDbReaderHeightmap(Node):
             raise ConfigError(f"tms_db_reader_heightmap: parameter image_encoding {self.encoding!r}: "
                               f"one of {', '.join(ENCODINGS)}")
         self.store = declare_and_open(self)
-        self._server = ActionServer(self, TmsdbTerrainImage, ACTION, execute_callback=self._execute)
+        self._server = ActionServer(self, TmsdbTerrainImage, ACTION, execute_callback=self._execute,
+                                    result_timeout=ACTION_RESULT_TIMEOUT_S)
         self.get_logger().info(f"{ACTION} ready ({self.encoding})")
 
     def _execute(self, goal_handle: Any) -> Any:
