@@ -212,3 +212,50 @@ def test_reader_core_images_as_the_original_and_errors(tmp_path):
             image_of(data, "rgb8")
     finally:
         store.close()
+
+
+def test_dynamic_terrain_core_stores_scans_and_keeps_the_newest(tmp_path):
+    store = open_store(path=tmp_path / "db")
+    try:
+        box = GridSpec(102.0, 201.0, 106.0, 205.0, 0.1)
+        dyn = tr.DynamicTerrain(store, box, 0.1, 10.0, keep=2)
+        pts = _mound_points(np.random.default_rng(4), spacing=0.1)
+        ids = [dyn.on_points(pts, time=f"2026-01-01T00:00:0{k}.000000") for k in range(3)]
+        docs = store.find_blobs({"type": "dynamic"})
+        assert [d["_id"] for d in docs] == ids[1:] and dyn.written == 3
+        d = docs[0]
+        assert (d["id"], d["offset_x"], d["offset_y"], d["offset_z"]) == (3031, 102.0, 201.0, 10.0)
+        hm = tr.heightmap_from_blob(store.get_blob(ids[-1]), docs[-1])
+        assert (hm.cols, hm.rows) == (40, 40)
+        assert hm.height_at(105.05, 203.05) == pytest.approx(_surface(105.05, 203.05), abs=0.03)
+        with pytest.raises(tr.TerrainError, match=r"/scan: no point inside x \[102\.00, 106\.00\]"):
+            dyn.on_points(pts + [50.0, 0.0, 0.0], source="/scan")
+        with pytest.raises(tr.TerrainError, match=r"/scan: empty point cloud"):
+            dyn.on_points(np.zeros((0, 3)), source="/scan")
+        assert len(store.find_blobs({"type": "dynamic"})) == 2  # nothing stored by the refused scans
+        with pytest.raises(tr.TerrainError, match=r"dynamic terrain: keep must be >= 1, got 0"):
+            tr.DynamicTerrain(store, box, 0.1, 0.0, keep=0)
+    finally:
+        store.close()
+
+
+def test_static_command_stores_a_png_placed_on_the_map_and_refuses_bad_files(tmp_path, capsys):
+    from tms_sp.terrain_static import main
+
+    png = tmp_path / "hm.png"
+    Image.fromarray(np.full((3, 4), 8192, dtype=np.uint16)).save(png)
+    db = tmp_path / "db"
+    assert main([str(png), "--x-min", "5", "--y-min", "-2", "--size-x", "8", "--size-y", "6", "--z-min", "1",
+                 "--db-path", str(db)]) == 0
+    assert "static hm.png: 4 x 3 cells" in capsys.readouterr().out
+    with open_store(path=db) as store:
+        (doc,) = store.find_blobs({"type": "static"})
+        assert (doc["height"], doc["width"], doc["elevation"], doc["offset_x"], doc["id"]) == (8.0, 6.0, 2.0, 5.0, 3030)
+    assert main([str(tmp_path / "none.laz"), "--db-path", str(db)]) == 1
+    assert "tms_ss_terrain_static: " in capsys.readouterr().err
+    flat = tmp_path / "eight.png"
+    Image.fromarray(np.zeros((3, 3), dtype=np.uint8)).save(flat)
+    assert main([str(flat), "--db-path", str(db)]) == 1
+    assert "eight.png: heightmap must be a 16-bit grayscale PNG, got mode L" in capsys.readouterr().err
+    with open_store(path=db) as store:
+        assert len(store.find_blobs({"type": "static"})) == 1
