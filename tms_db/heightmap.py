@@ -2,8 +2,9 @@
 
 Heightmaps are PNG blobs (:meth:`tms_db.store.Store.put_blob`) whose file document carries the original's fields
 ``time``, ``type``, ``id``, ``height``, ``width``, ``elevation``, ``offset_x``, ``offset_y``. :func:`find_heightmap`
-picks the newest by ``time`` of a ``type`` (``static``, ``heightmap``, ``texture`` or ``dynamic``, the original's),
-with ``id`` when not 0 and ``filename`` when not empty; :func:`image_of` turns the PNG into the fields of a
+picks the newest by ``time`` of a ``type`` (``static``, ``heightmap``, ``texture`` or ``dynamic``, the original's)
+whose ``DataType`` is ``heightmap`` (``texture`` for that type), with ``id`` when not 0 and ``filename`` when not
+empty; :func:`image_of` turns the PNG into the fields of a
 ``sensor_msgs/Image``: ``bgr8`` as the original's reader (``cv2.imdecode(..., IMREAD_COLOR)``: a 16-bit gray PNG
 keeps its high byte, 1/16 m a step) or ``mono16`` (the stored 16-bit values, 1/4096 m).
 """
@@ -29,7 +30,9 @@ def find_heightmap(store: Any, kind: str, ident: int = 0, filename: str = "") ->
     :data:`TERRAIN_TYPES`; RecordNotFound naming type, id and filename when nothing is stored."""
     if kind not in TERRAIN_TYPES:
         raise ValidationError(f"terrain type {kind!r}: must be one of {', '.join(TERRAIN_TYPES)}")
-    flt: dict[str, Any] = {"type": kind}
+    # DataType as the original's save_image_to_mongodb.py writes it: a type's other blobs (the original's dynamic
+    # point clouds through tms_db_writer_gridfs, its static .pcd files) are not images
+    flt: dict[str, Any] = {"type": kind, "DataType": "texture" if kind == "texture" else "heightmap"}
     if ident:
         flt["id"] = int(ident)
     if filename:

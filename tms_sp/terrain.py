@@ -272,16 +272,17 @@ def store_heightmap(store: Any, hm: Heightmap, *, kind: str, ident: int, filenam
     if keep is not None:
         if keep < 1:
             raise TerrainError(f"{kind} terrain: keep must be >= 1, got {keep}")
-        docs = store.find_blobs({"type": kind, "id": int(ident)})
+        # only heightmaps: the original's dynamic point clouds (tms_db_writer_gridfs) share type and id
+        docs = store.find_blobs({"type": kind, "id": int(ident), "DataType": "heightmap"})
         for doc in docs[:-keep]:
             store.delete_blob(doc["_id"])
     return file_id
 
 
 def latest_heightmap(store: Any, kind: str, *, ident: int = 0, filename: str = "") -> tuple[dict, bytes]:
-    """The newest (by ``time``) stored file document of ``type`` ``kind`` (and ``id`` when not 0, ``filename`` when
-    not empty) and its bytes; TerrainError naming the request when nothing matches."""
-    flt: dict[str, Any] = {"type": kind}
+    """The newest (by ``time``) stored heightmap (``DataType: heightmap``) of ``type`` ``kind`` (and ``id`` when not 0,
+    ``filename`` when not empty) and its bytes; TerrainError naming the request when nothing matches."""
+    flt: dict[str, Any] = {"type": kind, "DataType": "heightmap"}
     if ident:
         flt["id"] = int(ident)
     if filename:

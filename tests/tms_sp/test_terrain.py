@@ -190,8 +190,10 @@ def test_reader_core_images_as_the_original_and_errors(tmp_path):
         tr.store_heightmap(store, hm, kind="static", ident=3030, filename="a.png", time="2026-01-01T00:00:01.000000")
         hm2 = tr.Heightmap(z=np.array([[0.5, 1.0, 2.0]]), x_min=0.0, y_min=0.0, x_max=3.0, y_max=1.0, z_min=0.0)
         tr.store_heightmap(store, hm2, kind="static", ident=3030, filename="b.png", time="2026-01-01T00:00:02.000000")
+        store.put_blob(b"not an image", filename="late.pcd", time="2026-01-01T00:00:09.000000", type="static", id=3030)
         doc, data = find_heightmap(store, "static")
-        assert doc["filename"] == "b.png"  # the newest by time
+        assert doc["filename"] == "b.png"  # the newest heightmap by time (the .pcd is newer, not a heightmap)
+        assert tr.latest_heightmap(store, "static")[0]["filename"] == "b.png"
         doc, data = find_heightmap(store, "static", 3030, "a.png")
         mono = image_of(data, "mono16")
         assert (mono["encoding"], mono["width"], mono["height"], mono["step"]) == ("mono16", 3, 1, 6)
@@ -220,7 +222,13 @@ def test_dynamic_terrain_core_stores_scans_and_keeps_the_newest(tmp_path):
         box = GridSpec(102.0, 201.0, 106.0, 205.0, 0.1)
         dyn = tr.DynamicTerrain(store, box, 0.1, 10.0, keep=2)
         pts = _mound_points(np.random.default_rng(4), spacing=0.1)
+        # a dynamic point cloud as the original's tms_db_writer_gridfs stores it: same type and id, not a heightmap
+        cloud = store.put_blob(b"0,0,128,63", filename=None, time="2026-01-01T00:00:00.500000", type="dynamic",
+                               id=3031, height=1, width=1, point_step=4, row_step=4, is_bigendian=False,
+                               is_dense=True, fields=[])
         ids = [dyn.on_points(pts, time=f"2026-01-01T00:00:0{k}.000000") for k in range(3)]
+        assert cloud in [d["_id"] for d in store.find_blobs({"type": "dynamic"})]  # not pruned with the heightmaps
+        store.delete_blob(cloud)
         docs = store.find_blobs({"type": "dynamic"})
         assert [d["_id"] for d in docs] == ids[1:] and dyn.written == 3
         d = docs[0]
