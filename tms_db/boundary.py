@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from tms_db.errors import RecordNotFound, StoreError, ValidationError
+from tms_db.errors import BlobTooLarge, RecordNotFound, StoreError, ValidationError
 from tms_db.store import Store
 
 __all__ = [
@@ -278,6 +278,15 @@ def parse_field_repr(text: Any, where: str) -> PointFieldSpec:
         raise ValidationError(f"{where}: field 'fields': {text!r:.80}: {exc}") from None
 
 
+def _put(store: Store, kind: str, field: str, data: bytes, **fields: Any) -> str:
+    """``put_blob``; a BlobTooLarge names the message's type and field too."""
+    try:
+        return store.put_blob(data, **fields)
+    except BlobTooLarge as exc:
+        raise BlobTooLarge(f"type {kind!r}: field {field!r}: {exc}", filename=exc.filename, size=exc.size,
+                           limit=exc.limit) from None
+
+
 def put_gridfs(store: Store, kind: str, ident: int, time: str, filename: str, cloud: Cloud | None, *,
                remove_file: bool = True) -> str:
     """A ``TmsdbGridFS`` message's write; the blob's id.
@@ -296,7 +305,7 @@ def put_gridfs(store: Store, kind: str, ident: int, time: str, filename: str, cl
         except OSError as exc:
             raise StoreError(f"type {kind!r}: field 'filename': cannot read {filename!r}: "
                              f"{exc.strerror or exc}") from None
-        file_id = store.put_blob(data, filename=filename, time=time, type=kind, id=ident)
+        file_id = _put(store, kind, "filename", data, filename=filename, time=time, type=kind, id=ident)
         if remove_file:
             try:
                 os.remove(filename)
@@ -307,10 +316,10 @@ def put_gridfs(store: Store, kind: str, ident: int, time: str, filename: str, cl
     if kind == CLOUD_TYPE:
         if cloud is None:
             raise ValidationError("type 'dynamic': field 'pointcloud2' is missing")
-        return store.put_blob(encode_cloud_data(cloud.data), filename=None, time=time, type=kind, id=ident,
-                              height=cloud.height, width=cloud.width, is_bigendian=cloud.is_bigendian,
-                              point_step=cloud.point_step, row_step=cloud.row_step,
-                              fields=[field_repr(f) for f in cloud.fields], is_dense=cloud.is_dense)
+        return _put(store, kind, "pointcloud2", encode_cloud_data(cloud.data), filename=None, time=time, type=kind,
+                    id=ident, height=cloud.height, width=cloud.width, is_bigendian=cloud.is_bigendian,
+                    point_step=cloud.point_step, row_step=cloud.row_step,
+                    fields=[field_repr(f) for f in cloud.fields], is_dense=cloud.is_dense)
     raise ValidationError(f"field 'type': {kind!r} is not a GridFS type ({', '.join(FILE_TYPES)}, {CLOUD_TYPE})")
 
 

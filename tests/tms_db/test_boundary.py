@@ -151,14 +151,15 @@ def test_gridfs_refusals_store_nothing_and_keep_the_file(tmp_path) -> None:
     with open_store(path=tmp_path / "db", max_blob_bytes=1000) as store:
         big = tmp_path / "big.bin"
         big.write_bytes(b"x" * 1001)
-        with pytest.raises(BlobTooLarge, match="1,001 bytes, over the store's limit of 1,000"):
+        with pytest.raises(BlobTooLarge, match="type 'dem': field 'filename': blob '.*big.bin': 1,001 bytes, over the "
+                                               "store's limit of 1,000"):
             b.put_gridfs(store, "dem", 1, "t", str(big), None)
         assert big.exists()
         with pytest.raises(StoreError, match=r"field 'filename': cannot read '.*missing.bin': No such file"):
             b.put_gridfs(store, "static", 1, "t", str(tmp_path / "missing.bin"), None)
         with pytest.raises(ValidationError, match="field 'type': 'terrain' is not a GridFS type"):
             b.put_gridfs(store, "terrain", 1, "t", str(big), None)
-        with pytest.raises(BlobTooLarge):
+        with pytest.raises(BlobTooLarge, match="type 'dynamic': field 'pointcloud2': blob None: 1,199 bytes"):
             b.put_gridfs(store, "dynamic", 1, "t", "", b.Cloud(data=bytes(600)))  # 600 bytes are 1,199 of text
         assert store.find_blobs() == [] and big.exists()
 

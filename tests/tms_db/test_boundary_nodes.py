@@ -190,8 +190,8 @@ def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
     assert not terrain.exists()  # handed over to the DB, as the original removes it
     assert writer.wait_for(f"/tms_db_gridfs_data dropped: type 'static': field 'filename': cannot read "
                            f"'{tmp_path / 'no.ply'}': No such file", 30), writer.output
-    assert writer.wait_for(f"/tms_db_gridfs_data dropped: blob '{big}': {limit + 1:,} bytes, over the store's limit "
-                           f"of {limit:,}", 30), writer.output
+    assert writer.wait_for(f"/tms_db_gridfs_data dropped: type 'dem': field 'filename': blob '{big}': "
+                           f"{limit + 1:,} bytes, over the store's limit of {limit:,}", 30), writer.output
     assert big.exists() and os.path.getsize(big) == limit + 1
 
     result, _ = _action(ros_node, client, GridFSAction.Goal(type="static", filename=str(terrain)))
