@@ -184,7 +184,10 @@ class MongoStore(Store):
                 self._tasks.replace_one({"task_id": tid}, {"task_id": tid, **doc})
                 return tid
             # Claim the id atomically: insert only if no document has it (upsert with $setOnInsert).
-            res = self._tasks.update_one({"task_id": tid}, {"$setOnInsert": {"task_id": tid, **doc}}, upsert=True)
+            try:
+                res = self._tasks.update_one({"task_id": tid}, {"$setOnInsert": {"task_id": tid, **doc}}, upsert=True)
+            except self._errors.DuplicateKeyError:  # another writer claimed it after our read: choose again
+                continue
             if res.upserted_id is not None:
                 return tid
         raise StoreError("add_task: could not claim a free task_id after 20 attempts (concurrent writers?)")
@@ -233,22 +236,31 @@ class MongoStore(Store):
                    upsert: bool = False) -> dict:
         check_record_name(record_name)
         validate_fields(record_name, fields, protected=("_id", "record_name", "model_name"))
-        current = self._current(record_name, model_name)
-        if current is None and not upsert:
-            raise self._not_found(record_name, model_name, fields)
-        merged = dict(current or self._filter(record_name, model_name))
-        merged.update(fields)
-        merged["timestamps"] = now_utc()
-        stamp = self._stamp(merged)
-        validate_parameter(merged)
-        doc = self._params.find_one_and_update(
-            {"_id": current["_id"]} if current else self._filter(record_name, model_name),
-            {"$set": dict(fields), **stamp},
-            upsert=upsert, return_document=self._pymongo.ReturnDocument.AFTER,
-        )
-        if doc is None:
-            raise self._not_found(record_name, model_name, fields)
-        return doc
+        for _attempt in range(3):
+            current = self._current(record_name, model_name)
+            if current is None and not upsert:
+                raise self._not_found(record_name, model_name, fields)
+            merged = dict(current or self._filter(record_name, model_name))
+            merged.update(fields)
+            merged["timestamps"] = now_utc()
+            stamp = self._stamp(merged)
+            validate_parameter(merged)
+            try:
+                doc = self._params.find_one_and_update(
+                    {"_id": current["_id"]} if current else self._filter(record_name, model_name),
+                    {"$set": dict(fields), **stamp},
+                    upsert=current is None, return_document=self._pymongo.ReturnDocument.AFTER,
+                )
+            except self._errors.DuplicateKeyError:
+                doc = None
+            if doc is not None:
+                return doc
+            # Another writer created the record between the read and this upsert (the unique key refuses a second
+            # one: MongoDB says DuplicateKeyError, SecantusDB answers no document) or removed it: read it again.
+            if not upsert:
+                raise self._not_found(record_name, model_name, fields)
+        raise StoreError(f"{param_filter_text(record_name, model_name)}: set_fields gave up after 3 attempts "
+                         "(concurrent writers creating and removing the record)")
 
     @staticmethod
     def _stamp(merged: dict) -> dict:
@@ -308,7 +320,11 @@ class MongoStore(Store):
             self._params.insert_one(doc, session=session)
 
     def upsert_parameter(self, doc: Mapping[str, Any]) -> None:
-        self._put_parameter(self._checked_parameter(doc))
+        checked = self._checked_parameter(doc)
+        try:
+            self._put_parameter(dict(checked))
+        except self._errors.DuplicateKeyError:  # another writer created the record after our read: replace it now
+            self._put_parameter(dict(checked))
 
     def _in_transaction(self, write: Any) -> bool:
         """Run ``write(session)`` in a transaction; False (nothing written) when the server has none (standalone)."""

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import random
 import signal
+import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 
 import pytest
@@ -75,3 +77,46 @@ def test_sigkilled_writer_loses_no_acknowledged_write(backend, tmp_path) -> None
     with open_at(db) as store:
         doc = store.get_record("W0")
         assert doc["neg"] == -doc["seq"] and doc["arr"] == [doc["seq"]] * 7  # whole, never torn
+
+
+def test_concurrent_creators_of_one_record_make_one_document(backend) -> None:
+    """Writers that create the same records at once (``set_fields(upsert=True)``, ``upsert_parameter``, ``add_task``)
+    leave one document per key with every writer's fields: on MongoDB the unique keys refuse a second document and
+    the store retries the loser as an update (SecantusDB answered the raced upsert with no document and the write
+    was lost before)."""
+    writers, records = 6, 20
+    tree = '<root BTCPP_format="4"><BehaviorTree ID="T{}"><AlwaysSuccess/></BehaviorTree></root>'
+    stores = [open_at(backend) for _ in range(writers)]
+    errors: list[str] = []
+    task_ids: list[int] = []
+    barrier = threading.Barrier(writers)
+
+    def create(k: int) -> None:
+        store = stores[k]
+        try:
+            barrier.wait(10)
+            for i in range(records):
+                store.set_fields(f"R{i}", {f"w{k}": i}, upsert=True)
+                store.upsert_parameter({"record_name": f"P{i}", "type": "dynamic", "by": k})
+            task_ids.extend(store.add_task(tree.format(f"{k}_{n}")) for n in range(3))
+        except Exception as exc:  # noqa: BLE001 - any failure of a writer is the finding, reported below
+            errors.append(f"writer {k}: {type(exc).__name__}: {exc}")
+
+    threads = [threading.Thread(target=create, args=(k,)) for k in range(writers)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    try:
+        assert errors == []
+        docs = stores[0].list_parameters()
+        by_name = Counter(d["record_name"] for d in docs)
+        assert by_name == Counter({**{f"R{i}": 1 for i in range(records)}, **{f"P{i}": 1 for i in range(records)}})
+        for doc in docs:
+            if doc["record_name"].startswith("R"):
+                assert {f"w{k}" for k in range(writers)} <= set(doc), doc  # no writer's update lost
+        assert sorted(task_ids) == list(range(1, 3 * writers + 1))  # distinct ids, the smallest free ones
+        assert [t["task_id"] for t in stores[0].list_tasks()] == sorted(task_ids)
+    finally:
+        for store in stores:
+            store.close()
