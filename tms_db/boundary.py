@@ -118,7 +118,7 @@ def _number(where: str, value: Any) -> float:
 
 def apply_query(store: Store, kind: str, writemode: str, record_name: str, vehicle_name: str,
                 pose: Mapping[str, float], joints: Sequence[float]) -> dict:
-    """A ``TmsdbQuery``'s write; returns the record as stored.
+    """A ``TmsdbQuery``'s write; returns the record written.
 
     * ``pose``: the record ``{model_name, record_name, x, y, qx, qy, qz, qw}`` (``pose`` from ``add_path.pose``),
       replacing one with the same names (the original inserts another document that its readers, taking the
@@ -138,7 +138,7 @@ def apply_query(store: Store, kind: str, writemode: str, record_name: str, vehic
         for key in ("x", "y", "qw", "qx", "qy", "qz"):
             doc[key] = _number(f"{where}: field 'add_path.pose.{_pose_path(key)}'", pose[key])
         store.upsert_parameter(doc)
-        return store.get_parameter(vehicle_name or None, record_name)
+        return doc
     if kind == "joint":
         if len(joints) < len(JOINT_FIELDS):
             raise ValidationError(f"{where}: field 'add_joints.position': {len(joints)} values, a joint record needs "
@@ -147,7 +147,7 @@ def apply_query(store: Store, kind: str, writemode: str, record_name: str, vehic
         for i, key in enumerate(JOINT_FIELDS):
             doc[key] = _number(f"{where}: field 'add_joints.position[{i}]'", joints[i])
         store.upsert_parameter(doc)
-        return store.get_parameter(vehicle_name or None, record_name)
+        return doc
     if kind == "pose_query":
         values = {k: _number(f"{where}: field 'add_path.pose.{_pose_path(k)}'", pose[k]) for k in POSE_FIELDS}
         current = store.get_parameter(vehicle_name or None, record_name)  # RecordNotFound names the record
@@ -192,7 +192,7 @@ def param_replies(store: Store, collection: str, flgorparam: str, name: str,
         return [], [f"type {collection!r}: the param reader reads records of the 'parameter' collection"]
     if flgorparam not in ("param", "flg"):
         return [], [f"field 'flgorparam': {flgorparam!r} is neither 'param' nor 'flg'"]
-    names = [name] if name else [n for n in recordnames]
+    names = [name] if name else list(recordnames)
     if not names:
         return [], ["neither field 'name' nor 'recordnames' names a record"]
     docs, problems = [], []
