@@ -86,6 +86,7 @@ def mongodb_uri() -> Iterator[str]:
 _BACKEND_PARAMS = ("store", "backend")
 _BACKENDS = ("embedded", "mongodb")
 _backend_of: dict[str, str] = {}
+_OUTCOMES = ("passed", "failed", "error", "skipped", "xfailed", "xpassed", "deselected")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
@@ -104,7 +105,8 @@ def pytest_terminal_summary(terminalreporter) -> None:
         for report in reports:
             backend = _backend_of.get(getattr(report, "nodeid", ""))
             # one outcome per test: the call's, or the setup's / teardown's when that is what failed or skipped
-            if backend and outcome and (getattr(report, "when", "call") == "call" or outcome in ("error", "skipped")):
+            if backend and outcome in _OUTCOMES and (getattr(report, "when", "call") == "call"
+                                                     or outcome in ("error", "skipped")):
                 counts[backend][outcome] += 1
     if any(counts.values()):
         parts = [f"{b}: " + (", ".join(f"{n} {o}" for o, n in sorted(counts[b].items())) or "none run")

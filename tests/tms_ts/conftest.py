@@ -16,6 +16,8 @@ class TsSystem:
     node: object
     store: object
     db: str
+    #: a mongodb:// URI: the nodes open it instead of ``db`` (a test sets it and ``store`` before ``start``)
+    db_uri: str = ""
     procs: dict = field(default_factory=dict)
     statuses: list = field(default_factory=list)
 
@@ -70,6 +72,7 @@ def ts_system(tmp_path, procs, ros_node):
 
     def start(stub_duration_s: float = 0.3, ignore_cancel: bool = False, server_wait_s: float = 20.0,
               halt_timeout_s: float = 5.0, stop_timeout_s: float = 5.0, manager_args: tuple[str, ...] = ()) -> TsSystem:
+        db_params = ["-p", f"db_path:={db}", *(["-p", f"db_uri:={system.db_uri}"] if system.db_uri else [])]
         system.procs["stub"] = procs(
             [sys.executable, "-m", "tests.tms_ts.planning_stub", "--ros-args", "-p", f"duration_s:={stub_duration_s}",
              "-p", f"ignore_cancel:={'true' if ignore_cancel else 'false'}"], name="stub", PYTHONPATH=str(ROOT))
@@ -80,8 +83,7 @@ def ts_system(tmp_path, procs, ros_node):
                     "--ros-args",
                     "-p",
                     f"machine:={machine}",
-                    "-p",
-                    f"db_path:={db}",
+                    *db_params,
                     "-p",
                     f"stop_timeout_s:={stop_timeout_s}",
                     "-p",
@@ -90,7 +92,7 @@ def ts_system(tmp_path, procs, ros_node):
                 name=machine,
             )
         system.procs["manager"] = procs(
-            [executable("tms_ts", "tms_ts_manager"), "--ros-args", "-p", f"db_path:={db}",
+            [executable("tms_ts", "tms_ts_manager"), "--ros-args", *db_params,
              "-p", f"server_wait_s:={server_wait_s}", "-p", f"halt_timeout_s:={halt_timeout_s}",
              "-p", "tick_rate_hz:=20.0", "-p", "status_rate_hz:=4.0", *manager_args], name="manager")
         for name, text in (("stub", "planning stub ready"), ("zx200", "subtask servers"),
