@@ -148,13 +148,20 @@ def test_tmsdb_query_updates_records(procs, ros_node, tmp_path) -> None:
 
 def _action(ros_node, client, goal, timeout: float = 120.0):
     assert client.wait_for_server(timeout_sec=30), "action server not available"
-    feedback = []
-    sent = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback))
+    sent = client.send_goal_async(goal)
     handle = _until(ros_node, lambda: sent.done() and sent.result(), timeout, "goal acceptance")
     assert handle.accepted
     done = handle.get_result_async()
     _until(ros_node, done.done, timeout, "the action's result")
-    return done.result(), feedback
+    return done.result(), bytes(handle.goal_id.uuid)
+
+
+def _feedback_of(ros_node, seen: list, goal_id: bytes, count: int) -> list:
+    """The goal's feedback messages, read from the feedback topic: rclpy's ActionClient drops feedback that arrives
+    after the result (a topic and a service: either can come first), so its feedback_callback may miss the last."""
+    _until(ros_node, lambda: len(mine := [f.feedback for f in seen if bytes(f.goal_id.uuid) == goal_id]) >= count
+           and mine, 60, f"{count} feedback message(s)")
+    return [f.feedback for f in seen if bytes(f.goal_id.uuid) == goal_id]
 
 
 def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
@@ -175,6 +182,9 @@ def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
     reader = procs(_node("tms_db_reader_gridfs", db))
     pub = _publisher(ros_node, TmsdbGridFS, "/tms_db_gridfs_data", writer)
     client = ActionClient(ros_node, GridFSAction, "/tms_db_reader_gridfs")
+    seen: list = []
+    ros_node.create_subscription(GridFSAction.Impl.FeedbackMessage, "/tms_db_reader_gridfs/_action/feedback",
+                                 seen.append, 10)
 
     rng = np.random.default_rng(7)
     payload = rng.integers(0, 256, 10 * 1024 * 1024, dtype=np.uint8).tobytes()
@@ -209,14 +219,17 @@ def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
     assert writer.wait_for("stored dynamic (cloud) time '2025-06-01T09", 120), writer.output
     assert writer.wait_for("stored dynamic (cloud) time '2025-06-01T10", 120), writer.output
 
-    result, feedback = _action(ros_node, client, GridFSAction.Goal(type="dynamic", latest_only=True))
+    result, goal_id = _action(ros_node, client, GridFSAction.Goal(type="dynamic", latest_only=True))
     got = result.result.pointcloud2
     assert result.status == GoalStatus.STATUS_SUCCEEDED and result.result.result, result.result.msg
     assert bytes(got.data) == payload and (got.width, got.point_step, got.row_step) == (cloud.width, 16, len(payload))
     assert [(f.name, f.offset, f.datatype) for f in got.fields] == [(f.name, f.offset, f.datatype)
                                                                    for f in cloud.fields]
+    feedback = _feedback_of(ros_node, seen, goal_id, 1)
     assert got.header.frame_id == "map" and got.is_dense and len(feedback) == 1
-    result, feedback = _action(ros_node, client, GridFSAction.Goal(type="dynamic", latest_only=False))
+    assert bytes(feedback[0].pointcloud2.data) == payload
+    result, goal_id = _action(ros_node, client, GridFSAction.Goal(type="dynamic", latest_only=False))
+    feedback = _feedback_of(ros_node, seen, goal_id, 2)
     assert [f.msg for f in feedback] == ["2025-06-01T09:00:00.000000", "2025-06-01T10:00:03.000000"]  # by time
     assert bytes(feedback[0].pointcloud2.data) == bytes(range(16)) and bytes(result.result.pointcloud2.data) == payload
 
