@@ -42,6 +42,8 @@ _NO_TRANSACTIONS = 20
 SERVER_TIMEOUT_S = 5.0
 #: [s] the longest a server that is connected may take over one reply (socketTimeoutMS): a hung server, a big restore
 SOCKET_TIMEOUT_S = 30.0
+#: the unique index the store keeps on each collection's key (created on open)
+_UNIQUE_INDEX = {"task": "task_by_id", "parameter": "parameter_by_key"}
 
 __all__ = ["MongoStore", "SERVER_TIMEOUT_S", "SOCKET_TIMEOUT_S"]
 
@@ -540,6 +542,10 @@ class MongoStore(Store):
                 continue
             if not result.get("valid", False):
                 problems.append(f"{name}: {result.get('errors')}")
+            index = _UNIQUE_INDEX[name]
+            if not any(i.get("name") == index and i.get("unique") for i in self._db[name].list_indexes()):
+                problems.append(f"{name}: no unique index {index!r} (the store creates it on open; it fails when "
+                                "two documents share a key): concurrent writers may create duplicates")
             for doc in self._db[name].find({}).sort("_id", 1):
                 problems += check_document(name, doc)
         return problems

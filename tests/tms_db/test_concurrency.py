@@ -120,3 +120,25 @@ def test_concurrent_creators_of_one_record_make_one_document(backend) -> None:
     finally:
         for store in stores:
             store.close()
+
+
+def test_mongodb_check_names_a_missing_unique_key(mongodb_uri) -> None:
+    """A database that already holds two records with one key (written by another client) cannot get the store's
+    unique index; the store still opens, and ``check`` says the index is missing and why it matters."""
+    import pymongo
+
+    name = unique_database()
+    client = pymongo.MongoClient(mongodb_uri)
+    try:
+        client[name]["parameter"].insert_many([{"record_name": "A", "type": "dynamic", "v": v} for v in (1, 2)])
+        with open_store(uri=mongodb_uri, database=name) as store:
+            assert store.get_record("A")["v"] == 1  # the first, as find_one gives it
+            assert store.check() == [
+                "parameter: no unique index 'parameter_by_key' (the store creates it on open; it fails when two "
+                "documents share a key): concurrent writers may create duplicates"]
+            client[name]["parameter"].delete_one({"v": 2})
+        with open_store(uri=mongodb_uri, database=name) as store:  # the next open creates it
+            assert store.check() == []
+    finally:
+        client.drop_database(name)
+        client.close()
