@@ -38,7 +38,9 @@ def backend(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
 def test_four_writers_four_readers_lose_nothing(backend, tmp_path) -> None:
     db = backend
     wsum, rsum, acks, _ = run_hammer(db, tmp_path, writers=4, readers=4, seconds=6.0)
-    assert all(w["inc"] > 20 and w["flag"] > 20 for w in wsum), wsum  # every writer made progress
+    # every writer made progress (SecantusDB, a server in Python, gave each writer ~38 of each kind in 6 s here)
+    least = 5 if db.startswith("mongodb") else 20
+    assert all(w["inc"] > least and w["flag"] > least for w in wsum), wsum
     assert all(r["reads"] > 100 for r in rsum), rsum
     assert [r["first_problems"] for r in rsum] == [[]] * 4  # no torn document, nothing went backwards
     assert verify_store(db, acks, exact=True) == []  # no lost update, every acknowledged write present
