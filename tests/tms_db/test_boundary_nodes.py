@@ -1,14 +1,18 @@
 """The original's DB boundary across processes: our writer and reader nodes, each its own process over DDS, driven
-by a client built only on the original's types (tms_msg_db, sensor_msgs, geometry_msgs), as its nodes are."""
+by a client built only on the original's types (tms_msg_db, sensor_msgs, geometry_msgs), as its nodes are; on the
+embedded store and on a MongoDB server (the ``backend`` param)."""
 
 from __future__ import annotations
 
 import json
 import os
 import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import pytest
 
+from tests.mongo_server import unique_database, with_database
 from tests.rosproc import executable
 from tests.tms_db.test_nodes import _call
 from tms_db import open_store
@@ -19,8 +23,27 @@ PATH = {"model_name": "ic120", "record_name": "LOAD_PATH", "type": "dynamic",
         **{k: [0.0] for k in ("x", "y", "z", "qx", "qy", "qz")}, "qw": [1.0]}
 
 
-def _node(name: str, db, *params: str) -> list:
-    args = [executable("tms_db", name), "--ros-args", "-p", f"db_path:={db}"]
+@dataclass(frozen=True)
+class Db:
+    """Where the nodes' store is: the node parameter naming it, and how the test opens it."""
+
+    param: str
+    open: Callable
+
+
+@pytest.fixture(params=["embedded", "mongodb"])
+def backend(request: pytest.FixtureRequest, tmp_path) -> Iterator[Db]:
+    if request.param == "embedded":
+        yield Db(f"db_path:={tmp_path / 'db'}", lambda: open_store(path=tmp_path / "db"))
+        return
+    uri = with_database(request.getfixturevalue("mongodb_uri"), unique_database())
+    yield Db(f"db_uri:={uri}", lambda: open_store(uri=uri))
+    with open_store(uri=uri) as store:
+        store._client.drop_database(store.database)  # test cleanup
+
+
+def _node(name: str, db: Db, *params: str) -> list:
+    args = [executable("tms_db", name), "--ros-args", "-p", db.param]
     for p in params:
         args += ["-p", p]
     return args
@@ -51,13 +74,13 @@ def _get_data(ros_node, client, kind: str, ident: int, name: str = "", latest_on
     return [(m.time, m.type, m.id, m.name, json.loads(m.msg)) for m in reply.tmsdbs]
 
 
-def test_tmsdb_written_and_read_back(procs, ros_node, tmp_path) -> None:
+def test_tmsdb_written_and_read_back(procs, ros_node, backend) -> None:
     """``tms_db_data`` -> ``tms_db_writer`` -> store -> ``tms_db_reader`` (latest and history); a msg that is not
     JSON is refused naming topic and field and stores nothing; retention keeps the newest per collection."""
     from tms_msg_db.msg import Tmsdb
     from tms_msg_db.srv import TmsdbGetData
 
-    db = tmp_path / "db"
+    db = backend
     writer = procs(_node("tms_db_writer", db, "retention_max_count:=3", "retention_period_s:=0.3"))
     reader = procs(_node("tms_db_reader", db))
     pub = _publisher(ros_node, Tmsdb, "/tms_db_data", writer)
@@ -88,19 +111,19 @@ def test_tmsdb_written_and_read_back(procs, ros_node, tmp_path) -> None:
     assert writer.wait_for("retention: removed 2 documents of 'probe'", 10), writer.output
     assert _get_data(ros_node, get, "parameter", 1) == []  # not a data collection: refused, logged
     assert reader.wait_for("field 'type': 'parameter' is a reserved collection", 10), reader.output
-    with open_store(path=db) as store:
+    with db.open() as store:
         assert len(store.find_data("machine_pose", 3012)) == 3  # the bad one stored nothing
     assert writer.popen.poll() is None and reader.popen.poll() is None
 
 
-def test_tmsdb_query_updates_records(procs, ros_node, tmp_path) -> None:
+def test_tmsdb_query_updates_records(procs, ros_node, backend) -> None:
     """``tms_db_param_data`` (TmsdbQuery) -> records, read back with ``tms_db_reader_parameter`` and the original's
     param reader; a query for a record that does not exist is refused naming it."""
     from tms_msg_db.msg import TmsdbQuery
     from tms_msg_db.srv import TmsdbGetData, TmsdbGetParameter
 
-    db = tmp_path / "db"
-    with open_store(path=db) as store:
+    db = backend
+    with db.open() as store:
         store.upsert_parameter(PATH)
     writer = procs(_node("tms_db_writer_param", db))
     reader = procs(_node("tms_db_reader", db))
@@ -141,7 +164,7 @@ def test_tmsdb_query_updates_records(procs, ros_node, tmp_path) -> None:
     reply = _call(ros_node, get_rec, TmsdbGetData.Request(type="parameter", flgorparam="flg", name="dig_pose"))
     flg = json.loads(reply.tmsdbs[0].msg)
     assert flg["trajectory"] == 1 and flg["bucket_end_joint"] == 0.5 and flg["model_name"] == "zx200"
-    with open_store(path=db) as store:
+    with db.open() as store:
         assert {d["record_name"] for d in store.list_parameters()} == {"LOAD_PATH", "dig_pose"}  # nothing else
     assert all(p.popen.poll() is None for p in (writer, reader, param_reader))
 
@@ -164,7 +187,7 @@ def _feedback_of(ros_node, seen: list, goal_id: bytes, count: int) -> list:
     return [f.feedback for f in seen if bytes(f.goal_id.uuid) == goal_id]
 
 
-def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
+def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path, backend) -> None:
     """A 10 MB file (``static``) and a 10 MB point cloud (``dynamic``) through ``tms_db_gridfs_data`` and back
     intact through the ``tms_db_reader_gridfs`` action; a file that does not exist and one over the store's limit are
     refused naming topic and field, nothing stored, the big file left in place."""
@@ -176,7 +199,7 @@ def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
     from tms_msg_db.action import TmsdbGridFS as GridFSAction
     from tms_msg_db.msg import TmsdbGridFS
 
-    db = tmp_path / "db"
+    db = backend
     limit = 40_000_000
     writer = procs(_node("tms_db_writer_gridfs", db, f"max_blob_bytes:={limit}"))
     reader = procs(_node("tms_db_reader_gridfs", db))
@@ -236,16 +259,16 @@ def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path) -> None:
     result, _ = _action(ros_node, client, GridFSAction.Goal(type="mesh", filename=str(terrain)))
     assert result.status == GoalStatus.STATUS_ABORTED and not result.result.result
     assert result.result.msg == f"no 'mesh' blob with filename {str(terrain)!r}"
-    with open_store(path=db) as store:
+    with db.open() as store:
         assert [(m["type"], m["length"]) for m in store.find_blobs({"type": "static"})] == [("static", len(payload))]
         assert store.find_blobs({"type": "dem"}) == []
     assert writer.popen.poll() is None and reader.popen.poll() is None
 
 
-def test_collision_writer(procs, ros_node, tmp_path) -> None:
+def test_collision_writer(procs, ros_node, tmp_path, backend) -> None:
     from tms_msg_db.msg import TmsdbCollision
 
-    db = tmp_path / "db"
+    db = backend
     writer = procs(_node("tms_db_writer_collision", db))
     pub = _publisher(ros_node, TmsdbCollision, "/tms_db_collision", writer)
     mesh = tmp_path / "dump_area.stl"
@@ -253,7 +276,7 @@ def test_collision_writer(procs, ros_node, tmp_path) -> None:
     pub.publish(TmsdbCollision(model_name="zx200", type="static", filepath=str(mesh)))
     pub.publish(TmsdbCollision(model_name="zx200", type="static", filepath=str(tmp_path / "none.stl")))
     assert writer.wait_for("stored", 30) and writer.wait_for("field 'filepath': cannot read", 30), writer.output
-    with open_store(path=db) as store:
+    with db.open() as store:
         doc = store.get_parameter("zx200", "collision_object_dump_area")
         assert doc["data"] == mesh.read_bytes() and (doc["x"], doc["qw"], doc["type"]) == (8.0, 1.0, "static")
         assert len(store.list_parameters()) == 1
