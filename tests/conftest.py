@@ -73,9 +73,12 @@ def mongodb_uri() -> Iterator[str]:
     server = MongoServer()
     try:
         server.start()
+        problem = ""
     except MongoServerError as exc:
+        problem = str(exc)
+    if problem:  # outside the except block: the report shows the server's output once
         server.stop()
-        pytest.fail(f"the test MongoDB server did not start: {exc}", pytrace=False)
+        pytest.fail(f"the test MongoDB server did not start: {problem}", pytrace=False)
     try:
         yield server.uri
     finally:
