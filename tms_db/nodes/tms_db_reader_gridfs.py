@@ -25,7 +25,7 @@ from typing import Any
 from rclpy.action import ActionServer
 from rclpy.node import Node
 
-from tms_common.node import run_node
+from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_db.boundary import CLOUD_TYPE, FILE_TYPES, GRIDFS_ACTION, read_clouds, read_file_blob
 from tms_db.errors import StoreError
 from tms_db.nodes.common import declare_and_open
@@ -54,7 +54,8 @@ class TmsDbReaderGridFS(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_db_reader_gridfs", **kwargs)
         self.store = declare_and_open(self)
-        self._server = ActionServer(self, TmsdbGridFS, GRIDFS_ACTION, self._execute)
+        self._server = ActionServer(self, TmsdbGridFS, GRIDFS_ACTION, self._execute,
+                                    result_timeout=ACTION_RESULT_TIMEOUT_S)
         self.get_logger().info(f"tms_db_reader_gridfs ready: {GRIDFS_ACTION}")
 
     def _execute(self, goal_handle):
