@@ -8,6 +8,7 @@ build on :mod:`tms_db.store`, so the function that picks one cannot live there.
 
 from __future__ import annotations
 
+import inspect
 import os
 from pathlib import Path
 from typing import Any
@@ -24,8 +25,10 @@ def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **
     """Open the store: ``mongodb://`` / ``mongodb+srv://`` URIs via pymongo, otherwise the embedded store.
 
     ``path`` (embedded only) is a directory, created if missing; default :func:`tms_db.store.default_path`.
-    ``options`` go to the backend (``database=`` for MongoDB, default ``rostmsdb`` or the URI's database), except
-    ``max_blob_bytes`` (both backends: the largest blob ``put_blob`` stores, default 64 MiB).
+    ``options`` go to the backend (MongoDB: ``database=``, default the URI's database else ``rostmsdb``, and
+    ``timeout_s=``, how long a call waits for the server, default :data:`tms_db.mongo.SERVER_TIMEOUT_S`; embedded:
+    ``synchronous=``, ``busy_timeout_s=``), except ``max_blob_bytes`` (both backends: the largest blob ``put_blob``
+    stores, default 64 MiB). An option the chosen backend does not take: StoreError naming it and the backend.
     """
     max_blob = options.pop("max_blob_bytes", None)
     if max_blob is not None and (isinstance(max_blob, bool) or not isinstance(max_blob, int) or max_blob < 0):
@@ -36,7 +39,19 @@ def open_store(uri: str | None = None, path: str | os.PathLike | None = None, **
     return store
 
 
+def _check_options(backend: type, options: dict[str, Any]) -> None:
+    taken = [n for n, p in inspect.signature(backend.__init__).parameters.items() if p.kind is p.KEYWORD_ONLY]
+    unknown = sorted(set(options) - set(taken))
+    if unknown:
+        raise StoreError(f"open_store: option(s) {', '.join(unknown)} not taken by {backend.__name__} "
+                         f"(it takes {', '.join(taken) or 'none'}, and max_blob_bytes)")
+
+
 def _open(uri: str | None, path: str | os.PathLike | None, options: dict[str, Any]) -> Store:
+    if uri and uri.startswith(("mongodb://", "mongodb+srv://")):
+        _check_options(MongoStore, options)
+    elif options and (not uri or uri.startswith("file:")):
+        _check_options(EmbeddedStore, options)
     if uri:
         if uri.startswith(("mongodb://", "mongodb+srv://")):
             return MongoStore(uri, **options)

@@ -125,3 +125,16 @@ def test_the_reader_node_answers_and_logs_while_the_server_is_gone_and_recovers(
     with open_store(uri=uri) as store:
         assert store.get_record("SAMPLE_GLOBAL_BLACKBOARD")["sample_val_int"] == 11
     assert reader.popen.poll() is None and writer.popen.poll() is None  # the nodes lived through it
+
+
+def test_open_store_names_an_option_the_backend_does_not_take(tmp_path) -> None:
+    """A misspelt or other backend's option is refused naming it before any server is contacted (no 5 s wait)."""
+    start = time.monotonic()
+    with pytest.raises(StoreError, match=r"option\(s\) databse not taken by MongoStore \(it takes database, timeout_s"):
+        open_store(uri="mongodb://127.0.0.1:1/x", databse="y")
+    with pytest.raises(StoreError, match=r"option\(s\) synchronous not taken by MongoStore"):
+        open_store(uri="mongodb://127.0.0.1:1/x", synchronous="FULL")
+    assert time.monotonic() - start < 1.0
+    with pytest.raises(StoreError, match=r"option\(s\) database not taken by EmbeddedStore"):
+        open_store(path=tmp_path / "db", database="rostmsdb")
+    assert not (tmp_path / "db").exists()  # nothing created
