@@ -62,9 +62,10 @@ def _reason(exc: Exception, timeout_s: float | None) -> str:
     text = " ".join(str(exc).split())
     if len(text) > 300:
         text = text[:300] + " ..."
+    from pymongo.errors import ConnectionFailure  # pymongo is loaded only with a MongoStore (see __init__)
+
     kind = type(exc).__name__
-    if kind in ("ServerSelectionTimeoutError", "AutoReconnect", "ConnectionFailure", "NetworkTimeout",
-                "ExecutionTimeout", "WaitQueueTimeoutError") or "Timeout" in kind:
+    if isinstance(exc, ConnectionFailure):  # gone, unreachable, or silent past socketTimeoutMS
         after = f" within {timeout_s:g} s" if timeout_s and kind == "ServerSelectionTimeoutError" else ""
         return f"the server did not answer{after} ({kind}: {text})"
     return f"{kind}: {text}"
