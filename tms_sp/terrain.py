@@ -47,6 +47,7 @@ from scipy import ndimage
 from scipy.interpolate import griddata
 from scipy.stats import binned_statistic_2d
 
+from tms_db import StoreError, find_heightmap
 from tms_sp.errors import SensingError
 from tms_sp.heightgrid import GridSpec
 
@@ -280,18 +281,13 @@ def store_heightmap(store: Any, hm: Heightmap, *, kind: str, ident: int, filenam
 
 
 def latest_heightmap(store: Any, kind: str, *, ident: int = 0, filename: str = "") -> tuple[dict, bytes]:
-    """The newest (by ``time``) stored heightmap (``DataType: heightmap``) of ``type`` ``kind`` (and ``id`` when not 0,
-    ``filename`` when not empty) and its bytes; TerrainError naming the request when nothing matches."""
-    flt: dict[str, Any] = {"type": kind, "DataType": "heightmap"}
-    if ident:
-        flt["id"] = int(ident)
-    if filename:
-        flt["filename"] = filename
-    found = store.find_blobs(flt, latest_only=True)
-    if not found:
-        raise TerrainError(f"no {kind!r} terrain stored" + (f" with id {ident}" if ident else "")
-                           + (f" named {filename!r}" if filename else ""))
-    return found[0], store.get_blob(found[0]["_id"])
+    """The newest (by ``time``) stored heightmap of ``type`` ``kind`` (and ``id`` when not 0, ``filename`` when not
+    empty) and its bytes, as tms_db's heightmap reader picks it; TerrainError naming the request when nothing
+    matches."""
+    try:
+        return find_heightmap(store, kind, ident, filename)
+    except StoreError as exc:
+        raise TerrainError(str(exc)) from None
 
 
 def image_8bit(units: np.ndarray) -> np.ndarray:
