@@ -13,12 +13,12 @@ import math
 import signal
 import subprocess
 
-import laspy
 import numpy as np
 import pytest
 
 from tests.arm_stack import arm_stack  # noqa: F401 - a fixture, found by pytest through this module
 from tests.rosproc import executable
+from tests.tms_sp.test_terrain import _write_las
 from tests.tms_sp.treeutil import ROOT
 from tms_db import open_store
 from tms_model.excavator import codes
@@ -31,14 +31,6 @@ pytestmark = pytest.mark.integration
 SUCCEEDED, ABORTED = 4, 6
 CFG = load_sensing_config()
 
-
-def _write_las(path, pts: np.ndarray) -> None:
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.offsets = pts.min(axis=0) if len(pts) else np.zeros(3)
-    header.scales = np.array([0.001, 0.001, 0.001])
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
-    las.write(str(path))
 
 
 def _static_cmd(db, *args: str) -> subprocess.CompletedProcess:
