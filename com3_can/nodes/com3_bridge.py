@@ -296,7 +296,8 @@ class Com3Bridge(Node):
     def _on_zx_setting(self, msg: Any) -> None:
         self._command(self.core.machine_setting, {
             "engine_rpm": msg.engine_rpm,
-            "power_eco_mode": float(msg.power_eco_mode),   # true = power = DBC 1
+            # com3_msgs: false = power, true = eco; the DBC's value table: 1 "Power Mode", 0 "Eco Mode"
+            "power_eco_mode": 0.0 if msg.power_eco_mode else 1.0,
             "travel_speed_mode": float(msg.travel_speed_mode),  # true = turtle = DBC 1
             "working_mode_notice": float(msg.working_mode_notice),
             "yellow_led_mode": float(msg.yellow_led_mode),

@@ -467,6 +467,8 @@ def test_machine_settings_on_com3_ros_topics_and_types(procs, ros_node, peer, ca
         (0.2, lambda: zx_pub.publish(zx_msg)),
     ), zx_bridge.output
     assert latest(ZX, t0)["yellow_led_mode"] == 2 and latest(ZX, t0)["working_mode_notice"] == 1
+    # the message's true is eco (com3_msgs), the DBC's eco is 0; turtle is true and 1 in both
+    assert latest(ZX, t0)["power_eco_mode"] == 0 and latest(ZX, t0)["travel_speed_mode"] == 1
 
     ic_bridge = start_bridge(procs, "ic120", can_cfg)
     ic_pub = ros_node.create_publisher(CrawlerCarrierCom3MachineSetting, "/ic120/crawler_carrier_machine_setting", 10)
