@@ -7,7 +7,8 @@ schema (database ``rostmsdb``, collections ``task`` and ``parameter``). The back
 with the same API. The reader/writer nodes expose it to other processes over ROS 2 services/topics.
 
 The public API, the one thing other packages import of tms_db: :func:`open_store`, :func:`declare_and_open` (a
-node's ``db_uri`` / ``db_path`` parameters and the store they name), :class:`Store`, the errors, and
+node's ``db_uri`` / ``db_path`` parameters and the store they name) with :class:`StoreOwner` (closes it with the
+node), :class:`Store`, the errors, and
 :func:`normalise_task_xml` (the one-line form a task's tree is stored in), :func:`find_heightmap` (the newest stored
 terrain heightmap of a type, as the original's heightmap reader picks it).
 """
@@ -15,9 +16,9 @@ terrain heightmap of a type, as the original's heightmap reader picks it).
 from tms_db.backend import open_store
 from tms_db.errors import BlobTooLarge, RecordNotFound, StoreError, ValidationError
 from tms_db.heightmap import find_heightmap
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_db.schema import normalise_task_xml
 from tms_db.store import DATABASE, Store, default_path
 
-__all__ = ["open_store", "declare_and_open", "Store", "StoreError", "RecordNotFound", "ValidationError", "BlobTooLarge",
-           "normalise_task_xml", "DATABASE", "default_path", "find_heightmap"]
+__all__ = ["open_store", "declare_and_open", "StoreOwner", "Store", "StoreError", "RecordNotFound", "ValidationError",
+           "BlobTooLarge", "normalise_task_xml", "DATABASE", "default_path", "find_heightmap"]

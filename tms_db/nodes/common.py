@@ -8,7 +8,7 @@ from tms_common.params import declare_startup
 from tms_db.backend import open_store
 from tms_db.store import Store
 
-__all__ = ["declare_and_open"]
+__all__ = ["StoreOwner", "declare_and_open"]
 
 
 def declare_and_open(node: Any, **options: Any) -> Store:
@@ -18,3 +18,21 @@ def declare_and_open(node: Any, **options: Any) -> Store:
     store = open_store(uri=uri or None, path=path or None, **options)
     node.get_logger().info(f"document store: {store!r}")
     return store
+
+
+class StoreOwner:
+    """Mixin for a node that owns ``self.store`` (from :func:`declare_and_open`): closes it when the node is destroyed.
+
+    Listed before ``Node`` in the bases (``class X(StoreOwner, Node)``), so ``super()`` reaches ``Node``'s
+    ``destroy_node``, which runs even when closing the store raises.
+    """
+
+    store: Store
+
+    def destroy_node(self) -> None:
+        try:
+            store = getattr(self, "store", None)  # a constructor that failed before opening it
+            if store is not None:
+                store.close()
+        finally:
+            super().destroy_node()  # type: ignore[misc]

@@ -28,7 +28,7 @@ from rclpy.node import Node
 from tms_common.node import run_node
 from tms_db.boundary import DATA_SERVICE, read_data
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_msg_db.msg import Tmsdb
 from tms_msg_db.srv import TmsdbGetData, TmsdbGetParameter, TmsdbGetTask
 
@@ -53,7 +53,7 @@ def parameter_pairs(doc: dict) -> tuple[list[str], list[str]]:
     return keys, values
 
 
-class TmsDbReader(Node):
+class TmsDbReader(StoreOwner, Node):
     """Answers task and parameter look-ups from the store."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -89,10 +89,6 @@ class TmsDbReader(Node):
             return response
         response.tmsdbs = [Tmsdb(**fields) for fields in found]
         return response
-
-    def destroy_node(self) -> None:
-        self.store.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

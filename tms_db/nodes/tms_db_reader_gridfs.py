@@ -28,7 +28,7 @@ from rclpy.node import Node
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_db.boundary import CLOUD_TYPE, FILE_TYPES, GRIDFS_ACTION, read_clouds, read_file_blob
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_db.nodes.pointcloud import cloud_to_msg
 from tms_msg_db.action import TmsdbGridFS
 
@@ -48,7 +48,7 @@ def write_file(path: str, data: bytes) -> None:
         raise
 
 
-class TmsDbReaderGridFS(Node):
+class TmsDbReaderGridFS(StoreOwner, Node):
     """Reads blobs back: files to disk, point clouds into the result."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -94,7 +94,6 @@ class TmsDbReaderGridFS(Node):
 
     def destroy_node(self) -> None:
         self._server.destroy()
-        self.store.close()
         super().destroy_node()
 
 

@@ -31,7 +31,7 @@ from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import declare_startup
 from tms_db.errors import StoreError
 from tms_db.heightmap import ENCODINGS, find_heightmap, image_of
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_msg_db.action import TmsdbTerrainImage
 
 __all__ = ["ACTION", "TmsDbReaderHeightmap", "main"]
@@ -39,7 +39,7 @@ __all__ = ["ACTION", "TmsDbReaderHeightmap", "main"]
 ACTION = "tms_db_reader_heightmap"
 
 
-class TmsDbReaderHeightmap(Node):
+class TmsDbReaderHeightmap(StoreOwner, Node):
     """Serves stored heightmaps; see the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -82,12 +82,6 @@ class TmsDbReaderHeightmap(Node):
         result.msg = f"{result.type} heightmap {result.filename} of {result.time}"
         goal_handle.succeed()
         return result
-
-    def destroy_node(self) -> None:
-        try:
-            self.store.close()
-        finally:
-            super().destroy_node()
 
 
 def main() -> int:

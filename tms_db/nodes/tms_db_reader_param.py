@@ -17,14 +17,14 @@ from rclpy.node import Node
 from tms_common.node import run_node
 from tms_db.boundary import PARAM_SERVICE, param_replies
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_msg_db.msg import Tmsdb
 from tms_msg_db.srv import TmsdbGetData
 
 __all__ = ["main", "TmsDbReaderParam"]
 
 
-class TmsDbReaderParam(Node):
+class TmsDbReaderParam(StoreOwner, Node):
     """Answers record look-ups as the original's param reader."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -43,10 +43,6 @@ class TmsDbReaderParam(Node):
             self.get_logger().warning(f"{PARAM_SERVICE}: {problem}")
         response.tmsdbs = [Tmsdb(**fields) for fields in found]
         return response
-
-    def destroy_node(self) -> None:
-        self.store.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -29,7 +29,7 @@ from tms_common.node import run_node
 from tms_common.params import declare_startup
 from tms_db.boundary import DATA_TOPIC, data_document
 from tms_db.errors import StoreError, ValidationError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_msg.msg import ParameterUpdate
 from tms_msg.srv import SetParameter
 from tms_msg_db.msg import Tmsdb
@@ -51,7 +51,7 @@ def apply_update(store: Any, model_name: str, record_name: str, fields_json: str
     return store.set_fields(record_name, fields, model_name=model_name or None, upsert=upsert)
 
 
-class TmsDbWriter(Node):
+class TmsDbWriter(StoreOwner, Node):
     """Applies parameter updates from sensing to the store."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -103,10 +103,6 @@ class TmsDbWriter(Node):
             return response
         response.success, response.message = True, ""
         return response
-
-    def destroy_node(self) -> None:
-        self.store.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -18,13 +18,13 @@ from rclpy.node import Node
 from tms_common.node import run_node
 from tms_db.boundary import COLLISION_TOPIC, write_collision
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_msg_db.msg import TmsdbCollision
 
 __all__ = ["main", "TmsDbWriterCollision"]
 
 
-class TmsDbWriterCollision(Node):
+class TmsDbWriterCollision(StoreOwner, Node):
     """Stores collision-object meshes as records."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -41,10 +41,6 @@ class TmsDbWriterCollision(Node):
             return
         self.get_logger().info(f"{COLLISION_TOPIC}: stored {msg.filepath!r} ({len(doc['data'])} bytes) as record "
                                f"{doc['record_name']!r}")
-
-    def destroy_node(self) -> None:
-        self.store.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

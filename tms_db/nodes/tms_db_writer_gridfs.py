@@ -24,14 +24,14 @@ from tms_common.node import run_node
 from tms_common.params import declare_startup
 from tms_db.boundary import CLOUD_TYPE, GRIDFS_TOPIC, put_gridfs
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_db.nodes.pointcloud import cloud_from_msg
 from tms_msg_db.msg import TmsdbGridFS
 
 __all__ = ["main", "TmsDbWriterGridFS"]
 
 
-class TmsDbWriterGridFS(Node):
+class TmsDbWriterGridFS(StoreOwner, Node):
     """Stores files and point clouds as blobs."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -53,10 +53,6 @@ class TmsDbWriterGridFS(Node):
             return
         self.get_logger().info(f"{GRIDFS_TOPIC}: stored {msg.type} {msg.filename or '(cloud)'} time {msg.time!r} "
                                f"as blob {file_id}")
-
-    def destroy_node(self) -> None:
-        self.store.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

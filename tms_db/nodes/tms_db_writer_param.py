@@ -17,7 +17,7 @@ from rclpy.node import Node
 from tms_common.node import run_node
 from tms_db.boundary import PARAM_TOPIC, POSE_FIELDS, apply_query
 from tms_db.errors import StoreError
-from tms_db.nodes.common import declare_and_open
+from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_msg_db.msg import TmsdbQuery
 
 __all__ = ["main", "TmsDbWriterParam", "query_pose"]
@@ -29,7 +29,7 @@ def query_pose(msg: Any) -> dict[str, float]:
     return dict(zip(POSE_FIELDS, (p.x, p.y, p.z, q.x, q.y, q.z, q.w), strict=True))
 
 
-class TmsDbWriterParam(Node):
+class TmsDbWriterParam(StoreOwner, Node):
     """Applies TmsdbQuery writes to the parameter records."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -47,10 +47,6 @@ class TmsDbWriterParam(Node):
             return
         self.get_logger().info(f"{PARAM_TOPIC}: {msg.type} {msg.writemode or '-'} stored record "
                                f"{doc.get('record_name')!r} of {doc.get('model_name') or 'no model'!r}")
-
-    def destroy_node(self) -> None:
-        self.store.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

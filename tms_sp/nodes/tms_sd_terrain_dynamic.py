@@ -27,7 +27,7 @@ from sensor_msgs.msg import PointCloud2
 from tms_common.errors import ConfigError, TmsError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
-from tms_db import declare_and_open
+from tms_db import StoreOwner, declare_and_open
 from tms_sp.config import load_sensing_config
 from tms_sp.pointcloud import xyz_from_cloud
 from tms_sp.terrain import DYNAMIC_ID, DynamicTerrain
@@ -35,7 +35,7 @@ from tms_sp.terrain import DYNAMIC_ID, DynamicTerrain
 __all__ = ["TmsSdTerrainDynamic", "main"]
 
 
-class TmsSdTerrainDynamic(Node):
+class TmsSdTerrainDynamic(StoreOwner, Node):
     """Writes dynamic heightmaps from scans; see the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -80,12 +80,6 @@ class TmsSdTerrainDynamic(Node):
             self.terrain.on_points(xyz_from_cloud(msg, topic=self.topic), source=self.topic)
         except TmsError as exc:
             self.get_logger().warning(f"dynamic terrain not stored: {exc}", throttle_duration_sec=5.0)
-
-    def destroy_node(self) -> None:
-        try:
-            self.store.close()
-        finally:
-            super().destroy_node()
 
 
 def main() -> int:

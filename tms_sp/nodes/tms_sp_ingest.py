@@ -27,13 +27,13 @@ from rclpy.node import Node
 
 from tms_common.errors import TmsError
 from tms_common.node import run_node
-from tms_db import declare_and_open
+from tms_db import StoreOwner, declare_and_open
 from tms_sp.ingest import SENSING_TOPICS, SensingTopic, SensingWriter
 
 __all__ = ["SensingIngest", "main"]
 
 
-class SensingIngest(Node):
+class SensingIngest(StoreOwner, Node):
     """Writes the original's sensing messages into the DB; see the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -62,12 +62,6 @@ class SensingIngest(Node):
                 f"{topic.topic}: record {fields.get('record_name')!r} has none of the message's fields",
                 throttle_duration_sec=5.0,
             )
-
-    def destroy_node(self) -> None:
-        try:
-            self.store.close()
-        finally:
-            super().destroy_node()
 
 
 def main() -> int:

@@ -46,7 +46,7 @@ from sensor_msgs.msg import PointCloud2
 from tms_common.errors import ConfigError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
-from tms_db import declare_and_open
+from tms_db import StoreOwner, declare_and_open
 from tms_model.geometry import Pose2D, yaw_from_quaternion
 from tms_sp.config import load_sensing_config
 from tms_sp.errors import SensingError
@@ -59,7 +59,7 @@ def pose2d(msg: PoseStamped) -> Pose2D:
     return Pose2D(p.x, p.y, yaw_from_quaternion(q), p.z)
 
 
-class SensingNode(Node):
+class SensingNode(StoreOwner, Node):
     """Feeds SiteSensing from ROS topics; see the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -167,12 +167,6 @@ class SensingNode(Node):
         msg = array_t(status=[st])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._status.publish(msg)
-
-    def destroy_node(self) -> None:
-        try:
-            self.store.close()
-        finally:
-            super().destroy_node()
 
 
 def main() -> int:

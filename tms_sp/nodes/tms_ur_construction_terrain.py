@@ -38,7 +38,7 @@ from std_msgs.msg import ColorRGBA
 from tms_common.errors import ConfigError, TmsError
 from tms_common.node import run_node
 from tms_common.params import declare_startup
-from tms_db import declare_and_open
+from tms_db import StoreOwner, declare_and_open
 from tms_msg_db.srv import ColoredMeshSrv, DemSrv, TerrainStaticSrv, TmsdbTerrainImageSrv
 from tms_sp.terrain import (
     Heightmap,
@@ -57,7 +57,7 @@ SERVICES = {"static": "output/terrain/static_srv", "dem": "output/terrain/dem_sr
             "mesh": "output/terrain/mesh_srv", "heightmap": "output/terrain/heightmap_srv"}
 
 
-class TmsUrConstructionTerrain(Node):
+class TmsUrConstructionTerrain(StoreOwner, Node):
     """Serves the terrain services; see the module docstring."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -153,12 +153,6 @@ class TmsUrConstructionTerrain(Node):
         response.image.header.frame_id = "map"
         response.image.header.stamp = self.get_clock().now().to_msg()
         return response
-
-    def destroy_node(self) -> None:
-        try:
-            self.store.close()
-        finally:
-            super().destroy_node()
 
 
 def main() -> int:
