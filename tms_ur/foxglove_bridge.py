@@ -10,10 +10,12 @@ own origin), so a bind off loopback is refused unless ``allow_remote`` says so e
 
 from __future__ import annotations
 
+import importlib
 import re
 import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from tms_common.errors import ConfigError
 from tms_model.machines import CRAWLER_DUMP, Machine
@@ -25,6 +27,7 @@ __all__ = [
     "Plan",
     "QosChoice",
     "choose_qos",
+    "message_class",
     "select_topics",
     "site_topics",
 ]
@@ -32,6 +35,19 @@ __all__ = [
 NODE = "tms_ur_foxglove"
 # a ROS 2 topic name, fully qualified (what the graph reports): '/' then tokens of [A-Za-z0-9_] separated by '/'
 _TOPIC = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
+_MSGTYPE = re.compile(r"^([A-Za-z][A-Za-z0-9_]*)/msg/([A-Z][A-Za-z0-9]*)$")
+
+
+def message_class(msgtype: str) -> Any:
+    """The generated Python class of ``pkg/msg/Type`` (a raw subscription needs it); ConfigError naming the type."""
+    m = _MSGTYPE.match(msgtype)
+    if not m:
+        raise ConfigError(f"{NODE}: {msgtype!r} is not a message type of the form pkg/msg/Type")
+    try:
+        cls = getattr(importlib.import_module(f"{m.group(1)}.msg"), m.group(2))
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"{NODE}: message type {msgtype} is not installed: {exc}") from None
+    return cls
 
 
 @dataclass(frozen=True)

@@ -3,12 +3,23 @@
 from __future__ import annotations
 
 import pytest
+from std_msgs.msg import String
 
 from tms_common.errors import ConfigError
 from tms_model.fleet import load_named
 from tms_model.machines import CRAWLER_DUMP
 from tms_model.site import load_site
-from tms_ur.foxglove_bridge import BridgeConfig, ChannelTable, Plan, QosChoice, choose_qos, select_topics, site_topics
+from tms_msg.msg import TaskStatus
+from tms_ur.foxglove_bridge import (
+    BridgeConfig,
+    ChannelTable,
+    Plan,
+    QosChoice,
+    choose_qos,
+    message_class,
+    select_topics,
+    site_topics,
+)
 
 
 def test_loopback_default_and_remote_needs_explicit_setting() -> None:
@@ -102,3 +113,13 @@ def test_unavailable_type_is_reported_once_and_not_advertised_again() -> None:
     assert not table.mark_unavailable("pkg/msg/Missing", "no definition")
     assert table.plan({"/m": "pkg/msg/Missing", "/s": "std_msgs/msg/String"}).advertise == (
         ("/s", "std_msgs/msg/String"),)
+
+
+def test_message_class_resolves_installed_types_and_names_the_bad_one() -> None:
+    assert message_class("std_msgs/msg/String") is String
+    assert message_class("tms_msg/msg/TaskStatus") is TaskStatus
+    for bad, culprit in (("std_msgs/String", "not a message type"), ("std_msgs/srv/String", "not a message type"),
+                         ("no_such_pkg/msg/Thing", "no_such_pkg/msg/Thing is not installed"),
+                         ("std_msgs/msg/NoSuchType", "std_msgs/msg/NoSuchType is not installed")):
+        with pytest.raises(ConfigError, match=culprit):
+            message_class(bad)
