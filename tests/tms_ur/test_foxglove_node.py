@@ -133,7 +133,7 @@ def test_foxglove_client_sees_the_site_topics_as_published(procs) -> None:
     async def session() -> None:
         async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS,
                                       max_size=None) as ws:
-            assert ws.subprotocol in SUBPROTOCOLS
+            assert ws.subprotocol == "foxglove.sdk.v1"  # foxglove-sdk's only subprotocol (README: Lichtblick)
             client = FoxgloveClient(ws)
             await client.pump(lambda: client.server_info is not None and set(expected_types) <= set(client.channels),
                               30, "serverInfo and the advertisements")
@@ -175,6 +175,13 @@ def test_foxglove_client_sees_the_site_topics_as_published(procs) -> None:
                 assert _messages(second, 9, "tf2_msgs/msg/TFMessage")[0] == _tf(7, "static_frame")
 
     asyncio.run(session())
+
+    async def legacy_only() -> None:  # the pre-SDK name alone is refused at the handshake (old Lichtblick sends it)
+        with pytest.raises(websockets.exceptions.InvalidStatus, match="HTTP 400"):
+            async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1"]):
+                pass
+
+    asyncio.run(legacy_only())
     assert node.popen.poll() is None, node.output
     node.signal(signal.SIGINT)
     assert node.wait(15) == 0, node.output
