@@ -72,6 +72,16 @@ if ! fresh "$STAMPS/ament" pyproject.toml scripts/register_ament.py "$STAMPS/pro
   touch "$STAMPS/ament"
 fi
 
+# The panel's 3-D view (tms_ur/web3d): three.js and urdf-loader from the npm registry at the versions of the
+# committed package-lock.json; the panel serves them from node_modules (nothing fetched at run time).
+if ! fresh "$STAMPS/web3d" tms_ur/web3d/package.json tms_ur/web3d/package-lock.json \
+    || [ ! -d tms_ur/web3d/node_modules/three ]; then
+  command -v npm >/dev/null || fail "npm not found: the panel's 3-D view needs Node.js and npm (Debian: apt-get install nodejs npm)"
+  say "installing the 3-D view's JavaScript packages (npm ci in tms_ur/web3d)"
+  (cd tms_ur/web3d && npm ci --no-audit --no-fund --ignore-scripts) || fail "npm ci in tms_ur/web3d failed"
+  touch "$STAMPS/web3d"
+fi
+
 if [ ! -x /usr/bin/chromium ]; then
   # Browser tests of the web panel (tms_ur) need Debian's chromium; failure here is reported, and the
   # browser tests then skip naming the missing /usr/bin/chromium.

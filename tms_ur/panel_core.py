@@ -21,6 +21,8 @@ import numpy as np
 from tms_common.errors import ConfigError, TmsError
 from tms_model.excavator.kinematics import ExcavatorKinematics
 from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR, LIFT_JOINT, ROTATE_JOINT, VESSEL_JOINT, Machine
+from tms_model.transform import Transform
+from tms_model.urdf import MachineTree
 
 __all__ = [
     "PanelConfig",
@@ -39,6 +41,9 @@ __all__ = [
     "SiteState",
     "arm_side_view",
     "machine_info",
+    "TfError",
+    "SiteTfView",
+    "terrain_layer",
 ]
 
 
@@ -347,3 +352,89 @@ class SiteState:
             "soil": self.soil,
             "events": self.events[-20:],
         }
+
+
+# ---- the 3-D view: link poses in map from /tf, terrain layers -------------------------------------------------------
+class TfError(TmsError, ValueError):
+    """A /tf transform the 3-D view cannot use; the message names the frames and the field."""
+
+
+MAP_FRAME = "map"
+
+
+class SiteTfView:
+    """Latest /tf and /tf_static edges, composed into each machine's link poses in ``map`` for the 3-D view.
+
+    ``trees`` are the machines shown (their URDF trees, frames with the machine's tf prefix). Each machine's poses
+    carry the stamp of its ``odom -> base_link`` edge (the pose the page draws), so a client can compare the view
+    with /tf at that stamp. Edges of frames no shown machine has (another site's) are ignored.
+    """
+
+    def __init__(self, trees: list[MachineTree]) -> None:
+        self.trees = {t.machine.model_name: t for t in trees}
+        self._edges: dict[str, tuple[str, Transform, float]] = {}  # child -> (parent, parent_T_child, stamp)
+        self._known = {MAP_FRAME}
+        for t in trees:
+            self._known |= {t.frame(link) for link in (*t.links, "odom")}
+        self.version = 0  # bumped on every accepted edge: the snapshot is rebuilt only when it changed
+
+    def set(self, parent: str, child: str, translation: tuple[float, float, float],
+            rotation: tuple[float, float, float, float], stamp: float) -> None:
+        """One transform ``parent_T_child`` at ``stamp`` [s]; TfError naming the frames for a non-finite value or a
+        rotation that is not a unit quaternion (nothing is kept then)."""
+        if child not in self._known:
+            return
+        values = (*translation, *rotation)
+        if not all(math.isfinite(v) for v in values):
+            raise TfError(f"/tf {parent} -> {child}: non-finite value in {values}")
+        norm = math.sqrt(sum(c * c for c in rotation))
+        if abs(norm - 1.0) > 0.01:
+            raise TfError(f"/tf {parent} -> {child}: rotation quaternion has norm {norm:.4f}, expected 1")
+        rot = tuple(float(c) / norm for c in rotation)
+        self._edges[child] = (parent, Transform(tuple(float(v) for v in translation), rot), float(stamp))  # type: ignore[arg-type]
+        self.version += 1
+
+    def in_map(self, frame: str) -> Transform | None:
+        """``map_T_frame`` from the latest edges; None while an edge of the chain is missing."""
+        out = Transform()
+        seen = 0
+        while frame != MAP_FRAME:
+            edge = self._edges.get(frame)
+            if edge is None or seen > 64:
+                return None
+            out = edge[1] * out
+            frame = edge[0]
+            seen += 1
+        return out
+
+    def machine_links(self, name: str) -> dict[str, Any] | None:
+        """``{"stamp": s, "links": {frame: [x, y, z, qx, qy, qz, qw]}}`` in ``map`` for machine ``name``; None until
+        its base_link reaches ``map``."""
+        tree = self.trees[name]
+        base = tree.frame("base_link")
+        edge = self._edges.get(base)
+        if edge is None or self.in_map(base) is None:
+            return None
+        links = {}
+        for link in tree.links:
+            pose = self.in_map(tree.frame(link))
+            if pose is not None:
+                links[tree.frame(link)] = [round(v, 5) for v in (*pose.translation, *pose.rotation)]
+        return {"stamp": round(edge[2], 9), "links": links}
+
+    def snapshot(self) -> dict[str, Any]:
+        return {name: pose for name in self.trees if (pose := self.machine_links(name)) is not None}
+
+
+def terrain_layer(kind: str, file_id: str, z: np.ndarray, x_min: float, y_min: float, x_max: float,
+                  y_max: float) -> dict[str, Any]:
+    """A heightmap (``z[row, col]`` in image order: row 0 the north edge) as the 3-D view draws it, heights in
+    mm-rounded metres, row-major."""
+    z = np.asarray(z, dtype=float)
+    if z.ndim != 2 or z.size == 0 or not np.all(np.isfinite(z)):
+        raise TfError(f"terrain {kind} {file_id}: heights must be a finite 2-D grid, got shape {z.shape}")
+    if not (x_max > x_min and y_max > y_min):
+        raise TfError(f"terrain {kind} {file_id}: empty extent x {x_min}..{x_max} y {y_min}..{y_max}")
+    return {"kind": kind, "id": str(file_id), "rows": int(z.shape[0]), "cols": int(z.shape[1]),
+            "x_min": float(x_min), "y_min": float(y_min), "x_max": float(x_max), "y_max": float(y_max),
+            "z": [round(float(v), 3) for v in z.ravel()]}

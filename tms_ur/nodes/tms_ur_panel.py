@@ -41,7 +41,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64MultiArray, Int32, String
 
-from tms_common.errors import ConfigError
+from tf2_msgs.msg import TFMessage
+from tms_common.errors import ConfigError, TmsError
 from tms_common.node import run_node
 from tms_common.params import startup_parameters
 from tms_db import open_store
@@ -50,22 +51,35 @@ from tms_model.fleet import load_named
 from tms_model.geometry import yaw_from_quaternion
 from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
 from tms_model.site import load_site
+from tms_model.urdf import machine_tree
 from tms_msg.msg import TaskIds, TaskStatus
+from tms_sp.nodes.tms_sp_tf import LATCHED, TF_QOS
+from tms_sp.terrain import heightmap_from_blob, latest_heightmap
 from tms_ur.panel_core import (
     Access,
     CommandError,
     PanelConfig,
     SiteState,
+    SiteTfView,
     authorize,
     machine_info,
     parse_command,
+    terrain_layer,
     websocket_access,
 )
 from tms_ur.site_map import order_machines
 
 WEB_DIR = Path(__file__).parent.parent / "web"
+WEB3D_DIR = Path(__file__).parent.parent / "web3d"
 STATIC = {"/": ("index.html", "text/html; charset=utf-8"), "/panel.js": ("panel.js", "text/javascript"),
           "/panel.css": ("panel.css", "text/css")}
+#: The 3-D view's own files (tms_ur/web3d) by URL path.
+STATIC_3D = {"/3d": ("index.html", "text/html; charset=utf-8"), "/site3d.js": ("site3d.js", "text/javascript")}
+#: The npm packages' files the page imports (tms_ur/web3d/node_modules, installed by scripts/bootstrap.sh):
+#: only these folders are served, only JavaScript.
+MODULE_ROOTS = ("three/build/", "three/examples/jsm/", "urdf-loader/src/")
+#: Terrain layers drawn, lowest first: the dynamic terrain from the mound scans over the static one.
+TERRAIN_KINDS = ("static", "dynamic")
 
 
 state_names = {0: "IDLE", 1: "RUNNING", 2: "SUCCESS", 3: "FAILURE", 4: "CANCELED"}
@@ -95,6 +109,12 @@ class PanelNode(Node):
         self.lock = threading.Lock()
         self.site = SiteState(machines=[machine_info(m) for m in machines])
         self.kin = {m.model_name: ExcavatorKinematics(m) for m in machines if m.type == EXCAVATOR}
+        trees = [machine_tree(m) for m in machines]
+        self.urdf = {t.machine.model_name: t.urdf() for t in trees}
+        self.tf_view = SiteTfView(trees)
+        self.terrain: dict[str, dict] = {}  # kind -> terrain_layer of the newest stored heightmap
+        self.create_subscription(TFMessage, "/tf", self._on_tf, TF_QOS)
+        self.create_subscription(TFMessage, "/tf_static", self._on_tf, LATCHED)
         self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
         self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", 10)
         self.pub_emergency = self.create_publisher(Bool, "/emergency_signal", 10)
@@ -119,6 +139,17 @@ class PanelNode(Node):
         self._web = _WebThread(self)  # last: it serves this node's snapshot and commands
 
     # -- inputs ---------------------------------------------------------------------------
+    def _on_tf(self, msg: TFMessage) -> None:
+        with self.lock:
+            for t in msg.transforms:
+                tr, r = t.transform.translation, t.transform.rotation
+                stamp = t.header.stamp.sec + t.header.stamp.nanosec * 1e-9
+                try:
+                    self.tf_view.set(t.header.frame_id, t.child_frame_id, (tr.x, tr.y, tr.z), (r.x, r.y, r.z, r.w),
+                                     stamp)
+                except TmsError as exc:
+                    self.get_logger().warning(f"3-D view: {exc}", throttle_duration_sec=5.0)
+
     def _on_status(self, msg: TaskStatus) -> None:
         tasks = []
         for t in msg.tasks:
@@ -182,9 +213,36 @@ class PanelNode(Node):
             with self.lock:
                 self.site.event("error", f"database: {type(exc).__name__}: {exc}")
             return
+        terrain = self._read_terrain()
         with self.lock:
             self.site.task_catalogue = catalogue
             self.site.flags = flags
+            self.terrain = terrain
+
+    def _read_terrain(self) -> dict[str, dict]:
+        """The newest heightmap of each of TERRAIN_KINDS in the DB; a layer is decoded only when its file changed."""
+        out = {}
+        for kind in TERRAIN_KINDS:
+            try:
+                doc, data = latest_heightmap(self._store, kind)
+            except TmsError:
+                continue  # none stored (yet): the view draws the other layer or flat ground
+            file_id = str(doc["_id"])
+            old = self.terrain.get(kind)
+            if old is not None and old["id"] == file_id:
+                out[kind] = old
+                continue
+            try:
+                hm = heightmap_from_blob(data, doc, source=f"{kind} terrain {file_id}")
+                out[kind] = terrain_layer(kind, file_id, hm.z, hm.x_min, hm.y_min, hm.x_max, hm.y_max)
+            except TmsError as exc:
+                self.get_logger().warning(f"3-D view: {exc}", throttle_duration_sec=5.0)
+        return out
+
+    def terrain_json(self) -> str:
+        with self.lock:
+            layers = [self.terrain[k] for k in TERRAIN_KINDS if k in self.terrain]
+        return json.dumps({"version": _terrain_version(layers), "layers": layers})
 
     # -- outputs --------------------------------------------------------------------------
     def execute(self, text: str) -> str:
@@ -204,7 +262,10 @@ class PanelNode(Node):
 
     def snapshot(self) -> str:
         with self.lock:
-            return json.dumps(self.site.snapshot())
+            snap = self.site.snapshot()
+            snap["tf"] = self.tf_view.snapshot()
+            snap["terrain_version"] = _terrain_version([self.terrain[k] for k in TERRAIN_KINDS if k in self.terrain])
+            return json.dumps(snap)
 
     def destroy_node(self) -> None:
         self._web.close()
@@ -269,10 +330,27 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:
             return None
         if url.path in STATIC:
             name, ctype = STATIC[url.path]
-            body = (WEB_DIR / name).read_bytes()
-            return Response(200, "OK", Headers([("Content-Type", ctype), ("Content-Length", str(len(body))),
-                                                ("Cache-Control", "no-store")]), body)
+            return _ok((WEB_DIR / name).read_bytes(), ctype)
+        if url.path in STATIC_3D:
+            name, ctype = STATIC_3D[url.path]
+            return _ok((WEB3D_DIR / name).read_bytes(), ctype)
+        if url.path == "/terrain.json":
+            return _ok(node.terrain_json().encode(), "application/json")
+        if url.path.startswith("/urdf/"):
+            urdf = node.urdf.get(url.path[len("/urdf/"):])
+            if urdf is None:
+                return connection.respond(404, f"404 Not Found: no machine {url.path[6:][:60]!r} on this panel\n")
+            return _ok(urdf.encode(), "application/xml")
+        if url.path.startswith("/modules/"):
+            path = _module_file(url.path[len("/modules/"):])
+            if path is None:
+                return connection.respond(404, "404 Not Found\n")
+            return _ok(path.read_bytes(), "text/javascript", cache=True)
         return connection.respond(404, "404 Not Found\n")
+
+    def _ok(body: bytes, ctype: str, cache: bool = False):
+        return Response(200, "OK", Headers([("Content-Type", ctype), ("Content-Length", str(len(body))),
+                                            ("Cache-Control", "max-age=3600" if cache else "no-store")]), body)
 
     def access_of(ws) -> Access:
         request = ws.request
@@ -333,6 +411,19 @@ async def _serve(node, ready: concurrent.futures.Future) -> None:
             await server.serve_forever()
         finally:
             broadcaster.cancel()
+
+
+def _terrain_version(layers: list[dict]) -> str:
+    return ",".join(f"{layer['kind']}:{layer['id']}" for layer in layers)
+
+
+def _module_file(rel: str) -> Path | None:
+    """The installed npm file for ``/modules/<rel>``, None unless it is a .js file under MODULE_ROOTS."""
+    if not rel.endswith(".js") or not rel.startswith(MODULE_ROOTS) or ".." in rel.split("/"):
+        return None
+    root = (WEB3D_DIR / "node_modules").resolve()
+    path = (root / rel).resolve()
+    return path if path.is_relative_to(root) and path.is_file() else None
 
 
 def _one(headers, name: str) -> str | None:

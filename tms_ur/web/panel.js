@@ -1,6 +1,7 @@
 // Live view and controls of the TMS web panel. No framework: one websocket, two canvases.
 "use strict";
 const token = new URLSearchParams(location.search).get("token");
+document.getElementById("link-3d").href = "/3d" + (token ? `?token=${encodeURIComponent(token)}` : "");
 let ws = null;
 let last = null;
 const picked = new Set();
