@@ -14,19 +14,23 @@ import socket
 import struct
 import sys
 import time
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 import rclpy
 import websockets
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState, PointCloud2, PointField
 from std_msgs.msg import String
 from tms_ur.msgdefs import message_definition
 
 from tests.rosproc import executable
 from tests.tms_ur.conftest import free_port
 from tf2_msgs.msg import TFMessage
+from tms_model.site import load_site
 from tms_msg.msg import TaskState, TaskStatus
 from tms_ur.foxglove_bridge import message_class
 
@@ -35,6 +39,7 @@ pytestmark = pytest.mark.integration
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 CHATTER = "/fg_test/chatter"  # not a site topic: reaches Foxglove by discovery
 STATUS = "/tms_ts/status"  # a site topic of a project type (tms_msg/TaskStatus)
+URDF = '<robot name="fg_test"><link name="base_link"/></robot>'
 
 
 def _tf(i: int, frame: str):
@@ -54,15 +59,70 @@ def _task_status(i: int):
     return TaskStatus(tasks=[TaskState(task_id=i, state=1, running_leaves=[f"leaf{i}"], message=f"tick {i}")])
 
 
+def _stamped(msg, i: int):
+    msg.header.frame_id = "map"
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 100 + i, 500
+    return msg
+
+
+def _cloud(i: int):
+    fields = [PointField(name=n, offset=4 * k, datatype=PointField.FLOAT32, count=1) for k, n in enumerate("xyz")]
+    points = [(0.1 * i, 2.0, -0.5), (1.5, 0.25 * i, 3.0)]
+    return _stamped(PointCloud2(height=1, width=len(points), fields=fields, is_bigendian=False, point_step=12,
+                                row_step=12 * len(points), is_dense=True,
+                                data=b"".join(struct.pack("<3f", *p) for p in points)), i)
+
+
+def _pose(i: int):
+    msg = _stamped(PoseStamped(), i)
+    msg.pose.position.x, msg.pose.position.z, msg.pose.orientation.w = 0.1 * i, 1.0, 1.0
+    return msg
+
+
+def _joints(i: int):
+    return _stamped(JointState(name=["swing_joint", "boom_joint"], position=[0.01 * i, -0.02 * i]), i)
+
+
+def _stamp_seq(msg) -> int:
+    return msg.header.stamp.sec - 100
+
+
+def _machine() -> str:
+    """A machine of the site's list (its topics are site topics the node bridges by default)."""
+    return next(iter(load_site().machines))
+
+
+def periodic() -> dict[str, tuple[str, Callable[[int], Any], Callable[[Any], int]]]:
+    """topic -> (type, the i-th message, i of a message) of every topic the publisher sends at 20 Hz."""
+    m = _machine()
+    return {
+        "/tf": ("tf2_msgs/msg/TFMessage", lambda i: _tf(i, "moving_frame"),
+                lambda msg: msg.transforms[0].header.stamp.sec - 100),
+        CHATTER: ("std_msgs/msg/String", _chatter, lambda msg: int(msg.data.split()[1])),
+        STATUS: ("tms_msg/msg/TaskStatus", _task_status, lambda msg: msg.tasks[0].task_id),
+        "/sim/sensors/mound/points": ("sensor_msgs/msg/PointCloud2", _cloud, _stamp_seq),
+        f"/sim/truth/{m}/pose": ("geometry_msgs/msg/PoseStamped", _pose, _stamp_seq),
+        f"/{m}/joint_states": ("sensor_msgs/msg/JointState", _joints, _stamp_seq),
+    }
+
+
+def latched() -> dict[str, tuple[str, Any]]:
+    """topic -> (type, message) of the topics the publisher sends once, transient local, before the node starts."""
+    return {"/tf_static": ("tf2_msgs/msg/TFMessage", _tf(7, "static_frame")),
+            f"/{_machine()}/robot_description": ("std_msgs/msg/String", String(data=URDF))}
+
+
 def publish() -> None:
-    """The publisher process: /tf_static once (latched), then /tf, the chatter and the task status at 20 Hz."""
+    """The publisher process: the latched topics once, then the periodic ones at 20 Hz."""
     rclpy.init()
     node = rclpy.create_node("fg_test_publisher")
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    node.create_publisher(TFMessage, "/tf_static", latched).publish(_tf(7, "static_frame"))
-    pubs = [(node.create_publisher(TFMessage, "/tf", 10), lambda i: _tf(i, "moving_frame")),
-            (node.create_publisher(String, CHATTER, 10), _chatter),
-            (node.create_publisher(TaskStatus, STATUS, 10), _task_status)]
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    keep = []
+    for topic, (msgtype, msg) in latched().items():
+        keep.append(node.create_publisher(message_class(msgtype), topic, qos))
+        keep[-1].publish(msg)
+    pubs = [(node.create_publisher(message_class(msgtype), topic, 10), make)
+            for topic, (msgtype, make, _) in periodic().items()]
     count = [0]
 
     def tick() -> None:
@@ -127,8 +187,8 @@ def test_foxglove_client_sees_the_site_topics_as_published(procs) -> None:
     node = procs([executable("tms_ur", "tms_ur_foxglove"), "--ros-args", "-p", f"port:={port}",
                   "-p", "exclude:=[/rosout]", "-p", "poll_period_s:=0.2"], name="foxglove")
     assert node.wait_for("Foxglove WebSocket server on ws://127.0.0.1:", 60), node.output
-    expected_types = {"/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage",
-                      CHATTER: "std_msgs/msg/String", STATUS: "tms_msg/msg/TaskStatus"}
+    sent, once = periodic(), latched()
+    expected_types = {**{t: v[0] for t, v in sent.items()}, **{t: v[0] for t, v in once.items()}}
 
     async def session() -> None:
         async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS,
@@ -146,22 +206,18 @@ def test_foxglove_client_sees_the_site_topics_as_published(procs) -> None:
                 assert (ch["encoding"], ch["schemaEncoding"], ch["schemaName"]) == ("cdr", "ros2msg", msgtype), ch
                 assert ch["schema"] == message_definition(msgtype), topic
 
-            subs = {1: "/tf", 2: "/tf_static", 3: CHATTER, 4: STATUS}
+            subs = dict(enumerate(expected_types, start=1))
             await client.subscribe(subs)
-            await client.pump(lambda: all(len(client.frames.get(s, [])) >= (1 if s == 2 else 5) for s in subs),
-                              30, "message data on every subscription")
+            await client.pump(lambda: all(len(client.frames.get(s, [])) >= (1 if t in once else 5)
+                                          for s, t in subs.items()), 30, "message data on every subscription")
 
-            static = _messages(client, 2, "tf2_msgs/msg/TFMessage")
-            assert static[0] == _tf(7, "static_frame")  # latched before the client came: transient local reader
-            for sub_id, topic, make in ((1, "/tf", lambda i: _tf(i, "moving_frame")), (3, CHATTER, _chatter),
-                                        (4, STATUS, _task_status)):
+            for sub_id, topic in subs.items():
                 got = _messages(client, sub_id, expected_types[topic])
-                if topic == CHATTER:
-                    seqs = [int(m.data.split()[1]) for m in got]
-                elif topic == STATUS:
-                    seqs = [m.tasks[0].task_id for m in got]
-                else:
-                    seqs = [m.transforms[0].header.stamp.sec - 100 for m in got]
+                if topic in once:  # latched before the client came: the node's reader is transient local
+                    assert got[0] == once[topic][1], topic
+                    continue
+                _, make, seq = sent[topic]
+                seqs = [seq(m) for m in got]
                 assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs), (topic, seqs)
                 assert got == [make(i) for i in seqs], topic  # every field as published
             assert all(t > 0 for frames in client.frames.values() for t, _ in frames)
