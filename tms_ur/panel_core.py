@@ -44,6 +44,7 @@ __all__ = [
     "TfError",
     "SiteTfView",
     "terrain_layer",
+    "ReplayClock",
 ]
 
 
@@ -208,9 +209,11 @@ def check_int_range(field_name: str, value: int, lo: int, hi: int, type_name: st
 class Command:
     op: str
     task_ids: tuple[int, ...] = ()
+    seek: float | None = None  # replay: go to this log time [s]
+    play: bool | None = None  # replay: play (True) or pause (False)
 
 
-_OPS = {"start", "cancel", "emergency", "confirm"}
+_OPS = {"start", "cancel", "emergency", "confirm", "replay"}
 
 
 def parse_command(text: str) -> Command:
@@ -238,6 +241,16 @@ def parse_command(text: str) -> Command:
         return Command(op, tuple(_task_id(i, "task_ids") for i in ids))
     if op == "cancel":
         return Command(op, (_task_id(data.get("task_id"), "task_id"),))
+    if op == "replay":
+        seek, play = data.get("seek"), data.get("play")
+        if seek is not None and (isinstance(seek, bool) or not isinstance(seek, (int, float))
+                                 or not math.isfinite(seek)):
+            raise CommandError(f"replay: 'seek' must be a time in seconds, got {_short(seek)}")
+        if play is not None and not isinstance(play, bool):
+            raise CommandError(f"replay: 'play' must be true or false, got {_short(play)}")
+        if seek is None and play is None:
+            raise CommandError("replay needs 'seek' (a log time in seconds) or 'play' (true/false)")
+        return Command(op, seek=None if seek is None else float(seek), play=play)
     return Command(op)
 
 
@@ -438,3 +451,52 @@ def terrain_layer(kind: str, file_id: str, z: np.ndarray, x_min: float, y_min: f
     return {"kind": kind, "id": str(file_id), "rows": int(z.shape[0]), "cols": int(z.shape[1]),
             "x_min": float(x_min), "y_min": float(y_min), "x_max": float(x_max), "y_max": float(y_max),
             "z": [round(float(v), 3) for v in z.ravel()]}
+
+
+class ReplayClock:
+    """Which recorded messages the view has applied: log times ``times`` [ns] sorted ascending, a cursor and a
+    replay time [s] that advances with wall time while playing.
+
+    The view's state at time ``t`` is every message with log time <= ``t`` applied in order, so a seek back
+    restarts from the first message (:meth:`seek` says so by returning True) and a seek forward only applies
+    the messages in between.
+    """
+
+    def __init__(self, times_ns: list[int]) -> None:
+        if not times_ns:
+            raise CommandError("replay: the recording holds no message of the panel's topics")
+        if any(b < a for a, b in zip(times_ns, times_ns[1:], strict=False)):
+            raise CommandError("replay: the recording's messages are not in log-time order")
+        self.times = times_ns
+        self.start = times_ns[0] * 1e-9
+        self.end = times_ns[-1] * 1e-9
+        self.t = self.start
+        self.cursor = 0  # messages [0, cursor) are applied
+        self.playing = False
+
+    def seek(self, t: float) -> bool:
+        """Go to ``t`` (clamped to the recording); True when the view must be cleared and refilled from the start."""
+        t = min(max(float(t), self.start), self.end)
+        restart = t < self.t
+        if restart:
+            self.cursor = 0
+        self.t = t
+        return restart
+
+    def advance(self, wall_dt: float) -> None:
+        """While playing, move the replay time on by ``wall_dt`` (real-time replay); pause at the end."""
+        if self.playing:
+            self.t = min(self.t + max(0.0, wall_dt), self.end)
+            if self.t >= self.end:
+                self.playing = False
+
+    def due(self) -> range:
+        """Indices of the messages to apply now (log time <= t), and the cursor moves past them."""
+        limit = int(round(self.t * 1e9))
+        first = self.cursor
+        while self.cursor < len(self.times) and self.times[self.cursor] <= limit:
+            self.cursor += 1
+        return range(first, self.cursor)
+
+    def state(self) -> dict[str, Any]:
+        return {"start": self.start, "end": self.end, "t": round(self.t, 9), "playing": self.playing}
