@@ -145,6 +145,8 @@ class TreeContext:
     failures: list[str] = field(default_factory=list)
     #: actions whose server was lost while serving a goal of this task (the manager's stop policy)
     lost_servers: list[str] = field(default_factory=list)
+    #: called ``(node, prev, status)`` on every status change, as BT.CPP's ``subscribeToStatusChange`` (Groot)
+    status_listeners: list[Callable[[Any, Status, Status], None]] = field(default_factory=list)
 
     def task_time(self) -> float:
         """Seconds on the task's clock (``task_clock``, else ``clock``)."""
@@ -167,6 +169,7 @@ class TreeContext:
             stops=self.stops,
             failures=self.failures,
             lost_servers=self.lost_servers,
+            status_listeners=self.status_listeners,
         )
 
 
@@ -265,9 +268,16 @@ class BtNode(Behaviour):
     # -- execution (BT.CPP executeTick / halt) --------------------------------------------------
     def execute_tick(self) -> Status:
         """Tick this node once and remember its status (do not override)."""
+        prev = self.status
         status = self._tick()
         self.status = status
+        if status != prev and self.ctx.status_listeners:
+            self._notify(prev, status)
         return status
+
+    def _notify(self, prev: Status, status: Status) -> None:
+        for listener in self.ctx.status_listeners:
+            listener(self, prev, status)
 
     def _tick(self) -> Status:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -278,10 +288,13 @@ class BtNode(Behaviour):
 
     def halt(self) -> None:
         """Interrupt a RUNNING node and reset it to IDLE (do not override; fill ``on_halted``)."""
-        if self.status == RUNNING:
+        prev = self.status
+        if prev == RUNNING:
             self.on_halted()
         self._reset()
         self.status = IDLE
+        if prev != IDLE and self.ctx.status_listeners:
+            self._notify(prev, IDLE)
 
     def on_halted(self) -> None:
         """Hook: the node was RUNNING and is being interrupted (cancel goals, stop timers)."""
