@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import importlib
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,9 +25,11 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError, WriterError
 
 from tms_common.errors import TmsError
+from tms_model.machines import CRAWLER_DUMP, Machine
 from tms_ur.msgdefs import MsgDefError, message_definition, rihs01
 
-__all__ = ["BagRecorder", "RecordedMessage", "RecordingError", "bag_summary", "bag_times", "read_bag"]
+__all__ = ["BagRecorder", "RecordedMessage", "RecordingError", "bag_summary", "bag_times", "plan_topics", "read_bag",
+           "replay_topics"]
 
 
 class RecordingError(TmsError):
@@ -42,6 +44,38 @@ class RecordedMessage:
     msgtype: str
     log_time_ns: int
     msg: Any
+
+
+def replay_topics(machines: Iterable[Machine]) -> list[str]:
+    """The site topics a replay needs, in order: /tf, /tf_static, the task states, the emergency signal, the soil
+    totals and the mound's point cloud (the terrain source), and per machine its true pose, its joint states and, for a
+    carrier, the soil in its vessel. /clock is not recorded: the log time is already the simulated time."""
+    topics = ["/tf", "/tf_static", "/tms_ts/status", "/emergency_signal", "/sim/truth/soil",
+              "/sim/sensors/mound/points"]
+    for m in machines:
+        name = m.model_name
+        topics += [f"/sim/truth/{name}/pose", f"/{name}/joint_states"]
+        if m.type == CRAWLER_DUMP:
+            topics.append(f"/sim/truth/{name}/soil")
+    return list(dict.fromkeys(topics))
+
+
+def plan_topics(graph: Mapping[str, Sequence[str]], wanted: Sequence[str],
+                started: Iterable[str]) -> tuple[dict[str, str], dict[str, str]]:
+    """Which wanted topics to start recording now: (topic -> type) for those the graph now gives one type and that are
+    not ``started``, and (topic -> reason) for those published under several types (a connection has one type)."""
+    started = set(started)
+    new: dict[str, str] = {}
+    problems: dict[str, str] = {}
+    for topic in wanted:
+        if topic in started or topic not in graph:
+            continue
+        types = sorted(set(graph[topic]))
+        if len(types) == 1:
+            new[topic] = types[0]
+        elif types:
+            problems[topic] = f"published with {len(types)} types {types}; a bag connection has one type"
+    return new, problems
 
 
 def _qos(reliable: bool, transient_local: bool, depth: int) -> Qos:
