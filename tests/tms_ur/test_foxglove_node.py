@@ -25,7 +25,6 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState, PointCloud2, PointField
 from std_msgs.msg import String
-from tms_ur.msgdefs import message_definition
 
 from tests.rosproc import executable
 from tests.tms_ur.conftest import free_port
@@ -33,6 +32,7 @@ from tf2_msgs.msg import TFMessage
 from tms_model.site import load_site
 from tms_msg.msg import TaskState, TaskStatus
 from tms_ur.foxglove_bridge import message_class
+from tms_ur.msgdefs import message_definition
 
 pytestmark = pytest.mark.integration
 
