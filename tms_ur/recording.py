@@ -174,10 +174,10 @@ def bag_summary(path: str | Path) -> dict[str, tuple[str, int]]:
 
 
 def bag_times(path: str | Path) -> tuple[int, int]:
-    """(start, end) log time of the bag in ns."""
+    """(first, last) message log time of the bag in ns."""
     reader = _open(path)
     try:
-        return reader.start_time, reader.end_time
+        return reader.start_time, max(reader.start_time, reader.end_time - 1)  # rosbags' end_time is exclusive
     finally:
         reader.close()
 
