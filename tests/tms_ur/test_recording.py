@@ -14,9 +14,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Bool
+
 from tf2_msgs.msg import TFMessage
 from tms_msg.msg import TaskState
-
 from tms_ur.msgdefs import MsgDefError, message_definition
 from tms_ur.recording import BagRecorder, RecordingError, bag_summary, bag_times, plan_topics, read_bag
 
