@@ -50,6 +50,12 @@ Status: ``finished_retention_s`` (60.0, wall seconds a finished task stays in ``
 at least one message), ``finished_max`` (100, the last N finished tasks at most), ``snapshot_max_nodes``
 (2000, lines of a tree snapshot), :mod:`tms_ts.status`.
 
+Groot (:mod:`tms_ts.groot`): ``groot`` (true) publishes one running tree as BehaviorTree.CPP 3.x's ``PublisherZMQ``
+does: status changes on ``groot_port`` (1666, PUB), the tree on request on ``groot_port`` + 1 (1667, REP), bound on
+``groot_address`` ("*") at start-up (a port that cannot be bound ends the start naming it); ``groot_max_msg_per_second``
+(100, the original's). Which tree: ``groot_task_id`` (-1: the earliest started task still running, then the next;
+else that task; writable, read every tick); the published tree stays after its task ends until another is chosen.
+
 Lost-server policy: when a task ends FAILURE because a subtask or planning server was lost mid-goal (its
 machine's ``emg_stop`` is then latched, see :mod:`tms_ts.leaf`), every other running task is cancelled
 ("stopped by policy"): the tasks cooperate through the global blackboard and the partner would wait
@@ -74,6 +80,7 @@ from tms_db import RecordNotFound, open_store
 from tms_msg.msg import TaskIds, TaskState, TaskStatus
 from tms_ts.bt.core import TreeContext
 from tms_ts.errors import TsError
+from tms_ts.groot import GrootPublisher
 from tms_ts.loader import load_tree
 from tms_ts.nodes.ros_port import ManagerRosPort
 from tms_ts.status import StatusBook
@@ -104,10 +111,22 @@ class TaskManager(Node):
         keep_max = p.integer("finished_max", 100, lo=1)
         snapshot_max = p.integer("snapshot_max_nodes", 2000, lo=1)
         max_loads = p.integer("max_pending_loads", 16, lo=1)
+        groot_on = p.value("groot", True)
+        if not isinstance(groot_on, bool):
+            raise TsError(f"parameter groot: must be true or false, got {groot_on!r}")
+        groot_port = p.integer("groot_port", 1666, lo=1)
+        groot_address = p.text("groot_address", "*")
+        groot_rate = p.number("groot_max_msg_per_second", 100.0, lo=0.0, above=True)
         self.store = open_store(uri=db_uri or None, path=db_path or None)
         if checkpoint_s > 0:
             self.store.checkpoint_in_background(checkpoint_s)
         self.ros = ManagerRosPort(self)
+        # bound here, before anything runs: a port in use ends the start naming it (GrootError), no silent fallback
+        self.groot = (GrootPublisher(groot_port, groot_port + 1, address=groot_address,
+                                     max_msg_per_second=groot_rate) if groot_on else None)
+        self._groot_run: TaskRun | None = None  # the run whose tree Groot sees
+        # which task's tree Groot sees; read every tick, so `ros2 param set` switches it
+        self.declare_parameter("groot_task_id", -1)
         #: tasks being run (ended runs are retired into ``self.status`` at the next tick or status)
         self.runs: dict[int, TaskRun] = {}
         self.status = StatusBook(retention_s=retention_s, keep_max=keep_max, snapshot_max_nodes=snapshot_max)
@@ -335,12 +354,35 @@ class TaskManager(Node):
             if run.state == FAILED and before != FAILED and run.ctx.lost_servers:
                 self._stop_others(run)
         changed |= self._take_loads()
+        if self.groot is not None:
+            self._groot_follow()
         took = (time.monotonic() - start) * 1000.0
         self._stats["ticks"] += 1
         self._stats["sum_tick_ms"] += took
         self._stats["max_tick_ms"] = max(self._stats["max_tick_ms"], took)
         if changed:
             self._publish_status()
+
+    def _groot_follow(self) -> None:
+        """Attach Groot to the chosen task's run (``groot_task_id``; -1: the earliest started still running)."""
+        wanted = int(self.get_parameter("groot_task_id").value)
+        current = self._groot_run
+        if wanted != -1:
+            run = self.runs.get(wanted)
+            target = run if run is not None and (run is current or not run.done) else None
+        elif current is not None and not current.done:
+            target = current
+        else:  # self.runs keeps the order the tasks started in
+            target = next((r for r in self.runs.values() if not r.done), None)
+        if target is None or target is current:
+            return
+        if current is not None and self.groot.listener in current.ctx.status_listeners:
+            current.ctx.status_listeners.remove(self.groot.listener)
+        self.groot.attach(target.tree.root)
+        target.ctx.status_listeners.append(self.groot.listener)
+        self._groot_run = target
+        self.get_logger().info(f"Groot: task {target.task_id}'s tree ({len(target.tree.nodes)} nodes) on ports "
+                               f"{self.groot.publisher_port} (publisher) / {self.groot.server_port} (server)")
 
     def _log_end(self, run: TaskRun) -> None:
         # One call site per severity: rclpy refuses a log call whose severity differs from its last call
@@ -387,6 +429,8 @@ class TaskManager(Node):
         for run in self.runs.values():
             if not run.done:
                 run.cancel("manager shutting down")
+        if self.groot is not None:
+            self.groot.close()  # sends the last transitions (the cancels above), then releases both ports
         self.store.close()
         super().destroy_node()
 
