@@ -253,9 +253,9 @@ class GrootPublisher:
             self._transitions = []
             self._header = status_header(self._tree)
             self._flush_at = None
+            self.messages_sent += 1  # before the send: a reader of the message sees the count
             # sent under the lock: the sender thread and the tick's thread share the PUB socket
             self._pub.send(message)
-            self.messages_sent += 1
 
     def _send_loop(self) -> None:
         while True:

@@ -128,3 +128,62 @@ def test_groot1_client_reads_the_running_tree_and_its_status_changes_within_100_
           f"stamp to reception: median {median * 1000:.1f} ms, max {worst * 1000:.1f} ms")
     assert min(delays) >= -0.001, min(delays)  # one clock: no change is received before it happened
     assert worst < 0.100, f"a status change arrived {worst * 1000:.1f} ms after the tick"
+
+
+SLEEPS = '<root><BehaviorTree ID="{id}"><Sequence name="{name}"><Sleep msec="{ms}"/></Sequence></BehaviorTree></root>'
+
+
+def test_groot_follows_the_earliest_running_task_and_groot_task_id_picks_one(tmp_path, domain):
+    """-1: the earliest started task still running, then the next one; ``groot_task_id`` switches (read every tick).
+    The manager runs in this process (its real node, ports and executor); the client is the Groot 1 one above."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from tms_common.node import make_executor
+    from tms_db import open_store
+    from tms_ts.nodes.tms_ts_manager import TaskManager
+
+    db = str(tmp_path / "db")
+    with open_store(path=db) as store:
+        store.add_task(SLEEPS.format(id="A", name="first", ms=1500), task_id=1)
+        store.add_task(SLEEPS.format(id="B", name="second", ms=60000), task_id=2)
+        store.add_task(SLEEPS.format(id="C", name="third", ms=60000), task_id=3)
+    port = _free_port_pair()
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = TaskManager(context=ctx, parameter_overrides=[
+        Parameter("db_path", value=db), Parameter("groot_port", value=port),
+        Parameter("groot_address", value="127.0.0.1")])
+    ex = make_executor("events", context=ctx)
+    ex.add_node(node)
+    client = GrootClient(port)
+
+    def spin_until(what, timeout_s=20.0):
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.02)
+            if what():
+                return True
+        return False
+
+    def published() -> str:
+        return client.tree()["nodes"][0]["instance_name"]
+
+    try:
+        node.start_tasks([1, 2, 3])
+        assert spin_until(lambda: node._groot_run is not None and node._groot_run.task_id == 1)
+        assert published() == "first"
+        assert spin_until(lambda: node._groot_run.task_id == 2), "Groot did not move on when task 1 ended"
+        assert published() == "second"
+        node.set_parameters([Parameter("groot_task_id", value=3)])
+        assert spin_until(lambda: node._groot_run.task_id == 3)
+        assert published() == "third"
+        node.set_parameters([Parameter("groot_task_id", value=1)])  # task 1 has ended: Groot stays on task 3
+        spin_until(lambda: False, 0.5)
+        assert node._groot_run.task_id == 3 and published() == "third"
+    finally:
+        client.close()
+        ex.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
