@@ -13,6 +13,7 @@ import signal
 import socket
 import struct
 import sys
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -39,6 +40,8 @@ pytestmark = pytest.mark.integration
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 CHATTER = "/fg_test/chatter"  # not a site topic: reaches Foxglove by discovery
 STATUS = "/tms_ts/status"  # a site topic of a project type (tms_msg/TaskStatus)
+SHORT = "/fg_test/short_lived"  # its publisher goes on SIGUSR1: the channel is unadvertised
+ONLY_SUB = "/fg_test/only_subscribed"  # in the graph with a subscriber only: carries no data, never advertised
 URDF = '<robot name="fg_test"><link name="base_link"/></robot>'
 
 
@@ -123,12 +126,18 @@ def publish() -> None:
         keep[-1].publish(msg)
     pubs = [(node.create_publisher(message_class(msgtype), topic, 10), make)
             for topic, (msgtype, make, _) in periodic().items()]
+    short = [node.create_publisher(String, SHORT, 10)]
+    node.create_subscription(String, ONLY_SUB, lambda _msg: None, 10)
+    drop = threading.Event()
+    signal.signal(signal.SIGUSR1, lambda *_: drop.set())
     count = [0]
 
     def tick() -> None:
         count[0] += 1
         for pub, make in pubs:
             pub.publish(make(count[0]))
+        if drop.is_set() and short:
+            node.destroy_publisher(short.pop())
 
     node.create_timer(0.05, tick)
     print("publisher ready", flush=True)
@@ -195,8 +204,10 @@ def test_foxglove_client_sees_the_site_topics_as_published(procs) -> None:
                                       max_size=None) as ws:
             assert ws.subprotocol == "foxglove.sdk.v1"  # foxglove-sdk's only subprotocol (README: Lichtblick)
             client = FoxgloveClient(ws)
-            await client.pump(lambda: client.server_info is not None and set(expected_types) <= set(client.channels),
-                              30, "serverInfo and the advertisements")
+            await client.pump(lambda: client.server_info is not None
+                              and {*expected_types, SHORT} <= set(client.channels), 30,
+                              "serverInfo and the advertisements")
+            assert ONLY_SUB not in client.channels
             assert client.server_info["name"] == "tms_ur_foxglove"
             # read-only: no client publishing, services or parameters
             assert not {"clientPublish", "services", "parameters"} & set(client.server_info["capabilities"])
@@ -229,6 +240,10 @@ def test_foxglove_client_sees_the_site_topics_as_published(procs) -> None:
                 await second.subscribe({9: "/tf_static"})
                 await second.pump(lambda: len(second.frames.get(9, [])) >= 1, 10, "/tf_static for the second client")
                 assert _messages(second, 9, "tf2_msgs/msg/TFMessage")[0] == _tf(7, "static_frame")
+
+            pub.signal(signal.SIGUSR1)  # the publisher drops SHORT's publisher: the channel goes
+            await client.pump(lambda: SHORT not in client.channels, 15, f"the unadvertisement of {SHORT}")
+            assert ONLY_SUB not in client.channels and set(expected_types) <= set(client.channels)
 
     asyncio.run(session())
 

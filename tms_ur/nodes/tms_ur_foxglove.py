@@ -78,7 +78,10 @@ class FoxgloveNode(Node):
 
     def _sync(self) -> None:
         """Channels after the graph, then ROS subscriptions after the clients' subscriptions."""
-        graph = dict(self.get_topic_names_and_types())
+        # types as the publishers give them: the graph also lists topics only subscribed to, which carry no data
+        graph = {topic: [i.topic_type for i in self.get_publishers_info_by_topic(topic)]
+                 for topic, _ in self.get_topic_names_and_types()}
+        graph = {topic: types for topic, types in graph.items() if types}
         selected, problems = select_topics(graph, self.config)
         for topic, reason in problems.items():
             self._report(topic, f"tms_ur_foxglove: {topic} not bridged: {reason}")
