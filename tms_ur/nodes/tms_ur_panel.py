@@ -23,6 +23,12 @@ layout.dim[0]), and per machine of ``machines`` (names; default the site's list,
 its pose (``pose_topics``, default ``/sim/truth/<name>/pose``: geometry_msgs/PoseStamped), its plan
 (``/<name>/plan``: nav_msgs/Path) and its joints (``/<name>/joint_states``), shown after its description's type: an
 excavator's arm side view, a carrier's vessel (and its load, ``/sim/truth/<name>/soil``), a dozer's blade.
+
+The 3-D view (``/3d``, files of ``tms_ur/web3d``): ``/tf`` and ``/tf_static`` composed into each machine's link poses
+in ``map`` (``panel_core.SiteTfView``), ``/urdf/<name>``, ``/terrain.json`` (the DB's newest static and dynamic
+heightmaps). With ``replay`` (a rosbag2 directory) the panel subscribes to none of its input topics: it plays the
+recording's messages of those topics into the same state (``panel_core.ReplayClock``; the page's slider sends
+``{"op": "replay", "seek": <log time s>}`` / ``{"op": "replay", "play": true|false}``).
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ import asyncio
 import concurrent.futures
 import json
 import threading
+import time
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -59,6 +66,7 @@ from tms_ur.panel_core import (
     Access,
     CommandError,
     PanelConfig,
+    ReplayClock,
     SiteState,
     SiteTfView,
     authorize,
@@ -67,6 +75,7 @@ from tms_ur.panel_core import (
     terrain_layer,
     websocket_access,
 )
+from tms_ur.recording import read_bag
 from tms_ur.site_map import order_machines
 
 WEB_DIR = Path(__file__).parent.parent / "web"
@@ -112,33 +121,90 @@ class PanelNode(Node):
         trees = [machine_tree(m) for m in machines]
         self.urdf = {t.machine.model_name: t.urdf() for t in trees}
         self.tf_view = SiteTfView(trees)
+        # replay: a rosbag2 directory played into the same state instead of the live topics
+        self.replay_dir = str(d("replay", "").value)
+        self._handlers: dict[str, Any] = {}
+        self._replay_lock = threading.Lock()  # the timer and a seek from the page apply messages one at a time
         self.terrain: dict[str, dict] = {}  # kind -> terrain_layer of the newest stored heightmap
-        self.create_subscription(TFMessage, "/tf", self._on_tf, TF_QOS)
-        self.create_subscription(TFMessage, "/tf_static", self._on_tf, LATCHED)
+        self._subscribe(TFMessage, "/tf", self._on_tf, TF_QOS)
+        self._subscribe(TFMessage, "/tf_static", self._on_tf, LATCHED)
         self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
         self.pub_cancel = self.create_publisher(Int32, "/tms_ts/cancel", 10)
         self.pub_emergency = self.create_publisher(Bool, "/emergency_signal", 10)
         self.pub_confirm = self.create_publisher(String, "/tms_ts/confirm", 10)
-        self.create_subscription(TaskStatus, "/tms_ts/status", self._on_status, 10)
+        self._subscribe(TaskStatus, "/tms_ts/status", self._on_status, 10)
         for entry in pose_topics:
             machine, _, topic = entry.partition(":")
             if not topic:
                 raise ConfigError(f"tms_ur_panel: pose_topics entry {entry!r} must be 'machine:/topic'")
-            self.create_subscription(PoseStamped, topic, lambda m, name=machine: self._on_pose(name, m), 10)
+            self._subscribe(PoseStamped, topic, lambda m, name=machine: self._on_pose(name, m), 10)
         for m in machines:
             name = m.model_name
-            self.create_subscription(PathMsg, f"/{name}/plan", lambda msg, name=name: self._on_plan(name, msg), 10)
-            self.create_subscription(JointState, f"/{name}/joint_states", lambda msg, m=m: self._on_joints(m, msg), 10)
+            self._subscribe(PathMsg, f"/{name}/plan", lambda msg, name=name: self._on_plan(name, msg), 10)
+            self._subscribe(JointState, f"/{name}/joint_states", lambda msg, m=m: self._on_joints(m, msg), 10)
             if m.type == CRAWLER_DUMP:
-                self.create_subscription(Float64MultiArray, f"/sim/truth/{name}/soil",
-                                         lambda msg, name=name: self._on_carrier_soil(name, msg), 10)
-        self.create_subscription(Float64MultiArray, d("soil_topic", "/sim/truth/soil").value, self._on_soil, 10)
+                self._subscribe(Float64MultiArray, f"/sim/truth/{name}/soil",
+                                lambda msg, name=name: self._on_carrier_soil(name, msg), 10)
+        self._subscribe(Float64MultiArray, d("soil_topic", "/sim/truth/soil").value, self._on_soil, 10)
         self._store = None
         self._last_messages: dict[int, str] = {}
         self.create_timer(0.5, self._poll_db)
+        self.replay: ReplayClock | None = None
+        if self.replay_dir:
+            self._load_replay()
         self._web = _WebThread(self)  # last: it serves this node's snapshot and commands
 
     # -- inputs ---------------------------------------------------------------------------
+    def _subscribe(self, msg_type: Any, topic: str, callback: Any, qos: Any) -> None:
+        """A live subscription, or in replay the handler of the topic's recorded messages."""
+        if self.replay_dir:
+            self._handlers[topic] = callback
+        else:
+            self.create_subscription(msg_type, topic, callback, qos)
+
+    def _load_replay(self) -> None:
+        """Read the recording's messages of the panel's topics (ConfigError naming the directory if unreadable)."""
+        try:
+            self._recorded = [m for m in read_bag(self.replay_dir) if m.topic in self._handlers]
+            self.replay = ReplayClock([m.log_time_ns for m in self._recorded])
+        except (TmsError, OSError) as exc:
+            raise ConfigError(f"tms_ur_panel: replay {self.replay_dir!r}: {exc}") from None
+        topics = sorted({m.topic for m in self._recorded})
+        self.get_logger().info(f"replaying {len(self._recorded)} messages of {len(topics)} topics from "
+                               f"{self.replay_dir}: {self.replay.end - self.replay.start:.1f} s")
+        self._wall = time.monotonic()
+        self.create_timer(0.05, self._replay_step)
+
+    def _replay_step(self) -> None:
+        with self._replay_lock:
+            with self.lock:
+                now = time.monotonic()
+                self.replay.advance(now - self._wall)
+                self._wall = now
+            self._apply_due()
+
+    def _apply_due(self) -> None:
+        with self.lock:
+            due = self.replay.due()
+        for i in due:  # the handlers take self.lock themselves
+            m = self._recorded[i]
+            self._handlers[m.topic](m.msg)
+
+    def _replay_command(self, seek: float | None, play: bool | None) -> str:
+        if self.replay is None:
+            raise CommandError("replay: this panel shows live topics (start it with replay:=<bag directory>)")
+        with self._replay_lock:
+            with self.lock:
+                if play is not None:
+                    self.replay.playing = play
+                    self._wall = time.monotonic()
+                if seek is not None and self.replay.seek(seek):
+                    # back in time: the state is rebuilt from the recording's first message
+                    self.tf_view = SiteTfView(list(self.tf_view.trees.values()))
+                    self.site = SiteState(machines=self.site.machines)
+            self._apply_due()
+        return f"replay at {self.replay.t - self.replay.start:.3f} s" + (" playing" if self.replay.playing else "")
+
     def _on_tf(self, msg: TFMessage) -> None:
         with self.lock:
             for t in msg.transforms:
@@ -257,6 +323,8 @@ class PanelNode(Node):
         if cmd.op == "emergency":
             self.pub_emergency.publish(Bool(data=True))
             return "EMERGENCY STOP sent on /emergency_signal"
+        if cmd.op == "replay":
+            return self._replay_command(cmd.seek, cmd.play)
         self.pub_confirm.publish(String(data="yes"))
         return "confirmation sent"
 
@@ -264,6 +332,8 @@ class PanelNode(Node):
         with self.lock:
             snap = self.site.snapshot()
             snap["tf"] = self.tf_view.snapshot()
+            if self.replay is not None:
+                snap["replay"] = self.replay.state()
             snap["terrain_version"] = _terrain_version([self.terrain[k] for k in TERRAIN_KINDS if k in self.terrain])
             return json.dumps(snap)
 

@@ -1,0 +1,119 @@
+"""Replay into the 3-D view: a short live run recorded (real processes over DDS: ``tms_sp_tf`` turns this test's
+odometry into /tf, written as received with ``tms_ur.recording``'s writer into a rosbag2 MCAP directory), then
+``tms_ur_panel`` started with ``replay:=<bag>``; headless Chromium moves the view to recorded log times and the view
+shows the poses recorded at those times, with their stamps. Seeking back rebuilds the view from the recording's
+start."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+from nav_msgs.msg import Odometry
+
+from tests.rosproc import executable
+from tests.tms_ur.conftest import free_port
+from tf2_msgs.msg import TFMessage
+from tms_model.fleet import load_named
+from tms_model.transform import quaternion_from_axis_angle
+from tms_model.urdf import machine_tree
+from tms_sp.nodes.tms_sp_tf import LATCHED, TF_QOS
+from tms_ur.recording import BagRecorder, read_bag
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+
+MACHINES = ["zx200", "ic120"]
+BASE_FRAMES = {machine_tree(load_named(m)).frame("base_link"): m for m in MACHINES}
+
+
+def _spin(node, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        node.executor_for_test.spin_once(timeout_sec=0.02)
+
+
+def _odom(frame: str, stamp: float, x: float, y: float, yaw: float) -> Odometry:
+    msg = Odometry()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(stamp), int(round((stamp % 1) * 1e9))
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    q = quaternion_from_axis_angle((0.0, 0.0, 1.0), yaw)
+    o = msg.pose.pose.orientation
+    o.x, o.y, o.z, o.w = q
+    return msg
+
+
+def _record(procs, ros_node, tmp_path):
+    """Drive both machines along known paths for ~4 s; ``tms_sp_tf`` turns the odometry into /tf, which this test
+    receives as CDR bytes and writes, as received, with tms_ur.recording's writer (log time: arrival, ns)."""
+    tf = procs([executable("tms_sp", "tms_sp_tf"), "--ros-args", "-p",
+                f"machines:={MACHINES!r}".replace("'", '"')])
+    assert tf.wait_for("tms_sp_tf ready", timeout=60), tf.output
+    bag = tmp_path / "bag"
+    writer = BagRecorder(bag)
+    writer.add_topic("/tf", "tf2_msgs/msg/TFMessage", depth=100)
+    writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", transient_local=True, depth=1)
+    for topic, qos in (("/tf", TF_QOS), ("/tf_static", LATCHED)):
+        ros_node.create_subscription(TFMessage, topic, lambda data, t=topic: writer.write(t, time.time_ns(), data),
+                                     qos, raw=True)
+    pubs = {m: ros_node.create_publisher(Odometry, f"/{m}/odom_pose", 10) for m in MACHINES}
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (
+            all(p.get_subscription_count() > 0 for p in pubs.values()) and ros_node.count_publishers("/tf") > 0):
+        _spin(ros_node, 0.2)
+    _spin(ros_node, 1.0)
+    for i in range(40):
+        stamp = 100.0 + 0.1 * i
+        pubs["zx200"].publish(_odom("map", stamp, 10.0 + 0.05 * i, 5.0, 0.02 * i))
+        pubs["ic120"].publish(_odom("map", stamp, 30.0, 8.0 + 0.1 * i, -0.01 * i))
+        _spin(ros_node, 0.1)
+    _spin(ros_node, 1.0)
+    writer.close()
+    tf.kill()
+    assert writer.counts["/tf"] >= 80, writer.counts
+    return bag
+
+
+def test_the_view_shows_the_recorded_poses_at_the_recorded_times(procs, ros_node, browser_page, tmp_path):
+    bag = _record(procs, ros_node, tmp_path)
+    # the recorded base_link edges, by log time: what the view must show when moved to that time
+    recorded = []  # (log_time_ns, child frame, stamp, x, y)
+    for m in read_bag(bag, topics=["/tf"]):
+        for t in m.msg.transforms:
+            if t.child_frame_id in BASE_FRAMES:
+                stamp = t.header.stamp.sec + t.header.stamp.nanosec * 1e-9
+                recorded.append((m.log_time_ns, t.child_frame_id, stamp, t.transform.translation.x,
+                                 t.transform.translation.y))
+    assert len(recorded) >= 40, f"only {len(recorded)} base_link transforms recorded"
+    port = free_port()
+    panel = procs([executable("tms_ur", "tms_ur_panel"), "--ros-args", "-p", f"port:={port}",
+                   "-p", f"db_path:={tmp_path / 'db'}", "-p", f"replay:={bag}",
+                   "-p", f"machines:={MACHINES!r}".replace("'", '"')])
+    assert panel.wait_for("serving http://127.0.0.1", timeout=60), panel.output
+    page = browser_page
+    page.goto(f"http://127.0.0.1:{port}/3d")
+    page.wait_for_selector("#conn.ok", timeout=30000)
+    page.wait_for_selector("#replay.on", timeout=30000)  # the time slider is shown in replay
+    page.wait_for_function(f"{MACHINES}.every(n => window.site3d.loaded(n))", timeout=30000)
+    # later, earlier (a seek back), then the middle: each time the newest recorded pose at or before the time
+    picks = [recorded[int(len(recorded) * f)] for f in (0.8, 0.2, 0.5)]
+    for log_ns, frame, stamp, x, y in picks:
+        machine = BASE_FRAMES[frame]
+        # 1 us after the log time: a double of ~1.8e9 s resolves only ~0.24 us (messages are 0.1 s apart)
+        page.evaluate(f"window.site3dReplay({{seek: {log_ns * 1e-9 + 1e-6!r}, play: false}})")
+        try:
+            page.wait_for_function(f"Math.abs(window.site3d.stamp({machine!r}) - {stamp!r}) < 1e-6", timeout=15000)
+        except Exception:  # noqa: BLE001 - playwright's TimeoutError: fail with what the page shows
+            shown = page.evaluate(f"[window.site3d.stamp({machine!r}), document.querySelector('#replay-t').innerText]")
+            pytest.fail(f"{machine}: the view shows {shown}, expected stamp {stamp} at log time {log_ns}:\n"
+                        + panel.output[-3000:])
+        links = page.evaluate(f"window.site3d.links({machine!r})")
+        m = links[frame]
+        assert math.hypot(m[12] - x, m[13] - y) < 0.01, (machine, stamp, m[12:14], (x, y))
+    shown = page.inner_text("#replay-t")
+    assert "/" in shown, shown
+    # play runs the replay on: the stamp shown moves forward
+    page.evaluate(f"window.site3dReplay({{seek: {recorded[0][0] * 1e-9!r}, play: true}})")
+    first = recorded[0][2]
+    page.wait_for_function(f"window.site3d.stamp('zx200') > {first + 1.0!r}", timeout=20000)
