@@ -65,7 +65,17 @@ class GrootTree:
     def __init__(self, root: BtNode) -> None:
         self.nodes: list[BtNode] = list(root.iter_nodes())  # depth first, the factory's creation order
         self.uids: dict[int, int] = {id(node): uid for uid, node in enumerate(self.nodes, start=1)}
-        self.buffer: bytes = serialize_tree(self.nodes, self.uids)
+        self._buffer: bytes | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def buffer(self) -> bytes:
+        """The serialized tree, built on first use: the publisher builds it on its server thread, not in the tick
+        (a tree of 4,990 nodes takes about 0.5 s)."""
+        with self._lock:
+            if self._buffer is None:
+                self._buffer = serialize_tree(self.nodes, self.uids)
+            return self._buffer
 
     def uid(self, node: BtNode) -> int:
         return self.uids[id(node)]
@@ -222,7 +232,8 @@ class GrootPublisher:
         return self._tree
 
     def attach(self, root: BtNode) -> GrootTree:
-        """Publish this tree from now on (the previous one's pending transitions are sent first)."""
+        """Publish this tree from now on (the previous one's pending transitions are sent first); its buffer is
+        serialized on the server thread."""
         tree = GrootTree(root)
         self.flush()
         with self._lock:
@@ -274,9 +285,11 @@ class GrootPublisher:
         poller = zmq.Poller()
         poller.register(self._rep, zmq.POLLIN)
         while self._active:
-            if self._tree is None:  # no tree yet: requests wait (Groot times out, as with no PublisherZMQ)
+            tree = self._tree
+            if tree is None:  # no tree yet: requests wait (Groot times out, as with no PublisherZMQ)
                 time.sleep(0.05)
                 continue
+            tree.buffer  # noqa: B018 - serialized here, before a request, off the tick's thread
             try:
                 if not poller.poll(100):
                     continue
