@@ -1,5 +1,5 @@
 """The 3-D view's and the replay's pure parts of tms_ur.panel_core, without ROS: link poses in map composed from
-/tf edges, terrain layers, the replay clock and its command."""
+/tf edges, terrain layers, the replay clock and its command; and which installed npm files the panel serves."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 from tms_model.fleet import load_named
 from tms_model.transform import quaternion_from_axis_angle
 from tms_model.urdf import machine_tree
+from tms_ur.nodes.tms_ur_panel import WEB3D_DIR, _module_file
 from tms_ur.panel_core import CommandError, ReplayClock, SiteTfView, TfError, parse_command, terrain_layer
 
 
@@ -88,3 +89,13 @@ def test_replay_command_is_parsed_and_bad_values_named():
         parse_command('{"op": "replay", "play": 1}')
     with pytest.raises(CommandError, match="needs 'seek'"):
         parse_command('{"op": "replay"}')
+
+
+def test_the_panel_serves_only_javascript_of_the_installed_packages_folders():
+    assert (WEB3D_DIR / "node_modules" / "three").is_dir(), "npm ci in tms_ur/web3d (scripts/bootstrap.sh) not run"
+    assert _module_file("three/build/three.module.js") is not None
+    assert _module_file("urdf-loader/src/URDFLoader.js") is not None
+    assert _module_file("three/package.json") is None  # not .js
+    assert _module_file("three/build/../../urdf-loader/package.json") is None
+    assert _module_file("three/examples/jsm/../../../../../pyproject.js") is None
+    assert _module_file("three/build/no_such_file.js") is None
