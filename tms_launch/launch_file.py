@@ -145,6 +145,7 @@ class LaunchFile:
     env: dict[str, str]
     startup: str = "sequential"
     shutdown: str = "parallel"
+    parameters: dict[str, Any] = field(default_factory=dict)  # the file's top-level parameters (every node's)
 
     @property
     def containers(self) -> tuple[str, ...]:
@@ -172,6 +173,38 @@ def with_parameters(launch: LaunchFile, overrides: list[str]) -> LaunchFile:
                               f"(nodes: {', '.join(n.fqn for n in nodes)})")
         for i in hits:
             nodes[i] = dataclasses.replace(nodes[i], parameters={**nodes[i].parameters, key: value})
+    return dataclasses.replace(launch, nodes=tuple(nodes))
+
+
+RECORDER_NAME = "tms_ur_recorder"
+RECORDER_STOP_GRACE_S = 15.0  # closing the MCAP file (its index and summary) of a long run on busy cores
+
+
+def with_recorder(launch: LaunchFile, output: str | Path) -> LaunchFile:
+    """``launch`` plus a ``tms_ur_recorder`` node recording the site's topics into the new directory ``output``
+    (tms-launch ``--record``): a process of its own, placed right after the file's first process (the plant in
+    the simulation launches), so ``shutdown: reverse`` stops it last but one, after every node it records and
+    before the clock's source; it takes the file's top-level parameters (``use_sim_time``: log time on the
+    simulated clock). An existing ``output`` or a node already named so is a ConfigError, nothing started."""
+    out = Path(output)
+    out = out if out.is_absolute() else Path.cwd() / out
+    if out.exists():
+        raise ConfigError(f"--record {output}: {out} exists already; a recording needs a new directory")
+    if not out.parent.is_dir():
+        raise ConfigError(f"--record {output}: the parent directory {out.parent} does not exist")
+    if any(n.name == RECORDER_NAME for n in launch.nodes):
+        raise ConfigError(f"--record: {launch.file} has a node named {RECORDER_NAME!r} already")
+    try:
+        path = resolve_executable("tms_ur", RECORDER_NAME)
+    except LookupError as exc:
+        raise ConfigError(f"--record: {exc}") from None
+    spec = NodeSpec(name=RECORDER_NAME, package="tms_ur", executable=RECORDER_NAME, path=path,
+                    parameters={**launch.parameters, "output": str(out)}, stop_grace_s=RECORDER_STOP_GRACE_S)
+    nodes = list(launch.nodes)
+    first = nodes[0].container if nodes else None
+    # after the first process: after every node of the first node's container (or after the first node alone)
+    at = 1 + max((i for i, n in enumerate(nodes) if first is not None and n.container == first), default=0)
+    nodes.insert(min(at, len(nodes)), spec)
     return dataclasses.replace(launch, nodes=tuple(nodes))
 
 
@@ -439,7 +472,8 @@ def parse_launch_file(path: str | Path) -> LaunchFile:
     shutdown = _expect(where, ("shutdown",), data.get("shutdown", "parallel"), str, "'shutdown'")
     if shutdown not in SHUTDOWN:
         raise where.error(("shutdown",), f"shutdown must be one of {', '.join(sorted(SHUTDOWN))}, got {shutdown!r}")
-    return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env, startup=startup, shutdown=shutdown)
+    return LaunchFile(file=str(path), name=str(title), nodes=tuple(nodes), env=env, startup=startup, shutdown=shutdown,
+                      parameters=dict(common_params))
 
 
 __all__ = ["NodeSpec", "LaunchFile", "ProcessSpec", "LAYOUTS", "LAYOUT_ENV", "processes", "parse_launch_file",

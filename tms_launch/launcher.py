@@ -16,6 +16,8 @@
   ``shutdown: reverse`` one node at a time, last started first, each gone before the next is signalled.
 * When a required node exits (for any reason) the launcher stops the others and exits 1 naming it,
   except a node with ``on_exit: shutdown`` that exits 0: that ends the launch with 0 (a job is done).
+* ``--record DIR`` adds a ``tms_ur_recorder`` node writing the site's topics into the new rosbag2 directory DIR
+  (MCAP storage), stopped last but one (``launch_file.with_recorder``).
 * ``--list`` prints the nodes of the file and exits; with ``--layout`` or ``--containers`` it prints the
   processes of that layout and their nodes.
 * SIGUSR1 prints the stack of every thread of the launcher (to see what a launcher that does not stop waits for).
@@ -52,6 +54,7 @@ from tms_launch.launch_file import (
     parse_launch_file,
     processes,
     with_parameters,
+    with_recorder,
 )
 
 SIGTERM_GRACE_S = 1.5
@@ -356,12 +359,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--param", action="append", default=[], metavar="NODE:KEY=VALUE",
                         help="set a node's parameter (VALUE as YAML); repeatable, e.g. "
                              "--param tms_sp_sensing:blackboard_records=[SAMPLE_BLACKBOARD_SHIMIZU]")
+    parser.add_argument("--record", default=None, metavar="DIR",
+                        help="record the site's topics into the new rosbag2 directory DIR (MCAP; tms_ur_recorder)")
     opts = parser.parse_args(argv)
     path = Path(opts.launch_file)
     layout = opts.layout or os.environ.get(LAYOUT_ENV) or "composed"
     containers = [c.strip() for c in opts.containers.split(",") if c.strip()] if opts.containers is not None else None
     try:
         launch = with_parameters(parse_launch_file(path), opts.param)
+        if opts.record is not None:
+            if containers is not None:
+                raise ConfigError("--record with --containers: the recorder belongs to no container; start it on "
+                                  "one host with ros2 run tms_ur tms_ur_recorder --ros-args -p output:=DIR")
+            launch = with_recorder(launch, opts.record)
         launcher = Launcher(launch, layout=layout, containers=containers)
     except ConfigError as exc:
         print(f"tms-launch: {exc}", file=sys.stderr, flush=True)
