@@ -18,8 +18,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tms_common.errors import ConfigError
-from tms_model.machines import CRAWLER_DUMP, Machine
+from tms_model.machines import Machine
 from tms_ur.panel_core import is_loopback
+from tms_ur.recording import replay_topics
 
 __all__ = [
     "BridgeConfig",
@@ -80,14 +81,10 @@ class BridgeConfig:
 
 
 def site_topics(machines: Iterable[Machine]) -> list[str]:
-    """The site topics bridged by default: the ones a recording of the site takes (no duplicates, in order)."""
-    topics = ["/tf", "/tf_static", "/tms_ts/status", "/sim/truth/soil", "/sim/sensors/mound/points"]
-    for m in machines:
-        name = m.model_name
-        topics += [f"/sim/truth/{name}/pose", f"/{name}/joint_states", f"/{name}/robot_description"]
-        if m.type == CRAWLER_DUMP:
-            topics.append(f"/sim/truth/{name}/soil")
-    return list(dict.fromkeys(topics))
+    """The site topics bridged by default: the ones a recording of the site takes (``recording.replay_topics``) and
+    each machine's ``robot_description``, which Foxglove's 3-D panel draws the machine from."""
+    machines = list(machines)
+    return list(dict.fromkeys([*replay_topics(machines), *(f"/{m.model_name}/robot_description" for m in machines)]))
 
 
 def select_topics(graph: Mapping[str, Sequence[str]], config: BridgeConfig) -> tuple[dict[str, str], dict[str, str]]:

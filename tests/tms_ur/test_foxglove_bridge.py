@@ -20,6 +20,7 @@ from tms_ur.foxglove_bridge import (
     select_topics,
     site_topics,
 )
+from tms_ur.recording import replay_topics
 
 
 def test_loopback_default_and_remote_needs_explicit_setting() -> None:
@@ -48,6 +49,7 @@ def test_site_topics_cover_every_machine_of_the_site() -> None:
     machines = [load_named(name, site=site) for name in site.machines]
     topics = site_topics(machines)
     assert len(topics) == len(set(topics))
+    assert set(replay_topics(machines)) <= set(topics)  # what a recording takes
     for t in ("/tf", "/tf_static", "/tms_ts/status", "/sim/truth/soil", "/sim/sensors/mound/points"):
         assert t in topics
     assert machines, "the site lists machines"
