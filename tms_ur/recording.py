@@ -25,7 +25,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError, WriterError
 
 from tms_common.errors import TmsError
-from tms_model.machines import CRAWLER_DUMP, Machine
+from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
 from tms_ur.msgdefs import MsgDefError, message_definition, rihs01
 
 __all__ = ["BagRecorder", "RecordedMessage", "RecordingError", "bag_summary", "bag_times", "plan_topics", "read_bag",
@@ -48,8 +48,9 @@ class RecordedMessage:
 
 def replay_topics(machines: Iterable[Machine]) -> list[str]:
     """The site topics a replay needs, in order: /tf, /tf_static, the task states, the emergency signal, the soil
-    totals and the mound's point cloud (the terrain source), and per machine its true pose, its joint states and, for a
-    carrier, the soil in its vessel. /clock is not recorded: the log time is already the simulated time."""
+    totals and the mound's point cloud (the terrain source), and per machine its true pose, its joint states, for a
+    carrier the soil in its vessel and for an excavator its bucket tip. /clock is not recorded: the log time is
+    already the simulated time."""
     topics = ["/tf", "/tf_static", "/tms_ts/status", "/emergency_signal", "/sim/truth/soil",
               "/sim/sensors/mound/points"]
     for m in machines:
@@ -57,6 +58,8 @@ def replay_topics(machines: Iterable[Machine]) -> list[str]:
         topics += [f"/sim/truth/{name}/pose", f"/{name}/joint_states"]
         if m.type == CRAWLER_DUMP:
             topics.append(f"/sim/truth/{name}/soil")
+        if m.type == EXCAVATOR:
+            topics.append(f"/sim/truth/{name}/bucket_tip")
     return list(dict.fromkeys(topics))
 
 

@@ -85,7 +85,14 @@ class ExperimentNode(Node):
         waits = [str(a) for a in d("wait_for_actions", [""]).value if str(a)]
         self.wait_for_actions: list[str] | None = waits or None
         runs = Path(d("runs_dir", "runs").value)
-        self.run_dir = (runs if runs.is_absolute() else repo_root() / runs) / datetime.now().strftime("%Y%m%d-%H%M%S")
+        # run_dir: the report's directory exactly (scripts/demo.sh picks it so the recording lands in its bag/);
+        # empty: a new <runs_dir>/<timestamp>
+        chosen = str(d("run_dir", "").value)
+        if chosen:
+            self.run_dir = Path(chosen) if Path(chosen).is_absolute() else repo_root() / chosen
+        else:
+            self.run_dir = ((runs if runs.is_absolute() else repo_root() / runs)
+                            / datetime.now().strftime("%Y%m%d-%H%M%S"))
         self.db_uri, self.db_path = d("db_uri", "").value, d("db_path", "").value
         self.carriers = [str(c) for c in d("carriers", [""]).value if str(c)]
         self.loads_target = int(d("loads", 0).value)
