@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # `make demo`: an experiment in simulation. Seeds a fresh embedded DB under runs/ with the scenario's seed, then
-# runs its launch file; the report lands in runs/<timestamp>/.
+# runs its launch file recording the site's topics; everything lands in one run directory runs/<timestamp>/:
+# the report (index.html, metrics.json, plots), the recording bag/ (rosbag2, MCAP: ros2 bag, Foxglove) and,
+# once the launch has ended and the bag is closed, the report's replay page replay.html.
 #   SCENARIO=paper (default): config/seeds/paper.yaml, config/launch/paper_experiment.yaml
 #   SCENARIO=fleet:           config/seeds/fleet.yaml, config/launch/fleet.yaml (one ZX200 loads three carriers)
+#   RECORD=0:                 no recording (and no replay page)
 # A first argument (a launch file) replaces the scenario's launch file.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,8 +17,26 @@ case "$SCENARIO" in
 esac
 LAUNCH=${1:-$DEFAULT_LAUNCH}
 shift || true
-export TMS_DB_PATH=${TMS_DB_PATH:-$PWD/runs/db-$(date +%Y%m%d-%H%M%S)}
+STAMP=$(date +%Y%m%d-%H%M%S)
+RUN_DIR=${RUN_DIR:-$PWD/runs/$STAMP}
+export TMS_DB_PATH=${TMS_DB_PATH:-$PWD/runs/db-$STAMP}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
-mkdir -p "$TMS_DB_PATH"
+mkdir -p "$TMS_DB_PATH" "$RUN_DIR"
 .venv/bin/tms-db seed "$SCENARIO"
-exec .venv/bin/tms-launch "$LAUNCH" "$@"
+ARGS=()
+# the supervisor writes its report into the same run directory (its run_dir parameter), when the launch has one
+if .venv/bin/tms-launch --list "$LAUNCH" | cut -f1 | grep -qx /tms_ur_experiment; then
+  ARGS+=(--param "tms_ur_experiment:run_dir=$RUN_DIR")
+fi
+if [ "${RECORD:-1}" != 0 ]; then
+  ARGS+=(--record "$RUN_DIR/bag")
+fi
+set +e
+.venv/bin/tms-launch "$LAUNCH" "${ARGS[@]}" "$@"
+rc=$?
+set -e
+if [ "${RECORD:-1}" != 0 ] && [ -f "$RUN_DIR/bag/metadata.yaml" ]; then
+  .venv/bin/python -m tms_ur.replay_page "$RUN_DIR" || echo "demo.sh: no replay page (see above)" >&2
+fi
+echo "demo.sh: run directory $RUN_DIR"
+exit $rc

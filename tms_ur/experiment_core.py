@@ -483,13 +483,17 @@ class ExperimentRecorder:
             for k, v in metrics.items()
             if k not in ("flags_timeline", "task_states", "pass_events_s", "dump_events_s")
         )
+        # a recording of the run (tms-launch --record <dir>/bag) is closed after this report; its replay page is
+        # written then (tms_ur.replay_page, scripts/demo.sh)
+        replay = ('<p><a href="replay.html">Replay</a> of the recording <a href="bag/">bag/</a> (rosbag2, MCAP)</p>\n'
+                  if (directory / "bag").is_dir() else "")
         html = f"""<!doctype html><html><head><meta charset="utf-8"><title>{title}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:1em auto}} \
 td,th{{text-align:left;padding:2px 8px;border-bottom:1px solid #ddd}}
 img{{max-width:100%;border:1px solid #ccc;margin:4px 0}}</style></head><body>
 <h1>{title}</h1><table>{rows}</table>
 <p><a href="metrics.json">metrics.json</a> (full timelines)</p>
-<h2>Site map</h2><img src="site_map.png" alt="site map">
+{replay}<h2>Site map</h2><img src="site_map.png" alt="site map">
 <h2>Soil</h2><img src="soil.png" alt="soil volumes">
 <h2>Flags</h2><img src="flags.png" alt="flag timeline">
 </body></html>"""
