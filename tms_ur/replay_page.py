@@ -49,8 +49,8 @@ def replay_timeline(bag: str | Path, rate_hz: float = 5.0) -> dict[str, Any]:
 
     ``machines``: name -> [[t, x, y, yaw], ...] from ``/sim/truth/<name>/pose``; ``tips``: name -> [[t, x, y, z]]
     from ``/sim/truth/<name>/bucket_tip``; ``soil``: [[t, {label: m^3}]] from ``/sim/truth/soil``; ``carrier_soil``:
-    name -> [[t, vessel m^3]] from ``/sim/truth/<name>/soil``. A series keeps a sample when ``1 / rate_hz`` has
-    passed since its last kept one.
+    name -> [[t, vessel m^3]] from ``/sim/truth/<name>/soil``. A series keeps the first sample of each ``1 /
+    rate_hz`` interval from the recording's start (integer nanoseconds: no rounding drift).
     """
     summary = bag_summary(bag)
     wanted = [t for t, (ty, _) in summary.items() if t.startswith("/sim/truth/") and (
@@ -59,18 +59,18 @@ def replay_timeline(bag: str | Path, rate_hz: float = 5.0) -> dict[str, Any]:
     if not any(t.endswith("/pose") for t in wanted):
         raise ReplayError(f"replay of {bag}: the recording holds no /sim/truth/<machine>/pose topic "
                           f"(topics: {sorted(summary)})")
-    step = 1.0 / rate_hz
-    last: dict[str, float] = {}
+    last: dict[str, int] = {}  # topic -> interval of its last kept sample
     out: dict[str, Any] = {"machines": {}, "tips": {}, "soil": [], "carrier_soil": {}}
-    t0 = None
+    t0_ns: int | None = None
     t_end = 0.0
     for m in read_bag(bag, topics=wanted):
         t = m.log_time_ns * 1e-9
-        t0 = t if t0 is None else t0
+        t0_ns = m.log_time_ns if t0_ns is None else t0_ns
         t_end = t
-        if t - last.get(m.topic, -math.inf) < step:
+        interval = int((m.log_time_ns - t0_ns) * rate_hz) // 1_000_000_000
+        if last.get(m.topic) == interval:
             continue
-        last[m.topic] = t
+        last[m.topic] = interval
         parts = m.topic.split("/")  # "", "sim", "truth", <name or soil>, <kind>
         if m.topic == "/sim/truth/soil":
             out["soil"].append([round(t, 3), {k: round(v, 4) for k, v in _labelled(m.msg).items()}])
@@ -85,7 +85,7 @@ def replay_timeline(bag: str | Path, rate_hz: float = 5.0) -> dict[str, Any]:
             vessel = _labelled(m.msg).get("vessel")
             if vessel is not None:
                 out["carrier_soil"].setdefault(parts[3], []).append([round(t, 3), round(vessel, 4)])
-    out["t0"] = round(t0 or 0.0, 3)
+    out["t0"] = round((t0_ns or 0) * 1e-9, 3)
     out["t1"] = round(t_end, 3)
     return out
 
