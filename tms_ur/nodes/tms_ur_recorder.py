@@ -94,8 +94,8 @@ class RecorderNode(Node):
                 recorder.write(t, 0, data)
             self._held = []
             recorder.close()
-            self.get_logger().info(f"tms_ur_recorder: closed {recorder.path} ({sum(recorder.counts.values())} "
-                                   "messages)")
+            # print, not the logger: after SIGINT the context is gone and /rosout cannot take it
+            print(f"[tms_ur_recorder] closed {recorder.path} ({sum(recorder.counts.values())} messages)", flush=True)
         super().destroy_node()
 
 
