@@ -1,5 +1,5 @@
 """Replay into the 3-D view: a short live run recorded (real processes over DDS: ``tms_sp_tf`` turns this test's
-odometry into /tf, written as received with ``tms_ur.recording``'s writer into a rosbag2 MCAP directory), then
+odometry into /tf, ``tms_ur_recorder`` writes it into a rosbag2 MCAP directory and is stopped with SIGINT), then
 ``tms_ur_panel`` started with ``replay:=<bag>``; headless Chromium moves the view to recorded log times and the view
 shows the poses recorded at those times, with their stamps. Seeking back rebuilds the view from the recording's
 start."""
@@ -7,6 +7,7 @@ start."""
 from __future__ import annotations
 
 import math
+import signal
 import time
 
 import pytest
@@ -14,12 +15,10 @@ from nav_msgs.msg import Odometry
 
 from tests.rosproc import executable
 from tests.tms_ur.conftest import free_port
-from tf2_msgs.msg import TFMessage
 from tms_model.fleet import load_named
 from tms_model.transform import quaternion_from_axis_angle
 from tms_model.urdf import machine_tree
-from tms_sp.nodes.tms_sp_tf import LATCHED, TF_QOS
-from tms_ur.recording import BagRecorder, read_bag
+from tms_ur.recording import read_bag
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 
@@ -45,23 +44,20 @@ def _odom(frame: str, stamp: float, x: float, y: float, yaw: float) -> Odometry:
 
 
 def _record(procs, ros_node, tmp_path):
-    """Drive both machines along known paths for ~4 s; ``tms_sp_tf`` turns the odometry into /tf, which this test
-    receives as CDR bytes and writes, as received, with tms_ur.recording's writer (log time: arrival, ns)."""
+    """Drive both machines along known paths for ~4 s while ``tms_ur_recorder`` records /tf and /tf_static."""
     tf = procs([executable("tms_sp", "tms_sp_tf"), "--ros-args", "-p",
                 f"machines:={MACHINES!r}".replace("'", '"')])
     assert tf.wait_for("tms_sp_tf ready", timeout=60), tf.output
     bag = tmp_path / "bag"
-    writer = BagRecorder(bag)
-    writer.add_topic("/tf", "tf2_msgs/msg/TFMessage", depth=100)
-    writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", transient_local=True, depth=1)
-    for topic, qos in (("/tf", TF_QOS), ("/tf_static", LATCHED)):
-        ros_node.create_subscription(TFMessage, topic, lambda data, t=topic: writer.write(t, time.time_ns(), data),
-                                     qos, raw=True)
+    rec = procs([executable("tms_ur", "tms_ur_recorder"), "--ros-args", "-p", f"output:={bag}",
+                 "-p", 'topics:=["/tf", "/tf_static"]'])
     pubs = {m: ros_node.create_publisher(Odometry, f"/{m}/odom_pose", 10) for m in MACHINES}
     deadline = time.monotonic() + 60
+    # the recorder subscribes once its graph poll sees tms_sp_tf's publishers
     while time.monotonic() < deadline and not (
-            all(p.get_subscription_count() > 0 for p in pubs.values()) and ros_node.count_publishers("/tf") > 0):
+            all(p.get_subscription_count() > 0 for p in pubs.values()) and ros_node.count_subscribers("/tf") > 0):
         _spin(ros_node, 0.2)
+    assert ros_node.count_subscribers("/tf") > 0, rec.output
     _spin(ros_node, 1.0)
     for i in range(40):
         stamp = 100.0 + 0.1 * i
@@ -69,9 +65,10 @@ def _record(procs, ros_node, tmp_path):
         pubs["ic120"].publish(_odom("map", stamp, 30.0, 8.0 + 0.1 * i, -0.01 * i))
         _spin(ros_node, 0.1)
     _spin(ros_node, 1.0)
-    writer.close()
+    rec.signal(signal.SIGINT)  # the recorder closes the bag on SIGINT
+    assert rec.wait(30) is not None, rec.output
     tf.kill()
-    assert writer.counts["/tf"] >= 80, writer.counts
+    assert (bag / "metadata.yaml").is_file(), rec.output
     return bag
 
 
