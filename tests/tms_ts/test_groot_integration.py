@@ -7,13 +7,16 @@ from __future__ import annotations
 
 import socket
 import statistics
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import zmq
 
-from tests.rosproc import executable
+from tests.rosproc import ROOT, executable
 from tests.tms_ts.test_groot import RUNNING_, SUCCESS_, read_status_message, read_tree
 from tests.tms_ts.test_integration import _handoff_tree, _seed, _state
 
@@ -33,6 +36,23 @@ def _free_port_pair() -> int:
                     continue
         return port
     raise AssertionError("no two consecutive free ports")
+
+
+def _subscribe(port: int, out: Path) -> None:
+    """The client's SUB side as a process of its own (``python -m tests.tms_ts.test_groot_integration PORT FILE``):
+    each message is stamped on reception and written at once, one ``<epoch s> <hex>`` line, with no other thread of
+    the test (rclpy's spinning) holding its interpreter."""
+    ctx = zmq.Context()
+    sub = ctx.socket(zmq.SUB)
+    sub.setsockopt(zmq.SUBSCRIBE, b"")
+    sub.connect(f"tcp://127.0.0.1:{port}")
+    with out.open("w") as f:
+        print("subscribed", flush=True)
+        while True:
+            data = sub.recv()
+            at = time.time()
+            f.write(f"{at!r} {data.hex()}\n")
+            f.flush()
 
 
 class GrootClient:
@@ -71,7 +91,7 @@ class GrootClient:
         self.ctx.destroy(linger=0)
 
 
-def test_groot1_client_reads_the_running_tree_and_its_status_changes_within_100_ms(ts_system, procs):
+def test_groot1_client_reads_the_running_tree_and_its_status_changes_within_100_ms(ts_system, procs, tmp_path):
     from tms_msg.msg import TaskIds, TaskState
 
     port = _free_port_pair()
@@ -83,7 +103,11 @@ def test_groot1_client_reads_the_running_tree_and_its_status_changes_within_100_
     # groot_task_id 1: Groot stays on task 1 after it ends (with -1 it would move on to task 2, still running)
     system = ts_system.start(stub_duration_s=0.2, manager_args=("-p", f"groot_port:={port}", "-p", "groot_task_id:=1"))
     client = GrootClient(port)
+    out = tmp_path / "groot_messages.txt"
+    sub = subprocess.Popen([sys.executable, "-m", "tests.tms_ts.test_groot_integration", str(port), str(out)],
+                           cwd=ROOT, stdout=subprocess.PIPE, text=True)
     try:
+        assert sub.stdout.readline().strip() == "subscribed"
         time.sleep(0.5)  # the subscription reaches the PUB socket before the first change (ZMQ's slow joiner)
         system.publish("/tms_ts/start", TaskIds(task_ids=[1, 2]))
         manager = system.procs["manager"]
@@ -109,8 +133,11 @@ def test_groot1_client_reads_the_running_tree_and_its_status_changes_within_100_
         assert "Groot: task 2" not in manager.output  # groot_task_id holds task 1
     finally:
         client.close()
+        sub.kill()
+        sub.wait(10)
 
-    received = [(at, *read_status_message(data)) for at, data in client.messages]
+    lines = [line.split() for line in out.read_text().splitlines()]
+    received = [(float(at), *read_status_message(bytes.fromhex(data))) for at, data in lines]
     transitions = [(at, *t) for at, _, ts in received for t in ts]
     assert transitions, "no status change received"
     leaf = [(prev, status) for _, _, uid, prev, status in transitions if uid == 5]
@@ -187,3 +214,7 @@ def test_groot_follows_the_earliest_running_task_and_groot_task_id_picks_one(tmp
         ex.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+if __name__ == "__main__":
+    _subscribe(int(sys.argv[1]), Path(sys.argv[2]))
