@@ -10,17 +10,21 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import rclpy
 import yaml
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TransformStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from tests.rosproc import executable
 from tf2_msgs.msg import TFMessage
 from tms_msg.msg import TaskState
+from tms_ur.recording import read_bag
 
 COUNTS = {"/tf_static": 1, "/tf": 30, "/tms_ts/status": 7, "/late/topic": 9}
 TYPES = {"/tf_static": "tf2_msgs/msg/TFMessage", "/tf": "tf2_msgs/msg/TFMessage",
@@ -119,3 +123,46 @@ def test_recorder_refuses_an_existing_output(procs, tmp_path: Path) -> None:
 
 if __name__ == "__main__" and sys.argv[1:] == ["publish"]:
     publish()
+
+
+def _spin(node, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        node.executor_for_test.spin_once(timeout_sec=0.02)
+
+
+def test_log_time_is_simulated_time(procs, ros_node, tmp_path: Path) -> None:
+    """Under use_sim_time the log time is /clock's: a latched message heard before the first /clock is logged at
+    the clock's first value, later ones at the clock of their arrival; header stamps stay as published."""
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    static = ros_node.create_publisher(TFMessage, "/tf_static", latched)
+    held = TransformStamped(child_frame_id="held")
+    held.header.stamp.sec = 7
+    static.publish(TFMessage(transforms=[held]))
+    clock = ros_node.create_publisher(Clock, "/clock", 10)
+    tf = ros_node.create_publisher(TFMessage, "/tf", 100)
+    bag = tmp_path / "bag"
+    rec = procs([executable("tms_ur", "tms_ur_recorder"), "--ros-args", "-p", f"output:={bag}", "-p",
+                 'topics:=["/tf_static", "/tf"]', "-p", "use_sim_time:=true", "-p", "poll_period_s:=0.2"],
+                name="recorder")
+    deadline = time.monotonic() + 20
+    while min(p.get_subscription_count() for p in (tf, static, clock)) == 0:
+        assert time.monotonic() < deadline, (rec.output, [p.get_subscription_count() for p in (tf, static, clock)])
+        _spin(ros_node, 0.1)
+    _spin(ros_node, 1.0)  # the latched message reaches the recorder before any /clock
+    sent = []
+    for i in range(10):
+        now = Time(sec=1000 + i)
+        clock.publish(Clock(clock=now))
+        _spin(ros_node, 0.3)  # the recorder's clock takes the value before the message arrives
+        tf.publish(TFMessage(transforms=[TransformStamped(child_frame_id=f"t{i}")]))
+        sent.append(1000 + i)
+        _spin(ros_node, 0.2)
+    rec.signal(signal.SIGINT)
+    assert rec.wait(20) == 0, rec.output
+    got = list(read_bag(bag))
+    static_msgs = [m for m in got if m.topic == "/tf_static"]
+    assert len(static_msgs) == 1 and static_msgs[0].msg.transforms[0].header.stamp.sec == 7
+    assert static_msgs[0].log_time_ns == 1000 * 10**9  # held until the first /clock
+    tf_times = [m.log_time_ns / 1e9 for m in got if m.topic == "/tf"]
+    assert tf_times == pytest.approx(sent), rec.output

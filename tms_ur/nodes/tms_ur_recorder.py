@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -48,7 +49,9 @@ class RecorderNode(Node):
         self._held: list[tuple[str, bytes]] = []  # arrived before the first /clock (sim time 0)
         self._reported: set[str] = set()
         self._sync()
-        self.create_timer(period, self._sync)
+        # the graph poll runs on the steady clock: on simulated time a timer waits for /clock, and topics
+        # published before the clock starts (the latched /tf_static) would not be subscribed until then
+        self.create_timer(period, self._sync, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"tms_ur_recorder: recording {len(self.wanted)} topics into {output}")
 
     def _sync(self) -> None:
