@@ -96,8 +96,9 @@ function layerMesh(l, index) {
   return new THREE.Mesh(g, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
 }
 
-const ground = new THREE.GridHelper(200, 40, 0x666666, 0x888888);
-ground.rotation.x = Math.PI / 2;  // the grid lies in the map's x-y plane
+// flat ground under the heightmaps (PlaneGeometry lies in x-y: the map's ground plane), just below them
+const ground = new THREE.Mesh(new THREE.PlaneGeometry(400, 400), new THREE.MeshLambertMaterial({ color: 0x9a9a86 }));
+ground.position.z = -0.05;
 scene.add(ground);
 
 let terrainLoading = false;
@@ -213,7 +214,7 @@ function frameSite() {  // the bird's-eye camera looks at the machines once all 
   for (const g of bases) c.add(g.position);
   c.divideScalar(bases.length);
   controls.target.copy(c);
-  camera.position.copy(c).add(new THREE.Vector3(-12, -40, 30));
+  camera.position.copy(c).add(new THREE.Vector3(-6, -26, 18));
   framed = true;
 }
 
