@@ -65,13 +65,15 @@ class GrootTree:
     def __init__(self, root: BtNode) -> None:
         self.nodes: list[BtNode] = list(root.iter_nodes())  # depth first, the factory's creation order
         self.uids: dict[int, int] = {id(node): uid for uid, node in enumerate(self.nodes, start=1)}
+        # the header's layout, compiled once: it is packed again after every status message
+        self.header_struct = struct.Struct("<" + "Hb" * len(self.nodes))
         self._buffer: bytes | None = None
         self._lock = threading.Lock()
 
     @property
     def buffer(self) -> bytes:
-        """The serialized tree, built on first use: the publisher builds it on its server thread, not in the tick
-        (a tree of 4,990 nodes takes about 0.5 s)."""
+        """The serialized tree, built when first asked for (on the publisher's server thread, not in the tick: a
+        tree of 4,990 nodes takes about 0.5 s); a tree no client asks for is never serialized."""
         with self._lock:
             if self._buffer is None:
                 self._buffer = serialize_tree(self.nodes, self.uids)
@@ -158,7 +160,10 @@ def serialize_tree(nodes: Sequence[BtNode], uids: dict[int, int]) -> bytes:
 
 def status_header(tree: GrootTree) -> bytes:
     """``createStatusBuffer``: (uid, status) of every node, depth first."""
-    return b"".join(struct.pack("<Hb", tree.uid(n), NODE_STATUS[n.status]) for n in tree.nodes)
+    values = []
+    for uid, node in enumerate(tree.nodes, start=1):  # uids are the depth-first positions
+        values += (uid, NODE_STATUS[node.status])
+    return tree.header_struct.pack(*values)
 
 
 def transition_bytes(stamp_s: float, uid: int, prev: Status, status: Status) -> bytes:
@@ -233,7 +238,7 @@ class GrootPublisher:
 
     def attach(self, root: BtNode) -> GrootTree:
         """Publish this tree from now on (the previous one's pending transitions are sent first); its buffer is
-        serialized on the server thread."""
+        serialized on the server thread when a client asks for it."""
         tree = GrootTree(root)
         self.flush()
         with self._lock:
@@ -289,12 +294,11 @@ class GrootPublisher:
             if tree is None:  # no tree yet: requests wait (Groot times out, as with no PublisherZMQ)
                 time.sleep(0.05)
                 continue
-            tree.buffer  # noqa: B018 - serialized here, before a request, off the tick's thread
             try:
                 if not poller.poll(100):
                     continue
                 self._rep.recv()
-                self._rep.send(self._tree.buffer)
+                self._rep.send(tree.buffer)  # serialized here on the first request, off the tick's thread
             except zmq.ZMQError:
                 return  # closed
 
