@@ -13,6 +13,7 @@ and the panel's replay read recordings through it.
 from __future__ import annotations
 
 import importlib
+import sys
 import threading
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -28,8 +29,8 @@ from tms_common.errors import TmsError
 from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
 from tms_ur.msgdefs import MsgDefError, message_definition, rihs01
 
-__all__ = ["BagRecorder", "RecordedMessage", "RecordingError", "bag_summary", "bag_times", "plan_topics", "read_bag",
-           "replay_topics"]
+__all__ = ["BagRecorder", "RecordedMessage", "RecordingError", "bag_sizes", "bag_summary", "bag_times", "plan_topics",
+           "read_bag", "replay_topics"]
 
 
 class RecordingError(TmsError):
@@ -218,3 +219,40 @@ def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[
     finally:
         reader.close()
 
+
+
+def bag_sizes(path: str | Path) -> dict[str, tuple[int, int]]:
+    """Topic -> (message count, bytes of CDR) over the whole recording."""
+    reader = _open(path)
+    try:
+        out: dict[str, tuple[int, int]] = {c.topic: (0, 0) for c in reader.connections}
+        for conn, _stamp, data in reader.messages():
+            n, b = out[conn.topic]
+            out[conn.topic] = (n + 1, b + len(data))
+        return out
+    finally:
+        reader.close()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m tms_ur.recording BAG``: each topic's type, count and size, per second of log time."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if len(args) != 1:
+        print("usage: python -m tms_ur.recording BAG_DIR", file=sys.stderr)
+        return 2
+    try:
+        types, sizes, (start, end) = bag_summary(args[0]), bag_sizes(args[0]), bag_times(args[0])
+    except RecordingError as exc:
+        print(f"recording: {exc}", file=sys.stderr)
+        return 2
+    span = max((end - start) * 1e-9, 1e-9)
+    print(f"{args[0]}: {span:.1f} s of log time")
+    for topic, (count, size) in sorted(sizes.items(), key=lambda kv: -kv[1][1]):
+        print(f"  {topic:<40} {types[topic][0]:<36} {count:7d} msgs {size / 1e6:8.2f} MB {size / span / 1e3:8.1f} kB/s")
+    total = sum(b for _, b in sizes.values())
+    print(f"  total {total / 1e6:.2f} MB, {total / span / 1e3:.1f} kB per second of log time")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

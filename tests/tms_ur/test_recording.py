@@ -18,7 +18,16 @@ from std_msgs.msg import Bool
 from tf2_msgs.msg import TFMessage
 from tms_msg.msg import TaskState
 from tms_ur.msgdefs import MsgDefError, message_definition
-from tms_ur.recording import BagRecorder, RecordingError, bag_summary, bag_times, plan_topics, read_bag
+from tms_ur.recording import (
+    BagRecorder,
+    RecordingError,
+    bag_sizes,
+    bag_summary,
+    bag_times,
+    main,
+    plan_topics,
+    read_bag,
+)
 
 TOPICS = {
     "/tf": ("tf2_msgs/msg/TFMessage", 7),
@@ -174,3 +183,14 @@ def test_plan_topics() -> None:
     new, problems = plan_topics(graph, ["/a", "/b", "/c", "/later"], started=["/c"])
     assert new == {"/a": "std_msgs/msg/Bool"}
     assert "/b" in problems and "2 types" in problems["/b"]
+
+
+def test_sizes_and_cli(bag: Path, capsys) -> None:
+    sizes = bag_sizes(bag)
+    assert {t: n for t, (n, _) in sizes.items()} == {t: c for t, (_, c) in TOPICS.items()}
+    one = len(serialize_message(_message("/emergency_signal", 0)))
+    assert sizes["/emergency_signal"][1] == 2 * one
+    assert main([str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert "0.1 s of log time" in out and "/tms_ts/status" in out and "tms_msg/msg/TaskState" in out
+    assert main([str(bag / "nope")]) == 2 and "not a directory" in capsys.readouterr().err
