@@ -28,7 +28,8 @@ The 3-D view (``/3d``, files of ``tms_ur/web3d``): ``/tf`` and ``/tf_static`` co
 in ``map`` (``panel_core.SiteTfView``), ``/urdf/<name>``, ``/terrain.json`` (the DB's newest static and dynamic
 heightmaps). With ``replay`` (a rosbag2 directory) the panel subscribes to none of its input topics: it plays the
 recording's messages of those topics into the same state (``panel_core.ReplayClock``; the page's slider sends
-``{"op": "replay", "seek": <log time s>}`` / ``{"op": "replay", "play": true|false}``).
+``{"op": "replay", "seek": <log time s>}`` / ``{"op": "replay", "play": true|false}``); the dynamic terrain is then the
+newest replayed scan of ``points_topic`` rasterised as ``tms_sd_terrain_dynamic`` does.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from urllib.parse import parse_qs, urlsplit
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path as PathMsg
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import Bool, Float64MultiArray, Int32, String
 
 from tf2_msgs.msg import TFMessage
@@ -60,8 +61,10 @@ from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine
 from tms_model.site import load_site
 from tms_model.urdf import machine_tree
 from tms_msg.msg import TaskIds, TaskStatus
+from tms_sp.config import load_sensing_config
 from tms_sp.nodes.tms_sp_tf import LATCHED, TF_QOS
-from tms_sp.terrain import heightmap_from_blob, latest_heightmap
+from tms_sp.pointcloud import xyz_from_cloud
+from tms_sp.terrain import heightmap_from_blob, heightmap_from_points, latest_heightmap
 from tms_ur.panel_core import (
     Access,
     CommandError,
@@ -126,6 +129,15 @@ class PanelNode(Node):
         self._handlers: dict[str, Any] = {}
         self._replay_lock = threading.Lock()  # the timer and a seek from the page apply messages one at a time
         self.terrain: dict[str, dict] = {}  # kind -> terrain_layer of the newest stored heightmap
+        if self.replay_dir:
+            # the recording's scans make the dynamic terrain, rasterised as tms_sd_terrain_dynamic does (the live
+            # DB's dynamic heightmap is of now, not of the recording); the static survey still comes from the DB
+            self._scan_topic = str(d("points_topic", "/sim/sensors/mound/points").value)
+            self._sensing = load_sensing_config()
+            self._scan: tuple[int, Any] | None = None  # (log time ns, newest replayed scan)
+            self._scan_layer: tuple[int, dict] | None = None
+            self._current_log_time = 0
+            self._subscribe(PointCloud2, self._scan_topic, self._on_replayed_scan, 2)
         self._subscribe(TFMessage, "/tf", self._on_tf, TF_QOS)
         self._subscribe(TFMessage, "/tf_static", self._on_tf, LATCHED)
         self.pub_start = self.create_publisher(TaskIds, "/tms_ts/start", 10)
@@ -188,7 +200,32 @@ class PanelNode(Node):
             due = self.replay.due()
         for i in due:  # the handlers take self.lock themselves
             m = self._recorded[i]
+            self._current_log_time = m.log_time_ns
             self._handlers[m.topic](m.msg)
+        self._replay_terrain()
+
+    def _on_replayed_scan(self, msg: Any) -> None:
+        with self.lock:
+            self._scan = (self._current_log_time, msg)
+
+    def _replay_terrain(self) -> None:
+        """Rasterise the newest replayed scan when it changed (only the newest: a seek applies many at once)."""
+        with self.lock:
+            scan = self._scan
+        if scan is None or (self._scan_layer is not None and self._scan_layer[0] == scan[0]):
+            return
+        grid, ground = self._sensing.mound_grid, self._sensing.mound.ground_z
+        source = f"{self._scan_topic} at log time {scan[0]} ns"
+        try:
+            hm = heightmap_from_points(xyz_from_cloud(scan[1], topic=self._scan_topic), cell=grid.resolution, box=grid,
+                                       z_min=ground, source=source, min_coverage=0.2)
+        except TmsError as exc:
+            self.get_logger().warning(f"3-D view: replayed scan not drawn: {exc}", throttle_duration_sec=5.0)
+            return
+        layer = terrain_layer("dynamic", f"replay-{scan[0]}", hm.z, hm.x_min, hm.y_min, hm.x_max, hm.y_max)
+        self._scan_layer = (scan[0], layer)
+        with self.lock:
+            self.terrain["dynamic"] = layer
 
     def _replay_command(self, seek: float | None, play: bool | None) -> str:
         if self.replay is None:
@@ -202,6 +239,8 @@ class PanelNode(Node):
                     # back in time: the state is rebuilt from the recording's first message
                     self.tf_view = SiteTfView(list(self.tf_view.trees.values()))
                     self.site = SiteState(machines=self.site.machines)
+                    self._scan = self._scan_layer = None
+                    self.terrain.pop("dynamic", None)
             self._apply_due()
         return f"replay at {self.replay.t - self.replay.start:.3f} s" + (" playing" if self.replay.playing else "")
 
@@ -286,9 +325,14 @@ class PanelNode(Node):
             self.terrain = terrain
 
     def _read_terrain(self) -> dict[str, dict]:
-        """The newest heightmap of each of TERRAIN_KINDS in the DB; a layer is decoded only when its file changed."""
+        """The newest heightmap of each of TERRAIN_KINDS in the DB (in replay: the static one, the dynamic one from
+        the recording); a layer is decoded only when its file changed."""
         out = {}
+        if self.replay_dir and self._scan_layer is not None:
+            out["dynamic"] = self._scan_layer[1]
         for kind in TERRAIN_KINDS:
+            if self.replay_dir and kind == "dynamic":
+                continue
             try:
                 doc, data = latest_heightmap(self._store, kind)
             except TmsError:
