@@ -356,6 +356,7 @@ class TaskManager(Node):
         changed |= self._take_loads()
         if self.groot is not None:
             self._groot_follow()
+            self.groot.end_of_tick()  # this tick's changes go out now (within the publisher's rate)
         took = (time.monotonic() - start) * 1000.0
         self._stats["ticks"] += 1
         self._stats["sum_tick_ms"] += took
