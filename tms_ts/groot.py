@@ -202,7 +202,9 @@ class GrootPublisher:
         self.min_interval_s = 1.0 / max_msg_per_second
         self.clock = clock
         self._context = zmq.Context()  # our own, so close() releases both ports at once (term)
-        self._pub = self._context.socket(zmq.PUB)
+        # XPUB is PUB on the wire (Groot's SUB socket cannot tell) and also hands us the subscriptions: with no
+        # client subscribed no change is stamped or queued (a tick of a 1,000-node tree: ~7 ms with, ~0.5 without)
+        self._pub = self._context.socket(zmq.XPUB)
         self._rep = self._context.socket(zmq.REP)
         for sock in (self._pub, self._rep):
             sock.setsockopt(zmq.LINGER, 0)
@@ -219,6 +221,7 @@ class GrootPublisher:
         self._transitions: list[tuple[float, int, Status, Status]] = []
         self._flush_at: float | None = None  # monotonic end of the open window
         self._last_sent = float("-inf")
+        self.subscribed = False  # a client is subscribed (XPUB forwards the first subscribe and the last unsubscribe)
         self._active = True
         self.messages_sent = 0
         self._server = threading.Thread(target=self._serve, name="groot-server", daemon=True)
@@ -254,7 +257,7 @@ class GrootPublisher:
         stamp = self.clock()
         with self._lock:
             tree = self._tree
-            uid = tree.uids.get(id(node)) if tree is not None else None
+            uid = tree.uids.get(id(node)) if tree is not None and self.subscribed else None
             if uid is None:
                 return
             # packed when sent (on the sender thread): a tick of a 1,000-node tree makes 2,000 changes
@@ -268,9 +271,27 @@ class GrootPublisher:
         ``1 / max_msg_per_second`` ago (then the window's timer sends them). The tick's thread is awake anyway, so
         a loaded machine need not schedule the sender thread first (it took up to 160 ms at load average 10)."""
         with self._lock:
+            self._read_subscriptions()
             due = self._transitions and time.monotonic() - self._last_sent >= self.min_interval_s
         if due:
             self.flush()
+
+    def _read_subscriptions(self) -> None:
+        """Take the XPUB's subscription messages (under the lock: the socket is shared with the senders). On the
+        first subscription the header is brought up to now, so the client's first message starts from the
+        statuses the nodes have, not from those of the last message sent before it came."""
+        while True:
+            try:
+                msg = self._pub.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            if msg[:1] == b"\x01" and not self.subscribed:
+                self.subscribed = True
+                if self._tree is not None:
+                    self._header = status_header(self._tree)
+            elif msg[:1] == b"\x00":
+                self.subscribed = False
+                self._transitions = []
 
     def flush(self) -> None:
         """Send the pending transitions now (as ``PublisherZMQ::flush``); nothing pending: nothing sent."""
@@ -304,6 +325,11 @@ class GrootPublisher:
         poller = zmq.Poller()
         poller.register(self._rep, zmq.POLLIN)
         while self._active:
+            with self._lock:  # a subscription is seen within one poll period even when no tree ticks
+                try:
+                    self._read_subscriptions()
+                except zmq.ZMQError:
+                    return  # closed
             if self._tree is None:  # no tree yet: requests wait (Groot times out, as with no PublisherZMQ)
                 time.sleep(0.05)
                 continue

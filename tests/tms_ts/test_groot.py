@@ -177,6 +177,40 @@ def test_publisher_serves_the_tree_and_batches_transitions_as_publisherzmq():
         groot.close()
 
 
+def test_with_no_client_subscribed_nothing_is_queued_or_sent_and_a_late_client_starts_from_now():
+    pub_port, srv_port = _free_ports(2)
+    t = tree(BODY, a="F", b="R")
+    groot = GrootPublisher(pub_port, srv_port, address="127.0.0.1", max_msg_per_second=20)
+    ctx = zmq.Context()
+    try:
+        groot.attach(t.root)
+        t.ctx.status_listeners.append(groot.listener)
+        t.tick()
+        groot.end_of_tick()
+        time.sleep(0.2)
+        assert not groot.subscribed and groot.messages_sent == 0 and not groot._transitions
+        sub = ctx.socket(zmq.SUB)
+        sub.setsockopt(zmq.SUBSCRIBE, b"")
+        sub.connect(f"tcp://127.0.0.1:{pub_port}")
+        deadline = time.monotonic() + 5
+        while not groot.subscribed and time.monotonic() < deadline:  # the server thread reads the subscription
+            time.sleep(0.02)
+        assert groot.subscribed
+        t.halt()
+        assert sub.poll(2000), "no status message after the client subscribed"
+        header, transitions = read_status_message(sub.recv())
+        assert header[1] == RUNNING_ and header[2] == SUCCESS_  # the statuses when it subscribed, not at attach
+        assert (1, RUNNING_, IDLE_) in [(u, p, s) for _, u, p, s in transitions]
+        sub.close(linger=0)
+        deadline = time.monotonic() + 5
+        while groot.subscribed and time.monotonic() < deadline:  # the last unsubscription (the pipe closed)
+            time.sleep(0.02)
+        assert not groot.subscribed
+    finally:
+        ctx.destroy(linger=0)
+        groot.close()
+
+
 def test_a_port_in_use_is_an_error_naming_it_and_close_releases_both():
     pub_port, srv_port = _free_ports(2)
     first = GrootPublisher(pub_port, srv_port, address="127.0.0.1")
