@@ -99,6 +99,19 @@ def _record(procs, ros_node, tmp_path):
     return bag
 
 
+def _replay_view(procs, page, bag, tmp_path):
+    """``tms_ur_panel`` replaying ``bag``, and the browser page on its 3-D view with the time slider shown."""
+    port = free_port()
+    panel = procs([executable("tms_ur", "tms_ur_panel"), "--ros-args", "-p", f"port:={port}",
+                   "-p", f"db_path:={tmp_path / 'db'}", "-p", f"replay:={bag}",
+                   "-p", f"machines:={MACHINES!r}".replace("'", '"')])
+    assert panel.wait_for("serving http://127.0.0.1", timeout=60), panel.output
+    page.goto(f"http://127.0.0.1:{port}/3d")
+    page.wait_for_selector("#conn.ok", timeout=30000)
+    page.wait_for_selector("#replay.on", timeout=30000)  # the time slider is shown in replay
+    return panel, page
+
+
 def test_the_view_shows_the_recorded_poses_at_the_recorded_times(procs, ros_node, browser_page, tmp_path):
     bag = _record(procs, ros_node, tmp_path)
     # the recorded base_link edges, by log time: what the view must show when moved to that time
@@ -110,15 +123,7 @@ def test_the_view_shows_the_recorded_poses_at_the_recorded_times(procs, ros_node
                 recorded.append((m.log_time_ns, t.child_frame_id, stamp, t.transform.translation.x,
                                  t.transform.translation.y))
     assert len(recorded) >= 40, f"only {len(recorded)} base_link transforms recorded"
-    port = free_port()
-    panel = procs([executable("tms_ur", "tms_ur_panel"), "--ros-args", "-p", f"port:={port}",
-                   "-p", f"db_path:={tmp_path / 'db'}", "-p", f"replay:={bag}",
-                   "-p", f"machines:={MACHINES!r}".replace("'", '"')])
-    assert panel.wait_for("serving http://127.0.0.1", timeout=60), panel.output
-    page = browser_page
-    page.goto(f"http://127.0.0.1:{port}/3d")
-    page.wait_for_selector("#conn.ok", timeout=30000)
-    page.wait_for_selector("#replay.on", timeout=30000)  # the time slider is shown in replay
+    panel, page = _replay_view(procs, browser_page, bag, tmp_path)
     page.wait_for_function(f"{MACHINES}.every(n => window.site3d.loaded(n))", timeout=30000)
     # later, earlier (a seek back), then the middle: each time the newest recorded pose at or before the time
     picks = [recorded[int(len(recorded) * f)] for f in (0.8, 0.2, 0.5)]
@@ -147,14 +152,7 @@ def test_the_view_replays_the_terrain_of_the_recorded_scans(procs, ros_node, bro
     bag = _record(procs, ros_node, tmp_path)
     scans = [m.log_time_ns for m in read_bag(bag, topics=[SCAN])]
     assert len(scans) == 2, scans
-    port = free_port()
-    panel = procs([executable("tms_ur", "tms_ur_panel"), "--ros-args", "-p", f"port:={port}",
-                   "-p", f"db_path:={tmp_path / 'db'}", "-p", f"replay:={bag}",
-                   "-p", f"machines:={MACHINES!r}".replace("'", '"')])
-    assert panel.wait_for("serving http://127.0.0.1", timeout=60), panel.output
-    page = browser_page
-    page.goto(f"http://127.0.0.1:{port}/3d")
-    page.wait_for_selector("#replay.on", timeout=30000)
+    panel, page = _replay_view(procs, browser_page, bag, tmp_path)
     beside = (HOLE[0] + 3.0, HOLE[1])
     # after the first scan, before the second: the whole mound; after the second: the hole; back: the mound again
     for log_ns, hole_z in ((scans[0], 1.0), (scans[1], 0.4), (scans[0], 1.0)):
