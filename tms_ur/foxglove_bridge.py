@@ -81,10 +81,9 @@ class BridgeConfig:
 
 
 def site_topics(machines: Iterable[Machine]) -> list[str]:
-    """The site topics bridged by default: the ones a recording of the site takes (``recording.replay_topics``) and
-    each machine's ``robot_description``, which Foxglove's 3-D panel draws the machine from."""
-    machines = list(machines)
-    return list(dict.fromkeys([*replay_topics(machines), *(f"/{m.model_name}/robot_description" for m in machines)]))
+    """The site topics bridged by default: the ones a recording of the site takes (``recording.replay_topics``, with
+    each machine's ``robot_description``, which Foxglove's 3-D panel draws the machine from)."""
+    return replay_topics(machines)
 
 
 def select_topics(graph: Mapping[str, Sequence[str]], config: BridgeConfig) -> tuple[dict[str, str], dict[str, str]]:

@@ -49,14 +49,14 @@ class RecordedMessage:
 
 def replay_topics(machines: Iterable[Machine]) -> list[str]:
     """The site topics a replay needs, in order: /tf, /tf_static, the task states, the emergency signal, the soil
-    totals and the mound's point cloud (the terrain source), and per machine its true pose, its joint states, for a
-    carrier the soil in its vessel and for an excavator its bucket tip. /clock is not recorded: the log time is
-    already the simulated time."""
+    totals and the mound's point cloud (the terrain source), and per machine its true pose, its joint states, its
+    robot_description (latched: a bag opened in Foxglove draws the machines), for a carrier the soil in its vessel and
+    for an excavator its bucket tip. /clock is not recorded: the log time is already the simulated time."""
     topics = ["/tf", "/tf_static", "/tms_ts/status", "/emergency_signal", "/sim/truth/soil",
               "/sim/sensors/mound/points"]
     for m in machines:
         name = m.model_name
-        topics += [f"/sim/truth/{name}/pose", f"/{name}/joint_states"]
+        topics += [f"/sim/truth/{name}/pose", f"/{name}/joint_states", f"/{name}/robot_description"]
         if m.type == CRAWLER_DUMP:
             topics.append(f"/sim/truth/{name}/soil")
         if m.type == EXCAVATOR:
