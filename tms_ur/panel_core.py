@@ -23,6 +23,7 @@ from tms_model.excavator.kinematics import ExcavatorKinematics
 from tms_model.machines import CRAWLER_DUMP, DOZER, EXCAVATOR, LIFT_JOINT, ROTATE_JOINT, VESSEL_JOINT, Machine
 from tms_model.transform import Transform
 from tms_model.urdf import MachineTree
+from tms_sp.terrain import TerrainError
 
 __all__ = [
     "PanelConfig",
@@ -442,12 +443,13 @@ class SiteTfView:
 def terrain_layer(kind: str, file_id: str, z: np.ndarray, x_min: float, y_min: float, x_max: float,
                   y_max: float) -> dict[str, Any]:
     """A heightmap (``z[row, col]`` in image order: row 0 the north edge) as the 3-D view draws it, heights in
-    mm-rounded metres, row-major."""
+    mm-rounded metres, row-major; ``tms_sp.terrain.TerrainError`` naming the layer for non-finite heights or an empty
+    extent."""
     z = np.asarray(z, dtype=float)
     if z.ndim != 2 or z.size == 0 or not np.all(np.isfinite(z)):
-        raise TfError(f"terrain {kind} {file_id}: heights must be a finite 2-D grid, got shape {z.shape}")
+        raise TerrainError(f"terrain {kind} {file_id}: heights must be a finite 2-D grid, got shape {z.shape}")
     if not (x_max > x_min and y_max > y_min):
-        raise TfError(f"terrain {kind} {file_id}: empty extent x {x_min}..{x_max} y {y_min}..{y_max}")
+        raise TerrainError(f"terrain {kind} {file_id}: empty extent x {x_min}..{x_max} y {y_min}..{y_max}")
     return {"kind": kind, "id": str(file_id), "rows": int(z.shape[0]), "cols": int(z.shape[1]),
             "x_min": float(x_min), "y_min": float(y_min), "x_max": float(x_max), "y_max": float(y_max),
             "z": [round(float(v), 3) for v in z.ravel()]}

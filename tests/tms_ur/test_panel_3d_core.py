@@ -11,6 +11,7 @@ import pytest
 from tms_model.fleet import load_named
 from tms_model.transform import quaternion_from_axis_angle
 from tms_model.urdf import machine_tree
+from tms_sp.terrain import TerrainError
 from tms_ur.nodes.tms_ur_panel import WEB3D_DIR, _module_file
 from tms_ur.panel_core import CommandError, ReplayClock, SiteTfView, TfError, parse_command, terrain_layer
 
@@ -58,9 +59,9 @@ def test_terrain_layer_is_row_major_in_image_order_and_checks_its_input():
     z = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
     layer = terrain_layer("dynamic", "abc", z, 0.0, 10.0, 3.0, 12.0)
     assert (layer["rows"], layer["cols"], layer["z"][:3], layer["id"]) == (2, 3, [1.0, 2.0, 3.0], "abc")
-    with pytest.raises(TfError, match="terrain dynamic abc: heights"):
+    with pytest.raises(TerrainError, match="terrain dynamic abc: heights"):
         terrain_layer("dynamic", "abc", np.array([[np.nan]]), 0.0, 0.0, 1.0, 1.0)
-    with pytest.raises(TfError, match="empty extent"):
+    with pytest.raises(TerrainError, match="empty extent"):
         terrain_layer("static", "x", z, 1.0, 0.0, 1.0, 1.0)
 
 
