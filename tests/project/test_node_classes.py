@@ -131,10 +131,19 @@ def test_every_node_class_is_built_and_destroyed_in_one_process(context, tmp_pat
     classes = [c for m in _node_modules() for c in _node_classes(m)]
     assert classes
     common = _overrides(tmp_path)
+    other_port = _free_tcp_port()
+    while other_port == common["port"]:
+        other_port = _free_tcp_port()
+    specific = {
+        **SPECIFIC,
+        # the recorder needs a new bag directory; the Foxglove server and the panel each bind a port of their own
+        "tms_ur_recorder": {"output": str(tmp_path / "bag")},
+        "tms_ur_foxglove": {"port": other_port},
+    }
     nodes, failures = [], []
     try:
         for cls in classes:
-            values = {**common, **SPECIFIC.get(cls.__module__.rpartition(".")[2], {})}
+            values = {**common, **specific.get(cls.__module__.rpartition(".")[2], {})}
             overrides = [Parameter(k, value=v) for k, v in values.items()]
             try:
                 nodes.append(cls(context=context, parameter_overrides=overrides))
