@@ -130,7 +130,9 @@ def test_the_3d_view_shows_the_site_as_tf_has_it_and_the_dig(procs, domain, ros_
 
     # poses: the view against /tf at the stamp the page drew, for every machine, several times
     compared = 0
-    for _ in range(6):
+    for _ in range(20):  # a loaded machine misses some stamps (the page drew one /tf the test has not heard): retry
+        if compared >= len(MACHINES) * 3:
+            break
         spin(ros_node, 1.0)
         for name in MACHINES:
             shown = page.evaluate(f"[window.site3d.stamp({name!r}), window.site3d.links({name!r})]")
