@@ -3,7 +3,7 @@ writer and the panel; tms-launch on the test's own ROS domain and CAN groups).
 
 The scene holds the terrain and every machine; each machine's base_link in the view agrees with /tf (heard by this
 test over DDS) within 1 cm at the stamp the page says it drew; the view's terrain changes where the bucket dug; a
-screenshot goes to docs/img/site3d.png.
+screenshot goes to runs/screenshots/site3d.png (docs/img/site3d.png is one of them, copied by hand).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from tms_sp.nodes.tms_sp_tf import TF_QOS
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(900)]
 
-SCREENSHOT = ROOT / "docs" / "img" / "site3d.png"
+SCREENSHOT = ROOT / "runs" / "screenshots" / "site3d.png"
 MACHINES = ("zx200", "ic120")  # the paper launch's machines (its experiment's ``machines`` parameter)
 
 
