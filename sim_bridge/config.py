@@ -18,11 +18,12 @@ from typing import Any
 
 from com3_can.codec import dbc_files
 from sim_bridge.errors import SimConfigError
+from sim_bridge.physics import PhysicsSpec
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.spec import PlantMachine, PlantSpec, SensorSpec, SoilSpec
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_common.schema import Reader, read_schema, setting
+from tms_common.schema import Reader, load_schema, read_schema, setting
 from tms_model.machines import CRAWLER_DUMP, EXCAVATOR, Machine, load_machine, parse_machine
 from tms_model.site import Site, load_site
 
@@ -48,6 +49,9 @@ class _Soil:
     deposit_radius: float = setting(lo=0.0)
     dump_radius: float = setting(lo=0.0)
     mound_region_margin: float = setting(lo=0.0)
+    #: bank 1.8 t/m^3 with 25 % swell (moist common earth: Peurifoy, Construction Planning, Equipment and Methods,
+    #: Table 4-1; Caterpillar Performance Handbook load factors) -> 1.45 t/m^3 as buckets and vessels hold it
+    density: float = setting(1450.0, lo=100.0, hi=3000.0, doc="[kg/m^3] of the soil as the plant moves it (loose)")
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,7 @@ class _PlantFile:
     sensors: SensorSpec = setting()
     initial_front: dict[str, float] | None = None  # front joints of the digging excavator at start
     experiment: str = "dig_and_carry"
+    substeps: int = setting(5, lo=1, hi=50, doc="MuJoCo steps per step_s (the hydraulic drives are stiff: ~2 ms)")
 
 
 @contextlib.contextmanager
@@ -88,6 +93,32 @@ def load_description(path: str | Path) -> Machine:
     return parse_machine(path)
 
 
+#: what the plant's physics needs of a machine of each type (``physics:`` of its YAML)
+_PHYSICS_NEEDS = {
+    EXCAVATOR: ("oil_bulk_modulus_mpa", "hose_volume_l", "tank_pressure_mpa", "cylinder_viscous_ns_per_m",
+                "pilot_crack_mpa", "pilot_full_mpa", "spool_overlap", "pump_power_kw", "ls_margin_mpa",
+                "function_flow_lpm", "swing_brake_delay_s"),
+}
+_DRIVE_NEEDS = ("drive_frequency_hz", "drive_torque_limit_nm")
+
+
+def _physics(d: Machine) -> PhysicsSpec:
+    """The ``physics:`` section of ``d``'s YAML, with what its type needs."""
+    phys = load_schema(PhysicsSpec, d.source, ("physics",))
+    try:
+        phys.need(d.source, *_PHYSICS_NEEDS.get(d.type, _DRIVE_NEEDS))
+    except ValueError as exc:
+        raise SimConfigError(str(exc)) from None
+    flows = phys.function_flow_lpm
+    if flows is not None and set(flows) != set(d.joint_names):
+        raise SimConfigError(f"{d.source}: physics.function_flow_lpm: expected one flow per joint {list(d.joint_names)}")
+    limits = phys.drive_torque_limit_nm
+    if limits is not None and set(limits) != set(d.joint_names):
+        raise SimConfigError(f"{d.source}: physics.drive_torque_limit_nm: expected one limit per joint "
+                             f"{list(d.joint_names)}")
+    return phys
+
+
 def _pose(poses: Reader, name: str, site: Site, site_path: Path) -> tuple[float, float, float]:
     if isinstance(poses.raw(name), str):  # a point name in site.yaml
         point = poses.string(name)
@@ -105,6 +136,7 @@ def _soil(soil: _Soil, site: Site) -> SoilSpec:
         mound_center=(mound.cx, mound.cy), mound_base_radius=mound.base_radius, mound_top_radius=mound.top_radius,
         mound_height=mound.height, ground_z=mound.ground_z, deposit_radius=soil.deposit_radius,
         dump_radius=soil.dump_radius, mound_region_margin=soil.mound_region_margin,
+        loose_density=soil.density,
     )
 
 
@@ -161,7 +193,7 @@ def load_plant(path: str | Path | None = None, *, site: str | Path | None = None
     poses.only(set(paths))
     machines = {
         name: PlantMachine(name=name, description=d, pose=_pose(poses, name, site_model, site_path),
-                           start_joints=MappingProxyType(start[name]))
+                           start_joints=MappingProxyType(start[name]), physics=_physics(d))
         for name, d in descriptions.items()
     }
     return PlantSpec(
@@ -175,4 +207,5 @@ def load_plant(path: str | Path | None = None, *, site: str | Path | None = None
         excavator=first[EXCAVATOR],
         carrier=first[CRAWLER_DUMP],
         experiment=plant.experiment,
+        substeps=plant.substeps,
     )

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import math
 
-from sim_bridge.hydraulics import JointBank
+from sim_bridge.hydraulics import JointBank, ValveFront
 from sim_bridge.spec import PlantMachine
 from sim_bridge.tracks import SkidSteer, centre_to_tracks
+from tms_model.cylinders import moment_arm
 from tms_model.geometry import wrap_angle
 from tms_model.machines import LIFT_JOINT, ROTATE_JOINT, VESSEL_JOINT, Machine
 
@@ -45,19 +46,29 @@ class Excavator(_Tracked):
     def __init__(self, machine: PlantMachine, dt: float) -> None:
         self._place(machine, dt)
         d = machine.description
-        assert d.bucket is not None and d.pump_flow is not None  # tms_model: every excavator has them
-        self.bucket = d.bucket
-        self.front = JointBank(d.joints, d.drives, dt, pump_flow=d.pump_flow)
+        assert d.bucket is not None and d.pump_flow is not None and d.cylinders is not None  # tms_model: every
+        self.bucket = d.bucket  # excavator has them
+        self.front = ValveFront(d.joints, d.drives, d.cylinders, machine.physics, d.pump_flow, dt)
         self.front.set_positions(dict(machine.start_joints))
+        self._cyl_planes = [
+            (c, (j.origin_xyz[0], j.origin_xyz[2]), j.origin_rpy[1], i + 1)
+            for i, (c, j) in enumerate(zip(d.cylinders.all, d.joints[1:], strict=True))
+        ]
 
     @property
-    def bank(self) -> JointBank:
+    def bank(self) -> ValveFront:
         """The joints the machine reports and the MuJoCo model shows (the front)."""
         return self.front
 
     def set_front_velocity(self, velocities: dict[str, float]) -> None:
+        """Velocity mode: joint speeds [rad/s] for the machine's own controller to meter."""
+        self.front.pilot = None
         for name, v in velocities.items():
             self.front.command[self.front.names.index(name)] = v
+
+    def set_front_pilot(self, pilot: dict[str, float]) -> None:
+        """Pilot-pressure mode: p_plus - p_minus [MPa] per front joint, straight to the main spools."""
+        self.front.pilot = [pilot[name] for name in self.front.names]
 
     def rest(self) -> None:
         self.front.rest()
@@ -75,6 +86,13 @@ class Excavator(_Tracked):
         return self.front.at_rest() and self.base.at_rest()
 
     def step(self) -> None:
+        """Valves for one step at the present pose (the dynamics move the joints: :mod:`sim_bridge.physics`)."""
+        q = self.front.q
+        for cyl, origin, pitch, i in self._cyl_planes:
+            try:
+                self.front.moment[i] = moment_arm(cyl, origin, pitch, q[i])
+            except ValueError:
+                pass  # beyond the linkage's closing range for an instant: keep the last ratio
         self.front.step()
         self.base.step()
 

@@ -2,12 +2,13 @@
 
 ``build_mjcf(spec)`` writes an MJCF document: the terrain height field and every machine of the plant,
 each written by its type's profile (:mod:`sim_bridge.profiles`) with names prefixed by the machine's
-name: an excavator is mocap base -> swing -> boom -> arm -> bucket with the URDF joint origins and a
-``<name>_bucket_tip`` site, a crawler carrier is mocap base -> (rotating upper body ->) vessel on its rear hinge,
-a dozer mocap base -> blade lift arm. The bases are mocap bodies and the joints are set
-from the hydraulic model (kinematic joints): MuJoCo computes the forward kinematics and renders; the
-actuator and soil dynamics live in :mod:`sim_bridge.hydraulics` and :mod:`sim_bridge.soil`, which is
-what keeps the plant far faster than real time. URDF ``rpy`` is fixed-axis XYZ, hence ``eulerseq="XYZ"``.
+name: an excavator is mocap base -> swing -> boom -> arm -> bucket with the URDF joint origins, the links' masses,
+its cylinders (spatial tendons between pin sites, the bucket's through its four-bar) and a ``<name>_bucket_tip``
+site, a crawler carrier is mocap base -> (rotating upper body ->) vessel on its rear hinge, a dozer mocap base ->
+blade lift arm. The bases are mocap bodies moved by the track model; every joint is a degree of freedom under
+gravity, driven by the motors :mod:`sim_bridge.physics` writes (``mj_step``, ``step_s / substeps`` per MuJoCo step).
+No geometry collides: soil forces come from :mod:`sim_bridge.soil_force`, not from contacts. URDF ``rpy`` is
+fixed-axis XYZ, hence ``eulerseq="XYZ"``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,10 @@ __all__ = ["build_mjcf", "SiteModel"]
 
 def build_mjcf(spec: PlantSpec) -> str:
     """The MJCF XML of every machine on the site (pure function of the configuration)."""
+    sections: dict[str, list[str]] = {"tendon": [], "equality": [], "actuator": []}
+    for machine in spec.machines.values():
+        for key, extra in PLANT_PROFILES.get(machine.type).mjcf_sections(machine).items():
+            sections[key] += extra
     soil = spec.soil
     nrow = int(round(soil.size_y / soil.resolution))
     ncol = int(round(soil.size_x / soil.resolution))
@@ -32,7 +37,7 @@ def build_mjcf(spec: PlantSpec) -> str:
     lines = [
         '<mujoco model="tms_site">',
         '  <compiler angle="radian" eulerseq="XYZ"/>',
-        f'  <option timestep="{spec.dt}"/>',
+        f'  <option timestep="{spec.dt / spec.substeps}" gravity="0 0 -9.81"/>',
         '  <visual><global offwidth="1920" offheight="1080"/><headlight ambient="0.45 0.45 0.45" diffuse="0.6 0.6 '
         '0.6"/></visual>',
         "  <asset>",
@@ -49,10 +54,11 @@ def build_mjcf(spec: PlantSpec) -> str:
     ]
     for machine in spec.machines.values():
         lines += PLANT_PROFILES.get(machine.type).mjcf(machine)
-    lines += [
-        "  </worldbody>",
-        "</mujoco>",
-    ]
+    lines.append("  </worldbody>")
+    for key, extra in sections.items():
+        if extra:
+            lines += [f"  <{key}>", *extra, f"  </{key}>"]
+    lines.append("</mujoco>")
     return "\n".join(lines)
 
 
@@ -75,8 +81,10 @@ class SiteModel:
             for name in spec.machines
         }
         self._qadr = {}
+        self._jid = {}
         for j in range(m.njnt):
             self._qadr[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)] = int(m.jnt_qposadr[j])
+            self._jid[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)] = j
         self._tip_sites = {  # excavator name -> its bucket tip site
             name: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"{name}_bucket_tip") for name in spec.machines
             if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"{name}_bucket_tip") >= 0
@@ -100,6 +108,15 @@ class SiteModel:
     def forward(self) -> None:
         """Recompute the kinematics after setting poses and joints."""
         mujoco.mj_kinematics(self.model, self.data)
+
+    def joint_state(self, name: str) -> tuple[float, float]:
+        """(position, velocity) of joint ``name`` (``<machine>_<joint>``)."""
+        j = self._jid[name]
+        return float(self.data.qpos[self.model.jnt_qposadr[j]]), float(self.data.qvel[self.model.jnt_dofadr[j]])
+
+    def rest_joint(self, name: str) -> None:
+        """Zero the speed of joint ``name`` (a teleport)."""
+        self.data.qvel[self.model.jnt_dofadr[self._jid[name]]] = 0.0
 
     def bucket_tip(self, machine: str | None = None) -> np.ndarray:
         """Bucket tip in map of excavator ``machine`` (default: the one digging the soil)."""

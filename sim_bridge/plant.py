@@ -19,6 +19,7 @@ from typing import Any
 from sim_bridge.config import load_plant
 from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
 from sim_bridge.model import SiteModel
+from sim_bridge.physics import G, FluidDrives
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
 from sim_bridge.spec import PlantSpec
@@ -69,11 +70,21 @@ class Plant:
         self.carriers = {n: m for n, m in self.machines.items() if isinstance(m, CrawlerCarrier)}
         self.dozers = {n: m for n, m in self.machines.items() if isinstance(m, Dozer)}
         self.model = SiteModel(self.spec)
+        self._place_joints()
+        drives = []
+        self._drive_slices: dict[str, slice] = {}
+        for name, m in self.spec.machines.items():
+            own = PLANT_PROFILES.get(m.type).drives(m, self.model.model)
+            self._drive_slices[name] = slice(len(drives), len(drives) + len(own))
+            drives += own
+        self.drives = FluidDrives(self.model.model, self.model.data, drives, self.spec.substeps)
+        self._joint_names = {name: [f"{name}_{j}" for j in mach.bank.names] for name, mach in self.machines.items()}
         self.ground = HeightField(self.spec.soil)
         self.soil = SoilState(carrier=self.spec.carrier, vessels=dict.fromkeys(self.carriers, 0.0),
                               blades=dict.fromkeys(self.dozers, 0.0))
         self.initial_volume = self.ground.volume()
-        self._update_model()
+        self._place_bases()
+        self.model.forward()
         self._tip = self.model.bucket_tip() if self.excavator is not None else None
         self.tip_speed = 0.0
         self._edges: dict[str, tuple[float, float, float]] = {}
@@ -109,20 +120,54 @@ class Plant:
         return roll, pitch
 
     # -- stepping ----------------------------------------------------------------------------------
-    def _update_model(self) -> None:
+    def _place_bases(self) -> None:
+        """The mocap bases where the track model has them, on the ground."""
         m = self.model
         for name, mach in self.machines.items():
             mach.z = self.ground.height(mach.base.x, mach.base.y)
             m.set_base(name, mach.base.x, mach.base.y, mach.z, mach.base.yaw)
+
+    def _place_joints(self) -> None:
+        """qpos from the machines' joint positions (start, teleport), at rest; closes the bucket linkages."""
+        m = self.model
+        for name, mach in self.machines.items():
             for joint, q in zip(mach.bank.names, mach.bank.q, strict=True):
                 m.set_joint(f"{name}_{joint}", q)
+                m.rest_joint(f"{name}_{joint}")
+            extra = PLANT_PROFILES.get(self.spec.machines[name].type).linkage_joints(self.spec.machines[name],
+                                                                                     dict(zip(mach.bank.names, mach.bank.q, strict=True)))
+            for joint, q in extra.items():
+                m.set_joint(joint, q)
+                m.rest_joint(joint)
         m.forward()
 
+    def _loads(self) -> None:
+        """External forces of the soil: the weight of what buckets and vessels hold."""
+        xfrc = self.model.data.xfrc_applied
+        xfrc[:] = 0.0
+        if self.excavator is not None and self.soil.bucket > 0.0:
+            xfrc[self.model.bucket_body, 2] = -self.soil.bucket * self.spec.soil.loose_density * G
+        for name, load in self.soil.vessels.items():
+            if load > 0.0:
+                xfrc[self.model.body_ids[f"{name}_vessel_link"], 2] = -load * self.spec.soil.loose_density * G
+
     def step(self) -> None:
-        """Advance one ``dt``: actuators, kinematics, soil."""
+        """Advance one ``dt``: valves, bases, dynamics (MuJoCo), soil."""
         for mach in self.machines.values():
             mach.step()
-        self._update_model()
+        self._place_bases()
+        v_ref = self.drives.v_ref
+        for name, mach in self.machines.items():
+            v_ref[self._drive_slices[name]] = mach.bank.v_ref
+        self._loads()
+        self.drives.step()
+        force, speed = self.drives.force, self.model.data.actuator_velocity[self.drives.ids]
+        for name, mach in self.machines.items():
+            bank = mach.bank
+            for i, joint in enumerate(self._joint_names[name]):
+                bank.q[i], bank.v[i] = self.model.joint_state(joint)
+            sl = self._drive_slices[name]
+            bank.set_forces(force[sl], speed[sl])
         if self.excavator is not None:
             tip = self.model.bucket_tip()
             prev = self._tip
@@ -260,8 +305,10 @@ class Plant:
         m.base.x, m.base.y, m.base.yaw = x, y, yaw
         bank = m.bank
         bank.set_positions(joints)
-        for act in bank.actuators:
-            act.reset()
-        self._update_model()
+        bank.reset()
+        self._place_joints()
+        self._place_bases()
+        self.drives.reset()
+        self.model.forward()
         if self.excavator is not None:
             self._tip = self.model.bucket_tip()

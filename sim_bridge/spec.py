@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from sim_bridge.physics import PhysicsSpec
 from tms_common.schema import setting
 from tms_model.machines import Machine
 from tms_model.site import Site
@@ -32,6 +33,7 @@ class PlantMachine:
     description: Machine
     pose: tuple[float, float, float]
     start_joints: Mapping[str, float]
+    physics: PhysicsSpec  # the plant's model of its drives (``physics:`` of its YAML)
 
     @property
     def type(self) -> str:
@@ -56,6 +58,7 @@ class SoilSpec:
     deposit_radius: float  # [m] disc over which released soil lands on the ground
     dump_radius: float  # [m] disc of a vessel dump pile
     mound_region_margin: float  # [m] beyond the base radius still counted as the mound (spills at its foot)
+    loose_density: float = 1450.0  # [kg/m^3] of the soil in buckets, vessels and piles (its weight on the machines)
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,7 @@ class PlantSpec:
     files: tuple[str, ...]
     excavator: str = ""
     carrier: str = ""
+    substeps: int = 5  # MuJoCo steps per plant step (``dt``): the drives' oil springs need ~2 ms
     experiment: str = "dig_and_carry"
 
     def description(self, name: str) -> Machine:

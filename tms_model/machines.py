@@ -32,6 +32,7 @@ from types import MappingProxyType
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.schema import Reader
+from tms_model.cylinders import Cylinders
 
 __all__ = [
     "Blade",
@@ -223,6 +224,7 @@ class Machine:
     tf_prefix: str = ""  # frames of this machine on /tf are "<tf_prefix>/<link>" ("" = bare link names)
     swing: Swing | None = None  # crawler_dump: the rotating upper body, when it has one
     blade: Blade | None = None  # dozer
+    cylinders: Cylinders | None = None  # excavator: the front's cylinders, bucket linkage and swing motor
     dbc: str = ""  # DBC file of its COM3 bus in com3_can/dbc (can.dbc of the YAML)
     source: str = field(default="", compare=False)
     #: the machine's name on the site (its namespace; :func:`tms_model.fleet.load_named`); "" = the kind itself
@@ -364,6 +366,20 @@ def _masses(top: Reader) -> Mapping[str, float]:
     return MappingProxyType({name: m.number(name, lo=0.0) for name in m.keys()})
 
 
+def _cylinders(top: Reader, front: tuple[str, ...]) -> Cylinders:
+    cyl = top.schema(Cylinders, "cylinders")
+    for key, c, joint in zip(("boom", "arm", "bucket"), cyl.all, front[1:], strict=True):
+        if c.joint != joint:
+            raise top.sub("cylinders").sub(key).key_error("joint", f"expected {joint!r} (front_joints order), got {c.joint!r}")
+        if (c.child_pin is None) == (c.linkage is None):
+            raise top.sub("cylinders").key_error(key, "give exactly one of child_pin (a pin on the child link) or linkage")
+        if c.rod >= c.bore:
+            raise top.sub("cylinders").sub(key).key_error("rod", f"rod {c.rod} m must be thinner than the bore {c.bore} m")
+    if cyl.swing is None:
+        raise top.sub("cylinders").key_error("swing", "an excavator needs its swing motor (displacement, relief, brake)")
+    return cyl
+
+
 def _excavator(top: Reader, kind: str, source: str) -> Machine:
     front = top.names("front_joints")
     if len(front) != 4:
@@ -402,6 +418,7 @@ def _excavator(top: Reader, kind: str, source: str) -> Machine:
     return Machine(
         kind=kind,
         type=EXCAVATOR,
+        cylinders=_cylinders(top, front),
         joints=joints,
         drives=MappingProxyType(drives),
         home_pose=MappingProxyType(home),

@@ -3,18 +3,21 @@
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from typing import Any, ClassVar, Protocol
 
 import can
+import mujoco
 import numpy as np
 
 from com3_can.codec import Com3Codec
 from com3_can.scheduler import FrameScheduler
+from sim_bridge.physics import Drive
 from sim_bridge.sensors import Gnss, Noise
 from sim_bridge.spec import PlantMachine, SensorSpec
 
-__all__ = ["PlantBus", "PlantProfile", "Side"]
+__all__ = ["PlantBus", "PlantProfile", "Side", "actuator_id"]
 
 
 class PlantBus(Protocol):
@@ -68,6 +71,14 @@ class Side:
 
 
 
+def actuator_id(model: mujoco.MjModel, name: str) -> int:
+    """Index of actuator ``name`` of the site model (KeyError naming it when the MJCF lacks it)."""
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+    if i < 0:
+        raise KeyError(f"the site model has no actuator {name!r}")
+    return int(i)
+
+
 class PlantProfile:
     """The plant side of one machine type; class-level (no per-machine state: that lives in the :class:`Side`).
 
@@ -89,6 +100,37 @@ class PlantProfile:
     def mjcf(machine: PlantMachine) -> list[str]:
         """MJCF lines of the machine's bodies (a mocap ``<name>_base`` body and its children)."""
         raise NotImplementedError
+
+    @staticmethod
+    def mjcf_sections(machine: PlantMachine) -> dict[str, list[str]]:
+        """MJCF lines outside ``worldbody`` by section (``tendon``, ``equality``, ``actuator``). Default: one motor on
+        each joint, ``<name>_<joint>_drive``, written by the hydraulic drive model (:mod:`sim_bridge.physics`)."""
+        name = machine.name
+        return {"actuator": [f'    <motor name="{name}_{j.name}_drive" joint="{name}_{j.name}" gear="1"/>'
+                             for j in machine.description.joints]}
+
+    @staticmethod
+    def drives(machine: PlantMachine, model: mujoco.MjModel) -> list[Drive]:
+        """The hydraulic drives of the machine's joints in bank order (:mod:`sim_bridge.physics`). Default: a stiff
+        drive on each joint at ``physics.drive_frequency_hz``, clipped at ``physics.drive_torque_limit_nm``."""
+        name, ph = machine.name, machine.physics
+        assert ph.drive_frequency_hz is not None and ph.drive_torque_limit_nm is not None  # config checks
+        out = []
+        for j in machine.description.joints:
+            limit = ph.drive_torque_limit_nm[j.name]
+            out.append(Drive(
+                actuator=actuator_id(model, f"{name}_{j.name}_drive"), stiffness=0.0, viscous=0.0, f_min=-limit,
+                f_max=limit, x_min=-math.inf if j.lower is None else j.lower,
+                x_max=math.inf if j.upper is None else j.upper, damping_ratio=ph.damping_ratio,
+                frequency=ph.drive_frequency_hz,
+            ))
+        return out
+
+    @staticmethod
+    def linkage_joints(machine: PlantMachine, q: dict[str, float]) -> dict[str, float]:
+        """qpos of the MJCF joints that are not the machine's own (a closed linkage's) at joint positions ``q``,
+        by MJCF joint name. Default: none."""
+        return {}
 
     @staticmethod
     def command(io: PlantBus, side: Side, frame: str, values: dict[str, float]) -> None:

@@ -49,7 +49,8 @@ class CrawlerCarrierPlantProfile(PlantProfile):
             lines += [
                 f'{indent}<body name="{name}_{sw.child}" pos="{vec(sw.origin_xyz)}">',
                 f'{indent}  <joint name="{name}_{sw.name}" type="hinge" axis="0 0 1"{rng}/>',
-                f'{indent}  <geom type="cylinder" size="1.0 0.1" material="ic" contype="0" conaffinity="0" mass="1"/>',
+                f'{indent}  <geom type="cylinder" size="1.0 0.1" material="ic" contype="0" conaffinity="0" '
+            f'mass="{d.masses["body"]}"/>',
             ]
             indent += "  "
         lines += [
@@ -57,7 +58,7 @@ class CrawlerCarrierPlantProfile(PlantProfile):
             f'{indent}  <joint name="{name}_{vessel.name}" type="hinge" axis="0 -1 0"'
             f' range="{vessel.lower} {vessel.upper}" limited="true"/>',
             f'{indent}  <geom type="box" size="{length / 2} {width / 2} 0.05" pos="{length / 2} 0 0.53" material="ic" '
-            'contype="0" conaffinity="0" mass="1"/>',
+            f'contype="0" conaffinity="0" mass="{d.masses["vessel"]}"/>',
             f'{indent}  <site name="{name}_vessel_centre" pos="{length / 2} 0 0.53" size="0.1"/>',
             f"{indent}</body>",
         ]

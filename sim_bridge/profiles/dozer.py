@@ -44,10 +44,10 @@ class DozerPlantProfile(PlantProfile):
             f'      <body name="{name}_{j.child}" pos="{vec(j.origin_xyz)}" euler="{vec(j.origin_rpy)}">',
             f'        <joint name="{name}_{j.name}" type="hinge" axis="{vec(j.axis)}"{rng}/>',
             f'        <geom type="box" size="{b.edge_xyz[0] / 2} 0.1 0.1" pos="{b.edge_xyz[0] / 2} 0 0" material="dz" '
-            'contype="0" conaffinity="0" mass="1"/>',
+            f'contype="0" conaffinity="0" mass="{d.masses["blade"] * 0.3}"/>',
             f'        <geom type="box" size="0.1 {b.width / 2} 0.45" '
             f'pos="{vec((b.edge_xyz[0], b.edge_xyz[1], b.edge_xyz[2] + 0.45))}" '
-            'material="dz" contype="0" conaffinity="0" mass="1"/>',
+            f'material="dz" contype="0" conaffinity="0" mass="{d.masses["blade"] * 0.7}"/>',
             f'        <site name="{name}_blade_edge" pos="{vec(b.edge_xyz)}" size="0.08"/>',
             "      </body>",
             "    </body>",
