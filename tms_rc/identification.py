@@ -6,8 +6,9 @@ What the arm controller needs of the machine it drives, estimated from what the 
   time constant (a first-order-plus-dead-time fit), the steady-state gain (steady joint speed / commanded
   speed), the saturated speed (largest steady speed reached, per direction) and the velocity dead band (the
   command offset below which the joint stays still: ``|v| = K (|u| - d)`` fitted over the unsaturated steps);
-* the flow a joint draws per unit joint speed [L/min per rad/s] (cylinder bottom flow vs joint speed in the
-  steady part of the steps, a fit through the origin);
+* the flow a joint draws per unit joint speed [L/min per rad/s] (the Hydraulic_Flow_Rate_1 flow into the drive:
+  the cylinder's bottom side extending, its rod side retracting, the swing motor's inlet port; against the joint
+  speed in the steady part of the steps, a fit through the origin, per direction);
 * the total pump flow while boom, arm and bucket are commanded at once beyond what the pumps deliver;
 * from a chirp, the -3 dB bandwidth (magnitude of the response relative to the steady-state gain).
 
@@ -38,6 +39,8 @@ __all__ = [
 MOVING_SPEED = 0.003
 #: fraction of a step's hold taken as its steady part (the end of the hold)
 STEADY_FRACTION = 0.2
+#: the first response: the speed beyond this fraction of its steady value
+FIRST_RESPONSE = 0.02
 #: steps whose steady speed is below this fraction of the saturated speed are in the linear range
 LINEAR_FRACTION = 0.9
 
@@ -48,7 +51,7 @@ class StepRecord:
 
     ``t`` [s] sample times with 0 at the step (the command went from 0 to ``command``), ``speed`` [rad/s] the
     joint speed measured at those times, ``hold_s`` how long the command was held (``t`` may run past it),
-    ``bottom_flow`` [L/min] the cylinder's bottom-side flow at the same times (None: not recorded / no cylinder).
+    ``flow`` [L/min] the flow into the drive at the same times (None: not recorded).
     """
 
     joint: str
@@ -56,7 +59,7 @@ class StepRecord:
     t: np.ndarray
     speed: np.ndarray
     hold_s: float
-    bottom_flow: np.ndarray | None = None
+    flow: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -65,7 +68,7 @@ class StepFit:
 
     command: float
     moved: bool
-    steady: float  # [rad/s] speed at the end of the hold
+    steady: float  # [rad/s] the fit's steady speed (not moved: the speed at the end of the hold)
     dead_time_s: float = math.nan
     lag_s: float = math.nan
     rms: float = math.nan  # [rad/s] residual of the fit
@@ -127,8 +130,33 @@ def fit_step(rec: StepRecord, *, max_lag_s: float = 3.0) -> StepFit:
 
     sol = least_squares(resid, x0=[dead, lag, k], bounds=([0.0, 1e-4, -np.inf], [rec.hold_s, 10 * max_lag_s, np.inf]))
     dead, lag, k = (float(v) for v in sol.x)
+    # The dead time is the first response: where the speed first passes FIRST_RESPONSE of the steady speed and stays
+    # beyond it (a plant with more than one lag starts later than the fit's dead time says is possible; on a
+    # dead-time + lag plant this is 2 % of a lag after the fit's). The lag is then refitted from there.
+    thr = max(FIRST_RESPONSE * abs(k), MOVING_SPEED / 3.0)
+    beyond = np.sign(k) * y > thr
+    run = np.convolve(beyond.astype(int), np.ones(3, dtype=int), "valid") == 3  # three samples in a row
+    if np.any(run):
+        i = int(np.argmax(run))
+        if i > 0:
+            y0, y1 = np.sign(k) * y[i - 1], np.sign(k) * y[i]
+            first = float(t[i - 1] + (thr - y0) / (y1 - y0) * (t[i] - t[i - 1])) if y1 > y0 else float(t[i])
+        else:
+            first = float(t[0])
+        first = max(0.0, first - lag * math.log(1.0 / (1.0 - FIRST_RESPONSE)))
+
+        def resid2(p: np.ndarray) -> np.ndarray:
+            tau, gain = p
+            return y - gain * (1.0 - np.exp(-np.clip(t - first, 0.0, None) / max(tau, 1e-4)))
+
+        sol = least_squares(resid2, x0=[lag, k], bounds=([1e-4, -np.inf], [10 * max_lag_s, np.inf]))
+        dead, (lag, k) = first, (float(v) for v in sol.x)
     rms = float(np.sqrt(np.mean(sol.fun**2)))
-    return StepFit(rec.command, True, steady, dead, lag, rms)
+    # the fitted gain, not the tail's mean (a hold of a few lags ends a few per cent short of the steady speed),
+    # but never beyond the fastest speed measured: a response the model does not describe (an acceleration-limited
+    # swing) can fit a gain it never reaches
+    top = float(np.max(np.sign(k) * y))
+    return StepFit(rec.command, True, math.copysign(min(abs(k), max(top, 0.0)), k), dead, lag, rms)
 
 
 def _linear_fit(amp: np.ndarray, speed: np.ndarray) -> tuple[float, float]:
@@ -164,6 +192,8 @@ def estimate_joint(records: Sequence[StepRecord]) -> JointEstimate:
         top = max(abs(f.steady) for f in moving)
         sat.append(top)
         linear = [f for f in moving if abs(f.steady) < LINEAR_FRACTION * top] or moving
+        # a step the dead-time + lag model does not describe (residual above a tenth of its speed) is left out
+        linear = [f for f in linear if f.rms <= 0.1 * abs(f.steady)] or linear
         # the largest unsaturated step bounds the linear range; a lone step beyond it is saturated
         linear_fits.extend(linear)
         amp = np.array([abs(f.command) for f in linear])
@@ -181,16 +211,16 @@ def estimate_joint(records: Sequence[StepRecord]) -> JointEstimate:
 
 
 def flow_per_speed(records: Sequence[StepRecord]) -> float:
-    """[L/min per rad/s] the bottom-side flow a joint draws per unit speed: a fit through the origin of
-    ``|bottom flow|`` on ``|speed|`` over the steady part of every moving step (0 when no flow was recorded)."""
+    """[L/min per rad/s] the flow a joint draws per unit speed: a fit through the origin of ``|flow|`` on ``|speed|``
+    over the steady part of every moving step of ``records`` (0 when no flow was recorded)."""
     xs: list[np.ndarray] = []
     ys: list[np.ndarray] = []
     for r in records:
-        if r.bottom_flow is None:
+        if r.flow is None:
             continue
         keep = (r.t >= (1.0 - STEADY_FRACTION) * r.hold_s) & (r.t <= r.hold_s) & (np.abs(r.speed) > MOVING_SPEED)
         xs.append(np.abs(r.speed[keep]))
-        ys.append(np.abs(r.bottom_flow[keep]))
+        ys.append(np.abs(r.flow[keep]))
     if not xs:
         return 0.0
     x, y = np.concatenate(xs), np.concatenate(ys)

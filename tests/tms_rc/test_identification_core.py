@@ -82,7 +82,7 @@ def test_a_joint_that_never_moves_is_an_error_naming_it():
         estimate_joint(recs)
 
 
-def test_flow_per_speed_from_the_bottom_flow_quantised_to_8_l_per_min():
+def test_flow_per_speed_from_the_drive_flow_quantised_to_8_l_per_min():
     coef = 300.0 / 0.45  # L/min per rad/s
     recs = []
     for a in (0.1, 0.2, 0.3, 0.45):
