@@ -258,7 +258,8 @@ class ValveFront:
             # the pilot pair is named by joint direction (COM3): the spool moves the cylinder the way that turns so
             x = min(1.0, max(0.0, (abs(value) - self.crack) / (self.full - self.crack)))
             return math.copysign(x, value * self.moment[i]) if x > 0 else 0.0
-        s = value * self.moment[i]
+        vmax = self.joints[i].velocity  # the machine's controller holds each joint to its rated speed
+        s = max(-vmax, min(vmax, value)) * self.moment[i]
         if s == 0.0:
             return 0.0
         area = self.a_ext[i] if s > 0 else self.a_ret[i]

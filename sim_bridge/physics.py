@@ -112,6 +112,7 @@ class FluidDrives:
         self.force = np.zeros(self.n)
         self.saturated = np.zeros(self.n, dtype=bool)
         self.sub_dt = model.opt.timestep
+        self.reset()
 
     def _effective_mass(self, actuator: int) -> float:
         """Mass (inertia) ``actuator`` sees along its own direction at the current pose: 1 / (J M^-1 J^T)."""
@@ -138,11 +139,24 @@ class FluidDrives:
         row[d.moment_colind[adr: adr + nnz]] = d.actuator_moment[adr: adr + nnz]
         return row
 
-    def reset(self) -> None:
-        """Oil volumes equal to the pistons' positions (after a teleport or at start): no force stored."""
-        mujoco.mj_forward(self.model, self.data)
-        self.x_ref[:] = self.data.actuator_length[self.ids]
+    def reset(self, settle_s: float = 2.0) -> None:
+        """Hold the present pose: oil volumes such that each drive carries its static load here (after a teleport or
+        at start). The machines are let sag under gravity for ``settle_s``, the compression each drive needed is
+        kept and the joints are put back, at rest: a machine does not drop when the plant starts."""
+        m, d = self.model, self.data
+        qpos = d.qpos.copy()
+        mujoco.mj_forward(m, d)
+        self.x_ref[:] = d.actuator_length[self.ids]
         self.v_ref[:] = 0.0
+        for _ in range(round(settle_s / (self.sub_dt * self.substeps))):
+            self.step()
+        mujoco.mj_forward(m, d)
+        preload = self.x_ref - d.actuator_length[self.ids]
+        d.qpos[:] = qpos
+        d.qvel[:] = 0.0
+        d.qacc_warmstart[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self.x_ref[:] = d.actuator_length[self.ids] + preload
 
     def step(self) -> None:
         """Advance ``substeps`` MuJoCo steps with the drives' forces recomputed before each."""

@@ -308,7 +308,7 @@ class Plant:
         bank.reset()
         self._place_joints()
         self._place_bases()
-        self.drives.reset()
+        self.drives.reset(settle_s=0.0)  # replay: the recorded poses, not a load to carry
         self.model.forward()
         if self.excavator is not None:
             self._tip = self.model.bucket_tip()

@@ -68,7 +68,7 @@ def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
 
         joints: list[tuple[float, JointStateOut]] = []
         next_cmd = 0.0
-        while plant.time < 2.5:
+        while plant.time < 3.5:  # the swing's dead time, then its inertia against the relief torque
             if plant.time + 1e-9 >= next_cmd:  # a controller's command stream (the converter's watchdog is 0.5 s)
                 send(core.front_cmd(FRONT, VELOCITY, COMMAND, [], plant.time))
                 next_cmd += 0.1
@@ -90,12 +90,12 @@ def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
     assert core.counters["rx_ok"] > 200 and not core.counters["cmd_rejected"], core.counters
     q = np.array(zx120.front.q)
     moved = q - q0
-    # every joint moved its way, past the dead time: at least 0.8 s of the 2.5 s at the commanded speed
+    # every joint moved its way, past the dead time: at least 0.8 s of the 3.5 s at the commanded speed
     for name, dq, v in zip(FRONT, moved, COMMAND, strict=True):
         assert math.copysign(1.0, dq) == math.copysign(1.0, v) and abs(dq) > 0.8 * abs(v), (name, moved)
     # the ZX200 on the same site did not move: the frames went to the ZX120 only
     digger = plant.excavator
-    assert digger.name == "zx200" and np.allclose(digger.front.q, [digger.description.home_pose[n] for n in FRONT])
+    assert digger.name == "zx200" and np.allclose(digger.front.q, [digger.description.home_pose[n] for n in FRONT], atol=1e-3)
 
     t_js, js = joints[-1]
     assert js.name == tuple(FRONT)
