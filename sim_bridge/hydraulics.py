@@ -222,6 +222,10 @@ class ValveFront:
         self.flow_scale = 1.0
         self.pump_pressure = self.tank
         self.cut_alpha: float | None = None
+        self.brake_delay = physics.swing_brake_delay_s
+        self.brake_torque = swing.brake_torque
+        self._swing_idle = 0.0  # [s] the swing's spool has been closed
+        self.swing_brake = False  # the swing parking brake holds (spring-applied, released by pilot pressure)
 
     # -- commands ------------------------------------------------------------------------------------
     def set_cutoff(self, time_constant: float | None) -> None:
@@ -280,6 +284,9 @@ class ValveFront:
             x = self.spool[i]
             opening = max(0.0, abs(x) - ol) / (1.0 - ol)
             demand[i] = math.copysign(opening * self.q_fn[i], x) if opening > 0 else 0.0
+        # the parking brake applies once the swing spool has been closed for its delay and the swing is (nearly) still
+        self._swing_idle = self._swing_idle + self.dt if demand[0] == 0.0 else 0.0
+        self.swing_brake = self._swing_idle >= self.brake_delay and abs(self.v[0]) < 0.05
         loads = [self.p_ext[i] if demand[i] > 0 else self.p_ret[i] for i in range(n) if demand[i] != 0.0]
         p_pump = min(max(loads) + self.margin, max(self.relief)) if loads else self.tank + self.margin
         supply = min(self.pump_flow, self.pump_power / p_pump)

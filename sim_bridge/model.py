@@ -114,6 +114,10 @@ class SiteModel:
         j = self._jid[name]
         return float(self.data.qpos[self.model.jnt_qposadr[j]]), float(self.data.qvel[self.model.jnt_dofadr[j]])
 
+    def dof(self, name: str) -> int:
+        """The dof index of joint ``name``."""
+        return int(self.model.jnt_dofadr[self._jid[name]])
+
     def rest_joint(self, name: str) -> None:
         """Zero the speed of joint ``name`` (a teleport)."""
         self.data.qvel[self.model.jnt_dofadr[self._jid[name]]] = 0.0

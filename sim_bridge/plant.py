@@ -79,6 +79,9 @@ class Plant:
             drives += own
         self.drives = FluidDrives(self.model.model, self.model.data, drives, self.spec.substeps)
         self._joint_names = {name: [f"{name}_{j}" for j in mach.bank.names] for name, mach in self.machines.items()}
+        #: excavator -> its swing's dof (the parking brake is friction on it)
+        self._swing_dofs = {name: self.model.dof(f"{name}_{mach.front.names[0]}") for name, mach in self.machines.items()
+                            if isinstance(mach, Excavator)}
         self.ground = HeightField(self.spec.soil)
         self.soil = SoilState(carrier=self.spec.carrier, vessels=dict.fromkeys(self.carriers, 0.0),
                               blades=dict.fromkeys(self.dozers, 0.0))
@@ -160,6 +163,9 @@ class Plant:
         for name, mach in self.machines.items():
             v_ref[self._drive_slices[name]] = mach.bank.v_ref
         self._loads()
+        for name, dof in self._swing_dofs.items():
+            front = self.machines[name].front
+            self.model.model.dof_frictionloss[dof] = front.brake_torque if front.swing_brake else 0.0
         self.drives.step()
         force, speed = self.drives.force, self.model.data.actuator_velocity[self.drives.ids]
         for name, mach in self.machines.items():
