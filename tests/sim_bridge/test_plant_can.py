@@ -99,8 +99,9 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
     def at_limits(_values: dict[str, float]) -> bool:
         a, w = zx.get("Front_Angle"), zx.get("Front_Angular_Velocity")
         return all(
-            # the stroke's end stop holds the joint within the oil column's give (mm of rod, < 0.01 rad)
-            abs(a[f"{FIELD[j]}_relative_angle"] - lim) < 0.01
+            # the stroke's end stop holds the joint within the oil column's give (mm of rod; near full curl the bucket
+            # linkage's small ratio turns that into up to 0.03 rad)
+            abs(a[f"{FIELD[j]}_relative_angle"] - lim) < 0.03
             and abs(w[f"{FIELD[j]}_relative_angular_velocity"]) < 0.003
             for j, lim in limits.items()
         )
