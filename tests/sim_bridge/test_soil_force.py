@@ -178,6 +178,10 @@ def test_a_rake_without_a_failure_wedge_names_the_tool():
         fee_force(SANDY_LOAM, DEG(60.0), 0.2, -1.0)
     with pytest.raises(ValueError, match=r"^fee_force: tool 2: depth must be finite, got nan$"):
         fee_force(SANDY_LOAM, DEG(60.0), [0.2, 0.1, math.nan], 1.0)
+    with pytest.raises(ValueError, match=r"^fee_force: tool 1: rake must be finite, got inf$"):
+        fee_force(SANDY_LOAM, [DEG(60.0), math.inf], [0.2, 0.0], 1.0)  # even out of the soil
+    with pytest.raises(ValueError, match=r"^fee_force: tool 0: speed must be finite and >= 0, got -0\.5$"):
+        fee_force(SANDY_LOAM, DEG(60.0), 0.2, 1.0, speed=-0.5)
     # just inside the limit the force is large but finite, with the wedge nearly flat
     lo, hi = rake_range(SANDY_LOAM)
     near = fee_force(SANDY_LOAM, [hi - 1e-6, DEG(60.0)], 0.2, 1.0)
