@@ -237,15 +237,15 @@ def fee_force(soil: SoilParams, rake, depth, width, *, surcharge=0.0, speed=0.0)
         # where that sum is <= 0, alpha + beta >= pi, D <= 0 as well and the entry is dropped below
         u = np.maximum(cot_a[:, None] + g.linear[1], 1e-12)
         num += (soil.density * v * v * d)[:, None] * g.linear[2] / u
-    D = trig[2:].T @ g.denominator
+    den = trig[2:].T @ g.denominator  # D of the docstring
     # D > 0 exactly for beta < pi - alpha - delta - phi, a prefix of the grid that rake_range keeps non-empty;
     # the rest, and a column on either side, hold _OUT so the neighbours of any minimum exist
     m = _BETA_GRID.size
     p = np.empty((n, m + 2))
     p[:, 0] = p[:, -1] = _OUT
     inner = p[:, 1:-1]
-    np.divide(num, np.maximum(D, 1e-9), out=inner)
-    inner[D <= 1e-9] = _OUT
+    np.divide(num, np.maximum(den, 1e-9), out=inner)
+    inner[den <= 1e-9] = _OUT
     i = np.argmin(p, axis=1)
     k = np.arange(0, n * (m + 2), m + 2) + i
     flat = p.ravel()

@@ -13,8 +13,15 @@ import numpy as np
 import pytest
 
 from sim_bridge.errors import SimConfigError
-from sim_bridge.soil_force import (GRAVITY, SoilParams, fee_force, load_soil_types, rake_range, surcharge_pressure,
-                                   tool_force)
+from sim_bridge.soil_force import (
+    GRAVITY,
+    SoilParams,
+    fee_force,
+    load_soil_types,
+    rake_range,
+    surcharge_pressure,
+    tool_force,
+)
 from tms_common.config import config_path
 
 SOILS = load_soil_types()
@@ -32,15 +39,15 @@ def _hand(soil: SoilParams, alpha: float, d: float, w: float, q: float = 0.0, v:
     best = (math.inf, 0.0)
     for k in range(1, 9000):
         beta = DEG(k * 0.01)
-        D = math.cos(alpha + delta) + math.sin(alpha + delta) * _cot(beta + phi)
-        if D <= 0.0:
+        den = math.cos(alpha + delta) + math.sin(alpha + delta) * _cot(beta + phi)
+        if den <= 0.0:
             continue
-        n_gamma = (_cot(alpha) + _cot(beta)) / (2.0 * D)
-        n_c = (1.0 + _cot(beta) * _cot(beta + phi)) / D
-        n_q = (_cot(alpha) + _cot(beta)) / D
-        n_a = (1.0 - _cot(alpha) * _cot(beta + phi)) / D
+        n_gamma = (_cot(alpha) + _cot(beta)) / (2.0 * den)
+        n_c = (1.0 + _cot(beta) * _cot(beta + phi)) / den
+        n_q = (_cot(alpha) + _cot(beta)) / den
+        n_a = (1.0 - _cot(alpha) * _cot(beta + phi)) / den
         # the speed term as the Lunar-Excavation-Simulation McKyesModel writes it (a different algebraic form)
-        n_v = (math.tan(beta) + _cot(beta + phi)) / (1.0 + math.tan(beta) * _cot(alpha)) / D
+        n_v = (math.tan(beta) + _cot(beta + phi)) / (1.0 + math.tan(beta) * _cot(alpha)) / den
         p = (soil.unit_weight * d * d * n_gamma + soil.cohesion * d * n_c + (q + soil.surcharge) * d * n_q
              + soil.adhesion * d * n_a + soil.density * v * v * d * n_v) * w
         best = min(best, (p, beta))
