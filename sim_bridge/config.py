@@ -19,6 +19,7 @@ from typing import Any
 from com3_can.codec import dbc_files
 from sim_bridge.errors import SimConfigError
 from sim_bridge.physics import PhysicsSpec
+from sim_bridge.soil_force import SoilParams, load_soil_types
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.spec import PlantMachine, PlantSpec, SensorSpec, SoilSpec
 from tms_common.config import config_path, load_yaml
@@ -52,6 +53,9 @@ class _Soil:
     #: bank 1.8 t/m^3 with 25 % swell (moist common earth: Peurifoy, Construction Planning, Equipment and Methods,
     #: Table 4-1; Caterpillar Performance Handbook load factors) -> 1.45 t/m^3 as buckets and vessels hold it
     density: float = setting(1450.0, lo=100.0, hi=3000.0, doc="[kg/m^3] of the soil as the plant moves it (loose)")
+    #: the soil the tools cut (config/sim/soil_types.yaml): OperaSim-AGX's dirt_1 by default, what OPERA's own
+    #: simulator digs
+    type: str = "agx_dirt_1"
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,14 @@ def _pose(poses: Reader, name: str, site: Site, site_path: Path) -> tuple[float,
     return poses.vector(name, 3)  # type: ignore[return-value]
 
 
+def _soil_type(name: str) -> SoilParams:
+    soils = load_soil_types()
+    if name not in soils:
+        raise SimConfigError(f"{config_path('sim', 'soil_types.yaml')}: no soil {name!r} for soil.type "
+                             f"(known: {sorted(soils)})")
+    return soils[name]
+
+
 def _soil(soil: _Soil, site: Site) -> SoilSpec:
     g, mound = soil.grid, site.mound
     return SoilSpec(
@@ -137,6 +149,7 @@ def _soil(soil: _Soil, site: Site) -> SoilSpec:
         mound_height=mound.height, ground_z=mound.ground_z, deposit_radius=soil.deposit_radius,
         dump_radius=soil.dump_radius, mound_region_margin=soil.mound_region_margin,
         loose_density=soil.density,
+        cutting=_soil_type(soil.type),
     )
 
 

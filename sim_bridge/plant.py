@@ -16,10 +16,14 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import mujoco
+import numpy as np
+
 from sim_bridge.config import load_plant
 from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
 from sim_bridge.model import SiteModel
 from sim_bridge.physics import G, FluidDrives
+from sim_bridge.soil_force import fee_force, rake_range
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
 from sim_bridge.spec import PlantSpec
@@ -82,6 +86,10 @@ class Plant:
         #: excavator -> its swing's dof (the parking brake is friction on it)
         self._swing_dofs = {name: self.model.dof(f"{name}_{mach.front.names[0]}") for name, mach in self.machines.items()
                             if isinstance(mach, Excavator)}
+        #: the digging excavator's front dofs (swing, boom, arm, bucket): the soil's resistance is friction on them
+        self._front_dofs = np.array([self.model.dof(f"{self.spec.excavator}_{j}") for j in self.excavator.front.names]
+                                    if self.excavator is not None else [], dtype=int)
+
         self.ground = HeightField(self.spec.soil)
         self.soil = SoilState(carrier=self.spec.carrier, vessels=dict.fromkeys(self.carriers, 0.0),
                               blades=dict.fromkeys(self.dozers, 0.0))
@@ -90,6 +98,9 @@ class Plant:
         self.model.forward()
         self._tip = self.model.bucket_tip() if self.excavator is not None else None
         self.tip_speed = 0.0
+        self._tip_velocity = np.zeros(3)
+        self._cut_direction = (1.0, 0.0, 0.0)
+        self.cut_force: tuple[np.ndarray, np.ndarray] | None = None  # the soil's last force on the bucket edge
         self._edges: dict[str, tuple[float, float, float]] = {}
 
 
@@ -145,14 +156,77 @@ class Plant:
         m.forward()
 
     def _loads(self) -> None:
-        """External forces of the soil: the weight of what buckets and vessels hold."""
-        xfrc = self.model.data.xfrc_applied
+        """External forces of the soil: the weight of what buckets and vessels hold, and the cutting resistance on
+        the digging bucket's edge while it is below the surface (Reece/McKyes, :mod:`sim_bridge.soil_force`).
+
+        The horizontal resistance is Coulomb friction on the front's joints (MuJoCo's ``frictionloss``, solved
+        implicitly: a bucket its cylinders cannot drag through the soil stalls instead of chattering), each joint
+        getting |J_edge^T F|: what the cut costs it. Lifting the edge straight up costs the joints little. The
+        vertical part is an applied force at the edge."""
+        m, data = self.model.model, self.model.data
+        xfrc = data.xfrc_applied
         xfrc[:] = 0.0
-        if self.excavator is not None and self.soil.bucket > 0.0:
-            xfrc[self.model.bucket_body, 2] = -self.soil.bucket * self.spec.soil.loose_density * G
         for name, load in self.soil.vessels.items():
             if load > 0.0:
                 xfrc[self.model.body_ids[f"{name}_vessel_link"], 2] = -load * self.spec.soil.loose_density * G
+        for name, dof in self._swing_dofs.items():
+            front = self.machines[name].front
+            m.dof_frictionloss[dof] = front.brake_torque if front.swing_brake else 0.0
+        if self.excavator is None:
+            return
+        body = self.model.bucket_body
+        if self.soil.bucket > 0.0:
+            xfrc[body, 2] = -self.soil.bucket * self.spec.soil.loose_density * G
+        dofs = self._front_dofs
+        m.dof_frictionloss[dofs[1:]] = 0.0
+        self.cut_force = self._cutting_force()
+        if self.cut_force is None:
+            return
+        force, tip = self.cut_force
+        jac = np.zeros((3, m.nv))
+        mujoco.mj_jacSite(m, data, jac, None, self.model.tip_site)
+        horizontal = np.array([force[0], force[1], 0.0])
+        m.dof_frictionloss[dofs] += np.abs(horizontal @ jac[:, dofs])
+        xfrc[body, 2] += force[2]
+        xfrc[body, 3:] += np.cross(tip - data.xipos[body], np.array([0.0, 0.0, force[2]]))
+
+    def _cutting_force(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(force of the soil on the bucket edge [N], the edge) while the edge is below the surface, else None.
+
+        Depth = the uncut surface two cells ahead of the edge (or at it) - the edge's height; rake = the pin->edge line's angle below horizontal (the bucket's
+        back plate), kept inside the wedge's range; surcharge = the weight of the soil already in the bucket over
+        the bucket's width and a 1 m long floor (Luengo, Singh and Cannon 1998 carry it as a surcharge). The
+        direction is the edge's horizontal motion (a still edge: the last one it moved in)."""
+        soil = self.spec.soil.cutting
+        tip = self._tip
+        if soil is None or tip is None:
+            return None
+        # the edge cuts the cells it passes down to its own height: the depth of cut is the uncut surface two cells
+        # ahead of it (either way along the arm's heading: the side already cut is the lower one)
+        heading = self.excavator.base.yaw + self.excavator.front.q[0]
+        ux, uy = math.cos(heading), math.sin(heading)
+        ahead = 2 * self.spec.soil.resolution
+        depth = max(self.ground.height(tip[0], tip[1]), self.ground.height(tip[0] + ux * ahead, tip[1] + uy * ahead),
+                    self.ground.height(tip[0] - ux * ahead, tip[1] - uy * ahead)) - tip[2]
+        if depth <= 0.0:
+            return None
+        lo, hi = rake_range(soil)
+        # a bucket's cutting plate meets the soil at 30-80 degrees; near the wedge's limit rake the factors diverge
+        rake = min(max(abs(self.excavator.tip_angle()), lo + 0.05, math.radians(30)), hi - 0.05, math.radians(80))
+        bucket = self.excavator.bucket
+        # the wedge in front of the bucket is at most the bucket's own height deep; soil standing above it and the
+        # soil already in the bucket (over a 1 m long floor) press on it as a surcharge (Luengo, Singh and Cannon)
+        tool = min(depth, abs(bucket.tip_xyz[2]))
+        surcharge = (soil.unit_weight * (depth - tool)
+                     + self.soil.bucket * self.spec.soil.loose_density * G / bucket.width)
+        self._cut_direction = (ux, uy, 0.0)  # the wedge lies in the arm's vertical plane (a bucket cuts fore or aft)
+        # the wedge's inertia term (McKyes) is left out: it grows with the square of a speed the same force sets, and
+        # at the bucket's speeds it is a few percent of the weight term
+        f = fee_force(soil, rake, tool, bucket.width, surcharge=surcharge)
+        h, v = float(f.horizontal[0] if np.ndim(f.horizontal) else f.horizontal), \
+            float(f.vertical[0] if np.ndim(f.vertical) else f.vertical)
+        ux, uy, _ = self._cut_direction
+        return np.array([-h * ux, -h * uy, -v]), tip
 
     def step(self) -> None:
         """Advance one ``dt``: valves, bases, dynamics (MuJoCo), soil."""
@@ -163,9 +237,6 @@ class Plant:
         for name, mach in self.machines.items():
             v_ref[self._drive_slices[name]] = mach.bank.v_ref
         self._loads()
-        for name, dof in self._swing_dofs.items():
-            front = self.machines[name].front
-            self.model.model.dof_frictionloss[dof] = front.brake_torque if front.swing_brake else 0.0
         self.drives.step()
         force, speed = self.drives.force, self.model.data.actuator_velocity[self.drives.ids]
         for name, mach in self.machines.items():
@@ -177,6 +248,7 @@ class Plant:
         if self.excavator is not None:
             tip = self.model.bucket_tip()
             prev = self._tip
+            self._tip_velocity = (tip - prev) / self.dt
             self.tip_speed = math.dist(tip, prev) / self.dt
             self._soil(prev, tip)
             self._tip = tip

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from sim_bridge.physics import PhysicsSpec
+from sim_bridge.soil_force import SoilParams
 from tms_common.schema import setting
 from tms_model.machines import Machine
 from tms_model.site import Site
@@ -59,6 +60,7 @@ class SoilSpec:
     dump_radius: float  # [m] disc of a vessel dump pile
     mound_region_margin: float  # [m] beyond the base radius still counted as the mound (spills at its foot)
     loose_density: float = 1450.0  # [kg/m^3] of the soil in buckets, vessels and piles (its weight on the machines)
+    cutting: SoilParams | None = None  # the soil the tools cut (sim_bridge.soil_force); None: no cutting force
 
 
 @dataclass(frozen=True)
