@@ -19,8 +19,8 @@ from typing import Any
 from com3_can.codec import dbc_files
 from sim_bridge.errors import SimConfigError
 from sim_bridge.physics import PhysicsSpec
-from sim_bridge.soil_force import SoilParams, load_soil_types
 from sim_bridge.profiles import PLANT_PROFILES
+from sim_bridge.soil_force import SoilParams, load_soil_types
 from sim_bridge.spec import PlantMachine, PlantSpec, SensorSpec, SoilSpec
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
@@ -115,7 +115,9 @@ def _physics(d: Machine) -> PhysicsSpec:
         raise SimConfigError(str(exc)) from None
     flows = phys.function_flow_lpm
     if flows is not None and set(flows) != set(d.joint_names):
-        raise SimConfigError(f"{d.source}: physics.function_flow_lpm: expected one flow per joint {list(d.joint_names)}")
+        raise SimConfigError(
+            f"{d.source}: physics.function_flow_lpm: expected one flow per joint {list(d.joint_names)}"
+        )
     limits = phys.drive_torque_limit_nm
     if limits is not None and set(limits) != set(d.joint_names):
         raise SimConfigError(f"{d.source}: physics.drive_torque_limit_nm: expected one limit per joint "

@@ -1,5 +1,5 @@
-"""Hydraulic valve models: the excavator front in cylinder space (:class:`ValveFront`) and, for the other machines' joints,
-dead time, first-order lag, velocity limits, shared pump flow, end stops (:class:`JointBank`).
+"""Hydraulic valve models: the excavator front in cylinder space (:class:`ValveFront`) and, for the other machines'
+joints, dead time, first-order lag, velocity limits, shared pump flow, end stops (:class:`JointBank`).
 
 Pilot cut-off (:meth:`JointBank.set_cutoff`): the command path is bypassed, the queued pilot signal is
 vented and every output decays to zero with the spool-centring time constant (no dead time).

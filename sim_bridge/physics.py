@@ -105,7 +105,9 @@ class FluidDrives:
         self.f_max = np.array([d.f_max for d in drives])
         self.x_min = np.array([d.x_min for d in drives])
         self.x_max = np.array([d.x_max for d in drives])
-        self.kv = np.array([2 * d.damping_ratio * math.sqrt(k * m) for d, k, m in zip(drives, self.k, mass, strict=True)])
+        self.kv = np.array(
+            [2 * d.damping_ratio * math.sqrt(k * m) for d, k, m in zip(drives, self.k, mass, strict=True)]
+        )
         self.mass = np.array(mass)
         self.x_ref = data.actuator_length[self.ids].copy()
         self.v_ref = np.zeros(self.n)

@@ -22,10 +22,10 @@ import numpy as np
 from sim_bridge.config import load_plant
 from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
 from sim_bridge.model import SiteModel
-from sim_bridge.physics import G, FluidDrives
-from sim_bridge.soil_force import fee_force, rake_range
+from sim_bridge.physics import FluidDrives, G
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
+from sim_bridge.soil_force import fee_force, rake_range
 from sim_bridge.spec import PlantSpec
 
 __all__ = ["Plant", "MachineTruth", "stamp_parts"]
@@ -84,8 +84,10 @@ class Plant:
         self.drives = FluidDrives(self.model.model, self.model.data, drives, self.spec.substeps)
         self._joint_names = {name: [f"{name}_{j}" for j in mach.bank.names] for name, mach in self.machines.items()}
         #: excavator -> its swing's dof (the parking brake is friction on it)
-        self._swing_dofs = {name: self.model.dof(f"{name}_{mach.front.names[0]}") for name, mach in self.machines.items()
-                            if isinstance(mach, Excavator)}
+        self._swing_dofs = {
+            name: self.model.dof(f"{name}_{mach.front.names[0]}")
+            for name, mach in self.machines.items() if isinstance(mach, Excavator)
+        }
         #: the digging excavator's front dofs (swing, boom, arm, bucket): the soil's resistance is friction on them
         self._front_dofs = np.array([self.model.dof(f"{self.spec.excavator}_{j}") for j in self.excavator.front.names]
                                     if self.excavator is not None else [], dtype=int)
@@ -148,8 +150,8 @@ class Plant:
             for joint, q in zip(mach.bank.names, mach.bank.q, strict=True):
                 m.set_joint(f"{name}_{joint}", q)
                 m.rest_joint(f"{name}_{joint}")
-            extra = PLANT_PROFILES.get(self.spec.machines[name].type).linkage_joints(self.spec.machines[name],
-                                                                                     dict(zip(mach.bank.names, mach.bank.q, strict=True)))
+            here = dict(zip(mach.bank.names, mach.bank.q, strict=True))
+            extra = PLANT_PROFILES.get(self.spec.machines[name].type).linkage_joints(self.spec.machines[name], here)
             for joint, q in extra.items():
                 m.set_joint(joint, q)
                 m.rest_joint(joint)
@@ -193,9 +195,10 @@ class Plant:
     def _cutting_force(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(force of the soil on the bucket edge [N], the edge) while the edge is below the surface, else None.
 
-        Depth = the uncut surface two cells ahead of the edge (or at it) - the edge's height; rake = the pin->edge line's angle below horizontal (the bucket's
-        back plate), kept inside the wedge's range; surcharge = the weight of the soil already in the bucket over
-        the bucket's width and a 1 m long floor (Luengo, Singh and Cannon 1998 carry it as a surcharge). The
+        Depth = the uncut surface two cells ahead of the edge (or at it) - the edge's height; rake = the pin->edge
+        line's angle below horizontal (the bucket's back plate), kept inside the wedge's range and 30-80 degrees;
+        surcharge = the soil above the bucket's height and the soil already in the bucket over its width and a 1 m
+        long floor (Luengo, Singh and Cannon 1998 carry it as a surcharge). The
         direction is the edge's horizontal motion (a still edge: the last one it moved in)."""
         soil = self.spec.soil.cutting
         tip = self._tip

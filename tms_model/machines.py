@@ -368,15 +368,16 @@ def _masses(top: Reader) -> Mapping[str, float]:
 
 def _cylinders(top: Reader, front: tuple[str, ...]) -> Cylinders:
     cyl = top.schema(Cylinders, "cylinders")
+    r = top.sub("cylinders")
     for key, c, joint in zip(("boom", "arm", "bucket"), cyl.all, front[1:], strict=True):
         if c.joint != joint:
-            raise top.sub("cylinders").sub(key).key_error("joint", f"expected {joint!r} (front_joints order), got {c.joint!r}")
+            raise r.sub(key).key_error("joint", f"expected {joint!r} (front_joints order), got {c.joint!r}")
         if (c.child_pin is None) == (c.linkage is None):
-            raise top.sub("cylinders").key_error(key, "give exactly one of child_pin (a pin on the child link) or linkage")
+            raise r.key_error(key, "give exactly one of child_pin (a pin on the child link) or linkage")
         if c.rod >= c.bore:
-            raise top.sub("cylinders").sub(key).key_error("rod", f"rod {c.rod} m must be thinner than the bore {c.bore} m")
+            raise r.sub(key).key_error("rod", f"rod {c.rod} m must be thinner than the bore {c.bore} m")
     if cyl.swing is None:
-        raise top.sub("cylinders").key_error("swing", "an excavator needs its swing motor (displacement, relief, brake)")
+        raise r.key_error("swing", "an excavator needs its swing motor (displacement, relief, brake)")
     return cyl
 
 

@@ -16,7 +16,7 @@ import mujoco
 
 from com3_can.profiles.excavator import ExcavatorProfile
 from com3_can.signal_map import EXCAVATOR_FRAMES as F
-from com3_can.signal_map import EXCAVATOR_FRONT, JointSignals
+from com3_can.signal_map import EXCAVATOR_FRONT, PILOT_MAX_MPA, JointSignals
 from com3_can.signal_map import TRACK_SIGNALS as T
 from sim_bridge.machines import Excavator
 from sim_bridge.physics import Drive
@@ -219,7 +219,8 @@ class ExcavatorPlantProfile(PlantProfile):
             for i, j in enumerate(_bus_order(zx)):
                 lpm = front.drive_speed[i] * 60000.0
                 if j.joint == "swing_joint":
-                    out.update(swing_motor_a_flow_rate=lpm * front.a_ext[i], swing_motor_b_flow_rate=-lpm * front.a_ret[i])
+                    out["swing_motor_a_flow_rate"] = lpm * front.a_ext[i]
+                    out["swing_motor_b_flow_rate"] = -lpm * front.a_ret[i]
                 else:
                     out[f"{j.short}_cylinder_bottom_flow_rate"] = lpm * front.a_ext[i]
                     out[f"{j.short}_cylinder_rod_flow_rate"] = -lpm * front.a_ret[i]
@@ -276,9 +277,9 @@ LINKAGE_MASS = 60.0
 
 
 def _linkage_frames(joint: Joint, link: Linkage) -> tuple[float, float]:
-    """Angles (atan2 of z over x) of the guide link (in the arm frame, from K) and of the side link (in the bucket frame, from
-    L) towards J with the bucket at 0 rad: the links' bodies are turned by these so that the loop is closed at
-    qpos 0."""
+    """Angles (atan2 of z over x) of the guide link (in the arm frame, from K) and of the side link (in the bucket
+    frame, from L) towards J with the bucket at 0 rad: the links' bodies are turned by these so that the loop is
+    closed at qpos 0."""
     origin, pitch = (joint.origin_xyz[0], joint.origin_xyz[2]), joint.origin_rpy[1]
     j0 = linkage_pin(link, origin, pitch, 0.0)
     if j0 is None:

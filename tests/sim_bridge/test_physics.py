@@ -111,7 +111,8 @@ def test_mujoco_tendons_are_the_description_cylinders(spec):
             j = d.joint(c.joint)
             tendon = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, f"{zx.name}_{c.joint.removesuffix('_joint')}_cyl")
             q = zx.front.q[FRONT.index(c.joint)]
-            assert data.ten_length[tendon] == pytest.approx(cylinder_length(c, *_plane(j), q), abs=3e-3), (c.joint, pose)
+            expected = cylinder_length(c, *_plane(j), q)
+            assert data.ten_length[tendon] == pytest.approx(expected, abs=3e-3), (c.joint, pose)
 
 
 @pytest.mark.parametrize("pose", POSES, ids=[f"pose{i}" for i in range(len(POSES))])
@@ -194,7 +195,8 @@ def test_bucket_holds_below_its_relief_and_gives_above_it(spec):
         q0 = zx.front.q[3]
         limit = d.cylinders.relief_pa * cyl.cap_area * moment_arm(cyl, *_plane(bucket), q0)
         # what the cylinder already carries of the bucket's weight stays on it
-        held = (zx.front.p_ext[3] * cyl.cap_area - zx.front.p_ret[3] * cyl.rod_area) * moment_arm(cyl, *_plane(bucket), q0)
+        force = zx.front.p_ext[3] * cyl.cap_area - zx.front.p_ret[3] * cyl.rod_area
+        held = force * moment_arm(cyl, *_plane(bucket), q0)
         couple = -axis * (share * limit - held)
 
         def load(data=data, body=body, arm=arm, couple=couple) -> None:
@@ -241,7 +243,7 @@ def test_speeds_empty_full_bucket_and_pump_saturation_follow_the_flow_model(spec
               f"pump flow share {sc:.2f}")
     # the full bucket needs more pressure; the pumps' power limit sets how much slower it goes
     assert rows["full"][3] > rows["empty"][3]
-    (ve, ppe, sce, _), (vf, ppf, scf, _) = rows["empty"], rows["full"]
+    (ve, _, sce, _), (vf, _, scf, _) = rows["empty"], rows["full"]
     assert abs(vf / ve) == pytest.approx(scf / sce, rel=0.08)
 
     plant = Plant(spec)
@@ -253,7 +255,8 @@ def test_speeds_empty_full_bucket_and_pump_saturation_follow_the_flow_model(spec
     measured = [f.drive_speed[i] for i in range(4)]
     predicted = [f.flow[i] / (f.a_ext[i] if f.flow[i] > 0 else f.a_ret[i]) for i in range(4)]
     total = sum(abs(q) for q in f.flow) * 60000
-    print(f"all four at full command: pump {f.pump_pressure / 1e6:.1f} MPa, {total:.0f} L/min, share {f.flow_scale:.2f}; "
+    print(f"all four at full command: pump {f.pump_pressure / 1e6:.1f} MPa, {total:.0f} L/min, "
+          f"share {f.flow_scale:.2f}; "
           + ", ".join(f"{n} {m:+.3f} (model {p:+.3f})" for n, m, p in zip(FRONT, measured, predicted, strict=True)))
     assert f.flow_scale < 1.0  # the pumps are saturated
     assert total <= zx.front.pump_flow * 60000 * 1.01
@@ -429,8 +432,8 @@ def _drag(spec, depth: float, seconds: float = 1.0, joint: str = "arm_joint") ->
 def test_digging_force_rises_with_cut_depth_and_a_too_deep_cut_opens_the_relief(spec):
     rows = [_drag(spec, d) for d in (0.1, 0.25, 0.4)]
     for f, p, travel, d, _, _ in rows:
-        print(f"\ncut {d:.2f} m deep ({spec.soil.cutting.name}): resistance {f / 1e3:.1f} kN, arm cap {p / 1e6:.1f} MPa, "
-              f"edge moved {travel:.2f} m in 1 s")
+        print(f"\ncut {d:.2f} m deep ({spec.soil.cutting.name}): resistance {f / 1e3:.1f} kN, "
+              f"arm cap {p / 1e6:.1f} MPa, edge moved {travel:.2f} m in 1 s")
     forces = [r[0] for r in rows]
     assert forces[0] > 0.0 and forces[0] < forces[1] < forces[2]
     assert rows[0][1] < rows[2][1]  # the arm cylinder works harder in the deeper cut

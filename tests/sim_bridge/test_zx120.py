@@ -95,7 +95,8 @@ def test_zx120_arm_moves_over_can_and_its_kinematics_match_the_plant() -> None:
         assert math.copysign(1.0, dq) == math.copysign(1.0, v) and abs(dq) > 0.8 * abs(v), (name, moved)
     # the ZX200 on the same site did not move: the frames went to the ZX120 only
     digger = plant.excavator
-    assert digger.name == "zx200" and np.allclose(digger.front.q, [digger.description.home_pose[n] for n in FRONT], atol=1e-3)
+    home = [digger.description.home_pose[n] for n in FRONT]
+    assert digger.name == "zx200" and np.allclose(digger.front.q, home, atol=1e-3)
 
     t_js, js = joints[-1]
     assert js.name == tuple(FRONT)
