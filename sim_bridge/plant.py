@@ -229,7 +229,10 @@ class Plant:
         h, v = float(f.horizontal[0] if np.ndim(f.horizontal) else f.horizontal), \
             float(f.vertical[0] if np.ndim(f.vertical) else f.vertical)
         ux, uy, _ = self._cut_direction
-        return np.array([-h * ux, -h * uy, -v]), tip
+        # the wedge's vertical force (on the tool, + up: the soil draws a raked edge down) exists while it cuts:
+        # ramped in over the first 2 cm/s of the edge's motion along the arm, none on a still edge
+        along = abs(float(self._tip_velocity[0] * ux + self._tip_velocity[1] * uy))
+        return np.array([-h * ux, -h * uy, v * min(1.0, along / 0.02)]), tip
 
     def step(self) -> None:
         """Advance one ``dt``: valves, bases, dynamics (MuJoCo), soil."""

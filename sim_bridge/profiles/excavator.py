@@ -2,9 +2,11 @@
 
 Commands: ``Machine_Setting_Cmd`` selects the front source (1 pilot pressure, 2 velocity) and the travel
 source (1 pilot, 2 per-track velocity, 3 centre velocity + yaw rate). Until a setting frame has arrived,
-velocity frames are honoured (centre+yaw when non-zero, else per-track). Pilot pressure maps linearly
-to velocity: ``v = v_max * (p_a - p_b) / 5 MPa``. States: joint angles/velocities, azimuths, the swing
-centre in the site CRS (RTK noise), pin positions in ``base_link``, flows, pressures, pilot echoes.
+velocity frames are honoured (centre+yaw when non-zero, else per-track). Front pilot pressures go to the main
+spools (:class:`sim_bridge.hydraulics.ValveFront`); travel pilot pressure maps linearly to track speed
+(``v = v_max * (p_a - p_b) / 5 MPa``). States: joint angles/velocities, azimuths, the swing centre in the site CRS
+(RTK noise), pin positions in ``base_link``, the pistons' flows, the chambers' pressures, the spools' pilot
+pressures.
 """
 
 from __future__ import annotations

@@ -76,7 +76,7 @@ def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plan
                 continue
             for j, target in expect.items():
                 v = values[f"{FIELD[j]}_relative_angular_velocity"]
-                if j not in moved and abs(v) > 0.005:
+                if j not in moved and abs(v) > 0.02:  # a commanded motion, not the oil columns settling
                     moved[j] = t
                 if j not in reached and abs(v - target) <= 0.03 * abs(target):
                     reached[j] = t
