@@ -1,16 +1,40 @@
-"""sim_bridge: plant speed (real-time factor) and the period jitter of its 10 ms COM3 frames.
+"""sim_bridge: plant speed (real-time factor), plant-core CPU before/after, and the jitter of its 10 ms COM3 frames.
 
 1. Core plant, both machines and soil, a scripted dig cycle on the ZX200 while the IC120 drives:
    simulated seconds per wall second (goal >= 50x).
-2. The same with the COM3 CAN I/O (all state frames encoded at their DBC cycles onto virtual buses).
-3. ``sim_plant`` as a separate process in real-time mode on udp_multicast: arrival period of the 10 ms
+2. Plant-core CPU per simulated second (core-s per sim-s) for the paper site (``config/sim/plant.yaml``) and the
+   ten machines of ``config/launch/original_machines.yaml`` (``config/sim/original_plant.yaml``): each run is a
+   child process (:mod:`tests.bench.sim_probe`) timing its stepping loop with ``time.process_time``; the ZX200
+   digs the scripted cycle, the IC120 stands at P1 under the dumps, the other eight machines get simple motion
+   commands (listed in the printout). Median of 3 runs per tree.
+   With ``BENCH_BASE=<rev>`` the same probe also runs against a temporary ``git worktree add --detach`` of that
+   revision (under /tmp, removed afterwards; the venv is shared, ``PYTHONPATH`` selects the tree and
+   ``AMENT_PREFIX_PATH`` is dropped so each tree reads its own ``config/``), alternating base and current, and
+   prints base, current and current/base. Only same-run ratios mean anything: the machine's speed varies 2-3x
+   between days. ``BENCH_BASE=HEAD`` compares uncommitted changes against the last commit.
+3. The same as 1 with the COM3 CAN I/O (all state frames encoded at their DBC cycles onto virtual buses).
+4. ``sim_plant`` as a separate process in real-time mode on udp_multicast: arrival period of the 10 ms
    ``Front_Angle`` frames measured in this process (p99 |period - 10 ms|; goal < 2 ms).
+
+Run::
+
+    .venv/bin/python -m tests.bench sim_bridge                      # current tree only
+    BENCH_BASE=99c87b6 .venv/bin/python -m tests.bench sim_bridge   # before (99c87b6) and after, side by side
+    make bench BENCH_ARGS=sim_bridge                                # the same in the isolated network namespace
 """
 
 from __future__ import annotations
 
+import json
 import os
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
+
+import yaml
 
 from sim_bridge.plant import Plant
 from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
@@ -18,6 +42,12 @@ from tests.bench.stats import percentile, summary_ms
 from tests.rosproc import Proc, executable, free_can_ports, isolated_domain, ros_env
 
 SIM_SECONDS = 120.0
+REPO = Path(__file__).resolve().parents[2]
+PROBE = Path(__file__).with_name("sim_probe.py")
+#: plant-core sites: label, plant YAML under config/
+SITES = (("paper site", "sim/plant.yaml"), ("original_machines.yaml", "sim/original_plant.yaml"))
+CORE_SIM_S = 36.0  # [s] simulated per probe run: one dig cycle (6 poses) on today's dynamic plant
+CORE_RUNS = 3  # per tree and site
 
 
 def _drive(plant: Plant, io=None) -> float:
@@ -48,6 +78,93 @@ def _core() -> str:
     return (f"plant core (ZX200 dig cycle + IC120 driving + soil, dt {plant.dt * 1e3:.0f} ms): "
             f"{SIM_SECONDS:.0f} s simulated in {wall:.2f} s = {SIM_SECONDS / wall:.0f}x real time "
             f"({wall / (SIM_SECONDS / plant.dt) * 1e6:.0f} us/step; dug {plant.soil.dug:.2f} m^3)")
+
+
+def _git(*args: str) -> str:
+    return subprocess.run(["git", "-C", str(REPO), *args], check=True, capture_output=True, text=True).stdout.strip()
+
+
+def _check_original_plant() -> None:
+    """original_plant.yaml must be the plant of original_machines.yaml: its sim_plant config, the same machines."""
+    launch, plant = REPO / "config/launch/original_machines.yaml", REPO / "config/sim/original_plant.yaml"
+    nodes = yaml.safe_load(launch.read_text())["nodes"]
+    sim = [n for n in nodes if n.get("executable") == "sim_plant"]
+    if len(sim) != 1 or sim[0].get("parameters", {}).get("config") != "config/sim/original_plant.yaml":
+        raise RuntimeError(f"{launch}: sim_plant does not run config/sim/original_plant.yaml")
+    bridged = {n["parameters"]["machine"] for n in nodes if n.get("executable") == "com3_bridge"}
+    simulated = set(yaml.safe_load(plant.read_text())["machines"])
+    if bridged != simulated or len(simulated) != 10:
+        raise RuntimeError(f"{plant}: machines {sorted(simulated)} are not the ten of {launch} {sorted(bridged)}")
+
+
+def _probe(tree: Path, plant: str) -> dict:
+    """One child process stepping ``plant`` of ``tree``; its JSON line (CPU of the stepping loop only)."""
+    env = {k: v for k, v in os.environ.items() if k != "AMENT_PREFIX_PATH"}  # else config/ = the checkout's
+    env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [os.environ.get("PYTHONPATH")])])
+    with tempfile.TemporaryDirectory(prefix="bench_sim_probe_") as cwd:  # MuJoCo's MUJOCO_LOG.TXT lands here
+        res = subprocess.run([sys.executable, str(PROBE), "--tree", str(tree), "--plant", plant,
+                              "--seconds", str(CORE_SIM_S)], cwd=cwd, env=env, capture_output=True, text=True,
+                             timeout=300)
+    if res.returncode != 0:
+        tail = (res.stderr or res.stdout).strip().splitlines()[-1:]
+        raise RuntimeError(f"sim_probe on {tree} ({plant}) exited {res.returncode}: {' '.join(tail)}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def _core_cpu() -> list[str]:
+    """Plant-core CPU per simulated second, current tree (and BENCH_BASE's, alternating), median of CORE_RUNS."""
+    _check_original_plant()
+    base_rev = os.environ.get("BENCH_BASE")
+    trees: dict[str, Path] = {"current": REPO}
+    lines = []
+    tmp = None
+    if base_rev is not None:
+        sha = _git("rev-parse", "--verify", f"{base_rev or 'HEAD'}^{{commit}}")
+        tmp = Path(tempfile.mkdtemp(prefix="bench_sim_base_"))
+        _git("worktree", "add", "--detach", str(tmp / "tree"), sha)
+        trees = {"base": tmp / "tree", "current": REPO}
+        dirty = _git("status", "--short", "--untracked-files=no", "--", "sim_bridge", "tms_model", "tms_common",
+                     "config").splitlines()
+        lines.append(f"base = {_git('log', '-1', '--format=%h %s', sha)}; current = working tree "
+                     f"(HEAD {_git('rev-parse', '--short', 'HEAD')}, {len(dirty)} uncommitted file(s) in "
+                     "sim_bridge/ tms_model/ tms_common/ config/)")
+    try:
+        runs: dict[tuple[str, str], list[dict]] = {}
+        for rep in range(CORE_RUNS):
+            order = list(trees) if rep % 2 == 0 else list(reversed(trees))  # alternate who goes first
+            for _, plant in SITES:
+                for which in order:
+                    runs.setdefault((which, plant), []).append(_probe(trees[which], plant))
+    finally:
+        if tmp is not None:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tmp / "tree")],
+                           capture_output=True, check=False)
+            subprocess.run(["git", "-C", str(REPO), "worktree", "prune"], capture_output=True, check=False)
+            subprocess.run(["rm", "-rf", str(tmp)], check=False)
+    first = runs[("current", SITES[1][1])][0]
+    lines.insert(0, f"plant core CPU (child process, time.process_time of {CORE_SIM_S:.0f} s simulated, "
+                    f"median of {CORE_RUNS} runs per tree{', alternating base/current' if tmp else ''}): "
+                    f"{first['excavator']} digs DIG_CYCLE, {first['carrier']} stands at P1; others "
+                    f"({', '.join(first['moving'])}) move: tracks on a 2 m circle, front/vessel/swing/blade "
+                    "back and forth every 8 s")
+    for label, plant in SITES:
+        med, detail = {}, []
+        for which in trees:
+            rs = runs[(which, plant)]
+            per = sorted(r["cpu_s"] / r["sim_s"] * 1e3 for r in rs)
+            med[which] = statistics.median(per)
+            r = rs[0]
+            detail.append(f"    {which:7s} runs {' '.join(f'{x:.1f}' for x in per)} core-ms per simulated s "
+                          f"({med[which] * r['sim_s'] / r['steps'] * 1e3:.0f} us/step); in {r['sim_s']:.0f} s: "
+                          f"{r['poses_reached']} dig poses reached, dug {r['dug_m3']:.2f} m^3, "
+                          f"vessel {r['vessel_m3']:.2f} m^3")
+        n = len(runs[("current", plant)][0]["machines"])
+        head = f"  {label} ({plant}, {n} machines): " + ", ".join(f"{w} {m:.1f}" for w, m in med.items())
+        head += " core-ms per simulated s"
+        if "base" in med:
+            head += f"; current/base = {med['current'] / med['base']:.2f}"
+        lines += [head, *detail]
+    return lines
 
 
 def _with_can() -> str:
@@ -123,6 +240,8 @@ def _jitter(seconds: float = 20.0) -> str:
 
 def main() -> None:
     print(_core(), flush=True)
+    for line in _core_cpu():
+        print(line, flush=True)
     print(_with_can(), flush=True)
     print(_jitter(), flush=True)
 
