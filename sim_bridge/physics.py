@@ -180,4 +180,9 @@ class FluidDrives:
             mujoco.mj_step2(m, d)
         self.force = fc
         self.saturated = fc != f
+        bad = d.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+        if bad.number:
+            # MuJoCo has reset the state to the model's reference pose: carrying on would teleport every machine
+            joint = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.dof_jntid[bad.lastinfo]))
+            raise FloatingPointError(f"MuJoCo: the dynamics diverged at joint {joint} (time {d.time:.3f} s)")
         mujoco.mj_kinematics(m, d)  # sites and bodies at the new positions (mj_step2 leaves them one step old)

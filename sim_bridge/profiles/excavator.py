@@ -276,6 +276,9 @@ def _short(joint: str) -> str:
 
 #: mass of each link of the bucket's four-bar [kg] (a 20 t class guide or side link pair; assumption)
 LINKAGE_MASS = 60.0
+#: rotor inertia added to the four-bar's pins [kg m^2]: the light links against the bucket cylinder's oil column
+#: (~8e6 N/m) would ring at ~60 Hz, too fast for the 2 ms step's explicit drive force
+LINKAGE_ARMATURE = 10.0
 
 
 def _linkage_frames(joint: Joint, link: Linkage) -> tuple[float, float]:
@@ -297,7 +300,7 @@ def _guide_body(name: str, joint: Joint, link: Linkage, indent: str) -> list[str
     k = link.guide_pin
     return [
         f'{indent}<body name="{name}_guide_link" pos="{k[0]} 0 {k[1]}" euler="0 {-angle} 0">',
-        f'{indent}  <joint name="{name}_guide_joint" type="hinge" axis="0 1 0"/>',
+        f'{indent}  <joint name="{name}_guide_joint" type="hinge" axis="0 1 0" armature="{LINKAGE_ARMATURE}"/>',
         f'{indent}  <geom type="capsule" fromto="0 0 0 {link.guide_length} 0 0" size="0.06" material="zx" '
         f'contype="0" conaffinity="0" mass="{LINKAGE_MASS}"/>',
         f'{indent}  <site name="{name}_bucket_cyl_rod" pos="{link.guide_length} 0 0" size="0.06"/>',
@@ -311,7 +314,7 @@ def _side_body(name: str, joint: Joint, link: Linkage, indent: str) -> list[str]
     lb = link.link_pin
     return [
         f'{indent}<body name="{name}_side_link" pos="{lb[0]} 0 {lb[1]}" euler="0 {-angle} 0">',
-        f'{indent}  <joint name="{name}_side_joint" type="hinge" axis="0 1 0"/>',
+        f'{indent}  <joint name="{name}_side_joint" type="hinge" axis="0 1 0" armature="{LINKAGE_ARMATURE}"/>',
         f'{indent}  <geom type="capsule" fromto="0 0 0 {link.link_length} 0 0" size="0.06" material="zx" '
         f'contype="0" conaffinity="0" mass="{LINKAGE_MASS}"/>',
         f"{indent}</body>",
