@@ -441,7 +441,7 @@ def test_digging_force_rises_with_cut_depth(spec):
     shallow = _drag(spec, 0.3, seconds=1.0, joint="bucket_joint")
     deep = _drag(spec, 2.0, seconds=1.0, joint="bucket_joint")
     relief = spec.description(spec.excavator).cylinders.relief_pa
-    for label, (_, p, travel, d, p_end, w_end) in (("shallow", shallow), ("deep", deep)):
+    for _, p, _, d, p_end, w_end in (shallow, deep):
         print(f"bucket curl {d:.2f} m deep: cylinder {p / 1e6:.1f} MPa as the cut starts, {p_end / 1e6:.1f} MPa after "
               f"1 s (relief {relief / 1e6:.1f}), bucket at {w_end:+.3f} rad/s of 0.5 commanded")
     assert deep[4] > shallow[4]
