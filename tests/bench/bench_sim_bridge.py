@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import statistics
 import subprocess
 import sys
@@ -48,6 +49,8 @@ PROBE = Path(__file__).with_name("sim_probe.py")
 SITES = (("paper site", "sim/plant.yaml"), ("original_machines.yaml", "sim/original_plant.yaml"))
 CORE_SIM_S = 36.0  # [s] simulated per probe run: one dig cycle (6 poses) on today's dynamic plant
 CORE_RUNS = 3  # per tree and site
+#: [s] simulated per turn: base and current take turns in chunks this short, so both see the same outside load
+CORE_CHUNK_S = 1.0
 
 
 def _drive(plant: Plant, io=None) -> float:
@@ -97,18 +100,41 @@ def _check_original_plant() -> None:
         raise RuntimeError(f"{plant}: machines {sorted(simulated)} are not the ten of {launch} {sorted(bridged)}")
 
 
-def _probe(tree: Path, plant: str) -> dict:
-    """One child process stepping ``plant`` of ``tree``; its JSON line (CPU of the stepping loop only)."""
-    env = {k: v for k, v in os.environ.items() if k != "AMENT_PREFIX_PATH"}  # else config/ = the checkout's
-    env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [os.environ.get("PYTHONPATH")])])
-    with tempfile.TemporaryDirectory(prefix="bench_sim_probe_") as cwd:  # MuJoCo's MUJOCO_LOG.TXT lands here
-        res = subprocess.run([sys.executable, str(PROBE), "--tree", str(tree), "--plant", plant,
-                              "--seconds", str(CORE_SIM_S)], cwd=cwd, env=env, capture_output=True, text=True,
-                             timeout=300)
-    if res.returncode != 0:
-        tail = (res.stderr or res.stdout).strip().splitlines()[-1:]
-        raise RuntimeError(f"sim_probe on {tree} ({plant}) exited {res.returncode}: {' '.join(tail)}")
-    return json.loads(res.stdout.strip().splitlines()[-1])
+class _Probe:
+    """A ``sim_probe.py --serve`` child on one tree: built at start, then stepped chunk by chunk on request."""
+
+    def __init__(self, tree: Path, plant: str) -> None:
+        env = {k: v for k, v in os.environ.items() if k != "AMENT_PREFIX_PATH"}  # else config/ = the checkout's
+        env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [os.environ.get("PYTHONPATH")])])
+        self.what = f"sim_probe on {tree} ({plant})"
+        self._dir = tempfile.TemporaryDirectory(prefix="bench_sim_probe_")  # MuJoCo's MUJOCO_LOG.TXT lands here
+        self._err = open(Path(self._dir.name) / "stderr.txt", "w+")
+        self.proc = subprocess.Popen(
+            [sys.executable, str(PROBE), "--tree", str(tree), "--plant", plant, "--serve"],
+            cwd=self._dir.name, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err, text=True,
+        )
+
+    def ask(self, command: str | None = None, timeout: float = 300.0) -> dict:
+        if command is not None:
+            self.proc.stdin.write(command + "\n")
+            self.proc.stdin.flush()
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
+        line = self.proc.stdout.readline() if ready else ""
+        if not line:
+            self.proc.kill()
+            self._err.seek(0)
+            tail = self._err.read().strip().splitlines()[-1:]
+            raise RuntimeError(f"{self.what}: no answer to {command or 'start'!r} within {timeout:.0f} s "
+                               f"(exit {self.proc.wait()}): {' '.join(tail)}")
+        return json.loads(line)
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for f in (self.proc.stdin, self.proc.stdout, self._err):
+            f.close()
+        self._dir.cleanup()
 
 
 def _core_cpu() -> list[str]:
@@ -119,22 +145,35 @@ def _core_cpu() -> list[str]:
     lines = []
     tmp = None
     if base_rev is not None:
-        sha = _git("rev-parse", "--verify", f"{base_rev or 'HEAD'}^{{commit}}")
-        tmp = Path(tempfile.mkdtemp(prefix="bench_sim_base_"))
-        _git("worktree", "add", "--detach", str(tmp / "tree"), sha)
-        trees = {"base": tmp / "tree", "current": REPO}
+        try:
+            sha = _git("rev-parse", "--verify", f"{base_rev or 'HEAD'}^{{commit}}")
+        except subprocess.CalledProcessError:
+            raise RuntimeError(f"BENCH_BASE={base_rev!r} is not a commit of {REPO}") from None
         dirty = _git("status", "--short", "--untracked-files=no", "--", "sim_bridge", "tms_model", "tms_common",
                      "config").splitlines()
         lines.append(f"base = {_git('log', '-1', '--format=%h %s', sha)}; current = working tree "
                      f"(HEAD {_git('rev-parse', '--short', 'HEAD')}, {len(dirty)} uncommitted file(s) in "
                      "sim_bridge/ tms_model/ tms_common/ config/)")
+        tmp = Path(tempfile.mkdtemp(prefix="bench_sim_base_"))
     try:
+        if tmp is not None:
+            _git("worktree", "add", "--detach", str(tmp / "tree"), sha)
+            trees = {"base": tmp / "tree", "current": REPO}
         runs: dict[tuple[str, str], list[dict]] = {}
-        for rep in range(CORE_RUNS):
-            order = list(trees) if rep % 2 == 0 else list(reversed(trees))  # alternate who goes first
+        for _rep in range(CORE_RUNS):
             for _, plant in SITES:
-                for which in order:
-                    runs.setdefault((which, plant), []).append(_probe(trees[which], plant))
+                probes = {which: _Probe(tree, plant) for which, tree in trees.items()}  # they build in parallel
+                try:
+                    dt = [p.ask()["dt"] for p in probes.values()][0]  # every probe answers when built
+                    order = list(probes)
+                    for i in range(round(CORE_SIM_S / CORE_CHUNK_S)):
+                        for which in order if i % 2 == 0 else reversed(order):  # alternate who goes first
+                            probes[which].ask(f"step {round(CORE_CHUNK_S / dt)}")
+                    for which, p in probes.items():
+                        runs.setdefault((which, plant), []).append(p.ask("end"))
+                finally:
+                    for p in probes.values():
+                        p.close()
     finally:
         if tmp is not None:
             subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tmp / "tree")],
@@ -142,8 +181,9 @@ def _core_cpu() -> list[str]:
             subprocess.run(["git", "-C", str(REPO), "worktree", "prune"], capture_output=True, check=False)
             subprocess.run(["rm", "-rf", str(tmp)], check=False)
     first = runs[("current", SITES[1][1])][0]
+    alt = f", base and current in turns of {CORE_CHUNK_S:.0f} s simulated" if tmp else ""
     lines.insert(0, f"plant core CPU (child process, time.process_time of {CORE_SIM_S:.0f} s simulated, "
-                    f"median of {CORE_RUNS} runs per tree{', alternating base/current' if tmp else ''}): "
+                    f"median of {CORE_RUNS} runs per tree{alt}): "
                     f"{first['excavator']} digs DIG_CYCLE, {first['carrier']} stands at P1; others "
                     f"({', '.join(first['moving'])}) move: tracks on a 2 m circle, front/vessel/swing/blade "
                     "back and forth every 8 s")
@@ -162,7 +202,10 @@ def _core_cpu() -> list[str]:
         head = f"  {label} ({plant}, {n} machines): " + ", ".join(f"{w} {m:.1f}" for w, m in med.items())
         head += " core-ms per simulated s"
         if "base" in med:
-            head += f"; current/base = {med['current'] / med['base']:.2f}"
+            paired = [c["cpu_s"] / b["cpu_s"] for b, c in zip(runs[("base", plant)], runs[("current", plant)],
+                                                              strict=True)]
+            head += (f"; current/base = {med['current'] / med['base']:.2f} "
+                     f"(per run: {' '.join(f'{x:.2f}' for x in paired)})")
         lines += [head, *detail]
     return lines
 

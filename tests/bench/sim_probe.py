@@ -1,20 +1,25 @@
 """Plant-core CPU probe, run as a script by ``bench_sim_bridge`` against one source tree (current or a baseline).
 
-``python tests/bench/sim_probe.py --tree ROOT --plant sim/plant.yaml --seconds 30`` builds
-``sim_bridge.plant.Plant(load_plant(<config>/sim/plant.yaml))`` from the tree on ``PYTHONPATH`` and steps it with
-the scripted dig cycle, then prints one JSON line: CPU seconds (``time.process_time``: every thread of this
-process) of the stepping loop alone, simulated seconds, and what was done (dug volume, dig-cycle poses reached).
+``python tests/bench/sim_probe.py --tree ROOT --plant sim/plant.yaml --seconds 36`` builds
+``sim_bridge.plant.Plant(load_plant(<config>/sim/plant.yaml))`` from the tree on ``PYTHONPATH`` (run it with
+``AMENT_PREFIX_PATH`` unset, so ``config/`` is the tree's own too), steps it with the scripted dig cycle and prints
+one JSON line: CPU seconds (``time.process_time``: every thread of this process) of the stepping alone, simulated
+seconds, and what was done (dig-cycle poses reached, dug volume, the carrier's load).
+
+``--serve`` is the bench's lock-step mode: after building, the probe prints ``{"ready": ...}`` and then reads
+commands from stdin, ``step N`` (answers ``{"cpu_s": ...}`` for those N steps) or ``end`` (answers the summary and
+exits). The bench keeps a baseline and a current probe alive and alternates short chunks between them, so both
+see the same load from the rest of the machine (a shared 2-core machine drifts within seconds).
 
 It uses only what exists both before and after the kinematic -> dynamic rewrite of the plant (``Plant(spec)``,
 ``load_plant(path)``, ``plant.step()``, ``set_truth``, the machines' command setters and
 :mod:`sim_bridge.scenario`), so the same file measures either tree. It imports nothing from ``tests``.
 
 Commands: the digging excavator (``spec.excavator``) follows ``DIG_CYCLE`` with ``servo_velocity``; the soil carrier
-(``spec.carrier``) stands still at site point P1 under the dumps (where ``DIG_CYCLE`` assumes it); with
-``--others move`` (default) every other machine gets simple motion commands, toggled every ``TOGGLE_S``: tracks
-on a 2 m circle (0.3 m/s, 0.15 rad/s), excavator swing +-0.3 rad/s and boom +-0.1 rad/s, vessel up/down
-(target 1 rad / 0, clamped to its limits), carrier swing +-0.5 rad, dozer blade between its lift limits.
-``--others idle`` leaves them without commands.
+(``spec.carrier``) stands still at site point P1 under the dumps (where ``DIG_CYCLE`` assumes it); every other
+machine gets simple motion commands, toggled every ``TOGGLE_S``: tracks on a 2 m circle (0.3 m/s, 0.15 rad/s),
+excavator swing +-0.3 rad/s and boom +-0.1 rad/s, vessel up/down (target 1 rad / 0, clamped to its limits),
+carrier swing +-0.5 rad, dozer blade between its lift limits. ``--others idle`` leaves them without commands.
 """
 
 from __future__ import annotations
@@ -42,69 +47,100 @@ def _check_tree(tree: Path) -> None:
                          "(unset AMENT_PREFIX_PATH so tms_common finds the tree's own config/)")
 
 
-def _others(plant, names: list[str], t: float) -> None:
-    from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
+class Probe:
+    """The plant of one tree and the scripted commands; :meth:`advance` steps and returns the CPU it took."""
 
-    sign = 1.0 if int(t / TOGGLE_S) % 2 == 0 else -1.0
-    for name in names:
-        m = plant.machines[name]
-        m.set_centre_velocity(0.3, 0.15)
-        if isinstance(m, Excavator):
-            m.set_front_velocity({"swing_joint": 0.3 * sign, "boom_joint": 0.1 * sign})
-        elif isinstance(m, CrawlerCarrier):
-            m.set_vessel_target(1.0 if sign > 0 else 0.0)
-            if m.has_swing:
-                m.set_swing_target(0.5 * sign)
-        elif isinstance(m, Dozer):
-            m.set_lift_target(1.0 * sign)  # clamped to the lift joint's limits
+    def __init__(self, tree: Path, plant_file: str, others: str) -> None:
+        _check_tree(tree)
+        from sim_bridge.config import load_plant
+        from sim_bridge.plant import Plant
+        from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
+        from tms_common.config import config_path
+
+        self._cycle, self._reached, self._servo = DIG_CYCLE, pose_reached, servo_velocity
+        c0 = time.process_time()
+        self.plant = plant = Plant(load_plant(config_path(*plant_file.split("/"))))
+        spec = plant.spec
+        if plant.excavator is None or plant.carrier is None:
+            raise SystemExit(f"sim_probe: {plant_file} has no digging excavator or soil carrier")
+        plant.set_truth(spec.carrier, *P1, {})
+        self.moving = [n for n in plant.machines if n not in (spec.excavator, spec.carrier)] if others == "move" else []
+        self.build_cpu_s = time.process_time() - c0
+        self.tree, self.plant_file = tree, plant_file
+        self.k = 0  # dig-cycle poses reached
+        self.steps = 0
+        self.cpu_s = 0.0
+
+    def _others(self, t: float) -> None:
+        from sim_bridge.machines import CrawlerCarrier, Dozer, Excavator
+
+        sign = 1.0 if int(t / TOGGLE_S) % 2 == 0 else -1.0
+        for name in self.moving:
+            m = self.plant.machines[name]
+            m.set_centre_velocity(0.3, 0.15)
+            if isinstance(m, Excavator):
+                m.set_front_velocity({"swing_joint": 0.3 * sign, "boom_joint": 0.1 * sign})
+            elif isinstance(m, CrawlerCarrier):
+                m.set_vessel_target(1.0 if sign > 0 else 0.0)
+                if m.has_swing:
+                    m.set_swing_target(0.5 * sign)
+            elif isinstance(m, Dozer):
+                m.set_lift_target(1.0 * sign)  # clamped to the lift joint's limits
+
+    def advance(self, steps: int) -> float:
+        plant, exc = self.plant, self.plant.excavator
+        names, cycle = exc.front.names, self._cycle
+        c0 = time.process_time()
+        for _ in range(steps):
+            q = dict(zip(names, exc.front.q, strict=True))
+            if self._reached(q, cycle[self.k % len(cycle)], tol=0.05):
+                self.k += 1
+            exc.set_front_velocity(self._servo(q, cycle[self.k % len(cycle)]))
+            if self.moving:
+                self._others(plant.time)
+            plant.step()
+        cpu = time.process_time() - c0
+        self.steps += steps
+        self.cpu_s += cpu
+        return cpu
+
+    def summary(self) -> dict:
+        p, spec = self.plant, self.plant.spec
+        return {
+            "tree": str(self.tree), "plant": self.plant_file, "machines": list(p.machines), "moving": self.moving,
+            "excavator": spec.excavator, "carrier": spec.carrier, "sim_s": self.steps * p.dt, "steps": self.steps,
+            "cpu_s": self.cpu_s, "build_cpu_s": self.build_cpu_s, "poses_reached": self.k,
+            "dug_m3": float(p.soil.dug), "vessel_m3": float(p.soil.vessels.get(spec.carrier, 0.0)),
+        }
 
 
-def run(tree: Path, plant_file: str, seconds: float, others: str) -> dict:
-    _check_tree(tree)
-    from sim_bridge.config import load_plant
-    from sim_bridge.plant import Plant
-    from sim_bridge.scenario import DIG_CYCLE, pose_reached, servo_velocity
-    from tms_common.config import config_path
-
-    c0 = time.process_time()
-    plant = Plant(load_plant(config_path(*plant_file.split("/"))))
-    spec = plant.spec
-    if plant.excavator is None or plant.carrier is None:
-        raise SystemExit(f"sim_probe: {plant_file} has no digging excavator or soil carrier")
-    plant.set_truth(spec.carrier, *P1, {})
-    moving = [n for n in plant.machines if n not in (spec.excavator, spec.carrier)] if others == "move" else []
-    build = time.process_time() - c0
-
-    exc = plant.excavator
-    names = exc.front.names
-    steps = round(seconds / plant.dt)
-    k = 0
-    c0, w0 = time.process_time(), time.perf_counter()
-    for _ in range(steps):
-        q = dict(zip(names, exc.front.q, strict=True))
-        if pose_reached(q, DIG_CYCLE[k % len(DIG_CYCLE)], tol=0.05):
-            k += 1
-        exc.set_front_velocity(servo_velocity(q, DIG_CYCLE[k % len(DIG_CYCLE)]))
-        if moving:
-            _others(plant, moving, plant.time)
-        plant.step()
-    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    return {
-        "tree": str(tree), "plant": plant_file, "machines": list(plant.machines), "moving": moving,
-        "excavator": spec.excavator, "carrier": spec.carrier, "sim_s": steps * plant.dt, "steps": steps,
-        "cpu_s": cpu, "wall_s": wall, "build_cpu_s": build, "poses_reached": k,
-        "dug_m3": float(plant.soil.dug), "vessel_m3": float(plant.soil.vessels.get(spec.carrier, 0.0)),
-    }
+def _serve(probe: Probe) -> int:
+    print(json.dumps({"ready": True, "dt": probe.plant.dt}), flush=True)
+    for line in sys.stdin:
+        cmd = line.split()
+        if cmd[:1] == ["step"] and len(cmd) == 2:
+            print(json.dumps({"cpu_s": probe.advance(int(cmd[1]))}), flush=True)
+        elif cmd == ["end"]:
+            print(json.dumps(probe.summary()), flush=True)
+            return 0
+        else:
+            raise SystemExit(f"sim_probe: unknown command {line.strip()!r} (expected 'step N' or 'end')")
+    return 1  # stdin closed without 'end': the bench went away
 
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tree", required=True, type=Path, help="source tree root expected on PYTHONPATH")
     ap.add_argument("--plant", default="sim/plant.yaml", help="plant YAML relative to the tree's config/")
-    ap.add_argument("--seconds", type=float, default=30.0, help="simulated seconds to step")
+    ap.add_argument("--seconds", type=float, default=36.0, help="simulated seconds to step (without --serve)")
     ap.add_argument("--others", choices=("move", "idle"), default="move")
+    ap.add_argument("--serve", action="store_true", help="lock-step mode: 'step N' / 'end' commands on stdin")
     a = ap.parse_args(argv)
-    print(json.dumps(run(a.tree.resolve(), a.plant, a.seconds, a.others)), flush=True)
+    probe = Probe(a.tree.resolve(), a.plant, a.others)
+    if a.serve:
+        return _serve(probe)
+    probe.advance(round(a.seconds / probe.plant.dt))
+    print(json.dumps(probe.summary()), flush=True)
     return 0
 
 
