@@ -24,8 +24,13 @@ Any list of machines: every machine's truth pose (by name) gives its path; every
 with its own machine's truth (the travelling machines' localisation); every excavator's bucket tip (by name) with
 its truth. The site map draws each machine by its type (:mod:`tms_ur.site_map`).
 
-``report(directory)`` writes ``metrics.json``, ``site_map.png``, ``soil.png``, ``flags.png`` and
-``index.html`` (one page linking them).
+The **hydraulics of one load pass** (:meth:`ExperimentRecorder.on_hydraulics`, ``/sim/truth/<excavator>/hydraulics``
+in MPa): a pass runs from the start of an ``excavate`` leaf to the start of the next; only the samples of the pass
+going on and of the last complete pass without a dump in it are kept (one without a dump if there is one: the last
+pass of a cycle also waits for the carrier's haul), so memory stays bounded over any run.
+
+``report(directory)`` writes ``metrics.json``, ``site_map.png``, ``soil.png``, ``flags.png``, ``hydraulics.png``
+(when hydraulics samples came) and ``index.html`` (one page linking them).
 
 :func:`tree_actions`: the action servers a task's tree calls (its leaves' subtasks and their planning actions),
 what the supervisor waits for before it starts the tasks.
@@ -211,6 +216,43 @@ class AlignedError:
         self.errors.append(math.hypot(x - tx, y - ty))
 
 
+#: the leaf whose start begins a load pass (``LeafNodeZx200 'excavate'``: a name with this word)
+_PASS_LEAF = "excavate"
+#: the chambers :meth:`ExperimentRecorder.report` plots, per cylinder: (bottom, rod)
+_CYLINDERS = (("boom_bottom", "boom_rod"), ("arm_bottom", "arm_rod"), ("bucket_bottom", "bucket_rod"))
+
+
+@dataclass
+class _PassTrace:
+    """One excavator's hydraulics samples: the pass going on and the one complete pass kept (module docstring).
+
+    A pass longer than ``max_samples`` samples is halved in rate (every other sample dropped) each time it fills."""
+
+    max_samples: int = 4000
+    labels: tuple[str, ...] = ()
+    start: float | None = None
+    current: list[tuple[float, tuple[float, ...]]] = field(default_factory=list)
+    #: (start, end, samples, without a dump) of the pass kept
+    kept: tuple[float, float, list[tuple[float, tuple[float, ...]]], bool] | None = None
+    received: int = 0
+
+    def sample(self, t: float, labels: tuple[str, ...], values: tuple[float, ...]) -> None:
+        self.received += 1
+        if labels != self.labels:  # another layout (a restarted plant): the samples so far do not compare
+            self.labels, self.current, self.kept = labels, [], None
+        if self.start is None or t < self.start:
+            return  # before the first pass
+        self.current.append((t, values))
+        if len(self.current) > self.max_samples:
+            self.current = self.current[::2]
+
+    def boundary(self, t: float, clean: bool) -> None:
+        """A pass starts at ``t``; the one before it ends there (``clean``: no dump during it)."""
+        if self.start is not None and self.current and (self.kept is None or clean or not self.kept[3]):
+            self.kept = (self.start, t, self.current, clean)
+        self.start, self.current = t, []
+
+
 @dataclass
 class ExperimentRecorder:
     """Accumulates one run. All times are simulated seconds; volumes m^3; distances m."""
@@ -253,6 +295,8 @@ class ExperimentRecorder:
     _last_pose: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: machine name -> its first truth pose (t, x, y, yaw): where the site map draws a machine with no site pose
     first_pose: dict[str, tuple[float, float, float, float]] = field(default_factory=dict)
+    #: excavator name -> its hydraulics samples of one load pass (:meth:`on_hydraulics`)
+    hydraulics: dict[str, _PassTrace] = field(default_factory=dict)
 
     # -- inputs -------------------------------------------------------------------------------
     def on_soil(self, t: float, mound: float, bucket: float, vessel: float, dumped: float) -> None:
@@ -327,6 +371,24 @@ class ExperimentRecorder:
         truth at ``t``. Every excavator's errors go into one ``end_effector_error_m``."""
         self._error_series(_TIP + machine).estimate(t, x, y)
 
+    def on_hydraulics(self, t: float, machine: str, values: dict[str, float]) -> None:
+        """Excavator ``machine``'s chamber, pump and relief pressures [MPa] at ``t`` (labels as the plant names them:
+        ``boom_bottom``, ``boom_rod``, ..., ``pump``, ``relief``)."""
+        self.hydraulics.setdefault(machine, _PassTrace()).sample(t, tuple(values), tuple(values.values()))
+
+    def _pass_boundary(self, t: float, task_id: int) -> None:
+        """An ``excavate`` leaf of task ``task_id`` started: a load pass of its machine (every excavator traced when
+        the task's machine is not known) begins."""
+        machine = self.task_machines.get(task_id)
+        if machine in self.hydraulics:
+            traces = [self.hydraulics[machine]]
+        else:  # a task named otherwise than the plant's machine: every trace; the task's own may not have come yet
+            traces = list(self.hydraulics.values()) + ([self.hydraulics.setdefault(machine, _PassTrace())]
+                                                       if machine else [])
+        for trace in traces:
+            clean = trace.start is None or not any(trace.start <= d <= t for d in self.dump_events)
+            trace.boundary(t, clean)
+
     def on_flags(self, t: float, flags: dict[str, Any]) -> None:
         for key, value in flags.items():
             series = self.flags.setdefault(key, [])
@@ -345,6 +407,8 @@ class ExperimentRecorder:
         for name in [n for n in starts if n not in leaves]:
             self.leaf_times.setdefault(task_id, {}).setdefault(name, []).append(t - starts.pop(name))
         for name in leaves:
+            if name not in starts and _PASS_LEAF in name:
+                self._pass_boundary(t, task_id)
             starts.setdefault(name, t)
 
     def _clock(self, t: float) -> None:
@@ -391,6 +455,7 @@ class ExperimentRecorder:
             "pass_events_s": [round(t, 2) for t in self.pass_events],
             "dump_events_s": [round(t, 2) for t in self.dump_events],
             "task_end_states": {str(k): v[-1][1] for k, v in self.task_states.items() if v},
+            "hydraulics_pass": self._hydraulics_metrics(),
             **self._fleet_metrics(),
         }
 
@@ -414,6 +479,63 @@ class ExperimentRecorder:
             "near_radius_m": self.near_radius,
         }
 
+    def hydraulics_pass(self) -> tuple[str, float, float, list[tuple[float, dict[str, float]]], bool] | None:
+        """The load pass whose pressures the report plots: (machine, start, end, samples as label -> MPa, complete);
+        the kept complete pass of the first excavator that has one, else the pass going on when the run ended; None
+        when no hydraulics sample came in a pass."""
+        for machine, trace in sorted(self.hydraulics.items()):
+            if trace.kept is not None:
+                start, end, samples, _clean = trace.kept
+                return machine, start, end, [(t, dict(zip(trace.labels, v, strict=True))) for t, v in samples], True
+        for machine, trace in sorted(self.hydraulics.items()):
+            if trace.start is not None and trace.current:
+                samples = [(t, dict(zip(trace.labels, v, strict=True))) for t, v in trace.current]
+                return machine, trace.start, samples[-1][0], samples, False
+        return None
+
+    def _hydraulics_metrics(self) -> dict[str, Any] | None:
+        chosen = self.hydraulics_pass()
+        if chosen is None:
+            return None
+        machine, start, end, samples, complete = chosen
+        labels = list(samples[0][1])
+        return {"machine": machine, "start_s": round(start, 2), "end_s": round(end, 2), "complete": complete,
+                "samples": len(samples),
+                "max_mpa": {k: round(max(v[k] for _, v in samples), 2) for k in labels}}
+
+    def _hydraulics_note(self) -> str:
+        """Why the report has no hydraulics figure."""
+        received = sum(trace.received for trace in self.hydraulics.values())
+        if not received:
+            return ("No hydraulics samples arrived (/sim/truth/&lt;excavator&gt;/hydraulics: a plant without it, or "
+                    "no digging excavator): no pressure plot.")
+        return f"{received} hydraulics sample(s) arrived but no load pass (an excavate leaf) started: no pressure plot."
+
+    def _plot_hydraulics(self, path: Path, plt) -> bool:
+        """The boom, arm and bucket bottom and rod pressures of one load pass against time; False when none came."""
+        chosen = self.hydraulics_pass()
+        if chosen is None:
+            return False
+        machine, start, end, samples, complete = chosen
+        fig, ax = plt.subplots(figsize=(8, 4))
+        ts = [t - start for t, _ in samples]
+        for (bottom, rod), color in zip(_CYLINDERS, ("tab:blue", "tab:orange", "tab:green"), strict=True):
+            if bottom in samples[0][1]:
+                ax.plot(ts, [v[bottom] for _, v in samples], color=color, label=bottom)
+            if rod in samples[0][1]:
+                ax.plot(ts, [v[rod] for _, v in samples], color=color, ls="--", label=rod)
+        if "relief" in samples[0][1]:
+            ax.axhline(samples[-1][1]["relief"], color="red", lw=0.8, label="relief")
+        ax.set_xlabel(f"time from the pass start (simulated {start:.1f} s) [s]")
+        ax.set_ylabel("pressure [MPa]")
+        ax.set_title(f"{machine}: cylinder pressures of one load pass, {start:.1f}-{end:.1f} s"
+                     + ("" if complete else " (incomplete: the run ended in it)"))
+        ax.legend(loc="upper right", fontsize=7, ncol=2)
+        fig.tight_layout()
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        return True
+
     def _unmatched(self, key: str) -> int:
         return self._aligned[key].unmatched if key in self._aligned else 0
 
@@ -427,7 +549,7 @@ class ExperimentRecorder:
         loading_point: str = "P1",
         title: str = "Earthwork run",
     ) -> Path:
-        """Write metrics.json, three PNG plots and index.html into ``directory``; returns index.html.
+        """Write metrics.json, the PNG plots and index.html into ``directory``; returns index.html.
 
         ``site`` defaults to config/site.yaml; ``machines`` (the descriptions the site map draws) to those of the
         machines recorded (a path), as named on the site.
@@ -478,6 +600,12 @@ class ExperimentRecorder:
         fig.savefig(directory / "flags.png", dpi=90)
         plt.close(fig)
 
+        if self._plot_hydraulics(directory / "hydraulics.png", plt):
+            hydraulics = '<img src="hydraulics.png" alt="cylinder pressures of one load pass">'
+        else:
+            (directory / "hydraulics.png").unlink(missing_ok=True)  # a report rewritten into the same directory
+            hydraulics = f"<p>{self._hydraulics_note()}</p>"
+
         rows = "".join(
             f"<tr><th>{k}</th><td>{json.dumps(v)}</td></tr>"
             for k, v in metrics.items()
@@ -496,6 +624,7 @@ img{{max-width:100%;border:1px solid #ccc;margin:4px 0}}</style></head><body>
 {replay}<h2>Site map</h2><img src="site_map.png" alt="site map">
 <h2>Soil</h2><img src="soil.png" alt="soil volumes">
 <h2>Flags</h2><img src="flags.png" alt="flag timeline">
+<h2>Hydraulics of one load pass</h2>{hydraulics}
 </body></html>"""
         index = directory / "index.html"
         index.write_text(html)

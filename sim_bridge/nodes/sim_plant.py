@@ -15,6 +15,9 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
 * ``/sim/truth/<carrier>/soil`` (std_msgs/Float64MultiArray ``[vessel, loaded, dumped]`` m^3, labels in
   ``layout.dim[0].label``) for every crawler carrier by name: its load now and the totals that landed in its
   vessel and that it dumped, every ``truth_period_s``,
+* ``/sim/truth/<excavator>/hydraulics`` (std_msgs/Float64MultiArray, MPa, labels :data:`HYDRAULICS_LABELS` in
+  ``layout.dim[0].label``) of the digging excavator: each cylinder's bottom (cap) and rod chamber, the swing motor's
+  ports A and B, the pump and the cylinders' relief setting, every ``truth_period_s``,
 * ``/sim/sensors/mound/points`` (sensor_msgs/PointCloud2, ``map``) and ``/sim/sensors/<carrier>/vessel_points``
   (PointCloud2, ``<carrier>/vessel``) for every crawler carrier by name: LiDAR-like soil scans for tms_sp
   (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
@@ -56,6 +59,12 @@ from tms_common.node import realtime_thread, run_node
 from tms_common.params import startup_parameters
 
 SOIL_LABELS = "mound,bucket,vessel,dumped,total_error,ground"
+HYDRAULICS_LABELS = ("boom_bottom,boom_rod,arm_bottom,arm_rod,bucket_bottom,bucket_rod,swing_a,swing_b,pump,"
+                     "relief")
+_HYDRAULICS_N = len(HYDRAULICS_LABELS.split(","))
+#: front joint -> its (extending, retracting) side's labels; the extending side is the cylinder's bottom (cap)
+_HYDRAULICS_SIDES = {"boom_joint": ("boom_bottom", "boom_rod"), "arm_joint": ("arm_bottom", "arm_rod"),
+                     "bucket_joint": ("bucket_bottom", "bucket_rod"), "swing_joint": ("swing_a", "swing_b")}
 
 
 class SimPlantNode(Node):
@@ -101,6 +110,19 @@ class SimPlantNode(Node):
         digger = spec.excavator  # the excavator digging the soil; none in a plant without the soil experiment
         self.tip_pub = self.create_publisher(PointStamped, f"/sim/truth/{digger}/bucket_tip", 10) if digger else None
         self.soil_pub = self.create_publisher(Float64MultiArray, "/sim/truth/soil", 10)
+        self.hyd_pub = self._hydraulics_index = None
+        if self.plant.excavator is not None:
+            front = self.plant.excavator.front
+            missing = [j for j in _HYDRAULICS_SIDES if j not in front.names]
+            if missing:
+                raise SimConfigError(f"sim_plant: excavator {digger}'s front has no {', '.join(missing)} "
+                                     f"(has {', '.join(front.names)}): /sim/truth/{digger}/hydraulics needs them")
+            # label -> (front function index, extending side?), in the order of HYDRAULICS_LABELS
+            where = {label: (front.names.index(j), k == 0)
+                     for j, pair in _HYDRAULICS_SIDES.items() for k, label in enumerate(pair)}
+            self._hydraulics_index = [where[label] for label in HYDRAULICS_LABELS.split(",")[:8]]
+            self._relief_mpa = front.relief[front.names.index("boom_joint")] * 1e-6
+            self.hyd_pub = self.create_publisher(Float64MultiArray, f"/sim/truth/{digger}/hydraulics", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/sim/diagnostics", 10)
         self._scan_period = float(p("scan_period_s", 0.5).value)
         # The mound changes only where the bucket cuts, and its cloud (~40k points) and assessment are the costly
@@ -185,6 +207,13 @@ class SimPlantNode(Node):
         soil.data = [plant.ground.mound_volume(), plant.soil.bucket, plant.soil.vessel, plant.soil.dumped, error,
                      plant.ground.ground_soil_volume()]
         self.soil_pub.publish(soil)
+        if self.hyd_pub is not None:
+            front = plant.excavator.front
+            hyd = Float64MultiArray()
+            hyd.layout.dim = [MultiArrayDimension(label=HYDRAULICS_LABELS, size=_HYDRAULICS_N, stride=_HYDRAULICS_N)]
+            hyd.data = [(front.p_ext[i] if ext else front.p_ret[i]) * 1e-6 for i, ext in self._hydraulics_index] + [
+                front.pump_pressure * 1e-6, self._relief_mpa]
+            self.hyd_pub.publish(hyd)
         for m, pub in self.carrier_soil_pub.items():
             msg = Float64MultiArray()
             msg.layout.dim = [MultiArrayDimension(label="vessel,loaded,dumped", size=3, stride=3)]

@@ -138,6 +138,8 @@ class ExperimentNode(Node):
                 PointStamped, f"/sim/truth/{m}/bucket_tip", lambda msg, m=m: self._on_tip(m, msg), 10
             )
             self.create_subscription(JointState, f"/{m}/joint_states", lambda msg, m=m: self._on_joints(m, msg), 10)
+            self.create_subscription(Float64MultiArray, f"/sim/truth/{m}/hydraulics",
+                                     lambda msg, m=m: self._on_hydraulics(m, msg), 10)
         self.create_timer(flags_period, self._sample_flags)
         self.create_timer(0.2, self._tick)
 
@@ -167,6 +169,11 @@ class ExperimentNode(Node):
         v = dict(zip(labels, msg.data, strict=False))
         if {"vessel", "loaded", "dumped"} <= v.keys():
             self.rec.on_carrier_soil(self.sim_t, machine, v["vessel"], v["loaded"], v["dumped"])
+
+    def _on_hydraulics(self, machine: str, msg: Float64MultiArray) -> None:
+        labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+        if labels and len(labels) == len(msg.data):
+            self.rec.on_hydraulics(self.sim_t, machine, dict(zip(labels, msg.data, strict=True)))
 
     def _stamp(self, header) -> float:
         """A message's stamp [s of simulated time]; this node's clock when it is unset."""
