@@ -41,6 +41,8 @@ MOVING_SPEED = 0.003
 STEADY_FRACTION = 0.2
 #: the first response: the speed beyond this fraction of its steady value
 FIRST_RESPONSE = 0.02
+#: steps at least this fraction of the saturated speed give the dead time and lag
+WORKING_FRACTION = 0.2
 #: steps whose steady speed is below this fraction of the saturated speed are in the linear range
 LINEAR_FRACTION = 0.9
 
@@ -171,8 +173,8 @@ def _linear_fit(amp: np.ndarray, speed: np.ndarray) -> tuple[float, float]:
 def estimate_joint(records: Sequence[StepRecord]) -> JointEstimate:
     """Dead time, lag, gain, saturated speeds and dead band of one joint from its steps (both directions).
 
-    Dead time and lag are the medians over the moving steps in the linear range (a saturated step's rise is
-    clipped by the velocity limit, which shortens the apparent lag).
+    Dead time and lag are the medians over the moving steps in the working range: unsaturated (a saturated step's
+    rise is clipped, which shortens the apparent lag) and at least WORKING_FRACTION of the saturated speed.
     """
     if not records:
         raise ValueError("estimate_joint: no steps")
@@ -204,8 +206,11 @@ def estimate_joint(records: Sequence[StepRecord]) -> JointEstimate:
         band.append(min(max(d, lo, 0.0), hi))
         still.append(lo)
         gains.append(k)
-    dead = float(np.median([f.dead_time_s for f in linear_fits]))
-    lag = float(np.median([f.lag_s for f in linear_fits]))
+    # Dead time and lag of the working range: a hydraulic drive starts later on a small command (the chambers
+    # take longer to reach the load pressure on a small flow); the small steps serve the dead band only.
+    working = [f for f in linear_fits if abs(f.steady) >= WORKING_FRACTION * sat[f.command > 0]] or linear_fits
+    dead = float(np.median([f.dead_time_s for f in working]))
+    lag = float(np.median([f.lag_s for f in working]))
     return JointEstimate(joint, dead, lag, float(np.mean(gains)), (sat[0], sat[1]), (band[0], band[1]),
                          (still[0], still[1]), fits)
 

@@ -212,7 +212,10 @@ class Experiment:
                     c = u.get(j, 0.0)
                     if j in cut or c == 0.0:
                         continue
-                    speed = max(abs(v[p.index]), abs(c) * p.gain)
+                    # the measured speed (median of the last frames: a dynamic plant rings); the commanded one would
+                    # stop a step early while the dead time and lag estimates are still those of the small steps
+                    recent = [smp.v[p.index] for smp in rec.samples[-5:]] or [v[p.index]]
+                    speed = abs(float(np.median(recent)))
                     ahead = q[p.index] + math.copysign(speed * p.stop_s, c)
                     if not p.lo <= ahead <= p.hi:
                         cut.add(j)
@@ -281,7 +284,9 @@ class Experiment:
                     cmd = math.copysign(0.9 * span / hold / p.gain, cmd)
                     travel = 0.9 * span
                 q = self.link.q[p.index]
-                if not (p.lo + 0.02 * span <= q + math.copysign(travel, cmd) <= p.hi - 0.02 * span):
+                if any(abs(cmd - r.command) < 1e-9 for r in records):
+                    continue  # an amplitude capped to one already stepped
+                if not (p.lo + 0.05 * span <= q + math.copysign(1.1 * travel, cmd) <= p.hi - 0.05 * span):
                     # from the far side of the range (a long step) or around the centre (a short one)
                     start = centre - math.copysign(travel / 2.0, cmd)
                     start = float(np.clip(start, p.lo + 0.02 * span, p.hi - 0.02 * span - travel) if cmd > 0
@@ -388,7 +393,11 @@ def start_plant(plant_config: Path, speed: float, log: Callable[[str], None]) ->
         if not ready.wait(90.0):
             raise RuntimeError("sim_plant did not start within 90 s:\n" + "\n".join(lines[-20:]))
         log(f"sim_plant running on {plant_config} (pid {proc.pid})")
-        yield buses
+        try:
+            yield buses
+        except BaseException:
+            log("sim_plant's last output:\n" + "\n".join(lines[-15:]))
+            raise
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, 15)

@@ -4,7 +4,7 @@ Every control step turns the measured joint angles into joint-velocity commands 
 :class:`~tms_rc.excavator.hqp.HierarchicalQP` with these priorities, highest first:
 
 1. pump flow: ``sum_i flow_i |dq_i| <= pump_flow`` (16 linear rows, one per sign pattern; the pump flow and
-   each joint's flow from the machine's description);
+   each joint's flow identified on the machine, :mod:`tms_rc.identify`);
 2. joint (cylinder) velocity limits, rate-limited by the acceleration limits;
 3. joint position limits (velocity bounds that shrink towards a limit, so no step crosses it);
 4. ground and self-collision avoidance of the bucket tip and pin (height and distance from the
@@ -17,7 +17,8 @@ References run from the state at segment start to the target on trapezoidal spee
 space with every joint at the same fraction of its move, Cartesian segments along the tip line and the
 edge angle; the most limited of the joints (velocity, acceleration, pump-flow share) and the tip / edge
 speed and acceleration limits set the timing. The task rows ask for the reference velocity plus PID
-feedback on its position. The plant's command dead time and lag are compensated with a Smith
+feedback on its position. The machine's command dead time and lag (identified on it over CAN,
+``config/tms_rc/identified/<machine>.yaml``) are compensated with a Smith
 predictor: the controller acts on the state predicted for when its command takes effect (measured
 state + what the lag still moves + commands still in flight), joints' delays are equalised in the
 output, and each reference starts at the predicted state, so the machine follows it one predictor
@@ -41,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from tms_common.config import config_path
+from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.schema import load_schema, setting
 from tms_model.excavator import codes
@@ -55,7 +56,9 @@ __all__ = [
     "ControllerConfig",
     "ControllerSettings",
     "controller_config",
-    "flow_per_rad_s",
+    "IdentifiedHydraulics",
+    "identified_file",
+    "load_identified",
     "load_controller_config",
     "load_controller_settings",
     "settings_path",
@@ -108,16 +111,62 @@ class CollisionSettings:
 
 
 @dataclass(frozen=True)
-class IdentifiedDelays:
-    """Per joint command dead time and first-order lag [s] identified on the machine driven (an estimate, used by
-    the Smith predictor instead of the description's hydraulics plus ``transport_delay_s``)."""
+class IdentifiedHydraulics:
+    """What ``tms_rc_identify`` measured on one machine over its CAN bus, in :data:`JOINTS` order: command dead time
+    (CAN link included) and lag [s], flow into each drive per unit joint speed [L/min per rad/s] (the larger of the
+    two directions) and the pump flow [L/min]."""
 
-    dead_time_s: dict[str, float] = setting(lo=0.0)
-    lag_s: dict[str, float] = setting(lo=0.0)
+    source: str
+    dead_time_s: np.ndarray
+    lag_s: np.ndarray
+    flow_per_rad_s: np.ndarray
+    pump_flow_lpm: float
 
-    def __post_init__(self) -> None:
-        _per_joint_values("dead_time_s", self.dead_time_s)
-        _per_joint_values("lag_s", self.lag_s)
+
+def _remake(name: str) -> str:
+    return (f"make it with `tms_rc_identify --machine {name}` against the machine's bus, or "
+            f"`tms_rc_identify --machine {name} --plant-config config/sim/<plant>.yaml` against a simulated one")
+
+
+def load_identified(path: str | Path, name: str) -> IdentifiedHydraulics:
+    """The identified hydraulics of machine ``name`` from ``path``; a ConfigError naming the file (and, when it is
+    missing, the command that makes it) otherwise."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no identified hydraulics of {name}: {_remake(name)}")
+    data, _ = load_yaml(path)
+
+    def bad(key: str, problem: str) -> ConfigError:
+        return ConfigError(f"{path}: {key}: {problem} ({_remake(name)})")
+
+    if not isinstance(data, dict) or data.get("machine") != name:
+        raise bad("machine", f"expected {name!r}, got {data.get('machine') if isinstance(data, dict) else data!r}")
+    joints = data.get("joints")
+    if not isinstance(joints, dict) or set(joints) != set(JOINTS):
+        raise bad("joints", f"expected an entry for each of {list(JOINTS)}, got "
+                  f"{sorted(joints) if isinstance(joints, dict) else joints!r}")
+
+    def number(key: str, value: Any, lo: float) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < lo:
+            raise bad(key, f"expected a number >= {lo}, got {value!r}")
+        return float(value)
+
+    def per_joint(field_: str) -> np.ndarray:
+        out = []
+        for j in JOINTS:
+            value = joints[j].get(field_) if isinstance(joints[j], dict) else None
+            if isinstance(value, list):  # [negative, positive direction]: the pump row takes |dq|, the larger
+                value = max(number(f"joints.{j}.{field_}", v, 0.0) for v in value) if value else None
+            out.append(number(f"joints.{j}.{field_}", value, 0.0))
+        return np.array(out)
+
+    return IdentifiedHydraulics(
+        source=str(path),
+        dead_time_s=per_joint("dead_time_s"),
+        lag_s=per_joint("lag_s"),
+        flow_per_rad_s=per_joint("flow_lpm_per_rad_s"),
+        pump_flow_lpm=number("pump_flow_lpm", data.get("pump_flow_lpm"), 1.0),
+    )
 
 
 @dataclass(frozen=True)
@@ -133,8 +182,9 @@ class OsqpSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class ControllerSettings:
-    """The control choices of ``config/tms_rc/excavator_arm_controller.yaml``; the machine's figures (joint limits,
-    pump flow, flow drawn per joint, hydraulic delays) come from its description (:func:`controller_config`)."""
+    """The control choices of ``config/tms_rc/excavator_arm_controller.yaml``; the machine's figures come from its
+    description (geometry, joint limits) and its identified file (pump flow, flow drawn per joint, hydraulic delays;
+    :func:`controller_config`)."""
 
     rate_hz: float = setting(lo=1.0, doc="[Hz] control rate")
     position_limit_gain: dict[str, float] = setting(lo=0.0, doc="[1/s] approach gain towards a position limit")
@@ -148,8 +198,10 @@ class ControllerSettings:
     max_theta_w_accel: float = setting(lo=1e-6, doc="[rad/s^2]")
     #: one fraction for every joint or a mapping joint -> fraction (a value-dependent shape: checked below)
     joint_speed_scale: Any = setting(doc="fraction of each joint's velocity and acceleration limits")
-    transport_delay_s: float = setting(0.0, lo=0.0, hi=1.0, doc="[s] command transport added to the dead times")
-    identified_delays: IdentifiedDelays | None = setting(None, doc="measured delays instead of the description's")
+    transport_delay_s: float = setting(0.0, lo=0.0, hi=1.0,
+                                       doc="[s] transport outside the identified CAN link, added to the dead times")
+    identified: str = setting("identified/{name}.yaml",
+                              doc="the identified hydraulics per machine name, relative to config/tms_rc/")
     goal_tolerance_m: float = setting(lo=1e-6)
     goal_tolerance_rad: float = setting(lo=1e-6)
     via_tolerance_m: float = setting(0.05, lo=1e-6)
@@ -221,33 +273,32 @@ def load_controller_settings(path: str | Path | None = None) -> ControllerSettin
     return load_schema(ControllerSettings, path if path is not None else settings_path())
 
 
-def flow_per_rad_s(machine: Machine) -> np.ndarray:
-    """[L/min per rad/s] per joint: the flow a joint draws at its velocity limit over that limit (the description's
-    ``hydraulics.flow_at_limit_lpm``, linear in the speed); 0 for a joint on its own circuit."""
-    return np.array([machine.drives[j].flow_at_limit / machine.joint(j).velocity for j in JOINTS])
+def identified_file(settings: ControllerSettings, name: str) -> Path:
+    """The identified-hydraulics file of machine ``name``: ``settings.identified`` with ``{name}`` filled in,
+    relative to ``config/tms_rc/``."""
+    path = Path(settings.identified.format(name=name))
+    return path if path.is_absolute() else Path(config_path("tms_rc")) / path
 
 
-def controller_config(settings: ControllerSettings, machine: Machine) -> ControllerConfig:
-    """The controller of ``machine`` (an excavator description) with the choices ``settings``."""
+def controller_config(settings: ControllerSettings, machine: Machine,
+                      identified: IdentifiedHydraulics | None = None) -> ControllerConfig:
+    """The controller of ``machine`` (an excavator description: geometry, joint limits) with the choices ``settings``
+    and its hydraulics ``identified`` (default: read from :func:`identified_file` of its name)."""
     machine.require(EXCAVATOR)
-    if machine.pump_flow is None:
-        raise ConfigError(f"{machine.source}: hydraulics.pump_flow_lpm: the arm controller needs the pump flow")
+    hyd = identified or load_identified(identified_file(settings, machine.model_name), machine.model_name)
     scale = settings.joint_speed_scale
     if isinstance(scale, dict):
         speed_scale = np.array([float(scale[j]) for j in JOINTS])
     else:
         speed_scale = np.full(N, float(scale))
-    if settings.identified_delays is not None:
-        dead = np.array([settings.identified_delays.dead_time_s[j] for j in JOINTS])
-        lag = np.array([settings.identified_delays.lag_s[j] for j in JOINTS])
-    else:
-        dead = np.array([machine.drives[j].dead_time for j in JOINTS]) + settings.transport_delay_s
-        lag = np.array([machine.drives[j].time_constant for j in JOINTS])
+    # the identified dead time was measured over the CAN link; the controller's path to it (DDS) comes on top
+    dead = hyd.dead_time_s + settings.transport_delay_s
+    lag = hyd.lag_s.copy()
     col, pid = settings.collision, settings.pid
     return ControllerConfig(
         rate_hz=settings.rate_hz,
-        pump_flow_lpm=float(machine.pump_flow),
-        flow_per_rad_s=flow_per_rad_s(machine),
+        pump_flow_lpm=hyd.pump_flow_lpm,
+        flow_per_rad_s=hyd.flow_per_rad_s.copy(),
         position_limit_gain=np.array([settings.position_limit_gain[j] for j in JOINTS]),
         position_limit_margin=settings.position_limit_margin,
         use_acceleration_limits=settings.use_acceleration_limits,

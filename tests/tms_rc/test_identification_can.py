@@ -1,0 +1,47 @@
+"""``tms_rc_identify`` against a running ``sim_plant`` process over a python-can bus (udp_multicast): a short
+identification of the bucket finds the dead time and lag the plant's description gives it, within 30 %.
+
+The test may read the plant's description (the identification and the controller may not): it is the answer.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+
+import pytest
+import yaml
+
+from sim_bridge.config import load_plant
+from tests.rosproc import executable, free_can_ports
+from tms_common.config import config_path
+
+pytestmark = pytest.mark.integration
+
+JOINT = "bucket_joint"
+
+
+def test_a_short_identification_of_the_bucket_over_can_finds_the_plants_dead_time_and_lag(procs, domain, tmp_path):
+    rng = random.Random(domain * 7919 + time.monotonic_ns())
+    ports = free_can_ports(domain, 2, rng)
+    buses = {m: {"channel": f"239.77.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", "port": p}
+             for m, p in zip(("zx200", "ic120"), ports, strict=True)}
+    args = [executable("sim_bridge", "sim_plant"), "--ros-args", "-p", f"config:={config_path('sim', 'plant.yaml')}"]
+    for m, b in buses.items():
+        args += ["-p", f"{m}_can_interface:=udp_multicast", "-p", f"{m}_can_channel:={b['channel']}",
+                 "-p", f"{m}_can_port:={b['port']}"]
+    plant = procs(args, name="sim_plant")
+    assert plant.wait_for("sim_plant: running", 60), plant.output
+    out = tmp_path / "zx200.yaml"
+    ident = procs([executable("tms_rc", "tms_rc_identify"), "--machine", "zx200", "--can-interface", "udp_multicast",
+                   "--can-channel", buses["zx200"]["channel"], "--can-port", str(buses["zx200"]["port"]),
+                   "--joints", JOINT, "--amplitudes", "0.1,0.25", "--chirp-s", "0", "--no-pump", "--output", str(out)],
+                  name="tms_rc_identify")
+    assert ident.wait(240) == 0, ident.output
+    text = out.read_text()
+    assert f"--joints {JOINT}" in text.splitlines()[2]  # the command that made it
+    figures = yaml.safe_load(text)["joints"][JOINT]
+    drive = load_plant().description("zx200").drives[JOINT]
+    assert figures["dead_time_s"] == pytest.approx(drive.dead_time, rel=0.3), (figures, drive)
+    assert figures["lag_s"] == pytest.approx(drive.time_constant, rel=0.3), (figures, drive)
+    assert figures["gain"] == pytest.approx(1.0, rel=0.1)  # velocity mode: the machine's controller meters the speed
