@@ -530,7 +530,7 @@ class ExperimentRecorder:
         ax.set_ylabel("pressure [MPa]")
         ax.set_title(f"{machine}: cylinder pressures of one load pass, {start:.1f}-{end:.1f} s"
                      + ("" if complete else " (incomplete: the run ended in it)"))
-        ax.legend(loc="upper right", fontsize=7, ncol=2)
+        ax.legend(loc="best", fontsize=7, ncol=2)
         fig.tight_layout()
         fig.savefig(path, dpi=90)
         plt.close(fig)

@@ -41,7 +41,7 @@ def test_hydraulics_topic_is_labelled_and_follows_the_boom(start_plant, ros_node
     assert len(data) == len(LABELS)
     rest = dict(zip(LABELS, data, strict=True))
     relief = ZX.cylinders.relief_mpa
-    print(f"\nat rest [MPa]: " + ", ".join(f"{k} {v:.2f}" for k, v in rest.items()))
+    print("\nat rest [MPa]: " + ", ".join(f"{k} {v:.2f}" for k, v in rest.items()))
     assert rest["relief"] == pytest.approx(relief)
     # the boom's bottom chamber carries the front's weight; its rod side is at tank
     assert 1.0 < rest["boom_bottom"] < relief, rest
