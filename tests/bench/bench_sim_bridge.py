@@ -9,9 +9,12 @@
    commands (listed in the printout). Median of 3 runs per tree.
    With ``BENCH_BASE=<rev>`` the same probe also runs against a temporary ``git worktree add --detach`` of that
    revision (under /tmp, removed afterwards; the venv is shared, ``PYTHONPATH`` selects the tree and
-   ``AMENT_PREFIX_PATH`` is dropped so each tree reads its own ``config/``), alternating base and current, and
-   prints base, current and current/base. Only same-run ratios mean anything: the machine's speed varies 2-3x
-   between days. ``BENCH_BASE=HEAD`` compares uncommitted changes against the last commit.
+   ``AMENT_PREFIX_PATH`` is dropped so each tree reads its own ``config/``): a base and a current probe are built
+   side by side and step in turns of 1 s simulated, so both see the same outside load; it prints base, current,
+   current/base of the medians and the ratio of each run pair. Only same-run ratios mean anything: the machine's
+   speed varies 2-3x between days. ``BENCH_BASE=HEAD`` compares uncommitted changes against the last commit; with
+   no plant-core change (HEAD c0f87d3 against itself, load average 12) the run pairs gave 0.96-1.04 (paper site)
+   and 0.94-0.97 (ten machines): differences within ~5 % are not resolved.
 3. The same as 1 with the COM3 CAN I/O (all state frames encoded at their DBC cycles onto virtual buses).
 4. ``sim_plant`` as a separate process in real-time mode on udp_multicast: arrival period of the 10 ms
    ``Front_Angle`` frames measured in this process (p99 |period - 10 ms|; goal < 2 ms).
