@@ -37,16 +37,18 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import can
+import cantools
 import numpy as np
 
-from com3_can.bus import load_bus_config, open_bus
-from com3_can.codec import Com3Codec, codec_for
 from tms_common.config import config_path, data_root, load_yaml
 from tms_common.errors import ConfigError
 from tms_model.excavator.kinematics import JOINTS
+from tms_model.fleet import load_named
 from tms_model.machines import EXCAVATOR, Machine, load_machine
 from tms_rc.identification import (
     JointEstimate,
@@ -88,15 +90,49 @@ class Sample:
     u: np.ndarray  # the command sent on this tick
 
 
+class Codec:
+    """The machine's COM3 DBC through cantools. com3_can, on the same architecture level as tms_rc, is not imported
+    (docs/architecture.md); its DBC files are read from its package directory, as the plant's and bridge's are."""
+
+    def __init__(self, dbc: str) -> None:
+        self.db = cantools.database.load_file(str(resources.files("com3_can").joinpath("dbc", dbc)), strict=True)
+
+    def frame_id(self, name: str) -> int:
+        return self.db.get_message_by_name(name).frame_id
+
+    def cycle_ms(self, name: str) -> int:
+        return int(self.db.get_message_by_name(name).cycle_time or 10)
+
+    def neutral(self, name: str) -> dict[str, float]:
+        """Every signal of frame ``name`` at physical 0 (clamped into its range)."""
+        out = {}
+        for sig in self.db.get_message_by_name(name).signals:
+            lo = sig.minimum if sig.minimum is not None else -math.inf
+            hi = sig.maximum if sig.maximum is not None and sig.maximum > lo else math.inf
+            out[sig.name] = min(max(0.0, lo), hi)
+        return out
+
+    def encode(self, name: str, values: Mapping[str, float]) -> bytes:
+        return bytes(self.db.get_message_by_name(name).encode(dict(values), scaling=True, strict=False))
+
+    def decode(self, arbitration_id: int, data: bytes) -> tuple[str, dict[str, float]]:
+        msg = self.db.get_message_by_frame_id(arbitration_id)
+        return msg.name, {k: float(v) for k, v in msg.decode(data, decode_choices=False).items()}
+
+
+def bus_config(name: str) -> dict[str, Any]:
+    """``interface``, ``channel`` (and ``port``) of ``config/can/<name>.yaml``."""
+    data, _ = load_yaml(config_path("can", f"{name}.yaml"))
+    return {k: data[k] for k in ("interface", "channel", "port") if k in data}
+
+
 class Link:
     """The COM3 peer: a command frame on every Front_Angular_Velocity frame, the latest state kept per tick."""
 
-    def __init__(self, codec: Com3Codec, bus_cfg: Mapping[str, Any]) -> None:
-        import can
-
+    def __init__(self, codec: Codec, bus_cfg: Mapping[str, Any]) -> None:
         self._can = can
         self.codec = codec
-        self.bus = open_bus(bus_cfg)
+        self.bus = can.Bus(ignore_config=True, **bus_cfg)
         self.dt = codec.cycle_ms("Front_Angular_Velocity") * 1e-3
         self.tick = 0
         self.q: np.ndarray | None = None
@@ -249,10 +285,14 @@ class Experiment:
             moves = {j: d for j, d in moves.items() if abs(d) > tol}
             if not moves:
                 return
-            speed = {j: 0.5 * self.plans[j].vmax for j in moves}
-            ticks = {j: int(round(abs(d) / (speed[j] * self.plans[j].gain) / self.link.dt)) for j, d in moves.items()}
-            self.run(lambda k: {j: math.copysign(speed[j], d) for j, d in moves.items() if k < ticks[j]},
-                     max(ticks.values()), guard=False)
+            speed = {j: math.copysign(0.5 * self.plans[j].vmax, d) for j, d in moves.items()}
+            ticks = {j: int(round(abs(d) / (abs(speed[j]) * self.plans[j].gain) / self.link.dt))
+                     for j, d in moves.items()}
+
+            def command(k: int, speed: dict[str, float] = speed, ticks: dict[str, int] = ticks) -> dict[str, float]:
+                return {j: v for j, v in speed.items() if k < ticks[j]}
+
+            self.run(command, max(ticks.values()), guard=False)
             self.rest()
 
     def step(self, joint: str, command: float, hold_s: float) -> StepRecord:
@@ -268,7 +308,8 @@ class Experiment:
         return StepRecord(joint, command, t, a["v"][:, p.index], held * self.link.dt, a["flow"][:, p.index])
 
     # -- procedures
-    def identify_joint(self, joint: str, amplitudes: Sequence[float], chirp_s: float) -> tuple[JointEstimate, list[StepRecord], dict[str, Any]]:
+    def identify_joint(self, joint: str, amplitudes: Sequence[float],
+                       chirp_s: float) -> tuple[JointEstimate, list[StepRecord], dict[str, Any]]:
         p = self.plans[joint]
         centre = float(np.clip(self.start_q[p.index], p.lo, p.hi))
         span = p.hi - p.lo
@@ -425,8 +466,8 @@ def _num(x: float, nd: int = 4) -> str:
 
 
 def render(name: str, command_line: str, plant_lines: Sequence[str], estimates: Mapping[str, JointEstimate],
-           flows: Mapping[str, tuple[float, float]], chirps: Mapping[str, Mapping[str, Any]], pump: Mapping[str, Any] | None,
-           dt: float) -> str:
+           flows: Mapping[str, tuple[float, float]], chirps: Mapping[str, Mapping[str, Any]],
+           pump: Mapping[str, Any] | None, dt: float) -> str:
     out = [
         f"# Front hydraulics of {name} identified over its COM3 CAN bus by tms_rc_identify (tms_rc/identify.py),",
         "# read by the arm controller (config/tms_rc/excavator_arm_controller.yaml `identified`). Made with:",
@@ -455,9 +496,10 @@ def render(name: str, command_line: str, plant_lines: Sequence[str], estimates: 
             f"  {j}: {{dead_time_s: {_num(e.dead_time_s, 3)}, lag_s: {_num(e.lag_s, 3)}, gain: {_num(e.gain, 3)}, "
             f"saturated_speed_rad_s: [{_num(e.saturated_speed[0], 3)}, {_num(e.saturated_speed[1], 3)}], "
             f"dead_band_rad_s: [{_num(e.dead_band[0], 4)}, {_num(e.dead_band[1], 4)}], "
-            f"flow_lpm_per_rad_s: [{_num(flows[j][0], 1)}, {_num(flows[j][1], 1)}], bandwidth_hz: {_num(c.get('bandwidth_hz', math.nan), 3)}}}"
+            f"flow_lpm_per_rad_s: [{_num(flows[j][0], 1)}, {_num(flows[j][1], 1)}], "
+            f"bandwidth_hz: {_num(c.get('bandwidth_hz', math.nan), 3)}}}"
         )
-    out.append("# The steps: command [rad/s], held [s] -> steady speed [rad/s], dead time [s], lag [s], fit rms [rad/s]")
+    out.append("# The steps: command [rad/s] -> steady speed [rad/s], dead time [s], lag [s], fit rms [rad/s]")
     for j, e in estimates.items():
         for f in e.fits:
             out.append(f"#   {j} {f.command:+.4f} -> {f.steady:+.4f}"
@@ -482,7 +524,7 @@ def _plant_lines(plant_config: Path | None, machine_file: Path | None, bus: Mapp
 # -------------------------------------------------------------------------------------------------------- main
 def _args(argv: Sequence[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="tms_rc_identify", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--machine", required=True, help="the excavator's name on the site (e.g. zx200, zx120)")
+    ap.add_argument("--machine", required=True, help="the excavator's name on the site (its namespace)")
     ap.add_argument("--plant-config", type=Path, help="start sim_plant on this plant YAML (private CAN buses)")
     ap.add_argument("--speed", type=float, default=1.0, help="sim_plant speed (x real time) with --plant-config")
     ap.add_argument("--machine-config", type=Path, help="the machine description (default: the plant config's "
@@ -506,8 +548,6 @@ def _description(name: str, machine_file: Path | None, plant_config: Path | None
         machine_file = Path(entry) if Path(entry).is_absolute() else config_path(entry)
     if machine_file is not None:
         return load_machine(machine_file.stem, machine_file).named(name), machine_file
-    from tms_model.fleet import load_named
-
     m = load_named(name)
     return m, Path(m.source) if m.source else None
 
@@ -535,7 +575,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if unknown:
             raise ConfigError(f"--joints: {unknown} are not front joints {list(JOINTS)}")
         amplitudes = sorted(float(a) for a in args.amplitudes.split(","))
-        codec = codec_for(machine.dbc, machine.model_name)
+        codec = Codec(machine.dbc)
     except (ConfigError, ValueError) as exc:
         print(f"tms_rc_identify: {exc}", file=sys.stderr)
         return 2
@@ -545,8 +585,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             buses = stack.enter_context(start_plant(args.plant_config, args.speed, log))
             bus = buses[args.machine]
         else:
-            bus = dict(load_bus_config(args.machine))
-            bus = {k: v for k, v in bus.items() if k in ("interface", "channel", "port")}
+            bus = bus_config(args.machine)
             for key in ("interface", "channel", "port"):
                 value = getattr(args, f"can_{key}")
                 if value is not None:
