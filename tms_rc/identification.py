@@ -194,8 +194,6 @@ def estimate_joint(records: Sequence[StepRecord]) -> JointEstimate:
         top = max(abs(f.steady) for f in moving)
         sat.append(top)
         linear = [f for f in moving if abs(f.steady) < LINEAR_FRACTION * top] or moving
-        # a step the dead-time + lag model does not describe (residual above a tenth of its speed) is left out
-        linear = [f for f in linear if f.rms <= 0.1 * abs(f.steady)] or linear
         # the largest unsaturated step bounds the linear range; a lone step beyond it is saturated
         linear_fits.extend(linear)
         amp = np.array([abs(f.command) for f in linear])
@@ -209,6 +207,9 @@ def estimate_joint(records: Sequence[StepRecord]) -> JointEstimate:
     # Dead time and lag of the working range: a hydraulic drive starts later on a small command (the chambers
     # take longer to reach the load pressure on a small flow); the small steps serve the dead band only.
     working = [f for f in linear_fits if abs(f.steady) >= WORKING_FRACTION * sat[f.command > 0]] or linear_fits
+    # a step the dead-time + lag model does not describe (residual above a tenth of its speed: the joint was not
+    # at rest when it began, say) is left out
+    working = [f for f in working if f.rms <= 0.1 * abs(f.steady)] or working
     dead = float(np.median([f.dead_time_s for f in working]))
     lag = float(np.median([f.lag_s for f in working]))
     return JointEstimate(joint, dead, lag, float(np.mean(gains)), (sat[0], sat[1]), (band[0], band[1]),

@@ -35,7 +35,7 @@ def test_a_short_identification_of_the_bucket_over_can_finds_the_plants_dead_tim
     out = tmp_path / "zx200.yaml"
     ident = procs([executable("tms_rc", "tms_rc_identify"), "--machine", "zx200", "--can-interface", "udp_multicast",
                    "--can-channel", buses["zx200"]["channel"], "--can-port", str(buses["zx200"]["port"]),
-                   "--joints", JOINT, "--amplitudes", "0.1,0.25", "--chirp-s", "0", "--no-pump", "--output", str(out)],
+                   "--joints", JOINT, "--amplitudes", "0.1,0.2,0.3", "--chirp-s", "0", "--no-pump", "--output", str(out)],
                   name="tms_rc_identify")
     assert ident.wait(240) == 0, ident.output
     text = out.read_text()
