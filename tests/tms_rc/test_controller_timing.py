@@ -19,6 +19,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import load_kinematics
@@ -27,9 +28,12 @@ from tms_rc.excavator.controller import ArmController, load_controller_config, l
 from tms_rc.excavator.plant import LagDeadTimePlant
 
 PLANT_DT = 0.01  # [s] the MuJoCo plant's step
-# The MuJoCo plant's hydraulics (config/machines/zx200.yaml) + CAN/DDS transport.
-PLANT_DEAD_TIME = np.array([0.932, 0.6495, 0.4255, 0.310]) + 0.03
-PLANT_LAG = np.array([0.35, 0.25, 0.2, 0.15])
+# The joints as the ZX200 was identified over CAN (config/tms_rc/identified/zx200.yaml, what the controller assumes):
+# these tests are about the controller's timing (late, skipped and restamped ticks), not about a model mismatch.
+_IDENTIFIED = load_yaml(config_path("tms_rc", "identified", "zx200.yaml"))[0]["joints"]
+_JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
+PLANT_DEAD_TIME = np.array([_IDENTIFIED[j]["dead_time_s"] for j in _JOINTS])
+PLANT_LAG = np.array([_IDENTIFIED[j]["lag_s"] for j in _JOINTS])
 
 
 @pytest.fixture(scope="module")
