@@ -284,9 +284,11 @@ class ValveFront:
             x = self.spool[i]
             opening = max(0.0, abs(x) - ol) / (1.0 - ol)
             demand[i] = math.copysign(opening * self.q_fn[i], x) if opening > 0 else 0.0
-        # the parking brake applies once the swing spool has been closed for its delay and the swing is (nearly) still
+        # the parking brake is spring-applied and released by pilot pressure: it applies at once when the pilot line
+        # is cut off (hydraulic lock), else once the swing spool has been closed for its delay and the swing is still
         self._swing_idle = self._swing_idle + self.dt if demand[0] == 0.0 else 0.0
-        self.swing_brake = self._swing_idle >= self.brake_delay and abs(self.v[0]) < 0.05
+        self.swing_brake = self.cut_alpha is not None or (
+            self._swing_idle >= self.brake_delay and abs(self.v[0]) < 0.05)
         loads = [self.p_ext[i] if demand[i] > 0 else self.p_ret[i] for i in range(n) if demand[i] != 0.0]
         p_pump = min(max(loads) + self.margin, max(self.relief)) if loads else self.tank + self.margin
         supply = min(self.pump_flow, self.pump_power / p_pump)

@@ -322,9 +322,9 @@ def test_step_and_chirp_of_each_function(spec):
 
 @pytest.mark.parametrize("case", ["swing", "boom_lowering"])
 def test_emergency_stop_with_inertia(spec, case):
-    """Pilot cut-off at full swing speed or mid boom lowering: the swing coasts against its relief torque (stop angle
-    ~ w^2 / (2 T_relief / I) after the solenoid and the spools), the boom stops in the oil's give; after the lock
-    nothing moves."""
+    """Pilot cut-off at full swing speed or mid boom lowering: the swing is braked by its relief torque and its parking
+    brake, which the cut-off applies (stop angle ~ w^2 / (2 (T_relief + T_brake) / I) after the solenoid and the
+    spools), the boom stops in the oil's give; after the lock nothing moves."""
     plant = Plant(spec)
     zx = plant.excavator
     _hold(plant, POSES[0], seconds=1.0)
@@ -353,10 +353,10 @@ def test_emergency_stop_with_inertia(spec, case):
         plant.step()
     drift = max(abs(a - b) for a, b in zip(zx.front.q, q_rest, strict=True))
     if case == "swing":
-        torque = zx.description.cylinders.swing.relief_torque
+        torque = zx.description.cylinders.swing.relief_torque + zx.description.cylinders.swing.brake_torque
         predicted = w0**2 / (2 * torque / inertia) + abs(w0) * (cut.solenoid_delay + 3 * cut.front_time_constant)
         print(f"\nswing at {w0:.2f} rad/s (inertia {inertia / 1e3:.0f} t m^2), cut-off: at rest after {t:.2f} s, "
-              f"{math.degrees(angle):.1f} deg (relief-limited prediction {math.degrees(predicted):.1f} deg); "
+              f"{math.degrees(angle):.1f} deg (relief and brake: {math.degrees(predicted):.1f} deg predicted); "
               f"drift after the lock {drift:.2e} rad")
         assert 0.6 * predicted <= abs(angle) <= 1.3 * predicted
     else:
