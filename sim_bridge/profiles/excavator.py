@@ -294,31 +294,31 @@ def _linkage_frames(joint: Joint, link: Linkage) -> tuple[float, float]:
     return math.atan2(j0[1] - k[1], j0[0] - k[0]), math.atan2(jb[1] - lb[1], jb[0] - lb[0])
 
 
+def _link_body(name: str, part: str, pin: tuple[float, float], angle: float, length: float, indent: str,
+               rod_site: bool = False) -> list[str]:
+    """One four-bar link: a body pinned at ``pin`` turned by ``angle`` towards J, its hinge, a capsule of ``length``
+    and (the guide link) the cylinder's rod site at its end."""
+    lines = [
+        f'{indent}<body name="{name}_{part}_link" pos="{pin[0]} 0 {pin[1]}" euler="0 {-angle} 0">',
+        f'{indent}  <joint name="{name}_{part}_joint" type="hinge" axis="0 1 0" armature="{LINKAGE_ARMATURE}"/>',
+        f'{indent}  <geom type="capsule" fromto="0 0 0 {length} 0 0" size="0.06" material="zx" '
+        f'contype="0" conaffinity="0" mass="{LINKAGE_MASS}"/>',
+    ]
+    if rod_site:
+        lines.append(f'{indent}  <site name="{name}_bucket_cyl_rod" pos="{length} 0 0" size="0.06"/>')
+    return [*lines, f"{indent}</body>"]
+
+
 def _guide_body(name: str, joint: Joint, link: Linkage, indent: str) -> list[str]:
     """The four-bar's guide link, pinned on the arm at K, the cylinder rod at its end J."""
     angle, _ = _linkage_frames(joint, link)
-    k = link.guide_pin
-    return [
-        f'{indent}<body name="{name}_guide_link" pos="{k[0]} 0 {k[1]}" euler="0 {-angle} 0">',
-        f'{indent}  <joint name="{name}_guide_joint" type="hinge" axis="0 1 0" armature="{LINKAGE_ARMATURE}"/>',
-        f'{indent}  <geom type="capsule" fromto="0 0 0 {link.guide_length} 0 0" size="0.06" material="zx" '
-        f'contype="0" conaffinity="0" mass="{LINKAGE_MASS}"/>',
-        f'{indent}  <site name="{name}_bucket_cyl_rod" pos="{link.guide_length} 0 0" size="0.06"/>',
-        f"{indent}</body>",
-    ]
+    return _link_body(name, "guide", link.guide_pin, angle, link.guide_length, indent, rod_site=True)
 
 
 def _side_body(name: str, joint: Joint, link: Linkage, indent: str) -> list[str]:
     """The four-bar's side link, pinned on the bucket at L; the connect equality joins its end to J."""
     _, angle = _linkage_frames(joint, link)
-    lb = link.link_pin
-    return [
-        f'{indent}<body name="{name}_side_link" pos="{lb[0]} 0 {lb[1]}" euler="0 {-angle} 0">',
-        f'{indent}  <joint name="{name}_side_joint" type="hinge" axis="0 1 0" armature="{LINKAGE_ARMATURE}"/>',
-        f'{indent}  <geom type="capsule" fromto="0 0 0 {link.link_length} 0 0" size="0.06" material="zx" '
-        f'contype="0" conaffinity="0" mass="{LINKAGE_MASS}"/>',
-        f"{indent}</body>",
-    ]
+    return _link_body(name, "side", link.link_pin, angle, link.link_length, indent)
 
 
 def linkage_angles(joint: Joint, link: Linkage, q: float) -> tuple[float, float]:
