@@ -176,7 +176,8 @@ def test_scripted_excavate_removes_soil_and_release_fills_the_vessel(arm_stack) 
     stack.feedback.clear()
     status, res = stack.run("release", TmsRpZx200ReleaseSimple.Goal(target_angle=swing), timeout=120)
     assert status == SUCCEEDED and res.error_code.val == codes.SUCCESS, res.message
-    assert carry_end_speed > 0.02, f"the pass-through carry waited for rest (joint speed {carry_end_speed:.3f} rad/s)"
+    # still moving when handed on: faster than the controller's rest speed (0.01 rad/s), which a goal waits for
+    assert carry_end_speed > 0.01, f"the pass-through carry waited for rest (joint speed {carry_end_speed:.3f} rad/s)"
     # planned from where the carry goes, not from the lagging joint_states: over the vessel already, so
     # the release opens at once (release_swing_in_open), with no swing back
     assert stack.procs["planner"].wait_for(
