@@ -172,8 +172,10 @@ def test_static_and_dynamic_terrain_through_the_db_while_the_excavator_digs(arm_
     # the cut: the strip the bucket swept (its width 2 x bucket_radius, from the tip target back by the drag)
     half = CFG.excavation.bucket_radius
     cut = (xs > x - 1.5) & (xs < x) & (np.abs(ys - mound.cy) < half) & inner
-    assert diff[cut].min() < -0.25, diff[cut].min()
-    assert np.mean(diff[cut] < -0.1) > 0.3, np.sort(diff[cut])[:10]
+    # the physical plant's bucket meets the soil's resistance and cuts a shallower, shorter strip than the kinematic
+    # one did (0.37-0.40 m deep there, 0.24 m in a run on it): well beyond the scanner's 2 cm noise either way
+    assert diff[cut].min() < -0.15, diff[cut].min()
+    assert np.mean(diff[cut] < -0.1) > 0.1, np.sort(diff[cut])[:10]
     # elsewhere, well away from the strip (and from the spill at its edges): the survey within the scan noise
     far = inner & ((np.abs(ys - mound.cy) > half + 1.0) | (xs > mound.cx + 1.0))
     off = np.abs(diff[far])
