@@ -89,7 +89,6 @@ class JointBank:
         self.flow_scale = 1.0  # last pump-flow scaling (1 = pumps not saturated)
         self.cut_alpha: float | None = None  # pilot cut off: per-step decay factor of every output
         self.v_ref = [0.0] * len(joints)  # the speed the valves meter (the dynamics' reference; ``v`` is measured)
-        self.torque = [0.0] * len(joints)  # what the drives push with [N m] (sim_bridge.physics)
 
     def set_cutoff(self, time_constant: float | None) -> None:
         """Engage (a spool-centring time constant [s]) or release (None) the pilot cut-off.
@@ -142,8 +141,7 @@ class JointBank:
             self.v_ref[i] = v
 
     def set_forces(self, forces: Sequence[float], speeds: Sequence[float]) -> None:
-        """The drives' torques the dynamics produced (reported; no pressure model on these joints)."""
-        self.torque[:] = forces
+        """The dynamics' drive torques: nothing to report on these joints (no pressure model, no pressure frames)."""
 
     def reset(self) -> None:
         """Forget the pipelines (replay, teleport)."""
