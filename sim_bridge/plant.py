@@ -83,6 +83,12 @@ class Plant:
             drives += own
         self.drives = FluidDrives(self.model.model, self.model.data, drives, self.spec.substeps)
         self._joint_names = {name: [f"{name}_{j}" for j in mach.bank.names] for name, mach in self.machines.items()}
+        #: machine -> (qpos addresses, dof addresses) of its bank's joints: one gather per step, not a name lookup each
+        self._joint_adr = {
+            name: (np.array([self.model.qpos_adr(j) for j in joints], dtype=int),
+                   np.array([self.model.dof(j) for j in joints], dtype=int))
+            for name, joints in self._joint_names.items()
+        }
         #: excavator -> its swing's dof (the parking brake is friction on it)
         self._swing_dofs = {
             name: self.model.dof(f"{name}_{mach.front.names[0]}")
@@ -103,6 +109,8 @@ class Plant:
         self._tip_velocity = np.zeros(3)
         self._cut_direction = (1.0, 0.0, 0.0)
         self.cut_force: tuple[np.ndarray, np.ndarray] | None = None  # the soil's last force on the bucket edge
+        self._buried = 0.0  # [N] the wedge's resistance to vertical motion of a buried bucket (else 0)
+        self._wedge_memo = None  # ((soil id, (depth, rake, surcharge)), (horizontal, vertical)) of the last wedge
         self._edges: dict[str, tuple[float, float, float]] = {}
 
 
@@ -163,7 +171,8 @@ class Plant:
 
         The horizontal resistance is Coulomb friction on the front's joints (MuJoCo's ``frictionloss``, solved
         implicitly: a bucket its cylinders cannot drag through the soil stalls instead of chattering), each joint
-        getting |J_edge^T F|: what the cut costs it. Lifting the edge straight up costs the joints little. The
+        getting |J_edge^T F|: what the cut costs it. Lifting the edge straight up costs the joints little, unless the
+        bucket is buried under more soil than its height: then the vertical motion meets the wedge too. The wedge's
         vertical part is an applied force at the edge."""
         m, data = self.model.model, self.model.data
         xfrc = data.xfrc_applied
@@ -189,6 +198,10 @@ class Plant:
         mujoco.mj_jacSite(m, data, jac, None, self.model.tip_site)
         horizontal = np.array([force[0], force[1], 0.0])
         m.dof_frictionloss[dofs] += np.abs(horizontal @ jac[:, dofs])
+        if self._buried > 0.0:
+            # a bucket under more soil than its own height meets the wedge whichever way it moves in the arm's
+            # plane: the same resistance on vertical motion (a curl or a lift through the soil stalls like a crowd)
+            m.dof_frictionloss[dofs] += self._buried * np.abs(jac[2, dofs])
         xfrc[body, 2] += force[2]
         xfrc[body, 3:] += np.cross(tip - data.xipos[body], np.array([0.0, 0.0, force[2]]))
 
@@ -202,6 +215,7 @@ class Plant:
         direction is the edge's horizontal motion (a still edge: the last one it moved in)."""
         soil = self.spec.soil.cutting
         tip = self._tip
+        self._buried = 0.0
         if soil is None or tip is None:
             return None
         # the edge cuts the cells it passes down to its own height: the depth of cut is the uncut surface two cells
@@ -225,14 +239,28 @@ class Plant:
         self._cut_direction = (ux, uy, 0.0)  # the wedge lies in the arm's vertical plane (a bucket cuts fore or aft)
         # the wedge's inertia term (McKyes) is left out: it grows with the square of a speed the same force sets, and
         # at the bucket's speeds it is a few percent of the weight term
-        f = fee_force(soil, rake, tool, bucket.width, surcharge=surcharge)
-        h, v = float(f.horizontal[0] if np.ndim(f.horizontal) else f.horizontal), \
-            float(f.vertical[0] if np.ndim(f.vertical) else f.vertical)
+        h, v = self._wedge(soil, rake, tool, bucket.width, surcharge)
+        # buried deeper than the bucket is high: resisted vertically too, fully once a bucket height of soil is above
+        self._buried = h * min(1.0, (depth - tool) / tool) if depth > tool else 0.0
         ux, uy, _ = self._cut_direction
         # the wedge's vertical force (on the tool, + up: the soil draws a raked edge down) exists while it cuts:
         # ramped in over the first 2 cm/s of the edge's motion along the arm, none on a still edge
         along = abs(float(self._tip_velocity[0] * ux + self._tip_velocity[1] * uy))
         return np.array([-h * ux, -h * uy, v * min(1.0, along / 0.02)]), tip
+
+    def _wedge(self, soil, rake: float, depth: float, width: float, surcharge: float) -> tuple[float, float]:
+        """(horizontal, vertical) wedge force [N]; the last one again while the cut has not changed by more than
+        2 mm of depth, 0.2 degrees of rake or 1 % of surcharge (a still or slow edge: the beta search is most of the
+        soil's cost per step)."""
+        key = np.array([depth, rake, surcharge])
+        last = self._wedge_memo
+        if last is not None and last[0][0] == id(soil) and np.all(np.abs(key - last[0][1]) <= (
+                0.002, 0.0035, 0.01 * abs(last[0][1][2]) + 1.0)):
+            return last[1]
+        f = fee_force(soil, rake, depth, width, surcharge=surcharge)
+        out = float(np.ravel(f.horizontal)[0]), float(np.ravel(f.vertical)[0])
+        self._wedge_memo = ((id(soil), key), out)
+        return out
 
     def step(self) -> None:
         """Advance one ``dt``: valves, bases, dynamics (MuJoCo), soil."""
@@ -245,10 +273,12 @@ class Plant:
         self._loads()
         self.drives.step()
         force, speed = self.drives.force, self.model.data.actuator_velocity[self.drives.ids]
+        qpos, qvel = self.model.data.qpos, self.model.data.qvel
         for name, mach in self.machines.items():
             bank = mach.bank
-            for i, joint in enumerate(self._joint_names[name]):
-                bank.q[i], bank.v[i] = self.model.joint_state(joint)
+            qadr, dadr = self._joint_adr[name]
+            bank.q[:] = qpos[qadr].tolist()
+            bank.v[:] = qvel[dadr].tolist()
             sl = self._drive_slices[name]
             bank.set_forces(force[sl], speed[sl])
         if self.excavator is not None:

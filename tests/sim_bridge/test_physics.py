@@ -437,13 +437,17 @@ def test_digging_force_rises_with_cut_depth(spec):
     forces = [r[0] for r in rows]
     assert forces[0] > 0.0 and forces[0] < forces[1] < forces[2]
     assert rows[0][1] < rows[2][1]  # the arm cylinder works harder in the deeper cut
-    # the bucket curled through a shallow and a 2 m deep cut: the deep one loads its cylinder more
+    # the bucket curled through a shallow and a 2 m deep cut, and the arm crowded through the deep one: the deep
+    # bucket is buried a bucket height under the surface, its cylinders reach relief and it stalls
     shallow = _drag(spec, 0.3, seconds=1.0, joint="bucket_joint")
     deep = _drag(spec, 2.0, seconds=1.0, joint="bucket_joint")
+    crowd = _drag(spec, 2.0, seconds=1.0, joint="arm_joint")
     relief = spec.description(spec.excavator).cylinders.relief_pa
-    for _, p, _, d, p_end, w_end in (shallow, deep):
-        print(f"bucket curl {d:.2f} m deep: cylinder {p / 1e6:.1f} MPa as the cut starts, {p_end / 1e6:.1f} MPa after "
-              f"1 s (relief {relief / 1e6:.1f}), bucket at {w_end:+.3f} rad/s of 0.5 commanded")
-    assert deep[4] > shallow[4]
-    # Not asserted: that the deep bucket then stops. The resistance is friction along the arm's heading only; a
-    # curling edge rises through the soil and meets little of it, so the curl goes on (no penetration model).
+    runs = (("bucket curl", shallow), ("bucket curl", deep), ("arm crowd", crowd))
+    for what, (_, p, travel, d, p_end, w_end) in runs:
+        print(f"{what} {d:.2f} m deep: cylinder {p / 1e6:.1f} MPa as the cut starts, {p_end / 1e6:.1f} MPa after "
+              f"1 s (relief {relief / 1e6:.1f}), at {w_end:+.3f} rad/s of 0.5 commanded, edge moved {travel:.3f} m")
+    assert shallow[5] > 0.4  # the shallow curl goes through at nearly its commanded speed
+    for stalled in (deep, crowd):
+        assert stalled[4] > 0.97 * relief  # the cylinder at its relief setting ...
+        assert abs(stalled[5]) < 0.05 and stalled[2] < 0.1  # ... and the edge stopped in the soil
