@@ -95,6 +95,9 @@ class FluidDrives:
         self.substeps = substeps
         self.n = len(drives)
         self.ids = np.array([d.actuator for d in drives], dtype=int)
+        #: the drives as one slice of MuJoCo's actuator arrays when they are its actuators in order (a view each
+        #: substep instead of a gather)
+        self._sel = slice(0, self.n) if np.array_equal(self.ids, np.arange(model.nu)) else self.ids
         mujoco.mj_forward(model, data)
         mass = [self._effective_mass(d.actuator) if d.dof < 0 else self._joint_inertia(d.dof) / d.ratio**2
                 for d in drives]
@@ -163,17 +166,17 @@ class FluidDrives:
     def step(self) -> None:
         """Advance ``substeps`` MuJoCo steps with the drives' forces recomputed before each."""
         m, d = self.model, self.data
-        ids, h = self.ids, self.sub_dt
+        ids, h = self._sel, self.sub_dt
         k, kv, kc = self.k, self.kv, self.kv + self.c
-        x_ref, f_min, f_max = self.x_ref, self.f_min, self.f_max
+        x_ref, f_min, f_max, x_min, x_max = self.x_ref, self.f_min, self.f_max, self.x_min, self.x_max
         push = kv * self.v_ref
         dx = self.v_ref * h
         for _ in range(self.substeps):
             mujoco.mj_step1(m, d)
             x_ref += dx
-            np.minimum(np.maximum(x_ref, self.x_min, out=x_ref), self.x_max, out=x_ref)
+            np.clip(x_ref, x_min, x_max, out=x_ref)
             f = k * (x_ref - d.actuator_length[ids]) + push - kc * d.actuator_velocity[ids]
-            fc = np.minimum(np.maximum(f, f_min), f_max)
+            fc = np.clip(f, f_min, f_max)
             # where the relief opens, the oil that cannot follow goes to tank: the spring holds the relief force
             x_ref += (fc - f) / k
             d.ctrl[ids] = fc

@@ -171,9 +171,9 @@ class Plant:
 
         The horizontal resistance is Coulomb friction on the front's joints (MuJoCo's ``frictionloss``, solved
         implicitly: a bucket its cylinders cannot drag through the soil stalls instead of chattering), each joint
-        getting |J_edge^T F|: what the cut costs it. Lifting the edge straight up costs the joints little, unless the
-        bucket is buried under more soil than its height: then the vertical motion meets the wedge too. The wedge's
-        vertical part is an applied force at the edge."""
+        getting |J_edge^T F|: what the cut costs it (a crowd, or a curl while the edge moves along the arm, deeper
+        than the cylinders can drag stalls at relief). Lifting the edge straight up costs the joints little. The
+        wedge's vertical part is an applied force at the edge."""
         m, data = self.model.model, self.model.data
         xfrc = data.xfrc_applied
         xfrc[:] = 0.0
@@ -198,12 +198,10 @@ class Plant:
         mujoco.mj_jacSite(m, data, jac, None, self.model.tip_site)
         horizontal = np.array([force[0], force[1], 0.0])
         m.dof_frictionloss[dofs] += np.abs(horizontal @ jac[:, dofs])
-        if self._buried > 0.0:
-            # a bucket under more soil than its own height meets the wedge whichever way it moves in the arm's
-            # plane: the same resistance on vertical motion (a curl or a lift through the soil stalls like a crowd)
-            m.dof_frictionloss[dofs] += self._buried * np.abs(jac[2, dofs])
         xfrc[body, 2] += force[2]
-        xfrc[body, 3:] += np.cross(tip - data.xipos[body], np.array([0.0, 0.0, force[2]]))
+        r = tip - data.xipos[body]
+        xfrc[body, 3] += r[1] * force[2]  # the moment r x (0, 0, fz) about the bucket's centre of mass
+        xfrc[body, 4] -= r[0] * force[2]
 
     def _cutting_force(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(force of the soil on the bucket edge [N], the edge) while the edge is below the surface, else None.
@@ -215,7 +213,6 @@ class Plant:
         direction is the edge's horizontal motion (a still edge: the last one it moved in)."""
         soil = self.spec.soil.cutting
         tip = self._tip
-        self._buried = 0.0
         if soil is None or tip is None:
             return None
         # the edge cuts the cells it passes down to its own height: the depth of cut is the uncut surface two cells
@@ -240,8 +237,6 @@ class Plant:
         # the wedge's inertia term (McKyes) is left out: it grows with the square of a speed the same force sets, and
         # at the bucket's speeds it is a few percent of the weight term
         h, v = self._wedge(soil, rake, tool, bucket.width, surcharge)
-        # buried deeper than the bucket is high: resisted vertically too, fully once a bucket height of soil is above
-        self._buried = h * min(1.0, (depth - tool) / tool) if depth > tool else 0.0
         ux, uy, _ = self._cut_direction
         # the wedge's vertical force (on the tool, + up: the soil draws a raked edge down) exists while it cuts:
         # ramped in over the first 2 cm/s of the edge's motion along the arm, none on a still edge

@@ -438,7 +438,7 @@ def test_digging_force_rises_with_cut_depth(spec):
     assert forces[0] > 0.0 and forces[0] < forces[1] < forces[2]
     assert rows[0][1] < rows[2][1]  # the arm cylinder works harder in the deeper cut
     # the bucket curled through a shallow and a 2 m deep cut, and the arm crowded through the deep one: the deep
-    # bucket is buried a bucket height under the surface, its cylinders reach relief and it stalls
+    # cut is deeper than the cylinders can drag the bucket through: they reach relief and the bucket stalls
     shallow = _drag(spec, 0.3, seconds=1.0, joint="bucket_joint")
     deep = _drag(spec, 2.0, seconds=1.0, joint="bucket_joint")
     crowd = _drag(spec, 2.0, seconds=1.0, joint="arm_joint")
