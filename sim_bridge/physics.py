@@ -57,6 +57,11 @@ class PhysicsSpec:
     # other joints: a stiff hydraulic drive on the joint
     drive_frequency_hz: float | None = setting(None, lo=0.1, hi=50.0)
     drive_torque_limit_nm: dict[str, float] | None = setting(None, lo=0.0)
+    # dozers: the blade's resistance and the tracks' slip under it (sim_bridge.tracks, Plant._doze)
+    traction_coefficient: float | None = setting(None, lo=0.05, hi=1.5, doc="max drawbar pull / machine weight")
+    shear_modulus_m: float | None = setting(None, lo=0.001, hi=0.2, doc="[m] the soil's shear deformation modulus K")
+    track_contact_length_m: float | None = setting(None, lo=0.1, hi=10.0, doc="[m] each track's length on the ground")
+    blade_rake_deg: float | None = setting(None, lo=10.0, hi=90.0, doc="[deg] the blade's cutting angle")
 
     def need(self, where: str, *names: str) -> None:
         """ValueError naming the missing keys a machine of this type needs."""

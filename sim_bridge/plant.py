@@ -112,6 +112,8 @@ class Plant:
         self._buried = 0.0  # [N] the wedge's resistance to vertical motion of a buried bucket (else 0)
         self._wedge_memo = None  # ((soil id, (depth, rake, surcharge)), (horizontal, vertical)) of the last wedge
         self._edges: dict[str, tuple[float, float, float]] = {}
+        #: dozer -> the soil's last resistance to its blade [N] (its tracks slip under it: ``base.load_slip``)
+        self.blade_force: dict[str, float] = dict.fromkeys(self.dozers, 0.0)
 
 
     # -- state -------------------------------------------------------------------------------------
@@ -385,7 +387,15 @@ class Plant:
         return dz.base.x + c * ex - sn * ey, dz.base.y + sn * ex + c * ey, dz.z + ez
 
     def _doze(self, name: str, dz: Dozer) -> None:
-        """The blade cuts while moving below the surface and leaves its load ahead when lifted above it."""
+        """The blade cuts while moving below the surface and leaves its load ahead when lifted above it.
+
+        While the tracks drive forward, the soil resists the blade (``blade_force``, handed to the tracks as their
+        drawbar load): the Reece/McKyes wedge in front of the edge (depth = the uncut surface at or one cell ahead
+        of the edge - the edge; rake ``physics.blade_rake_deg``; the blade's width) plus the friction of the pile
+        it pushes, load x loose density x g x tan(phi) (the usual dozer resistance split into cutting, pushing
+        the prism ahead of the blade and the machine's own motion: Caterpillar Performance Handbook; Wong, Theory
+        of Ground Vehicles). Backing up pushes nothing. ``Plant.step`` moves the bases before this: the tracks see
+        the resistance one step (10 ms) late."""
         b = dz.blade
         x, y, z = self.blade_edge(name)
         prev = self._edges.get(name)
@@ -406,6 +416,22 @@ class Plant:
                                 self.spec.soil.dump_radius)
             load = 0.0
         self.soil.blades[name] = load
+        soil, base = self.spec.soil.cutting, dz.base
+        track = 0.5 * (base.vl + base.vr)
+        force = 0.0
+        if soil is not None and track > 0.0:
+            ahead = self.spec.soil.resolution
+            depth = max(surface, self.ground.height(x + math.cos(yaw) * ahead, y + math.sin(yaw) * ahead)) - z
+            if depth > 0.0:
+                rake_deg = self.spec.machines[name].physics.blade_rake_deg
+                assert rake_deg is not None  # the dozer profile requires it
+                lo, hi = rake_range(soil)
+                rake = min(max(math.radians(rake_deg), lo + 0.05), hi - 0.05)
+                force = float(fee_force(soil, rake, depth, b.width).horizontal[0])
+            force += load * self.spec.soil.loose_density * G * math.tan(soil.phi)
+            # ramped in over the first 2 cm/s of track speed (as tool_force's): tracks at rest push nothing
+            force *= min(1.0, track / 0.02)
+        self.blade_force[name] = base.drawbar = force
 
     # -- replay ------------------------------------------------------------------------------------
     def set_truth(self, machine: str, x: float, y: float, yaw: float, joints: dict[str, float]) -> None:

@@ -4,6 +4,10 @@ Commands: ``Velocity_Cmd`` by ``velocity_mode`` (0 centre + yaw rate, 1 per trac
 stops the tracks); ``Blade_Cmd`` by ``blade_control_mode`` (0 hold, 1 target lift angle, 2 lift velocity);
 ``track_lock`` / ``blade_lock`` of ``Machine_Setting_Cmd`` hold the tracks / the blade. States: track velocities,
 blade lift angle, azimuth and yaw rate, roll/pitch, GNSS fix of the base (RTK noise), as the carrier's.
+
+The blade's soil resistance slows the dozer through its tracks' slip (``Plant._doze``, :mod:`sim_bridge.tracks`):
+the ``physics:`` section must give the traction coefficient, the soil's shear deformation modulus, the tracks'
+contact length and the blade's rake; the weight is the description's ``masses``.
 """
 
 from __future__ import annotations
@@ -13,13 +17,18 @@ from com3_can.signal_map import BLADE_ANGLE, BLADE_VELOCITY
 from com3_can.signal_map import DOZER_BLADE as B
 from com3_can.signal_map import DOZER_FRAMES as F
 from com3_can.signal_map import TRACK_SIGNALS as T
+from sim_bridge.errors import SimConfigError
 from sim_bridge.machines import Dozer
+from sim_bridge.physics import G
 from sim_bridge.profiles.base import PlantBus, PlantProfile, Side
 from sim_bridge.profiles.common import tracked_state, vec
 from sim_bridge.spec import PlantMachine
 from tms_model.machines import LIFT_JOINT
 
 __all__ = ["DozerPlantProfile"]
+
+#: ``physics:`` keys a dozer needs besides its blade drive's (the blade's resistance and the tracks' slip under it)
+TRACTION_NEEDS = ("traction_coefficient", "shear_modulus_m", "track_contact_length_m", "blade_rake_deg")
 
 
 class DozerPlantProfile(PlantProfile):
@@ -28,7 +37,17 @@ class DozerPlantProfile(PlantProfile):
 
     @staticmethod
     def make_machine(machine: PlantMachine, dt: float) -> Dozer:
-        return Dozer(machine, dt)
+        ph = machine.physics
+        try:
+            ph.need(machine.description.source, *TRACTION_NEEDS)
+        except ValueError as exc:
+            raise SimConfigError(str(exc)) from None
+        assert ph.traction_coefficient is not None and ph.shear_modulus_m is not None  # needed above
+        assert ph.track_contact_length_m is not None
+        dz = Dozer(machine, dt)
+        weight = sum(machine.description.masses.values()) * G  # [N] the whole machine rests on its tracks
+        dz.base.set_traction(ph.traction_coefficient * weight, ph.shear_modulus_m, ph.track_contact_length_m)
+        return dz
 
     @staticmethod
     def mjcf(machine: PlantMachine) -> list[str]:
