@@ -170,3 +170,39 @@ def test_success_only_when_commands_in_flight_keep_the_goal(kin, cfg):
         for u in list(ctl._in_flight)[-int(round(float(np.max(cfg.dead_time_s)) / cfg.dt)):]:
             q, _ = plant.step(u)
         assert np.linalg.norm(kin.tip_position(q) - kin.tip_position(q1)) < cfg.goal_tolerance_m * 1.5
+
+
+def _stalled_drag(kin, cfg):
+    """A drag towards the machine that the 'soil' stops 0.7 m along (no motion of the tip past that line is let
+    through), then a lift out: (controller, final q)."""
+    ctl = ArmController(kin, cfg)
+    q = np.array([0.0, -0.6, 1.2, 1.0])
+    p0 = kin.tip_position(q)
+    wall = p0[0] - 0.7
+    th = kin.theta_w(q)
+    ctl.start([CartesianTarget(p0 + np.array([-1.5, 0.0, 0.0]), th, "drag"),
+               CartesianTarget(p0 + np.array([-0.5, 0.0, 1.0]), th, "lift")])
+    plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q)
+    v = np.zeros(4)
+    for _ in range(int(60 * cfg.rate_hz)):
+        before = plant.q.copy()
+        q, v = plant.step(ctl.step(q, v))
+        x = kin.tip_position(q)[0]
+        if x < wall and x < kin.tip_position(before)[0]:
+            plant.q[:], plant.v[:] = before, 0.0  # stuck in the cut: that motion did not happen
+            q, v = before.copy(), np.zeros(4)
+        if ctl.status.result is not None:
+            break
+    return ctl, q, p0
+
+
+def test_a_stalled_via_segment_is_passed_on_and_the_run_goes_on(kin, cfg):
+    ctl, q, p0 = _stalled_drag(kin, dataclasses.replace(cfg, via_stall_s=1.0, via_stall_progress_m=0.05))
+    assert ctl.status.result == codes.SUCCESS, ctl.status
+    assert [label for label, _ in ctl.stalled] == ["drag"]
+    assert 0.7 < ctl.stalled[0][1] < 0.85  # the drag stopped ~0.8 m short of its end (0.7 m of 1.5 m done)
+    assert "drag stalled" in ctl.status.message
+    assert np.linalg.norm(kin.tip_position(q) - (p0 + np.array([-0.5, 0.0, 1.0]))) < cfg.goal_tolerance_m
+    # without the rule the same drag times out
+    ctl, _, _ = _stalled_drag(kin, dataclasses.replace(cfg, via_stall_s=0.0, segment_timeout_margin_s=3.0))
+    assert ctl.status.result == codes.TIMEOUT and "drag" in ctl.status.message, ctl.status

@@ -206,6 +206,9 @@ class ControllerSettings:
     goal_tolerance_rad: float = setting(lo=1e-6)
     via_tolerance_m: float = setting(0.05, lo=1e-6)
     via_tolerance_rad: float = setting(0.05, lo=1e-6)
+    via_stall_s: float = setting(0.0, lo=0.0, doc="[s] a via segment followed by another whose tip came no closer by "
+                                 "via_stall_progress_m this long after its reference ended is passed on (0: never)")
+    via_stall_progress_m: float = setting(0.01, lo=0.0, doc="[m] progress that counts as moving on a via segment")
     rest_speed: float = setting(lo=0.0, doc="[rad/s] joints at rest below this")
     settle_s: float = setting(lo=0.0, doc="[s] at rest this long before a goal succeeds")
     segment_timeout_margin_s: float = setting(lo=1e-3, doc="[s] a segment times out after its duration + this")
@@ -252,6 +255,8 @@ class ControllerConfig:
     via_tolerance_m: float
     via_tolerance_rad: float
     rest_speed: float
+    via_stall_s: float = 0.0
+    via_stall_progress_m: float = 0.01
     settle_s: float
     segment_timeout_margin_s: float
     stop_timeout_s: float
@@ -317,6 +322,8 @@ def controller_config(settings: ControllerSettings, machine: Machine,
         goal_tolerance_rad=settings.goal_tolerance_rad,
         via_tolerance_m=settings.via_tolerance_m,
         via_tolerance_rad=settings.via_tolerance_rad,
+        via_stall_s=settings.via_stall_s,
+        via_stall_progress_m=settings.via_stall_progress_m,
         rest_speed=settings.rest_speed,
         settle_s=settings.settle_s,
         segment_timeout_margin_s=settings.segment_timeout_margin_s,
@@ -492,6 +499,10 @@ class ArmController:
         self._theta_spline: TrapezoidSegment | None = None
         self._seg_time = 0.0
         self._settled = 0.0
+        self._stall_best = math.inf  # [m] the closest the tip came to the segment's end since it last progressed
+        self._stall_time = 0.0  # [s] since then (counted once the reference has ended)
+        #: segments of the current run passed on stalled: (label, metres short)
+        self.stalled: list[tuple[str, float]] = []
         self._pid_pos = _Pid(cfg.pid["position"], 3, self.dt)
         self._pid_th = _Pid(cfg.pid["theta_w"], 1, self.dt)
         self._pid_q = _Pid(cfg.pid["joint"], N, self.dt)
@@ -509,6 +520,7 @@ class ArmController:
         self._targets = list(targets)
         self._seg = 0
         self._spline = None
+        self.stalled = []
         self.status = ControllerStatus(mode="moving", segment=1, segments=len(targets), label=targets[0].label)
 
     def stop(self, message: str = "canceled") -> None:
@@ -634,6 +646,7 @@ class ArmController:
             self._theta_spline = TrapezoidSegment(np.array([th0]), np.array([target.theta_w]), dur, t_a)
         self._seg_time = 0.0
         self._settled = 0.0
+        self._stall_best, self._stall_time = math.inf, 0.0
         for pid in (self._pid_pos, self._pid_th, self._pid_q):
             pid.reset()
         self.status.segment = self._seg + 1
@@ -839,11 +852,25 @@ class ArmController:
                 self._settled += self.elapsed
             else:
                 self._settled = 0.0
+            # A via segment that another follows and that the arm cannot finish (a drag deeper than the cylinders
+            # can pull through: they stand at relief) is passed on once the tip has stopped closing in, as an
+            # operator lifts out of a cut that stalls; the next segment starts from where the arm is.
+            left = self.status.distance_remaining
+            if left < self._stall_best - cfg.via_stall_progress_m:
+                self._stall_best, self._stall_time = left, 0.0
+            else:
+                self._stall_time += self.elapsed
+            if (not reached and via and not last and cfg.via_stall_s > 0
+                    and self._stall_time >= cfg.via_stall_s):
+                self.stalled.append((target.label or f"segment {self._seg + 1}", left))
+                reached = True
             if reached and (via or self._settled >= cfg.settle_s):
                 if last:
+                    stalls = "; ".join(f"{label} stalled {m:.2f} m short, passed on" for label, m in self.stalled)
                     self.status = ControllerStatus(
                         mode="idle", segment=self._seg + 1, segments=len(self._targets), label=target.label,
-                        distance_remaining=self.status.distance_remaining, result=codes.SUCCESS, message="reached",
+                        distance_remaining=self.status.distance_remaining, result=codes.SUCCESS,
+                        message=f"reached ({stalls})" if stalls else "reached",
                     )
                     self._spline = None
                     return u
