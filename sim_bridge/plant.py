@@ -109,7 +109,6 @@ class Plant:
         self._tip_velocity = np.zeros(3)
         self._cut_direction = (1.0, 0.0, 0.0)
         self.cut_force: tuple[np.ndarray, np.ndarray] | None = None  # the soil's last force on the bucket edge
-        self._buried = 0.0  # [N] the wedge's resistance to vertical motion of a buried bucket (else 0)
         self._wedge_memo = None  # ((soil id, (depth, rake, surcharge)), (horizontal, vertical)) of the last wedge
         self._edges: dict[str, tuple[float, float, float]] = {}
         #: dozer -> the soil's last resistance to its blade [N] (its tracks slip under it: ``base.load_slip``)
