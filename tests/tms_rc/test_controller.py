@@ -206,3 +206,4 @@ def test_a_stalled_via_segment_is_passed_on_and_the_run_goes_on(kin, cfg):
     # without the rule the same drag times out
     ctl, _, _ = _stalled_drag(kin, dataclasses.replace(cfg, via_stall_s=0.0, segment_timeout_margin_s=3.0))
     assert ctl.status.result == codes.TIMEOUT and "drag" in ctl.status.message, ctl.status
+

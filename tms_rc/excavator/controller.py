@@ -499,6 +499,7 @@ class ArmController:
         self._theta_spline: TrapezoidSegment | None = None
         self._seg_time = 0.0
         self._settled = 0.0
+        self._in_flight_s = float(np.max(cfg.dead_time_s + cfg.lag_s))  # [s] until a command has acted
         self._stall_best = math.inf  # [m] the closest the tip came to the segment's end since it last progressed
         self._stall_time = 0.0  # [s] since then (counted once the reference has ended)
         #: segments of the current run passed on stalled: (label, metres short)
@@ -855,8 +856,11 @@ class ArmController:
             # A via segment that another follows and that the arm cannot finish (a drag deeper than the cylinders
             # can pull through: they stand at relief) is passed on once the tip has stopped closing in, as an
             # operator lifts out of a cut that stalls; the next segment starts from where the arm is.
+            # Counted only once the commands in flight have acted (the swing's dead time and lag are ~1.9 s: a short
+            # swing's profile ends before its measured tip has begun to move).
             left = self.status.distance_remaining
-            if left < self._stall_best - cfg.via_stall_progress_m:
+            if (left < self._stall_best - cfg.via_stall_progress_m
+                    or self._seg_time < spline.duration + self._in_flight_s):
                 self._stall_best, self._stall_time = left, 0.0
             else:
                 self._stall_time += self.elapsed
