@@ -156,7 +156,7 @@ class TaskManager(Node):
         # SCHED_FIFO for the thread that builds the node: the one that spins it, under run_node and in a container
         # (whose other nodes then share the priority)
         realtime_thread(p.integer("realtime_priority", 0), "tms_ts_manager", self.get_logger())
-        self.get_logger().info(f"tms_ts_manager ready: {self.tick_rate:g} Hz, db {db_uri or db_path or 'default'}")
+        self.get_logger().info(f"tms_ts_manager ready: {self.tick_rate:g} Hz, db {self.store!r}")
 
     # commands ----------------------------------------------------------------------------------
     def _on_start(self, msg: TaskIds) -> None:
