@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from tms_db.errors import BlobTooLarge, RecordNotFound, StoreError, ValidationError
-from tms_db.store import Store
+from tms_db.store import Store, param_filter_text
 
 __all__ = [
     "DATA_TOPIC", "PARAM_TOPIC", "GRIDFS_TOPIC", "COLLISION_TOPIC", "DATA_SERVICE", "PARAM_SERVICE", "GRIDFS_ACTION",
@@ -128,7 +128,9 @@ def apply_query(store: Store, kind: str, writemode: str, record_name: str, vehic
     * ``pose_query``: the existing record (``vehicle_name`` + ``record_name``; an empty ``vehicle_name``: by
       record alone) gets ``x y z qx qy qz qw``: ``writemode`` ``over_write`` sets each to a one-element array,
       any other appends the values (the original ``$push``-es one-element arrays, nesting them; we append the
-      numbers the waypoint readers expect). RecordNotFound naming the record when it does not exist.
+      numbers the waypoint readers expect) with :meth:`~tms_db.store.Store.append_fields`, atomic per record in both
+      backends: concurrent appenders never lose a waypoint. RecordNotFound naming the record when it does not
+      exist; ValidationError naming the field when one holds something other than an array.
     """
     if not isinstance(record_name, str) or not record_name:
         raise ValidationError(f"type {kind!r}: field 'record_name' must be a non-empty string")
@@ -150,17 +152,16 @@ def apply_query(store: Store, kind: str, writemode: str, record_name: str, vehic
         return doc
     if kind == "pose_query":
         values = {k: _number(f"{where}: field 'add_path.pose.{_pose_path(k)}'", pose[k]) for k in POSE_FIELDS}
-        current = store.get_parameter(vehicle_name or None, record_name)  # RecordNotFound names the record
         if writemode == "over_write":
-            fields = {k: [v] for k, v in values.items()}
-        else:
-            fields = {}
-            for k, v in values.items():
-                old = current.get(k, [])
-                if not isinstance(old, list):
-                    raise ValidationError(f"{where}: field {k!r}: holds {old!r}, not an array to append to")
-                fields[k] = [*old, v]
-        return store.set_fields(record_name, fields, model_name=vehicle_name or None)
+            store.get_parameter(vehicle_name or None, record_name)  # RecordNotFound names the record
+            return store.set_fields(record_name, {k: [v] for k, v in values.items()}, model_name=vehicle_name or None)
+        try:  # one atomic append per record (RecordNotFound names the record)
+            return store.append_fields(record_name, values, model_name=vehicle_name or None)
+        except ValidationError as exc:  # the store names the record its way; this module's messages name the vehicle
+            prefix = param_filter_text(record_name, vehicle_name or None)
+            if str(exc).startswith(prefix + ":"):
+                raise ValidationError(where + str(exc)[len(prefix):]) from None
+            raise
     raise ValidationError(f"{where}: field 'type': {kind!r} is not a query type (pose, joint, pose_query)")
 
 

@@ -2,7 +2,7 @@
 
 Why not montydb: montydb was measured (sqlite storage) losing ``$inc`` updates across processes
 (4 x 1,000 increments left the counter at 177). Here every document is one row holding its JSON body,
-and every read-modify-write (set fields, compare-and-set, increment, add task) runs inside one
+and every read-modify-write (set fields, append to arrays, compare-and-set, increment, add task) runs inside one
 ``BEGIN IMMEDIATE`` transaction, so writers in different processes serialise on SQLite's write lock and
 no update is lost. Writers first take an ``flock`` on ``write.lock`` next to the database: the kernel
 wakes the next writer as soon as the lock is free, where SQLite's own busy handler would sleep
@@ -44,6 +44,7 @@ from tms_db.store import (
     ImportResult,
     Rejected,
     Store,
+    appended,
     build_task_doc,
     check_document,
     check_record_name,
@@ -425,6 +426,13 @@ class EmbeddedStore(Store):
                    upsert: bool = False) -> dict:
         validate_fields(record_name, fields, protected=("_id", "record_name", "model_name"))
         return self._modify(record_name, model_name, lambda doc: doc.update(fields), upsert=upsert, fields=fields)[1]
+
+    def append_fields(self, record_name: str, values: Mapping[str, Any], *, model_name: str | None = None) -> dict:
+        validate_fields(record_name, values, protected=("_id", "record_name", "model_name"))
+        # read, append and write in one BEGIN IMMEDIATE transaction under the write lock (_modify): appenders in
+        # other processes wait for it, and each appends to the arrays the previous one committed
+        return self._modify(record_name, model_name,
+                            lambda doc: doc.update(appended(doc, values, record_name, model_name)))[1]
 
     def compare_and_set(self, record_name: str, field: str, expected: Any, new: Any, *,
                         model_name: str | None = None) -> bool:

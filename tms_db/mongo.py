@@ -1,6 +1,6 @@
 """The MongoDB backend (pymongo): the original's database, for sites that run a MongoDB server or replica set.
 
-Atomicity comes from MongoDB itself: ``find_one_and_update`` with ``$set`` / ``$inc`` /
+Atomicity comes from MongoDB itself: ``find_one_and_update`` with ``$set`` / ``$inc`` / ``$push`` /
 ``$currentDate`` is atomic per document, and compare-and-set puts the expected value into the filter.
 Validation of the *resulting* shape (e.g. a scalar into a waypoint record) reads the current document
 first; that check is advisory under concurrent writers, the update itself is atomic.
@@ -24,6 +24,7 @@ from tms_db.store import (
     ImportResult,
     Rejected,
     Store,
+    appended,
     build_task_doc,
     check_document,
     check_record_name,
@@ -273,6 +274,35 @@ class MongoStore(Store):
             merged.pop("timestamps", None)
             return {"$unset": {"timestamps": ""}}
         return {"$currentDate": {"timestamps": True}}
+
+    def append_fields(self, record_name: str, values: Mapping[str, Any], *, model_name: str | None = None) -> dict:
+        check_record_name(record_name)
+        validate_fields(record_name, values, protected=("_id", "record_name", "model_name"))
+        current = self._current(record_name, model_name)
+        if current is None:
+            raise self._not_found(record_name, model_name)
+        merged = appended(current, values, record_name, model_name)  # advisory: the $push below is the write
+        stamp = self._stamp(merged)
+        validate_parameter(merged)
+        try:  # one atomic update: concurrent appenders each push onto the arrays as they are on the server
+            doc = self._params.find_one_and_update(
+                self._filter(record_name, model_name), {"$push": dict(values), **stamp},
+                return_document=self._pymongo.ReturnDocument.AFTER, sort=[("_id", 1)],
+            )
+        except self._errors.OperationFailure as exc:
+            # a field became a non-array after our read ("The field 'x' must be an array but is of type double"):
+            # the same refusal as above, from the record as it is now
+            if "must be an array" not in str(exc):
+                raise
+            now = self._current(record_name, model_name)
+            if now is None:
+                raise self._not_found(record_name, model_name) from None
+            appended(now, values, record_name, model_name)
+            raise ValidationError(f"{param_filter_text(record_name, model_name)}: cannot append to field(s) "
+                                  f"{', '.join(map(repr, values))}: {_reason(exc, None)}") from None
+        if doc is None:  # removed after our read
+            raise self._not_found(record_name, model_name)
+        return doc
 
     def compare_and_set(self, record_name: str, field: str, expected: Any, new: Any, *,
                         model_name: str | None = None) -> bool:

@@ -5,8 +5,8 @@ Collections and shapes are the original's (database ``rostmsdb``): ``task`` docu
 ``{task_id, type: "task", model_name, description, task_sequence}``; ``parameter`` documents
 ``{model_name?, type?, record_name, ...payload}`` looked up by (model_name, record_name), and global
 blackboard groups in ``parameter`` looked up by ``record_name`` alone. Every write through
-``set_fields`` / ``compare_and_set`` / ``increment`` stamps ``timestamps`` (UTC datetime, millisecond
-precision, as MongoDB's ``$currentDate``). Values keep their types: bool stays bool, int stays int.
+``set_fields`` / ``append_fields`` / ``compare_and_set`` / ``increment`` stamps ``timestamps`` (UTC datetime,
+millisecond precision, as MongoDB's ``$currentDate``). Values keep their types: bool stays bool, int stays int.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from tms_db.schema import (
 __all__ = [
     "Store", "default_path", "now_utc", "values_equal", "DATABASE", "COLLECTIONS",
     "ImportResult", "Rejected", "check_import_document", "document_label", "prevalidate_import", "import_key",
-    "parameter_key", "check_document", "parse_file_id",
+    "parameter_key", "check_document", "parse_file_id", "appended",
 ]
 
 DATABASE = "rostmsdb"
@@ -75,6 +75,20 @@ def values_equal(current: Any, expected: Any) -> bool:
     if isinstance(current, Mapping) and isinstance(expected, Mapping):
         return list(current) == list(expected) and all(values_equal(current[k], expected[k]) for k in current)
     return type(current) is type(expected) and current == expected
+
+
+def appended(doc: Mapping[str, Any], values: Mapping[str, Any], record_name: str, model_name: str | None) -> dict:
+    """A copy of ``doc`` with each ``values[k]`` appended to its array ``k`` (missing: a new array), what
+    :meth:`Store.append_fields` writes; ValidationError naming the record and the first field (in ``values``' order)
+    that holds something else."""
+    merged = dict(doc)
+    for key, value in values.items():
+        old = merged.get(key, [])
+        if not isinstance(old, list):
+            raise ValidationError(f"{param_filter_text(record_name, model_name)}: field {key!r}: holds {old!r}, "
+                                  "not an array to append to")
+        merged[key] = [*old, value]
+    return merged
 
 
 def check_task_id(task_id: Any) -> int:
@@ -302,6 +316,17 @@ class Store(abc.ABC):
         Unknown record (and not ``upsert``): RecordNotFound naming record and fields. A result that
         breaks the record's shape (e.g. a scalar into a waypoint record): ValidationError naming the
         field; nothing is written then.
+        """
+
+    @abc.abstractmethod
+    def append_fields(self, record_name: str, values: Mapping[str, Any], *, model_name: str | None = None) -> dict:
+        """Atomically append ``values[k]`` to the array in field ``k`` of one record, for every ``k`` at once (as
+        MongoDB's ``$push``; a missing field becomes a one-element array), stamp as ``set_fields``; returns the new
+        document. One atomic update per record: appenders in other processes never lose each other's values.
+
+        Unknown record: RecordNotFound naming it (as ``get_parameter``). A field holding anything but an array:
+        ValidationError ``record ...: field 'x': holds 1.5, not an array to append to``; a result that breaks the
+        record's shape: ValidationError naming the field; nothing is written then.
         """
 
     @abc.abstractmethod

@@ -90,6 +90,37 @@ def test_query_refusals_store_nothing(store) -> None:
     assert store.list_parameters() == before
 
 
+def test_query_pose_query_append_is_the_stores_atomic_append(store) -> None:
+    """The append is ``Store.append_fields`` (one atomic update; tests/tms_db/test_concurrency.py has the processes
+    racing), with the refusals it always gave: a missing record, a field that holds no array (naming the vehicle)."""
+    store.upsert_parameter(PATH)
+    calls = []
+    append = store.append_fields
+
+    def spy(*args, **kwargs):
+        calls.append((args, kwargs))
+        return append(*args, **kwargs)
+
+    store.append_fields = spy
+    doc = b.apply_query(store, "pose_query", "", "LOAD_PATH", "", POSE, [])  # no vehicle: by record alone
+    assert calls == [(("LOAD_PATH", POSE), {"model_name": None})]
+    assert {k: doc[k] for k in b.POSE_FIELDS} == {k: [PATH[k][0], v] for k, v in POSE.items()}
+    assert doc == store.get_parameter("ic120", "LOAD_PATH")
+    b.apply_query(store, "pose_query", "over_write", "LOAD_PATH", "ic120", POSE, [])
+    assert len(calls) == 1  # over_write sets one-element arrays, no append
+    b.apply_query(store, "pose", "", "P1", "ic120", POSE, [])  # scalar x, y, q*: no waypoint arrays
+    before = store.list_parameters()
+    with pytest.raises(ValidationError, match=r"^record 'P1' \(vehicle 'ic120'\): field 'x': holds 1.5, not an array "
+                                              "to append to$"):
+        b.apply_query(store, "pose_query", "", "P1", "ic120", POSE, [])
+    with pytest.raises(ValidationError, match=r"^record 'P1': field 'x': holds 1.5, not an array to append to$"):
+        b.apply_query(store, "pose_query", "add", "P1", "", POSE, [])
+    with pytest.raises(RecordNotFound, match=r"^record 'NO_SUCH_PATH' of model 'ic120' not found in collection "
+                                             "'parameter'$"):
+        b.apply_query(store, "pose_query", "", "NO_SUCH_PATH", "ic120", POSE, [])
+    assert store.list_parameters() == before
+
+
 def test_param_reader_param_and_flg(store) -> None:
     store.upsert_parameter({**PATH, "Release_Count": [2]})
     store.upsert_parameter({"record_name": "GLOBAL_BB", "type": "global", "LOCK_FLG": True, "N": 3})

@@ -17,7 +17,7 @@ import pytest
 
 from tests.mongo_server import unique_database, with_database
 from tests.tms_db.hammer import open_at
-from tests.tms_db.workers import run_hammer, spawn, verify_store
+from tests.tms_db.workers import run_appenders, run_hammer, spawn, verify_store, waypoint
 from tms_db import open_store
 
 pytestmark = pytest.mark.slow
@@ -122,6 +122,30 @@ def test_concurrent_creators_of_one_record_make_one_document(backend) -> None:
     finally:
         for store in stores:
             store.close()
+
+
+def test_concurrent_pose_query_appends_lose_no_waypoint(backend) -> None:
+    """Processes appending waypoints to one record at once through the DB boundary (``TmsdbQuery`` ``pose_query``,
+    as several ``tms_db_writer_param`` nodes would) keep every one: the append is one atomic update per record
+    (``Store.append_fields``), not a read and a write of the whole arrays, which lost waypoints here."""
+    appenders, count = 4, 25
+    with open_at(backend) as store:
+        store.upsert_parameter({"model_name": "ic120", "record_name": "LOAD_PATH", "type": "dynamic",
+                                **{k: [] for k in ("x", "y", "z", "qx", "qy", "qz", "qw")}})
+    summaries = run_appenders(backend, "LOAD_PATH", "ic120", appenders=appenders, count=count)
+    assert [s["appended"] for s in summaries] == [count] * appenders
+    with open_at(backend) as store:
+        doc = store.get_parameter("ic120", "LOAD_PATH")
+        assert store.check() == []
+    lengths = {k: len(doc[k]) for k in ("x", "y", "z", "qx", "qy", "qz", "qw")}
+    assert lengths == dict.fromkeys(lengths, appenders * count), f"waypoints lost: {lengths}"
+    expected = {(w, i): waypoint(w, i) for w in range(appenders) for i in range(count)}
+    got = [{k: doc[k][n] for k in lengths} for n in range(appenders * count)]
+    assert sorted(p["x"] for p in got) == sorted(p["x"] for p in expected.values())
+    assert all(p == expected[divmod(int(p["x"]), 1000)] for p in got)  # each waypoint whole, at one index
+    for w in range(appenders):  # each appender's waypoints in the order it sent them
+        mine = [int(p["x"]) % 1000 for p in got if int(p["x"]) // 1000 == w]
+        assert mine == list(range(count)), (w, mine)
 
 
 def test_mongodb_check_names_a_missing_unique_key(mongodb_uri) -> None:

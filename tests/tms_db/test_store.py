@@ -177,6 +177,75 @@ def test_set_fields_is_validated_and_stamps_timestamps(store) -> None:
         store.set_fields("LOAD_PATH", {})
 
 
+def test_append_fields_appends_atomically_and_refuses_what_set_fields_would(store) -> None:
+    store.upsert_parameter(WAYPOINTS)
+    point = {"x": 4.0, "y": 1.5, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.6, "qw": 0.8}
+    doc = store.append_fields("LOAD_PATH", point, model_name="ic120")
+    assert doc["x"] == [1.0, 2.0, 3.0, 4.0] and doc["y"] == [0.0, 0.5, 1, 1.5] and doc["qw"] == [1.0, 1.0, 1.0, 0.8]
+    assert doc["model_name"] == "ic120" and doc["type"] == "dynamic"
+    doc = store.append_fields("LOAD_PATH", {**point, "x": 5}, model_name=None)  # by record alone, as get_parameter
+    stored = store.get_parameter("ic120", "LOAD_PATH")
+    assert stored == doc and stored["x"] == [1.0, 2.0, 3.0, 4.0, 5]
+    assert type(stored["x"][-1]) is int  # types kept
+    assert "timestamps" not in stored  # a waypoint record: no stamp, as set_fields
+    assert len(store.list_parameters()) == 1
+    # a missing field becomes an array; a record that is not a waypoint record is stamped
+    store.upsert_parameter({"record_name": "LOG", "events": [], "n": 1})
+    doc = store.append_fields("LOG", {"events": "start", "fresh": 2})
+    assert doc["events"] == ["start"] and doc["fresh"] == [2] and doc["n"] == 1
+    assert isinstance(store.get_record("LOG")["timestamps"], dt.datetime)
+
+    # refusals: the same record missing as get_parameter says it, a field that holds no array, a broken shape;
+    # nothing written then
+    with pytest.raises(RecordNotFound, match=r"^record 'NOPE' not found in collection 'parameter'$"):
+        store.append_fields("NOPE", point)
+    with pytest.raises(RecordNotFound, match=r"record 'LOAD_PATH' of model 'zx200' .*exists for model\(s\) "
+                                             r"\['ic120'\]"):
+        store.append_fields("LOAD_PATH", point, model_name="zx200")
+    store.upsert_parameter({"model_name": "ic120", "record_name": "P1", "x": 1.5, "y": -2.0, "qw": 1.0})
+    before = store.list_parameters()
+    with pytest.raises(ValidationError, match=r"^record 'P1' of model 'ic120': field 'x': holds 1.5, not an array "
+                                              "to append to$"):
+        store.append_fields("P1", {"trail": 1.0, "x": 2.0}, model_name="ic120")
+    with pytest.raises(ValidationError, match=r"^record 'LOG': field 'n': holds 1, not an array to append to$"):
+        store.append_fields("LOG", {"events": "stop", "n": 2})
+    with pytest.raises(ValidationError, match="record 'LOAD_PATH' .*field 'y': 5 elements, other waypoint fields "
+                                              "have 6"):
+        store.append_fields("LOAD_PATH", {"x": 6.0}, model_name="ic120")  # one pose field alone: lengths differ
+    with pytest.raises(ValidationError, match=r"field 'x'\[5\]: expected a number"):
+        store.append_fields("LOAD_PATH", {**point, "x": "six"}, model_name="ic120")
+    with pytest.raises(ValidationError, match="field 'record_name' cannot be set"):
+        store.append_fields("LOG", {"record_name": "x"})
+    with pytest.raises(ValidationError, match="non-empty mapping"):
+        store.append_fields("LOG", {})
+    assert store.list_parameters() == before
+
+
+def test_append_fields_refuses_a_field_made_scalar_after_its_read(store) -> None:
+    """MongoDB: the shape check reads the record before the ``$push``; a writer that makes the field a scalar in
+    between makes the server refuse the ``$push``, and the refusal is the same ValidationError (the embedded store
+    reads and writes in one transaction: nothing can come between)."""
+    store.upsert_parameter(WAYPOINTS)
+    if not hasattr(store, "_params"):  # the embedded store: the same refusal, without a race
+        store.set_fields("LOAD_PATH", {"x": 7.0, "y": 0.0, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0},
+                         model_name="ic120")
+    else:
+        read = store._current
+
+        def read_then_other_writer(record_name, model_name):
+            doc = read(record_name, model_name)
+            store._params.update_one({"_id": doc["_id"]}, {"$set": {"x": 7.0}})  # another client, after our read
+            store._current = read
+            return doc
+
+        store._current = read_then_other_writer
+    with pytest.raises(ValidationError, match=r"^record 'LOAD_PATH' of model 'ic120': field 'x': holds 7.0, not an "
+                                              "array to append to$"):
+        store.append_fields("LOAD_PATH", {k: 4.0 for k in ("x", "y", "z", "qx", "qy", "qz", "qw")}, model_name="ic120")
+    stored = store.get_parameter("ic120", "LOAD_PATH")
+    assert stored["x"] == 7.0 and stored["y"] in (0.0, [0.0, 0.5, 1])  # nothing appended
+
+
 def test_set_fields_upsert_creates_record(store) -> None:
     doc = store.set_fields("BB", {"ARRIVAL_FLG": True, "N": 0}, upsert=True)
     assert doc["record_name"] == "BB" and doc["ARRIVAL_FLG"] is True

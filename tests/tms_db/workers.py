@@ -1,8 +1,14 @@
 """Start hammer worker processes and check the store afterwards (shared by tests and the bench); ``db`` is an
-embedded store's directory or a ``mongodb://`` URI with its database (:func:`tests.tms_db.hammer.open_at`)."""
+embedded store's directory or a ``mongodb://`` URI with its database (:func:`tests.tms_db.hammer.open_at`).
+
+``python -m tests.tms_db.workers append --path DB --record R --model M --wid W --count K [--start-at T]``: one
+process appending ``K`` waypoints to record ``R`` through the DB boundary's ``pose_query`` (:func:`append_waypoints`);
+:func:`run_appenders` starts several at once.
+"""
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -93,3 +99,60 @@ def verify_store(
                 if not totals[kind] <= doc[field] <= totals[kind] + slack:
                     problems.append(f"HAMMER.{field} = {doc[field]}, acknowledged {totals[kind]} (lost updates)")
     return problems
+
+
+def waypoint(wid: int, i: int) -> dict[str, float]:
+    """Appender ``wid``'s ``i``-th pose: every field derived from ``x`` (= 1000 * wid + i), so a waypoint whose fields
+    did not land at one index of every array shows."""
+    x = 1000.0 * wid + i
+    return {"x": x, "y": -x, "z": x + 0.5, "qx": 0.0, "qy": 0.0, "qz": x / 1e4, "qw": 1.0}
+
+
+def append_waypoints(path: str, record: str, model: str, wid: int, count: int, start_at: float = 0.0) -> dict:
+    """Append ``count`` waypoints (:func:`waypoint`) to ``record`` of ``model``, one ``pose_query`` each, as the
+    original's ``tms_db_writer_param`` does for every ``TmsdbQuery`` it receives."""
+    from tms_db.boundary import apply_query
+
+    with hammer.open_at(path) as store:
+        delay = start_at - time.time()
+        if delay > 0:
+            time.sleep(delay)
+        t0 = time.monotonic()
+        for i in range(count):
+            apply_query(store, "pose_query", "", record, model, waypoint(wid, i), [])
+        return {"role": "appender", "wid": wid, "appended": count, "seconds": time.monotonic() - t0}
+
+
+def run_appenders(db: Path | str, record: str, model: str, *, appenders: int, count: int) -> list[dict]:
+    """``appenders`` processes appending ``count`` waypoints each to one record at once; their summaries."""
+    start_at = f"{time.time() + 2.0:.3f}"  # all start together, after interpreter start-up
+    procs = [subprocess.Popen([PY, "-m", "tests.tms_db.workers", "append", "--path", str(db), "--record", record,
+                               "--model", model, "--wid", str(w), "--count", str(count), "--start-at", start_at],
+                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True) for w in range(appenders)]
+    try:
+        return [summary_of(p, 120) for p in procs]
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(10)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="workers")
+    p.add_argument("role", choices=["append"])
+    p.add_argument("--path", required=True)
+    p.add_argument("--record", required=True)
+    p.add_argument("--model", default="")
+    p.add_argument("--wid", type=int, default=0)
+    p.add_argument("--count", type=int, default=25)
+    p.add_argument("--start-at", type=float, default=0.0)
+    args = p.parse_args(argv)
+    summary = append_waypoints(args.path, args.record, args.model, args.wid, args.count, args.start_at)
+    print(json.dumps(summary), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
