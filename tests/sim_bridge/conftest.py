@@ -142,11 +142,15 @@ class PlantUnderTest:
 
 @pytest.fixture
 def start_plant(procs, domain: int, tmp_path: Path) -> Iterator[Callable[..., PlantUnderTest]]:
-    """``start_plant(speed=1.0, ic120_pose="ic120_start", **params)`` runs sim_plant and opens both peers."""
+    """``start_plant(speed=1.0, ic120_pose="ic120_start", front=None, **params)`` runs sim_plant and opens both
+    peers."""
     machines_open: list[Machine] = []
 
-    def start(*, speed: float = 1.0, ic120_pose: str = "ic120_start", **params: Any) -> PlantUnderTest:
+    def start(*, speed: float = 1.0, ic120_pose: str = "ic120_start", front: dict[str, float] | None = None,
+              **params: Any) -> PlantUnderTest:
         text = config_path("sim", "plant.yaml").read_text().replace("ic120: ic120_start", f"ic120: {ic120_pose}")
+        if front is not None:  # the ZX200's front at start (default: its home pose, the bucket in the mound)
+            text = "initial_front: {" + ", ".join(f"{j}: {q}" for j, q in front.items()) + "}\n" + text
         cfg_file = tmp_path / "plant.yaml"
         cfg_file.write_text(text)
         cfgs = _bus_cfgs(domain)

@@ -42,7 +42,10 @@ def _settle_lag(joint: str) -> float:
 
 
 def test_step_velocity_reaches_command_within_lag_and_stops_at_limits(start_plant, ros_node):
-    plant = start_plant(speed=1.0)
+    # the front in the air (the paper's initial pose): from the home pose the bucket starts in the mound, and the
+    # soil's cutting resistance slows the crowd and the curl until they leave it
+    plant = start_plant(speed=1.0, front={"swing_joint": 0.0, "boom_joint": -0.9, "arm_joint": 1.8,
+                                          "bucket_joint": 1.2})
     zx = plant.zx200
     zx.get("Front_Angle")
     # Frame arrival (wall) -> simulated time through /clock: a loaded machine runs the plant below real
