@@ -114,11 +114,6 @@ class SiteModel:
         """Recompute the kinematics after setting poses and joints."""
         mujoco.mj_kinematics(self.model, self.data)
 
-    def joint_state(self, name: str) -> tuple[float, float]:
-        """(position, velocity) of joint ``name`` (``<machine>_<joint>``)."""
-        j = self._jid[name]
-        return float(self.data.qpos[self.model.jnt_qposadr[j]]), float(self.data.qvel[self.model.jnt_dofadr[j]])
-
     def qpos_adr(self, name: str) -> int:
         """The qpos index of joint ``name``."""
         return self._qadr[name]

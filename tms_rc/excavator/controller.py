@@ -208,7 +208,7 @@ class ControllerSettings:
     via_tolerance_rad: float = setting(0.05, lo=1e-6)
     via_stall_s: float = setting(0.0, lo=0.0, doc="[s] a via segment followed by another whose tip came no closer by "
                                  "via_stall_progress_m this long after its reference ended is passed on (0: never)")
-    via_stall_progress_m: float = setting(0.01, lo=0.0, doc="[m] progress that counts as moving on a via segment")
+    via_stall_progress_m: float = setting(0.05, lo=0.0, doc="[m] progress that counts as moving on a via segment")
     rest_speed: float = setting(lo=0.0, doc="[rad/s] joints at rest below this")
     settle_s: float = setting(lo=0.0, doc="[s] at rest this long before a goal succeeds")
     segment_timeout_margin_s: float = setting(lo=1e-3, doc="[s] a segment times out after its duration + this")
@@ -255,8 +255,8 @@ class ControllerConfig:
     via_tolerance_m: float
     via_tolerance_rad: float
     rest_speed: float
-    via_stall_s: float = 0.0
-    via_stall_progress_m: float = 0.01
+    via_stall_s: float
+    via_stall_progress_m: float
     settle_s: float
     segment_timeout_margin_s: float
     stop_timeout_s: float
