@@ -69,6 +69,17 @@ def test_joint_estimate_gain_saturation_and_dead_band():
     assert est.still_below == (0.02, 0.02)  # the smallest step stayed inside the band
 
 
+def test_a_step_beyond_saturation_that_came_out_slower_does_not_enter_the_gain():
+    plant = {"dead": 0.31, "tau": 0.15, "limit": 0.58}
+    amps = (0.05, 0.1, 0.3, 0.87)
+    recs = [_step("bucket_joint", s * a, **plant, seed=i) for i, a in enumerate(amps) for s in (1, -1)]
+    # the 150 % step met more load than the 100 % one and ran slower than the saturated speed
+    recs += [_step("bucket_joint", s * 1.32, dead=0.31, tau=0.15, limit=0.52) for s in (1, -1)]
+    est = estimate_joint(recs)
+    assert est.gain == pytest.approx(1.0, rel=0.02)
+    assert est.saturated_speed == pytest.approx((0.58, 0.58), rel=0.01)
+
+
 def test_no_dead_band_gives_zero():
     recs = [_step("bucket_joint", s * a, dead=0.31, tau=0.15) for a in (0.02, 0.1, 0.5) for s in (1, -1)]
     est = estimate_joint(recs)
