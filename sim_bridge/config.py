@@ -21,7 +21,7 @@ from sim_bridge.errors import SimConfigError
 from sim_bridge.physics import PhysicsSpec
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil_force import SoilParams, load_soil_types
-from sim_bridge.spec import PlantMachine, PlantSpec, SensorSpec, SoilSpec
+from sim_bridge.spec import FineGrid, PlantMachine, PlantSpec, SensorSpec, SoilSpec, fine_grid_problem
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.schema import Reader, load_schema, read_schema, setting
@@ -42,6 +42,14 @@ class _Grid:
     size_x: float = setting(lo=1.0)
     size_y: float = setting(lo=1.0)
     resolution: float = setting(lo=0.02, hi=2.0)
+    #: a finer patch where the tool works ({x_min, y_min, size_x, size_y, resolution}); absent: one grid
+    fine: FineGrid | None = None
+
+    def __post_init__(self) -> None:
+        if self.fine is not None:
+            problem = fine_grid_problem(self.x_min, self.y_min, self.size_x, self.size_y, self.resolution, self.fine)
+            if problem is not None:
+                raise ValueError(problem)
 
 
 @dataclass(frozen=True)
@@ -151,7 +159,7 @@ def _soil(soil: _Soil, site: Site) -> SoilSpec:
         mound_height=mound.height, ground_z=mound.ground_z, deposit_radius=soil.deposit_radius,
         dump_radius=soil.dump_radius, mound_region_margin=soil.mound_region_margin,
         loose_density=soil.density,
-        cutting=_soil_type(soil.type),
+        cutting=_soil_type(soil.type), fine=g.fine,
     )
 
 

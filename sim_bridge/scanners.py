@@ -23,7 +23,11 @@ def mound_scan(
     field: HeightField, center: tuple[float, float], radius: float, *, noise: float, rng: np.random.Generator,
     spacing: float = 0.2,
 ) -> np.ndarray:
-    """Ground points within ``radius`` of ``center`` on a ``spacing`` grid, heights with ``noise`` (1 sigma)."""
+    """Ground points within ``radius`` of ``center`` on a ``spacing`` grid, heights with ``noise`` (1 sigma).
+
+    The points are the coarse cells' (``field.h``): under a fine patch (``soil.grid.fine``) each is the mean of the
+    patch's cells over it, so the scan carries the patch's volume.
+    """
     step = max(1, int(round(spacing / field.res)))
     rows, cols = field.window(center[0], center[1], radius)
     xs = field.xs[cols][::step]

@@ -18,7 +18,7 @@ from tms_common.schema import setting
 from tms_model.machines import Machine
 from tms_model.site import Site
 
-__all__ = ["PlantMachine", "SoilSpec", "SensorSpec", "PlantSpec"]
+__all__ = ["PlantMachine", "FineGrid", "SoilSpec", "SensorSpec", "PlantSpec", "fine_grid_problem"]
 
 
 @dataclass(frozen=True)
@@ -43,8 +43,52 @@ class PlantMachine:
 
 
 @dataclass(frozen=True)
+class FineGrid:
+    """A finer patch of the soil grid where the tool works (the plant YAML's ``soil.grid.fine``).
+
+    A rectangle of whole coarse cells (its edges on the coarse cell boundaries) at ``resolution``, which divides the
+    coarse resolution a whole number of times: :func:`fine_grid_problem` says what is wrong otherwise.
+    """
+
+    x_min: float
+    y_min: float
+    size_x: float = setting(lo=0.0)
+    size_y: float = setting(lo=0.0)
+    resolution: float = setting(lo=0.005, hi=2.0, doc="[m] cell size inside the patch")
+
+
+def _multiple(value: float, step: float, least: int) -> bool:
+    """``value`` is ``k * step`` (to 1e-6 of a step) for a whole ``k >= least``."""
+    k = round(value / step)
+    return k >= least and abs(value - k * step) <= 1e-6 * step
+
+
+def fine_grid_problem(x_min: float, y_min: float, size_x: float, size_y: float, resolution: float,
+                      fine: FineGrid) -> str | None:
+    """What is wrong with the patch ``fine`` on the grid (``x_min`` ... ``resolution``), as ``fine.<field>: problem``;
+    None when it fits: inside the grid, edges on coarse cell boundaries, the coarse resolution a whole multiple of its
+    own."""
+    if not _multiple(resolution, fine.resolution, 1):
+        return (f"fine.resolution: the grid's resolution {resolution} m must be a whole multiple of it, "
+                f"got {fine.resolution} m")
+    for axis, lo, size, g_lo, g_size in (("x", fine.x_min, fine.size_x, x_min, size_x),
+                                         ("y", fine.y_min, fine.size_y, y_min, size_y)):
+        g_hi = g_lo + round(g_size / resolution) * resolution
+        if lo < g_lo - 1e-9:
+            return f"fine.{axis}_min: the patch must lie inside the grid [{g_lo}, {g_hi}] m, got {lo} m"
+        if lo + size > g_hi + 1e-9:
+            return f"fine.size_{axis}: the patch [{lo}, {lo + size}] m must lie inside the grid [{g_lo}, {g_hi}] m"
+        if not _multiple(lo - g_lo, resolution, 0):
+            return f"fine.{axis}_min: on a cell boundary of the grid ({g_lo} + k * {resolution} m), got {lo} m"
+        if not _multiple(size, resolution, 1):
+            return f"fine.size_{axis}: a whole number (>= 1) of the grid's {resolution} m cells, got {size} m"
+    return None
+
+
+@dataclass(frozen=True)
 class SoilSpec:
-    """Height-field site with one mound (a truncated cone on flat ground, from ``site.yaml``'s ``mound``)."""
+    """Height-field site with one mound (a truncated cone on flat ground, from ``site.yaml``'s ``mound``), optionally
+    with a finer patch of the grid where the tool works (``fine``: :class:`sim_bridge.soil.HeightField`)."""
 
     x_min: float
     y_min: float
@@ -61,6 +105,7 @@ class SoilSpec:
     mound_region_margin: float  # [m] beyond the base radius still counted as the mound (spills at its foot)
     loose_density: float = 1450.0  # [kg/m^3] of the soil in buckets, vessels and piles (its weight on the machines)
     cutting: SoilParams | None = None  # the soil the tools cut (sim_bridge.soil_force); None: no cutting force
+    fine: FineGrid | None = None  # a finer patch of the grid where the tool works; None: one grid
 
 
 @dataclass(frozen=True)
