@@ -3,7 +3,8 @@
 (a) all limits slack: the EoM holds and the tip / theta_w accelerations are met; (b) each limit made active in
 turn by a demanding reference (pump flow, cylinder force, actuator speed, stroke, ground damper): the limit holds,
 the tip position task gives way, the levels above still hold; (c) static hold: the cylinder forces equal the
-gravity load worked out by hand (moments of the link weights about each joint axis) within 1 %.
+gravity load worked out by hand (moments of the link weights about each joint axis) within 1 %; (d) a soil force or
+wrench at the tip enters the EoM as J^T F.
 """
 
 from __future__ import annotations
@@ -198,3 +199,19 @@ def test_static_hold_forces_match_gravity_load(front, pose):
         force = tau[i] / dl_dq
         assert res.force[i] == pytest.approx(force, rel=0.01), (joint.name, res.force[i], force)
     assert abs(res.tau[0]) < 1e-6  # swing: no gravity load on a level machine
+
+
+def test_external_wrench_enters_the_eom(front):
+    """Held still against a soil force (3-vector) and a wrench (force + moment at the tip): tau = g(q) - J^T F."""
+    dyn, kin = front
+    ctl = InverseDynamicsHQP(dyn, kin)
+    q = kin.home.copy()
+    qd = np.zeros(4)
+    ref = IdReference(position=kin.tip_position(q), theta_w=kin.theta_w(q))
+    dyn.update(q, qd)
+    jac = dyn.tip()[1].copy()
+    for f_ext in (np.array([-20e3, 0.0, 30e3]), np.array([-20e3, 1e3, 30e3, 0.0, 5e3, 0.0])):
+        res = ctl.solve(q, qd, ref, f_ext)
+        _check_eom(res)
+        np.testing.assert_allclose(res.qdd, 0.0, atol=1e-6)
+        np.testing.assert_allclose(res.tau, dyn.gravity(q) - jac[: f_ext.size].T @ f_ext, rtol=1e-6, atol=1e-3)

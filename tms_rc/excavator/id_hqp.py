@@ -125,18 +125,6 @@ class InverseDynamicsHQP:
         settings: the control choices.
     """
 
-    LEVELS = (
-        LevelSpec("eom", "eq", N),
-        None,  # pump flow: 2^k rows, k = functions on the main pumps (set in __init__)
-        LevelSpec("force_limits", "ineq", 2 * N),
-        LevelSpec("velocity_limits", "ineq", 2 * N),
-        LevelSpec("stroke_limits", "ineq", 2 * N),
-        LevelSpec("collision", "ineq", 4),
-        LevelSpec("orientation", "eq", 1),
-        LevelSpec("position", "eq", 3),
-        LevelSpec("damping", "eq", N),
-    )
-
     def __init__(self, dyn: FrontDynamics, kin: ExcavatorKinematics, settings: IdSettings | None = None) -> None:
         s = settings or IdSettings()
         self.dyn, self.kin, self.settings = dyn, kin, s
@@ -147,8 +135,9 @@ class InverseDynamicsHQP:
         flow_lpm = s.pump_flow_lpm if s.pump_flow_lpm is not None else machine.pump_flow
         self.pump_joints = tuple(pump)
         self.q_max = (flow_lpm or math.inf) / 60000.0  # [m^3/s]
-        levels = list(self.LEVELS)
-        levels[1] = LevelSpec("pump_flow", "ineq", max(2 ** len(pump), 1))
+        rows = (N, max(2 ** len(pump), 1), 2 * N, 2 * N, 2 * N, 4, 1, 3, N)  # pump: one row per direction pattern
+        kinds = ("eq", "ineq", "ineq", "ineq", "ineq", "ineq", "eq", "eq", "eq")
+        levels = [LevelSpec(name, kind, r) for name, kind, r in zip(LEVEL_NAMES, kinds, rows, strict=True)]
         self.levels = levels
         self.hqp = HierarchicalQP(2 * N, levels, eps=s.eps, max_iter=s.max_iter, regularisation=s.regularisation,
                                   fix_tolerance=s.fix_tolerance)
