@@ -2,8 +2,8 @@
 
 Decision vector ``x = [qdd (4), tau (4)]`` (swing, boom, arm, bucket), solved by the strict-priority
 :class:`~tms_rc.excavator.hqp.HierarchicalQP` (the IK controller's, which is general over the vector size) with
-HEAP's ID task list (Jud et al. 2021, sec. 4.3.1; forms in ``shared/reference/heap_and_physics.md`` sec. 2),
-highest first:
+HEAP's ID task list (Jud et al. 2021, "HEAP - The autonomous walking excavator", sec. 4.3.1; the strict-priority
+cascade after Bellicoso et al. 2016), highest first:
 
 1. equations of motion ``M qdd + h + F_v qd + F_s sgn(qd) = tau + J^T F_ext`` (``F_ext`` = the wrench the soil
    exerts on the bucket at the tip, base_link axes: a 3-force or a 6-wrench [force; moment]; sgn smoothed as
