@@ -380,8 +380,9 @@ class SiteTfView:
     """Latest /tf and /tf_static edges, composed into each machine's link poses in ``map`` for the 3-D view.
 
     ``trees`` are the machines shown (their URDF trees, frames with the machine's tf prefix). Each machine's poses
-    carry the stamp of its ``odom -> base_link`` edge (the pose the page draws), so a client can compare the view
-    with /tf at that stamp. Edges of frames no shown machine has (another site's) are ignored.
+    carry the stamp of its ``odom -> base_link`` edge (the pose the page draws) and the stamp of every edge from its
+    base up to ``map`` (``chain``, by child frame), so a client can compare the view with exactly those /tf edges.
+    Edges of frames no shown machine has (another site's) are ignored.
     """
 
     def __init__(self, trees: list[MachineTree]) -> None:
@@ -434,7 +435,11 @@ class SiteTfView:
             pose = self.in_map(tree.frame(link))
             if pose is not None:
                 links[tree.frame(link)] = [round(v, 5) for v in (*pose.translation, *pose.rotation)]
-        return {"stamp": round(edge[2], 9), "links": links}
+        chain, frame = {}, base
+        while frame != MAP_FRAME and frame in self._edges and len(chain) < 64:
+            chain[frame] = round(self._edges[frame][2], 9)
+            frame = self._edges[frame][0]
+        return {"stamp": round(edge[2], 9), "chain": chain, "links": links}
 
     def snapshot(self) -> dict[str, Any]:
         return {name: pose for name in self.trees if (pose := self.machine_links(name)) is not None}

@@ -74,19 +74,18 @@ class TfLog:
             self.edges.setdefault(t.child_frame_id, []).append(
                 (stamp, t.header.frame_id, (tr.x, tr.y, tr.z), (r.x, r.y, r.z, r.w)))
 
-    def base_in_map(self, base: str, stamp: float) -> tuple[float, float, float] | None:
-        """``map -> odom -> base`` at ``stamp``: the odom -> base edge of that stamp under the map -> odom edge
-        newest at or before it."""
-        edge = next((e for e in self.edges.get(base, []) if abs(e[0] - stamp) < 1e-6), None)
-        if edge is None:
-            return None
-        odom = edge[1]
-        tr = Transform(edge[2], edge[3])
-        ups = [e for e in self.edges.get(odom, []) if e[0] <= stamp + 1e-6]
-        if ups:
-            tr = Transform(ups[-1][2], ups[-1][3]) * tr
-        elif odom != "map":
-            return None
+    def base_in_map(self, base: str, chain: dict[str, float]) -> tuple[float, float, float] | None:
+        """``map -> ... -> base`` composed from the edges of the stamps the page says it drew (``chain``: child
+        frame -> stamp); None while one of them has not been heard here."""
+        tr, frame = Transform(), base
+        while frame != "map":
+            stamp = chain.get(frame)
+            edge = next((e for e in self.edges.get(frame, []) if stamp is not None and abs(e[0] - stamp) < 1e-6),
+                        None)
+            if edge is None:
+                return None
+            tr = Transform(edge[2], edge[3]) * tr
+            frame = edge[1]
         return tr.translation
 
 
@@ -135,11 +134,13 @@ def test_the_3d_view_shows_the_site_as_tf_has_it_and_the_dig(procs, domain, ros_
             break
         spin(ros_node, 1.0)
         for name in MACHINES:
-            shown = page.evaluate(f"[window.site3d.stamp({name!r}), window.site3d.links({name!r})]")
-            stamp, links = shown
+            shown = page.evaluate(f"[window.site3d.stamp({name!r}), window.site3d.chain({name!r}), "
+                                  f"window.site3d.links({name!r})]")
+            stamp, chain, links = shown
             base = base_frame(links)
             m = links[base]  # column-major 4x4: translation in 12..14
-            expected = tf.base_in_map(base, stamp)
+            assert chain[base] == stamp, (name, chain, stamp)
+            expected = tf.base_in_map(base, chain)
             if expected is None:
                 continue
             err = math.dist((m[12], m[13], m[14]), expected)

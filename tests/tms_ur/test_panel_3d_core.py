@@ -34,6 +34,7 @@ def test_links_are_composed_into_map_with_the_base_stamp(view):
     view.set(odom, base, (1.0, 2.0, 0.5), (0.0, 0.0, 0.0, 1.0), 7.25)
     pose = view.machine_links("ic120")
     assert pose["stamp"] == 7.25
+    assert pose["chain"] == {base: 7.25, odom: 5.0}  # the stamp of each edge drawn, base up to map
     # map_T_base = (10,0,0, yaw 90) * (1,2,0.5): x = 10 - 2, y = 1
     assert pose["links"][base][:3] == pytest.approx([8.0, 1.0, 0.5], abs=1e-5)
     # a child link reaches map once its fixed joint (static) is known

@@ -37,6 +37,7 @@ const controls = new OrbitControls(camera, renderer.domElement);
 const machines = {};     // name -> {links: {frame: Group}, label, heap, info}
 const terrain = { version: null, layers: [], meshes: [] };
 const tfStamp = {};      // name -> stamp [s] of the /tf poses drawn
+const tfChain = {};      // name -> {child frame: stamp [s]} of the /tf edges from its base up to map
 let fps = 0, frames = 0;
 window.site3d = Object.freeze({
   machineNames: () => Object.keys(machines),
@@ -44,6 +45,7 @@ window.site3d = Object.freeze({
   links: (name) => Object.fromEntries(Object.entries(machines[name]?.links ?? {}).map(
     ([f, g]) => [f, Array.from(g.matrixWorld.elements)])),
   stamp: (name) => tfStamp[name] ?? null,
+  chain: (name) => tfChain[name] ?? null,
   terrainVersion: () => terrain.version,
   terrainLayers: () => terrain.layers.map((l) => ({ kind: l.kind, id: l.id, rows: l.rows, cols: l.cols })),
   heightAt: (x, y) => heightAt(x, y),
@@ -185,6 +187,7 @@ function apply(s) {
         g.updateMatrixWorld(true);
       }
       tfStamp[name] = tf.stamp;
+      tfChain[name] = tf.chain;
     }
     const base = entry.links[findFrame(entry, "base_link")];
     if (base) entry.label.position.copy(base.position).add(new THREE.Vector3(0, 0, 5));
