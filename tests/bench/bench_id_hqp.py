@@ -7,7 +7,9 @@ a soil force of up to 60 kN resists the tip's motion (``F_ext``), enough for the
 Prints the solve time per step (wall and thread CPU: median, p99, max), how often each limit level bound, the
 RMS tip tracking error and the largest EoM residual. For comparison, the IK controller (``ArmController`` and
 its joint-velocity HQP, as in ``bench_zx200``) runs the same waypoints as Cartesian via targets against the
-lag + dead-time plant for 1000 steps and its QP solve time is printed the same way.
+lag + dead-time plant for 1000 steps and its QP solve time is printed the same way; and HEAP's cylinder-space IK
+hierarchy (``CylinderIkHQP``) follows a cubic Hermite reference through the same waypoints (tip x, z, theta_w;
+Catmull-Rom knot velocities) for 1000 steps, loop closed kinematically on its joint velocities (q += dt qd).
 
 Run: ``.venv/bin/python -m tests.bench id_hqp``.
 """
@@ -25,7 +27,9 @@ from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import CartesianTarget
 from tms_rc.excavator.controller import ArmController, load_controller_config
 from tms_rc.excavator.dynamics import FrontDynamics
+from tms_rc.excavator.hermite import HermiteReference
 from tms_rc.excavator.id_hqp import IdReference, IdSettings, InverseDynamicsHQP
+from tms_rc.excavator.ik_cylinder import CylinderIkHQP, IkReference, IkSettings
 from tms_rc.excavator.plant import LagDeadTimePlant
 
 STEPS = 1000
@@ -141,9 +145,53 @@ def ik_run() -> None:
     print("  IK HQP (thread CPU): " + summary_ms(cpu))
 
 
+def cylinder_ik_run() -> None:
+    kin = load_kinematics("zx200")
+    ctl = CylinderIkHQP(kin, IkSettings(rate_hz=RATE_HZ))
+    dt = ctl.dt
+    y = float(kin.tip_position(kin.home)[1])
+    times = np.cumsum([w[0] for w in WAYPOINTS])
+    ref = HermiteReference.through(times, [(x, z, th) for _, x, z, th, _ in WAYPOINTS])
+    p0 = ref.sample(0.0)[0]
+    q = kin.ik_position_with_angle(np.array([p0[0], y, p0[1]]), float(p0[2]))
+    qd = np.zeros(4)
+    wall, cpu, errs = [], [], []
+    levels = ("pump_flow", "velocity_limits", "stroke_limits", "collision")
+    bound = dict.fromkeys(levels, 0)
+    gave_way = 0
+    gc.collect()
+    gc.disable()
+    try:
+        for k in range(STEPS):
+            pos, vel = ref.sample(k * dt)
+            target = np.array([pos[0], y, pos[1]])
+            ik_ref = IkReference(position=target, velocity=np.array([vel[0], 0.0, vel[1]]), theta_w=float(pos[2]),
+                                 theta_w_rate=float(vel[2]))
+            start, cpu_start = time.perf_counter(), time.thread_time()
+            res = ctl.solve(q, ik_ref, qd=qd)
+            wall.append(time.perf_counter() - start)
+            cpu.append(time.thread_time() - cpu_start)
+            for name in levels:
+                if res.hqp.solved.get(name, False):
+                    bound[name] += 1
+            gave_way += res.gave_way
+            errs.append(float(np.linalg.norm(kin.tip_position(q) - target)))
+            qd = res.qd
+            q = q + dt * qd
+    finally:
+        gc.enable()
+    print(f"  cylinder-space IK HQP (CylinderIkHQP, HEAP's 7 IK tasks), Hermite reference, kinematic loop, {STEPS} "
+          "steps, per step incl. the kinematics and J_p (wall): " + summary_ms(wall))
+    print("  cylinder-space IK HQP (thread CPU): " + summary_ms(cpu))
+    print(f"  cylinder-space IK: tip RMS {1000 * math.sqrt(np.mean(np.square(errs))):.2f} mm, max "
+          f"{1000 * max(errs):.2f} mm; position task gave way on {gave_way} steps; limit level solved on: "
+          + ", ".join(f"{n} {c}" for n, c in bound.items()))
+
+
 def main() -> None:
     id_run()
     ik_run()
+    cylinder_ik_run()
 
 
 if __name__ == "__main__":
