@@ -1,8 +1,9 @@
 """Every excavator kind runs the arm controller with its own figures (no ROS).
 
 The control choices are one file (config/tms_rc/excavator_arm_controller.yaml); the pump flow, each joint's
-flow coefficient and the hydraulic delays come from the kind's description (config/machines/<kind>.yaml). The
-ZX120's controller holds the pumps to its own 265 L/min, not the ZX200's 424 L/min.
+flow coefficient and the hydraulic delays were identified on the machine over its CAN bus
+(config/tms_rc/identified/<name>.yaml, made by tms_rc_identify). The ZX120's controller holds the pumps to its
+own identified flow (288 L/min), not the ZX200's (448 L/min); the tests read both figures from those files.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import JointTarget
 from tms_model.machines import EXCAVATOR, load_machine
 from tms_rc.excavator.controller import (
+    PLANNED_PUMP_SHARE,
     ArmController,
     load_controller_config,
     load_controller_settings,
@@ -71,13 +73,16 @@ def test_the_zx120_is_held_to_its_own_pump_not_the_zx200s():
         min(cfg200.pump_flow_lpm, float(np.sum(cfg.flow_per_rad_s * np.array(kin.limits.velocity)))))
 
 
-def test_a_zx120_move_of_boom_arm_and_bucket_stays_within_265_l_per_min():
-    zx120 = load_machine("zx120")
-    kin = ExcavatorKinematics(zx120)
-    cfg = load_controller_config(zx120)
+def _identified_pump_lpm(name: str) -> float:
+    data, _ = load_yaml(config_path("tms_rc", "identified", f"{name}.yaml"))
+    return float(data["pump_flow_lpm"])
+
+
+def _peak_flow_of_move(kin, cfg, dq):
+    """Run one joint move on the lag + dead-time plant; (result, peak flow drawn [L/min], duration [s])."""
     ctl = ArmController(kin, cfg)
     q0 = np.array(kin.home, dtype=float)
-    q1 = q0 + np.array([0.0, 0.3, -0.5, -0.8])  # boom down, arm and bucket out: all three share the pumps
+    q1 = q0 + np.array(dq)
     assert kin.limits.violation(q1) is None
     plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q0)
     q, v = q0.copy(), np.zeros(len(JOINTS))
@@ -89,9 +94,26 @@ def test_a_zx120_move_of_boom_arm_and_bucket_stays_within_265_l_per_min():
         q, v = plant.step(u)
         if ctl.status.result is not None:
             break
-    assert ctl.status.result == codes.SUCCESS, ctl.status
-    assert max(flows) <= 265.0 * (1 + 1e-3), max(flows)
-    assert max(flows) > 0.7 * 265.0, max(flows)  # the pumps, not the joints' speeds, paced the move
+    return ctl.status, max(flows), len(flows) * cfg.dt
+
+
+def test_a_zx120_move_of_boom_arm_and_bucket_is_paced_by_its_identified_pump():
+    zx120 = load_machine("zx120")
+    kin = ExcavatorKinematics(zx120)
+    cfg = load_controller_config(zx120)
+    pump = _identified_pump_lpm("zx120")  # config/tms_rc/identified/zx120.yaml, not the description's 265
+    assert cfg.pump_flow_lpm == pump
+    dq = [0.0, 0.3, -0.5, -0.8]  # boom, arm and bucket together: all three share the pumps
+    # with pumps that never limit, the joints' own speed limits would draw far more than the ZX120's pump ...
+    free, free_peak, free_s = _peak_flow_of_move(kin, dataclasses.replace(cfg, pump_flow_lpm=1.0e5), dq)
+    assert free.result == codes.SUCCESS, free
+    assert free_peak > 1.5 * pump, free_peak
+    # ... so with its own pump the move is planned at PLANNED_PUMP_SHARE of it, never above it, and takes longer
+    status, peak, duration = _peak_flow_of_move(kin, cfg, dq)
+    assert status.result == codes.SUCCESS, status
+    assert peak <= pump * (1 + 1e-3), peak
+    assert peak >= 0.95 * PLANNED_PUMP_SHARE * pump, peak  # the pump, not the joints' speeds, paced the move
+    assert duration > free_s + 0.5, (duration, free_s)
 
 
 def test_the_settings_file_refuses_a_machine_figure_and_unknown_keys(tmp_path):
