@@ -101,7 +101,8 @@ def test_record_reads_the_originals_fields_and_link_padding(model: ArmCollisionM
             "zero length",
         ),
         (lambda d: d["collision_objects"][0].__setitem__("id", ""), "collision_objects[0].id", "non-empty string"),
-        (lambda d: d.__setitem__("link_padding", {"cab_link": 0.2}), "link_padding.cab_link", "not a ZX200 link"),
+        (lambda d: d.__setitem__("link_padding", {"cab_link": 0.2}), "link_padding.cab_link",
+         "not a link of the zx200 arm"),
         (lambda d: d.__setitem__("link_padding", {"arm_link": "wide"}), "link_padding.arm_link", "finite number"),
     ],
 )
@@ -109,7 +110,7 @@ def test_bad_record_names_record_and_field(mutate, field: str, words: str) -> No
     doc = carrier_doc()
     mutate(doc)
     with pytest.raises(CollisionRecordError) as err:
-        objects_from_record(doc, RECORD)
+        objects_from_record(doc, RECORD, "zx200")
     assert err.value.code == FAILURE
     assert f"record '{RECORD}'" in str(err.value) and f"field '{field}'" in str(err.value) and words in str(err.value)
 

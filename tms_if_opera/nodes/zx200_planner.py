@@ -452,7 +452,7 @@ class Zx200PlannerNode(Node):
                                        "(planner parameter collision_object_record_name)") from None
         except StoreError as exc:
             raise CollisionRecordError(self._collision_record, None, f"cannot be read: {exc}") from None
-        objects, padding = objects_from_record(doc, self._collision_record)
+        objects, padding = objects_from_record(doc, self._collision_record, self.planner.kin.machine.kind)
         return Scene(objects, self.collision.model.padding_for(padding))
 
     def _plan_report(self) -> str:

@@ -132,8 +132,10 @@ def _xyz(doc: dict, record: str, where: str, keys: str) -> list[float]:
     return out
 
 
-def objects_from_record(doc: dict, record: str) -> tuple[list[CollisionObject], dict[str, float]]:
-    """The collision objects and the ``link_padding`` of one collision-object record (see the module docstring).
+def objects_from_record(doc: dict, record: str,
+                        machine_kind: str = "") -> tuple[list[CollisionObject], dict[str, float]]:
+    """The collision objects and the ``link_padding`` of one collision-object record (see the module docstring);
+    ``machine_kind`` (the excavator's description, :attr:`tms_model.machines.Machine.kind`) names the machine in errors.
 
     Raises :class:`CollisionRecordError` naming the record and the field (``collision_objects[2].dimensions``).
     """
@@ -185,7 +187,8 @@ def objects_from_record(doc: dict, record: str) -> tuple[list[CollisionObject], 
         for link, value in _mapping(doc["link_padding"], record, "link_padding").items():
             if link not in ARM_LINKS:
                 raise CollisionRecordError(record, f"link_padding.{link}",
-                                           f"is not a ZX200 link (one of {', '.join(ARM_LINKS)})")
+                                           f"is not a link of the {machine_kind or 'excavator'} arm "
+                                           f"(one of {', '.join(ARM_LINKS)})")
             link_padding[link] = _number(value, record, f"link_padding.{link}", non_negative=True)
     return objects, link_padding
 

@@ -137,7 +137,8 @@ class Zx200Planner:
             names = list(joint_names or [])
             for name in names:
                 if name not in JOINTS and name != "bucket_end_joint":
-                    raise InvalidGoalError(f"trajectory joint name {name!r} is not a ZX200 front joint {JOINTS}")
+                    raise InvalidGoalError(f"trajectory joint name {name!r} is not a front joint of the "
+                                           f"{self.kin.machine.kind} {JOINTS}")
             base = np.asarray(current_q if current_q is not None else self.kin.home, dtype=float)
             for k, point in enumerate(joint_points):
                 vals = _finite(point, f"trajectory point {k + 1}")
