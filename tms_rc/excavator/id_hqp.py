@@ -18,10 +18,13 @@ cascade after Bellicoso et al. 2016), highest first:
    per actuator from the settings or, by default, the description's joint velocity limit times |J_p| at home);
 5. stroke limits: ``q_min <= q + T qd + T^2/2 qdd <= q_max`` (T = ``stroke_horizon_s``; the joint limits of the
    description are the stroke ends: each cylinder length is monotonic over its joint's range);
-6. ground and swing-axis clearance of the bucket tip and pin, second-order velocity dampers
-   (Faverjon & Tournassoud): ``d_dd >= -(xi/T) d/d_i - d_d/T`` while ``d < d_i``, d = height above
-   ``ground_min_z`` or distance from the swing axis beyond ``body_min_radius`` (the IK's rows, one order up).
-   **Not done**: true self-collision between link primitives (HEAP's Bullet closest points of boxes);
+6. collision, second-order velocity dampers (Faverjon & Tournassoud, ICRA 1987): (a) ground and swing-axis
+   clearance of the bucket tip and pin, ``d_dd >= -(xi/T) d/d_i - d_d/T`` while ``d < d_i``, d = height above
+   ``ground_min_z`` or distance from the swing axis beyond ``body_min_radius`` (the IK's rows, one order up);
+   (b) self-collision between link primitives (HEAP's closest points of boxes; :mod:`tms_rc.excavator.collision`:
+   boxes of boom, arm, bucket, upper structure, cab and undercarriage, closest points from coal), one row per
+   pair ``d_dd = n^T (J_b - J_a) qdd + drift >= -(xi_c/T)(d - d_s)/(d_i - d_s) - d_d/T`` while ``d < d_i``
+   (``self_collision_*`` settings; pairs whose bounding spheres are farther apart than d_i skip coal);
 7. bucket orientation: theta_w (bucket pin -> tip angle below horizontal, :mod:`tms_model.excavator.kinematics`)
    ``alpha_d = alpha_ref + kp e + kd e_dot``;
 8. bucket-tip position: ``J qdd + J_dot qd = a_d``, ``a_d = a_ref + kp e + kd e_dot``;
@@ -36,7 +39,7 @@ port pressure difference [Pa]).
 
 Pure Python core (numpy, pinocchio, OSQP); every buffer of a step is preallocated. Not yet done (see
 ``tms_rc/excavator/README.md``): the force-control loop around it, piston (pressure) control, the switch between
-IK and ID in the excavate subtask, link-primitive collision.
+IK and ID in the excavate subtask, the IK's use of the link-primitive pairs (its rows are still tip/pin clearance).
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_rc.excavator.collision import CollisionSettings, SelfCollision
 from tms_rc.excavator.dynamics import FrontDynamics
 from tms_rc.excavator.hqp import HierarchicalQP, HqpResult, LevelSpec
 
@@ -83,6 +87,13 @@ class IdSettings:
     damper_influence: float = 0.5  # [m] d_i: a damper row acts below this distance
     damper_xi: float = 0.5  # [m/s] xi of the damper
     damper_horizon_s: float = 0.1  # [s] T of the damper
+    #: link-primitive self-collision (level 6 (b)); HEAP's d_i, d_s and xi are not published: ours
+    self_collision: bool = True
+    self_collision_influence: float = 0.5  # [m] d_i: a pair's row acts below this distance
+    self_collision_safety: float = 0.1  # [m] d_s: the distance the damper holds (it approaches it exponentially)
+    self_collision_xi: float = 0.5  # [m/s] xi: approach speed at d_i (T = damper_horizon_s)
+    #: primitive sizes and pairs (:class:`~tms_rc.excavator.collision.CollisionSettings`)
+    collision_primitives: CollisionSettings = field(default_factory=CollisionSettings)
     eps: float = 1e-6  # OSQP tolerances
     max_iter: int = 2000
     regularisation: float = 1e-6
@@ -135,7 +146,13 @@ class InverseDynamicsHQP:
         flow_lpm = s.pump_flow_lpm if s.pump_flow_lpm is not None else machine.pump_flow
         self.pump_joints = tuple(pump)
         self.q_max = (flow_lpm or math.inf) / 60000.0  # [m^3/s]
-        rows = (N, max(2 ** len(pump), 1), 2 * N, 2 * N, 2 * N, 4, 1, 3, N)  # pump: one row per direction pattern
+        self.collision = SelfCollision(dyn.model, machine, s.collision_primitives) if s.self_collision else None
+        n_pairs = len(self.collision.names) if self.collision is not None else 0
+        if self.collision is not None and not 0.0 <= s.self_collision_safety < s.self_collision_influence:
+            raise ValueError(f"self-collision: need 0 <= d_s < d_i, got d_s={s.self_collision_safety}, "
+                             f"d_i={s.self_collision_influence}")
+        # pump: one row per direction pattern; collision: ground + swing axis of tip and pin, then one per pair
+        rows = (N, max(2 ** len(pump), 1), 2 * N, 2 * N, 2 * N, 4 + n_pairs, 1, 3, N)
         kinds = ("eq", "ineq", "ineq", "ineq", "ineq", "ineq", "eq", "eq", "eq")
         levels = [LevelSpec(name, kind, r) for name, kind, r in zip(LEVEL_NAMES, kinds, rows, strict=True)]
         self.levels = levels
@@ -173,6 +190,8 @@ class InverseDynamicsHQP:
         self._a[8][:, :N] = eye
         self._gains = np.zeros(N)
         self._swing_xy = np.array(kin.swing_origin[:2], dtype=float)
+        self._b[5][4:] = _FREE  # pair rows: free until a pair comes within d_i
+        self._pairs_set = False
 
     # ------------------------------------------------------------------ one step
     def solve(self, q: np.ndarray, qd: np.ndarray, ref: IdReference, f_ext: np.ndarray | None = None) -> IdResult:
@@ -224,8 +243,10 @@ class InverseDynamicsHQP:
         b[4][:N] = np.where(self._bounded, (self._upper - pred) / half, _FREE)
         b[4][N:] = np.where(self._bounded, (pred - self._lower) / half, _FREE)
 
-        # 6. ground and swing-axis dampers of tip and pin: d_dd >= beta while d < d_i
+        # 6. ground and swing-axis dampers of tip and pin, then the primitive pairs: d_dd >= beta while d < d_i
         self._dampers(tip, jac, jdq, pin_p, pin_jac, pin_jdq, qd)
+        if self.collision is not None:
+            self._pair_dampers(qd)
 
         # 7. theta_w acceleration
         th = float(q[1] + q[2] + q[3]) + self.kin.c_bucket
@@ -281,3 +302,33 @@ class InverseDynamicsHQP:
             else:
                 b[r] = _FREE
             r += 1
+
+    def _pair_dampers(self, qd) -> None:
+        """Level 6 rows 4.. : per primitive pair ``-row qdd <= drift - beta`` while d < d_i, else free (zero row).
+
+        The pinocchio data of :attr:`dyn` holds this step's placements, joint Jacobians and (qd, qdd = 0) motion.
+        """
+        s = self.settings
+        col = self.collision
+        a, b = self._a[5], self._b[5]
+        di, ds, xi, t = (s.self_collision_influence, s.self_collision_safety, s.self_collision_xi,
+                         s.damper_horizon_s)
+        count = col.update(self.dyn.data, di)
+        if not count:
+            if self._pairs_set:  # clear the rows of the last active step once
+                a[4:].fill(0.0)
+                b[4:].fill(_FREE)
+                self._pairs_set = False
+            return
+        self._pairs_set = True
+        for k, on in enumerate(col.active):
+            r = 4 + k
+            if on:
+                row = col.rows[k]
+                d = float(col.distance[k])
+                beta = -(xi / t) * (d - ds) / (di - ds) - float(row @ qd) / t
+                a[r, :N] = -row
+                b[r] = float(col.drift[k]) - beta
+            else:
+                a[r, :N] = 0.0
+                b[r] = _FREE
