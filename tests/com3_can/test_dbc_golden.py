@@ -9,7 +9,6 @@ scale, offset, min/max, unit), that no frame or signal is missing or extra, and 
 from __future__ import annotations
 
 import csv
-import os
 from pathlib import Path
 
 import cantools
@@ -17,17 +16,12 @@ import pytest
 
 from com3_can.codec import dbc_text, load_codec
 
-# The reference lives beside the checkout (shared/reference); a copy is kept in tests/com3_can/data so the
-# golden test also runs where shared/ is absent. TMS_SHARED points at another shared/ directory.
-_SHARED = (
-    Path(os.environ.get("TMS_SHARED", Path(__file__).resolve().parents[3] / "shared")) / "reference" / "com3_frames.csv"
-)
-CSV = _SHARED if _SHARED.is_file() else Path(__file__).parent / "data" / "com3_frames.csv"
+#: the published COM3 layout, one row per signal, kept with the tests
+CSV = Path(__file__).parent / "data" / "com3_frames.csv"
 
 
 def _rows() -> list[dict[str, str]]:
-    if not CSV.is_file():  # the reference lives beside the checkout; name the missing capability
-        pytest.skip(f"reference csv not available at {CSV} (set TMS_SHARED)")
+    assert CSV.is_file(), f"the COM3 layout csv is missing: {CSV}"
     with CSV.open() as fh:
         return list(csv.DictReader(fh))
 
