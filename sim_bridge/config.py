@@ -64,6 +64,12 @@ class _Soil:
     #: the soil the tools cut (config/sim/soil_types.yaml): OperaSim-AGX's dirt_1 by default, what OPERA's own
     #: simulator digs
     type: str = "agx_dirt_1"
+    #: the digging bucket pressed into the ground meets the soil's bearing resistance (Terzaghi/Meyerhof capacity
+    #: after a Winkler ramp, sim_bridge.soil_force.penetration_force); off in the shipped plants until measured
+    #: in the demo
+    penetration: bool = False
+    penetration_breadth_m: float = setting(0.3, lo=0.02, hi=2.0, doc="[m] the pressed bucket's contact along its "
+                                           "motion (edge plate and front of the floor); its length is the edge's width")
 
 
 @dataclass(frozen=True)
@@ -153,13 +159,17 @@ def _soil_type(name: str) -> SoilParams:
 
 def _soil(soil: _Soil, site: Site) -> SoilSpec:
     g, mound = soil.grid, site.mound
+    cutting = _soil_type(soil.type)
+    if soil.penetration and cutting.subgrade_modulus is None:
+        raise SimConfigError(f"{config_path('sim', 'soil_types.yaml')}: soil_types.{soil.type}: "
+                             "soil.penetration needs its subgrade_modulus_mn_m3")
     return SoilSpec(
         x_min=g.x_min, y_min=g.y_min, size_x=g.size_x, size_y=g.size_y, resolution=g.resolution,
         mound_center=(mound.cx, mound.cy), mound_base_radius=mound.base_radius, mound_top_radius=mound.top_radius,
         mound_height=mound.height, ground_z=mound.ground_z, deposit_radius=soil.deposit_radius,
         dump_radius=soil.dump_radius, mound_region_margin=soil.mound_region_margin,
         loose_density=soil.density,
-        cutting=_soil_type(soil.type), fine=g.fine,
+        cutting=cutting, fine=g.fine, penetration=soil.penetration, penetration_breadth=soil.penetration_breadth_m,
     )
 
 

@@ -13,7 +13,8 @@ that sets the reference speed ``v_ref`` (``hydraulics.py``); the trapped oil is 
 integral of ``v_ref``) and the piston's position, with damping on the speed difference; the force is clipped at the
 relief setting, the clipped oil goes over the relief (``x_ref`` follows the piston: no wind-up). Modelled: oil
 compressibility (linearised about mid-stroke), relief valves, cylinder viscous friction, the four-bar, inertia and
-gravity of every link, soil weight and cutting forces on the bucket (applied by the plant). Not modelled: leakage,
+gravity of every link, soil weight and cutting forces on the bucket (applied by the plant; a pressed bucket's bearing
+through ``substep_hook``, each substep). Not modelled: leakage,
 cavitation, pressure dynamics of the pump and hoses beyond the linear spring, Coulomb friction of the seals.
 
 The force law runs in numpy over all drives of the site between MuJoCo substeps (``mj_step1`` / ``mj_step2``), so a
@@ -23,7 +24,7 @@ site of ten machines is one vector operation per substep.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -122,6 +123,9 @@ class FluidDrives:
         self.force = np.zeros(self.n)
         self.saturated = np.zeros(self.n, dtype=bool)
         self.sub_dt = model.opt.timestep
+        #: called after each substep's ``mj_step1`` (positions and sites current, forces not yet applied): the plant's
+        #: stiff external forces (a pressed bucket's bearing, ``Plant._press``) follow the substeps there; None: none
+        self.substep_hook: Callable[[], None] | None = None
         self.reset()
 
     def _effective_mass(self, actuator: int) -> float:
@@ -176,8 +180,11 @@ class FluidDrives:
         x_ref, f_min, f_max, x_min, x_max = self.x_ref, self.f_min, self.f_max, self.x_min, self.x_max
         push = kv * self.v_ref
         dx = self.v_ref * h
+        hook = self.substep_hook
         for _ in range(self.substeps):
             mujoco.mj_step1(m, d)
+            if hook is not None:
+                hook()
             x_ref += dx
             np.clip(x_ref, x_min, x_max, out=x_ref)
             f = k * (x_ref - d.actuator_length[ids]) + push - kc * d.actuator_velocity[ids]

@@ -25,7 +25,7 @@ from sim_bridge.model import SiteModel
 from sim_bridge.physics import FluidDrives, G
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil import HeightField, SoilState
-from sim_bridge.soil_force import fee_force, rake_range
+from sim_bridge.soil_force import bearing_terms, fee_force, rake_range
 from sim_bridge.spec import PlantSpec
 
 __all__ = ["Plant", "MachineTruth", "stamp_parts"]
@@ -113,6 +113,15 @@ class Plant:
         self._edges: dict[str, tuple[float, float, float]] = {}
         #: dozer -> the soil's last resistance to its blade [N] (its tracks slip under it: ``base.load_slip``)
         self.blade_force: dict[str, float] = dict.fromkeys(self.dozers, 0.0)
+        #: the soil's bearing force on the pressed bucket edge [N, up] and the bearing capacity there [N] of the last
+        #: substep (``soil.penetration``; 0 without it or out of contact)
+        self.press_force = 0.0
+        self.press_capacity = 0.0
+        self.press_displaced = 0.0  # [m^3] soil the pressed bucket has pushed aside so far (bearing failure)
+        self._press_on = bool(self.spec.soil.penetration and self.excavator is not None
+                              and self.spec.soil.cutting is not None)
+        if self._press_on:
+            self._press_setup()
 
 
     # -- state -------------------------------------------------------------------------------------
@@ -204,6 +213,82 @@ class Plant:
         xfrc[body, 3] += r[1] * force[2]  # the moment r x (0, 0, fz) about the bucket's centre of mass
         xfrc[body, 4] -= r[0] * force[2]
 
+    # -- penetration: the bucket pressed into the ground (soil.penetration) ---------------------------
+    def _press_setup(self) -> None:
+        """Constants of the pressed edge: contact B x w, the Winkler spring k_s B w and the capacity's terms
+        (:func:`sim_bridge.soil_force.bearing_terms` times the area: capacity = q0 + dq * D)."""
+        soil = self.spec.soil.cutting
+        assert soil is not None and soil.subgrade_modulus is not None  # load_plant refuses a soil without it
+        b, w = self.spec.soil.penetration_breadth, self.excavator.bucket.width
+        q0, dq = bearing_terms(soil, b, w)
+        self._press_k = soil.subgrade_modulus * b * w
+        self._press_q0, self._press_dq = float(q0) * b * w, float(dq) * b * w
+        self._press_surface = math.inf  # the soil surface under the edge this step (lowered where it yields)
+        self._press_around = -math.inf  # the surrounding surface (the overburden's top)
+        self._press_base = np.zeros(6)  # the bucket's other external force this step (weight, cut)
+        self.drives.substep_hook = self._press
+
+    def _press_start(self) -> None:
+        """Once per plant step, before the substeps: the soil surface under the edge (the lowest of its cell and the
+        cells one cell ahead and behind along the arm's heading: an edge riding on its own cut floor compresses
+        that floor, not the uncut face ahead of it) and around it (the highest within two cells, as the wedge's
+        depth), and the bucket's applied force without the bearing."""
+        tip = self._tip
+        heading = self.excavator.base.yaw + self.excavator.front.q[0]
+        ux, uy = math.cos(heading), math.sin(heading)
+        g, res = self.ground, self.spec.soil.resolution
+        here = g.height(tip[0], tip[1])
+        near = [g.height(tip[0] + k * ux * res, tip[1] + k * uy * res) for k in (-2, -1, 1, 2)]
+        self._press_surface = min(here, near[1], near[2])
+        self._press_around = max(here, near[0], near[3])
+        self._press_base[:] = self.model.data.xfrc_applied[self.model.bucket_body]
+
+    def _press(self) -> None:
+        """Each substep (after ``mj_step1``): the soil's bearing force on the edge, :func:`penetration_force`'s law
+        in scalar form: ``min(k_s delta, q_ult(D)) B w`` up at the edge, delta = the surface under the edge - the
+        edge, D = max(delta, the surrounding surface - the edge). Where the spring would carry more than the
+        capacity the soil yields: its surface under the edge follows the edge down to where the spring carries the
+        capacity (the plant removes that soil after the step, :meth:`_press_yield`)."""
+        d = self.model.data
+        body = self.model.bucket_body
+        xfrc = d.xfrc_applied[body]
+        xfrc[:] = self._press_base
+        tip = d.site_xpos[self.model.tip_site]
+        z = float(tip[2])
+        delta = self._press_surface - z
+        if delta <= 0.0:
+            self.press_force = 0.0
+            return
+        capacity = self._press_q0 + self._press_dq * max(delta, self._press_around - z)
+        f = self._press_k * delta
+        if f > capacity:
+            self._press_surface = z + capacity / self._press_k
+            f = capacity
+        r = tip - d.xipos[body]
+        xfrc[2] += f
+        xfrc[3] += r[1] * f  # the moment r x (0, 0, f) about the bucket's centre of mass
+        xfrc[4] -= r[0] * f
+        self.press_force, self.press_capacity = f, capacity
+
+    def _press_yield(self, tip) -> None:
+        """After the substeps: where the soil under the edge has yielded, its cells (the edge's width, one cell
+        along) are lowered to the yielded surface and the soil displaced is heaved up beside the bucket, half on
+        each side beyond its width (the bearing failure's side heave; volume conserved as a cut and a deposit)."""
+        if self._press_surface >= self.ground.height(tip[0], tip[1]):
+            return
+        heading = self.excavator.base.yaw + self.excavator.front.q[0]
+        lx, ly = -math.sin(heading), math.cos(heading)
+        w = self.excavator.bucket.width
+        moved = self.ground.cut((tip[0], tip[1]), (tip[0], tip[1]), self._press_surface, width=w,
+                                lateral=(lx, ly), max_volume=math.inf)
+        if moved <= 0.0:
+            return
+        radius = self.spec.soil.deposit_radius
+        side = 0.5 * w + radius + self.spec.soil.resolution
+        for sign in (-1.0, 1.0):
+            self.ground.deposit(tip[0] + sign * side * lx, tip[1] + sign * side * ly, 0.5 * moved, radius)
+        self.press_displaced += moved
+
     def _cutting_force(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(force of the soil on the bucket edge [N], the edge) while the edge is below the surface, else None.
 
@@ -267,6 +352,8 @@ class Plant:
         for name, mach in self.machines.items():
             v_ref[self._drive_slices[name]] = mach.bank.v_ref
         self._loads()
+        if self._press_on:
+            self._press_start()
         self.drives.step()
         force, speed = self.drives.force, self.model.data.actuator_velocity[self.drives.ids]
         qpos, qvel = self.model.data.qpos, self.model.data.qvel
@@ -283,6 +370,8 @@ class Plant:
             self._tip_velocity = (tip - prev) / self.dt
             self.tip_speed = math.dist(tip, prev) / self.dt
             self._soil(prev, tip)
+            if self._press_on:
+                self._press_yield(tip)
             self._tip = tip
         self._dump()
         for name, dz in self.dozers.items():
@@ -299,13 +388,23 @@ class Plant:
         soil = self.soil
         ground = self.ground
         surface = ground.height(tip[0], tip[1])
-        if tip[2] < surface and self.tip_speed >= zx.cut_min_speed:
+        cutting = self.tip_speed >= zx.cut_min_speed
+        if self._press_on:
+            # with the bearing modelled, an edge moving more down than along presses (Plant._press) instead of
+            # cutting: only its horizontal motion cuts
+            v = self._tip_velocity
+            along = math.hypot(v[0], v[1])
+            cutting = along >= zx.cut_min_speed and along >= -v[2]
+        if tip[2] < surface and cutting:
             heading = self.excavator.base.yaw + self.excavator.front.q[0]
             lateral = (-math.sin(heading), math.cos(heading))
+            # a pressed edge (soil.penetration) cuts down to the soil it compresses, not to its own height: the soil
+            # under it stays carrying it (the Winkler spring's compression, Plant._press)
+            floor = tip[2] + self.press_force / self._press_k if self._press_on else tip[2]
             got = ground.cut(
                 (prev[0], prev[1]),
                 (tip[0], tip[1]),
-                tip[2],
+                floor,
                 width=zx.width,
                 lateral=lateral,
                 max_volume=zx.capacity - soil.bucket,

@@ -48,9 +48,32 @@ IEEE/RSJ IROS 1998) use the same equation for an excavator bucket: the cutting e
 width as w, and the soil already in the bucket or heaped in front of it as surcharge. :func:`surcharge_pressure`
 turns such a heap's height into q.
 
-What is not modelled: penetration (a tool moving straight down, no horizontal motion, meets no force here),
-side-wall friction and the three-dimensional side crescents of narrow tools, tooth geometry, and the weight of
-soil carried (the plant adds that mass separately). Numbers are per unit: N, m, Pa, rad, m/s.
+Penetration (:func:`penetration_force`, :func:`bearing_capacity`): a tool pressed down into the soil meets the
+soil's bearing resistance, as a strip footing does. The ultimate bearing pressure of a footing of breadth B (along
+the tool's motion) and length L (the cutting edge's width) with its base at depth D below the surrounding surface is
+Terzaghi's superposition (Terzaghi 1943, "Theoretical Soil Mechanics", Wiley, ch. XVIII) with Meyerhof's factors
+(Meyerhof 1951, "The ultimate bearing capacity of foundations", Geotechnique 2(4); Meyerhof 1963, "Some recent
+research on the bearing capacity of foundations", Canadian Geotechnical Journal 1(1))::
+
+    q_ult   = c N_c s_c + gamma D N_q s_q + 0.5 gamma B N_gamma s_gamma
+    N_q     = exp(pi tan phi) tan^2(45 deg + phi / 2)        (Prandtl 1921, Reissner 1924)
+    N_c     = (N_q - 1) cot phi
+    N_gamma = (N_q - 1) tan(1.4 phi)                         (Meyerhof 1963)
+    s_c     = 1 + 0.2 K_p B / L,  s_q = s_gamma = 1 + 0.1 K_p B / L,  K_p = tan^2(45 deg + phi / 2)
+
+(Meyerhof's shape factors; his s_q = s_gamma = 1 for phi = 0 and the form above for phi >= 10 deg, linear in phi
+between.) Meyerhof's depth factors (>= 1) are left out: the overburden term gamma D N_q already carries the depth,
+and leaving them out keeps q_ult on the low side. Before the soil yields it is a Winkler spring: the pressure under
+the tool is k_s times its penetration, k_s the modulus of subgrade reaction (Winkler 1867; values per soil from
+Bowles 1996, "Foundation Analysis and Design", 5th ed., McGraw-Hill, table 9-1, in ``soil_types.yaml``). The
+force on the tool is ``min(k_s delta, q_ult) B L`` upwards: a tool resting on the ground is held up to the bearing
+capacity; pushed harder it sinks, and :func:`penetration_force` says by how much (``excess``: the plant removes that
+soil from under the tool and displaces it beside, so volume stays conserved).
+
+What is not modelled: side-wall friction and the three-dimensional side crescents of narrow tools, tooth geometry,
+the weight of soil carried (the plant adds that mass separately), the inclination and eccentricity of the load on a
+pressed tool (its bearing force is vertical), and consolidation or rate effects of the soil under a pressed tool.
+Numbers are per unit: N, m, Pa, rad, m/s.
 """
 
 from __future__ import annotations
@@ -70,8 +93,8 @@ from tms_common.errors import ConfigError
 from tms_common.schema import load_schema, setting
 
 __all__ = [
-    "GRAVITY", "FeeForce", "SoilParams", "fee_force", "load_soil_types", "rake_range", "surcharge_pressure",
-    "tool_force",
+    "GRAVITY", "FeeForce", "Penetration", "SoilParams", "bearing_capacity", "bearing_factors", "bearing_terms",
+    "fee_force", "load_soil_types", "penetration_force", "rake_range", "surcharge_pressure", "tool_force",
 ]
 
 GRAVITY = 9.81  # [m/s^2]
@@ -89,7 +112,8 @@ class SoilParams:
 
     ``unit_weight`` is gamma = rho g [N/m^3]; ``cohesion`` c [Pa]; ``phi`` the internal friction angle;
     ``delta`` the soil-tool friction angle; ``adhesion`` c_a [Pa]; ``surcharge`` a standing surface pressure q
-    [Pa] added to each tool's own; ``source`` where the figures come from.
+    [Pa] added to each tool's own; ``subgrade_modulus`` k_s [N/m^3] of the soil under a pressed tool (None: not
+    known, :func:`penetration_force` refuses the soil); ``source`` where the figures come from.
     """
 
     unit_weight: float
@@ -100,6 +124,7 @@ class SoilParams:
     surcharge: float = 0.0
     name: str = ""
     source: str = ""
+    subgrade_modulus: float | None = None
 
     def __post_init__(self) -> None:
         checks = (
@@ -109,9 +134,10 @@ class SoilParams:
             ("delta", 0.0 <= self.delta < math.pi / 2, "must be in [0, pi/2) rad"),
             ("adhesion", self.adhesion >= 0.0, "must be >= 0 Pa"),
             ("surcharge", self.surcharge >= 0.0, "must be >= 0 Pa"),
+            ("subgrade_modulus", self.subgrade_modulus is None or self.subgrade_modulus > 0.0, "must be > 0 N/m^3"),
         )
         for field, ok, problem in checks:
-            if not (ok and math.isfinite(getattr(self, field))):
+            if not (ok and math.isfinite(getattr(self, field) or 0.0)):
                 raise ValueError(f"soil {self.name or '<unnamed>'}: {field} {problem}, got {getattr(self, field)!r}")
 
     @property
@@ -292,6 +318,97 @@ def tool_force(soil: SoilParams, velocity, rake, depth, width, *, surcharge=0.0,
     return out
 
 
+# --- penetration: bearing capacity (Terzaghi / Meyerhof) with a Winkler ramp -----------------------------------
+
+
+class Penetration(NamedTuple):
+    """Per tool (arrays of the broadcast shape of the inputs): the soil's resistance to a tool pressed into it.
+
+    ``force`` [N] upwards on the tool, ``min(k_s delta, q_ult) B L`` (0 out of the soil); ``capacity`` [N] is
+    q_ult B L at the tool's depth; ``excess`` [m] how far the tool is below the penetration at which the soil yields
+    (``capacity / (k_s B L)``): the soil under it has failed by that much, and the plant lowers the surface under the
+    tool by it (0 while the soil holds).
+    """
+
+    force: np.ndarray
+    capacity: np.ndarray
+    excess: np.ndarray
+
+
+def bearing_factors(phi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N_c, N_q, N_gamma) for internal friction ``phi`` [rad] (scalar or array): Prandtl/Reissner's N_q and N_c,
+    Meyerhof's (1963) N_gamma (see the module docstring). At phi -> 0 N_c tends to 2 + pi (Prandtl), N_q to 1 and
+    N_gamma to 0.
+
+    Raises:
+        ValueError: phi outside (0, 60 deg] (tan(1.4 phi) leaves the range the factors were fitted for).
+    """
+    phi = np.asarray(phi, dtype=float)
+    if not (np.all(np.isfinite(phi)) and np.all(phi > 0.0) and np.all(phi <= math.radians(60.0) + 1e-12)):
+        raise ValueError(f"bearing_factors: phi must be in (0, 60 deg], got {np.degrees(phi)!r} deg")
+    t = np.tan(phi)
+    n_q = np.exp(math.pi * t) * np.tan(math.pi / 4 + phi / 2) ** 2
+    n_c = (n_q - 1.0) / t
+    n_gamma = (n_q - 1.0) * np.tan(1.4 * phi)
+    return n_c, n_q, n_gamma
+
+
+def bearing_terms(soil: SoilParams, breadth, length) -> tuple[np.ndarray, np.ndarray]:
+    """(q0 [Pa], dq/dD [Pa/m]) of the ultimate bearing pressure ``q_ult = q0 + dq/dD * D`` of a footing of
+    ``breadth`` B x ``length`` L [m] in ``soil`` (Terzaghi's superposition, Meyerhof's factors and shape factors,
+    the module docstring): q0 = c N_c s_c + 0.5 gamma B N_gamma s_gamma, dq/dD = gamma N_q s_q. B and L broadcast;
+    B / L is taken at most 1 (a footing's breadth is its shorter side)."""
+    b = np.asarray(breadth, dtype=float)
+    ratio = np.minimum(b / np.asarray(length, dtype=float), 1.0)
+    n_c, n_q, n_gamma = bearing_factors(soil.phi)
+    k_p = math.tan(math.pi / 4 + soil.phi / 2) ** 2
+    s_c = 1.0 + 0.2 * k_p * ratio
+    # Meyerhof: s_q = s_gamma = 1 for phi = 0, 1 + 0.1 K_p B/L for phi >= 10 deg; linear in phi between
+    s_q = 1.0 + 0.1 * k_p * ratio * min(1.0, soil.phi / math.radians(10.0))
+    q0 = soil.cohesion * n_c * s_c + 0.5 * soil.unit_weight * b * n_gamma * s_q
+    return q0, soil.unit_weight * n_q * s_q
+
+
+def bearing_capacity(soil: SoilParams, depth, breadth, length) -> np.ndarray:
+    """q_ult [Pa] under a footing ``breadth`` x ``length`` [m] whose base is ``depth`` [m] below the surrounding
+    surface (negative depths count as 0); all three broadcast (scalars or 1-D arrays over the tools)."""
+    q0, per_depth = bearing_terms(soil, breadth, length)
+    return q0 + per_depth * np.maximum(np.asarray(depth, dtype=float), 0.0)
+
+
+def penetration_force(soil: SoilParams, penetration, depth, breadth, length) -> Penetration:
+    """The soil's bearing resistance to each tool pressed into it (see the module docstring).
+
+    Args:
+        soil: the soil, with its ``subgrade_modulus``.
+        penetration: delta [m], how far the tool's bottom is below the soil surface directly under it (the soil it
+            compresses); <= 0: the tool is not in contact, no force.
+        depth: D [m], its bottom below the surrounding surface (the overburden of the bearing capacity); taken at
+            least ``penetration``.
+        breadth: B [m], the contact's extent along the tool's motion (its thickness, or the floor it rests on).
+        length: L [m], the contact's extent across (the cutting edge's width).
+
+    All but ``soil`` broadcast (scalars or 1-D arrays over the tools).
+
+    Raises:
+        ValueError: the soil has no subgrade modulus, or a breadth or length is not finite and > 0.
+    """
+    if soil.subgrade_modulus is None:
+        raise ValueError(f"penetration_force: soil {soil.name or '<unnamed>'} has no subgrade_modulus "
+                         "(soil_types.yaml subgrade_modulus_mn_m3)")
+    delta = np.asarray(penetration, dtype=float)
+    b, w = np.asarray(breadth, dtype=float), np.asarray(length, dtype=float)
+    if not (np.all(np.isfinite(b)) and np.all(b > 0.0) and np.all(np.isfinite(w)) and np.all(w > 0.0)):
+        raise ValueError(f"penetration_force: breadth and length must be finite and > 0, got {b!r}, {w!r}")
+    area = b * w
+    capacity = bearing_capacity(soil, np.maximum(depth, delta), b, w) * area
+    spring = soil.subgrade_modulus * area
+    inside = delta > 0.0
+    force = np.where(inside, np.minimum(spring * np.maximum(delta, 0.0), capacity), 0.0)
+    excess = np.where(inside, np.maximum(delta - capacity / spring, 0.0), 0.0)
+    return Penetration(force, capacity, excess)
+
+
 # --- soil types from config/sim/soil_types.yaml ------------------------------------------------------------------
 
 
@@ -307,6 +424,7 @@ class _SoilEntry:
     density_kg_m3: float | None = setting(None, lo=500.0, hi=3000.0)
     adhesion_kpa: float = setting(0.0, lo=0.0, hi=1000.0)
     surcharge_kpa: float = setting(0.0, lo=0.0, hi=1000.0)
+    subgrade_modulus_mn_m3: float | None = setting(None, lo=1.0, hi=500.0, doc="k_s [MN/m^3] (Bowles table 9-1)")
 
     def __post_init__(self) -> None:
         if (self.unit_weight_kn_m3 is None) == (self.density_kg_m3 is None):
@@ -338,6 +456,7 @@ def load_soil_types(path: str | Path | None = None) -> MappingProxyType:
                 unit_weight=gamma, cohesion=e.cohesion_kpa * 1e3, phi=math.radians(e.friction_deg),
                 delta=math.radians(e.tool_friction_deg), adhesion=e.adhesion_kpa * 1e3,
                 surcharge=e.surcharge_kpa * 1e3, name=name, source=" ".join(e.source.split()),
+                subgrade_modulus=(e.subgrade_modulus_mn_m3 * 1e6 if e.subgrade_modulus_mn_m3 is not None else None),
             )
         except ValueError as exc:
             raise SimConfigError(f"{path}: soil_types.{name}: {exc}") from None

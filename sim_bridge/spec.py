@@ -106,6 +106,12 @@ class SoilSpec:
     loose_density: float = 1450.0  # [kg/m^3] of the soil in buckets, vessels and piles (its weight on the machines)
     cutting: SoilParams | None = None  # the soil the tools cut (sim_bridge.soil_force); None: no cutting force
     fine: FineGrid | None = None  # a finer patch of the grid where the tool works; None: one grid
+    #: the digging bucket pressed into the ground meets the soil's bearing resistance (soil_force.penetration_force;
+    #: the plant YAML's ``soil.penetration``, off in the shipped plants); needs ``cutting`` with a subgrade modulus
+    penetration: bool = False
+    #: [m] the pressed bucket's contact along its motion (breadth B of the bearing capacity; its length is the
+    #: cutting edge's width): the edge plate and the front of the floor behind it
+    penetration_breadth: float = 0.3
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ transport and CPU of the full launch, so it shows what digging and release setti
     tree's)
     LOAD_PASS_TRANSPORT=2 python -m tests.bench load_pass   # measurements 2 periods old, commands 2 periods late
     LOAD_PASS_GAP=0.2 python -m tests.bench load_pass   # the controller idles this long [s] before each next goal
+    LOAD_PASS_PENETRATION=1 python -m tests.bench load_pass   # the plant with soil.penetration on (the bucket
+    pressed into the ground meets the soil's bearing; off in the shipped plant YAMLs)
 
 Prints per pass: simulated time of each action and of the pass, soil cut, soil that reached the vessel,
 soil spilled elsewhere, and the totals. ``make demo`` runs the same cores in separate processes.
@@ -62,6 +64,8 @@ TRANSPORT = int(os.environ.get("LOAD_PASS_TRANSPORT", "0"))
 #: Simulated seconds the controller idles before each goal after the first (LOAD_PASS_GAP; 0: the next goal
 #: starts at the next tick), as the goal round trip tree -> subtask server -> planner -> controller takes in the stack.
 GAP_S = float(os.environ.get("LOAD_PASS_GAP", "0"))
+#: The plant's soil.penetration (LOAD_PASS_PENETRATION=1: on; default: the plant YAML's, off).
+PENETRATION = os.environ.get("LOAD_PASS_PENETRATION", "0") != "0"
 #: The seed's theta_w_tolerance of that record.
 APPROACH_TOLERANCE = next(d["theta_w_tolerance"] for d in load_seed()["parameters"]
                           if d.get("record_name") == "target_excavate_approach_pose")
@@ -71,7 +75,10 @@ class PassRig:
     """The plant of the paper experiment with the ZX200 cores driving it in simulated time."""
 
     def __init__(self) -> None:
-        self.plant = Plant(load_plant(config_path("sim", "paper_plant.yaml")))
+        spec = load_plant(config_path("sim", "paper_plant.yaml"))
+        if PENETRATION:
+            spec = dataclasses.replace(spec, soil=dataclasses.replace(spec.soil, penetration=True))
+        self.plant = Plant(spec)
         self.kin = load_kinematics()
         cfg = load_controller_config(self.kin.machine)
         cfg = dataclasses.replace(cfg, rate_hz=RATE_HZ)
