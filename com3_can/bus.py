@@ -18,10 +18,8 @@ from typing import Any
 import can
 
 from com3_can.errors import Com3BusError
-from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_model.fleet import site_machine
-from tms_model.site import Site, SiteMachine, load_site
+from tms_model.fleet import load_bus_config  # one reader of config/can/<kind>.yaml for every package
 
 __all__ = ["BACKENDS", "IN_PROCESS_ENV", "open_bus", "socketcan_available", "load_bus_config", "link_config",
            "in_process_machines"]
@@ -128,45 +126,3 @@ def link_config(machine: str, cfg: Mapping[str, Any], *, interface: str = "", ch
     if out.get("interface") != "udp_multicast":
         out.pop("port", None)
     return out
-
-
-def load_bus_config(machine: str, path: str | Path | None = None, site: Site | None = None) -> dict[str, Any]:
-    """The bus + bridge configuration of the machine called ``machine``.
-
-    Its kind's ``config/can/<kind>.yaml`` (or ``path``), with the site's ``can`` changes for this machine over
-    the top level (``machines:`` of config/site.yaml: two machines of one kind need udp_multicast ports of their
-    own) and ``{name}`` in the ``in_process`` channel replaced by the machine's name.
-
-    Raises:
-        ConfigError: the machine is not on the site, or another machine of the site would share its link.
-    """
-    site = site or load_site()
-    entry = site_machine(machine, site)
-    path = Path(path) if path else config_path("can", f"{entry.kind}.yaml")
-    data, where = load_yaml(path)
-    if not isinstance(data, dict):
-        raise where.error((), "expected a mapping with interface/channel/bridge")
-    out = _named(data, entry)
-    link = _udp_link(out)
-    if link and path == config_path("can", f"{entry.kind}.yaml"):
-        for other in site.machines.values():
-            if other.name != machine and other.kind == entry.kind and _udp_link(_named(data, other)) == link:
-                raise ConfigError(f"{path}: machines {machine!r} and {other.name!r} of the site would share the "
-                                  f"udp_multicast link {link}: give one its own port (machines.<name>.can.port in "
-                                  f"{site.source})")
-    return out
-
-
-def _named(data: Mapping[str, Any], entry: SiteMachine) -> dict[str, Any]:
-    """The kind's bus config as machine ``entry`` uses it."""
-    out = {**data, **entry.can}
-    local = data.get("in_process")
-    if isinstance(local, Mapping) and isinstance(local.get("channel"), str):
-        out["in_process"] = {**local, "channel": local["channel"].replace("{name}", entry.name)}
-    return out
-
-
-def _udp_link(cfg: Mapping[str, Any]) -> tuple[str, int] | None:
-    if cfg.get("interface") != "udp_multicast":
-        return None
-    return str(cfg.get("channel")), int(cfg.get("port", 0))

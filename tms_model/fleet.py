@@ -8,13 +8,23 @@ needs per-kind knowledge asks :func:`machine_kind` or :func:`load_named` instead
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
+from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
+from tms_common.schema import Reader
 from tms_model.machines import Joint, Machine, load_machine
 from tms_model.site import Site, SiteMachine, load_site
 
-__all__ = ["load_named", "machine_kind", "machine_name", "site_machine", "vessel_swing_joint"]
+__all__ = ["CAN_KEYS", "load_bus_config", "load_named", "machine_kind", "machine_name", "site_machine",
+           "vessel_swing_joint"]
+
+#: keys of config/can/<kind>.yaml: the link (python-can's interface, channel and its backends' options), the
+#: link used when the plant and the converter share a process, and the converter's settings (com3_can's)
+CAN_KEYS = frozenset({"interface", "channel", "port", "hop_limit", "fd", "receive_own_messages", "in_process",
+                      "bridge"})
 
 
 def site_machine(name: str, site: Site | None = None) -> SiteMachine:
@@ -53,3 +63,60 @@ def vessel_swing_joint(machine: Machine) -> Joint | None:
     if machine.vessel is None:
         return None
     return next((j for j in machine.joints if tuple(j.axis) == (0.0, 0.0, 1.0)), None)
+
+
+def load_bus_config(name: str, path: str | Path | None = None, site: Site | None = None) -> dict[str, Any]:
+    """The CAN bus configuration of the machine called ``name``, for every reader of a bus (the converter, the
+    plant, ``tms_rc_identify``): its kind's ``config/can/<kind>.yaml`` (or ``path``) read through
+    :mod:`tms_common.schema` (unknown keys refused, types checked, ``file:line`` errors), with the site's ``can``
+    changes for this machine over the top level (``machines:`` of config/site.yaml: two machines of one kind need
+    udp_multicast ports of their own) and ``{name}`` in the ``in_process`` channel replaced by the machine's name.
+
+    Raises:
+        ConfigError: the machine is not on the site, the file is missing or bad, or another machine of the site
+            would share its link.
+    """
+    site = site or load_site()
+    entry = site_machine(name, site)
+    default = config_path("can", f"{entry.kind}.yaml")
+    path = Path(path) if path else default
+    data, where = load_yaml(path)
+    reader = Reader(data, where)
+    reader.only(set(CAN_KEYS))
+    reader.string("interface")
+    reader.string("channel")
+    if reader.has("port"):
+        port = reader.raw("port")
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+            raise reader.key_error("port", f"expected a port number 1..65535, got {port!r}")
+    if reader.has("in_process"):
+        local = reader.sub("in_process")
+        local.only({"interface", "channel", "receive_own_messages"})
+        local.string("interface")
+        local.string("channel")
+    if reader.has("bridge"):
+        reader.sub("bridge")  # a mapping; its keys are the converter's (com3_can.bridge_config)
+    out = _named(data, entry)
+    link = _udp_link(out)
+    if link and path == default:
+        for other in site.machines.values():
+            if other.name != name and other.kind == entry.kind and _udp_link(_named(data, other)) == link:
+                raise ConfigError(f"{path}: machines {name!r} and {other.name!r} of the site would share the "
+                                  f"udp_multicast link {link}: give one its own port (machines.<name>.can.port in "
+                                  f"{site.source})")
+    return out
+
+
+def _named(data: Mapping[str, Any], entry: SiteMachine) -> dict[str, Any]:
+    """The kind's bus config as machine ``entry`` uses it."""
+    out = {**data, **entry.can}
+    local = data.get("in_process")
+    if isinstance(local, Mapping) and isinstance(local.get("channel"), str):
+        out["in_process"] = {**local, "channel": local["channel"].replace("{name}", entry.name)}
+    return out
+
+
+def _udp_link(cfg: Mapping[str, Any]) -> tuple[str, int] | None:
+    if cfg.get("interface") != "udp_multicast":
+        return None
+    return str(cfg.get("channel")), int(cfg.get("port", 0))

@@ -47,9 +47,11 @@ import numpy as np
 
 from tms_common.config import config_path, data_root, load_yaml
 from tms_common.errors import ConfigError
+from tms_common.schema import Reader
 from tms_model.excavator.kinematics import JOINTS
-from tms_model.fleet import load_named
+from tms_model.fleet import load_bus_config, load_named
 from tms_model.machines import EXCAVATOR, Machine, load_machine
+from tms_model.site import Site
 from tms_rc.identification import (
     JointEstimate,
     StepRecord,
@@ -120,10 +122,23 @@ class Codec:
         return msg.name, {k: float(v) for k, v in msg.decode(data, decode_choices=False).items()}
 
 
-def bus_config(name: str) -> dict[str, Any]:
-    """``interface``, ``channel`` (and ``port``) of ``config/can/<name>.yaml``."""
-    data, _ = load_yaml(config_path("can", f"{name}.yaml"))
-    return {k: data[k] for k in ("interface", "channel", "port") if k in data}
+def bus_config(name: str, overrides: Mapping[str, Any] | None = None, site: Site | None = None) -> dict[str, Any]:
+    """The link to the real bus of the machine called ``name``: the top level of its kind's
+    ``config/can/<kind>.yaml`` with the site's ``can`` changes for it (:func:`tms_model.fleet.load_bus_config`,
+    as the converter reads it), then ``overrides`` (the ``--can-*`` options) that are not None; without the
+    converter's sections (``bridge``, ``in_process``). ConfigError (``file:line: key: problem``) for a bad file."""
+    cfg = load_bus_config(name, site=site)
+    out = {k: v for k, v in cfg.items() if k not in ("bridge", "in_process")}
+    out.update({k: v for k, v in (overrides or {}).items() if v is not None})
+    if out.get("interface") != "udp_multicast":
+        out.pop("port", None)
+    return out
+
+
+def _plant_machines(plant_config: Path) -> Reader:
+    """The ``machines:`` mapping (name -> description file) of a plant YAML, read through tms_common.schema."""
+    data, where = load_yaml(plant_config)
+    return Reader(data, where).sub("machines")
 
 
 class Link:
@@ -400,10 +415,10 @@ def start_plant(plant_config: Path, speed: float, log: Callable[[str], None]) ->
 
     ROS discovery is off for it (ROS_AUTOMATIC_DISCOVERY_RANGE=OFF): its /clock and truth topics reach no one.
     """
-    data, _ = load_yaml(plant_config)
+    names = _plant_machines(plant_config).keys()
     rng = random.Random(os.getpid() * 7919 + time.monotonic_ns())
     buses = {m: {"interface": "udp_multicast", "channel": f"239.76.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}",
-                 "port": _free_port(rng)} for m in data["machines"]}
+                 "port": _free_port(rng)} for m in names}
     # the console script beside this interpreter (the project's venv), else the one on PATH
     exe = Path(sys.executable).parent / "sim_plant"
     if not exe.is_file():
@@ -541,10 +556,10 @@ def _args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def _description(name: str, machine_file: Path | None, plant_config: Path | None) -> tuple[Machine, Path | None]:
     if machine_file is None and plant_config is not None:
-        data, _ = load_yaml(plant_config)
-        entry = data.get("machines", {}).get(name)
-        if entry is None:
-            raise ConfigError(f"{plant_config}: machines: no machine {name!r} (has {sorted(data.get('machines', {}))})")
+        machines = _plant_machines(plant_config)
+        if not machines.has(name):
+            raise machines.error(machines.path, f"no machine {name!r} (has {sorted(machines.keys())})")
+        entry = machines.string(name)
         machine_file = Path(entry) if Path(entry).is_absolute() else config_path(entry)
     if machine_file is not None:
         return load_machine(machine_file.stem, machine_file).named(name), machine_file
@@ -557,8 +572,17 @@ def _terminate(_signum: int, _frame: Any) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The command line; a bad file or option stops it with one line (``file:line: key: problem``), exit code 2."""
     signal.signal(signal.SIGTERM, _terminate)
     args = _args(argv)
+    try:
+        return _run(args, argv)
+    except (ConfigError, ValueError) as exc:
+        print(f"tms_rc_identify: {exc}", file=sys.stderr, flush=True)
+        return 2
+
+
+def _run(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.plant_config is not None:
         args.plant_config = args.plant_config.resolve()
     words = ["tms_rc_identify", *(sys.argv[1:] if argv is None else argv)]
@@ -567,29 +591,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     def log(msg: str) -> None:
         print(msg, flush=True)
 
-    try:
-        machine, machine_file = _description(args.machine, args.machine_config, args.plant_config)
-        machine.require(EXCAVATOR)
-        joints = [j.strip() for j in args.joints.split(",") if j.strip()]
-        unknown = [j for j in joints if j not in JOINTS]
-        if unknown:
-            raise ConfigError(f"--joints: {unknown} are not front joints {list(JOINTS)}")
-        amplitudes = sorted(float(a) for a in args.amplitudes.split(","))
-        codec = Codec(machine.dbc)
-    except (ConfigError, ValueError) as exc:
-        print(f"tms_rc_identify: {exc}", file=sys.stderr)
-        return 2
+    machine, machine_file = _description(args.machine, args.machine_config, args.plant_config)
+    machine.require(EXCAVATOR)
+    joints = [j.strip() for j in args.joints.split(",") if j.strip()]
+    unknown = [j for j in joints if j not in JOINTS]
+    if unknown:
+        raise ConfigError(f"--joints: {unknown} are not front joints {list(JOINTS)}")
+    amplitudes = sorted(float(a) for a in args.amplitudes.split(","))
+    codec = Codec(machine.dbc)
+    # a real bus: the machine's kind's config/can/<kind>.yaml as the site changes it (read before anything starts)
+    real_bus = None if args.plant_config is not None else bus_config(
+        args.machine, {k: getattr(args, f"can_{k}") for k in ("interface", "channel", "port")})
     output = args.output or identified_path(args.machine)
     with contextlib.ExitStack() as stack:
         if args.plant_config is not None:
             buses = stack.enter_context(start_plant(args.plant_config, args.speed, log))
             bus = buses[args.machine]
         else:
-            bus = bus_config(args.machine)
-            for key in ("interface", "channel", "port"):
-                value = getattr(args, f"can_{key}")
-                if value is not None:
-                    bus[key] = value
+            bus = real_bus
         link = Link(codec, bus)
         stack.callback(link.close)
         exp = Experiment(link, machine, log)
