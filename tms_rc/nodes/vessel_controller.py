@@ -47,7 +47,6 @@ from tms_common.params import declare_startup
 from tms_common.rclpy_compat import create_deferred_service
 from tms_model.com3 import CARRIER_DUMP_JOINT, CARRIER_ROTATE_JOINT, POSITION
 from tms_model.fleet import load_named, machine_name, vessel_swing_joint
-from tms_model.machines import load_machine
 from tms_model.nav_files import load_nav_files
 from tms_rc.carrier.vessel import VesselController, VesselError, VesselParams, VesselTuning
 
@@ -78,12 +77,8 @@ class VesselControllerNode(Node):
         machine_yaml = str(declare_startup(self, "machine_config", "").value)
         nav_yaml = str(declare_startup(self, "nav_config", "").value)
         rate = float(declare_startup(self, "rate_hz", 10.0).value)
-        try:
-            desc = load_named(self.machine, machine_yaml or None)
-        except ConfigError:
-            if not machine_yaml:
-                raise
-            desc = load_machine(self.machine, machine_yaml)
+        # a name resolves to its kind through the site only (machine_config replaces that kind's file)
+        desc = load_named(self.machine, machine_yaml or None)
         if desc.vessel is None:
             raise ConfigError(f"{desc.source}: {self.machine} ({desc.kind}, a {desc.type}) has no vessel: "
                               "vessel_controller serves crawler carriers")

@@ -35,7 +35,7 @@ from pathlib import Path
 from tms_common.errors import ConfigError
 from tms_common.schema import setting
 from tms_model.fleet import load_named
-from tms_model.machines import Machine, load_machine, machine_path
+from tms_model.machines import Machine
 from tms_model.nav_files import DEFAULT_NAV, load_nav_files, nav_path_for
 from tms_rp.tracked.controller import ControllerParams, Limits
 from tms_rp.tracked.costmap import Costmap, CostmapParams, Footprint, load_map
@@ -136,17 +136,6 @@ def _fields(cls: type, section: object) -> dict:
     return {f.name: getattr(section, f.name) for f in dataclasses.fields(cls)}
 
 
-def _description(machine: str, machine_yaml: str | Path | None) -> Machine:
-    """The description of the machine called ``machine`` on the site; a kind's own name off the site is read
-    as that kind (a test or a bench run of one kind)."""
-    try:
-        return load_named(machine, machine_yaml)
-    except ConfigError:
-        if machine_yaml is None and not machine_path(machine).is_file():
-            raise
-        return load_machine(machine, machine_yaml)
-
-
 def load_nav_config(nav_yaml: str | Path | None = None, machine_yaml: str | Path | None = None,
                     map_yaml: str | Path | None = None, *, machine: str) -> NavConfig:
     """Read and validate the navigation config of the machine called ``machine`` (a name of the site).
@@ -155,7 +144,7 @@ def load_nav_config(nav_yaml: str | Path | None = None, machine_yaml: str | Path
     ``config/nav/tracked_nav.yaml`` (:func:`tms_model.nav_files.load_nav_files`); ``machine_yaml`` replaces the
     kind's description file.
     """
-    description = _description(machine, machine_yaml)
+    description = load_named(machine, machine_yaml)  # a name resolves to its kind through the site only
     files = load_nav_files(description.kind, nav_yaml)
     for name in ("localization", "costmap", "planner", "controller", "goal_checker", "progress_checker"):
         if not files.has(name):
