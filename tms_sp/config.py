@@ -31,7 +31,7 @@ from tms_sp.heightgrid import GridSpec
 from tms_sp.mound import ExcavationParams
 from tms_sp.vessel import VesselGeometry, VesselParams
 
-__all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry"]
+__all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry", "planner_approach_height"]
 
 
 # ---- the schema of config/tms_sp/sensing.yaml (documented inline there) -----------------------------------------
@@ -39,7 +39,6 @@ __all__ = ["SensingConfig", "load_sensing_config", "carrier_vessel_geometry"]
 class _Excavation:
     record: str
     approach_record: str | None  # null = none (the original's trees have no approach record)
-    approach_height: float = setting(lo=0.0)
     roi_margin: float = setting(lo=0.0)
     reach_min: float = setting(lo=0.0)
     reach_max: float = setting(lo=0.0)
@@ -116,7 +115,7 @@ class SensingConfig:
     excavation: ExcavationParams
     excavation_record: str
     approach_record: str  # "" = none
-    approach_height: float
+    approach_height: float  # the excavator's planner's (:func:`planner_approach_height`); 0.0 without approach_record
     excavation_update_threshold: float
     carriers: tuple[str, ...]
     vessels: Mapping[str, VesselGeometry]  # per carrier name: its kind's vessel
@@ -159,6 +158,16 @@ def _vessel_geometry(name: str, site: Site) -> VesselGeometry:
     return VesselGeometry(inner_length=v.inner_length, inner_width=v.inner_width, capacity=v.capacity,
                           hinge_xyz=v.hinge_xyz, floor_above_hinge=v.floor_above_hinge,
                           rim_above_hinge=v.rim_above_hinge)
+
+
+def planner_approach_height(kind: str) -> float:
+    """``approach_height`` of excavator ``kind``'s planner, ``config/tms_rp/<kind>_planner.yaml``: the height above
+    the target of the excavate's first point. The approach record sensing writes is the target this much higher, so
+    the tree's return over the mound ends where the excavate begins: one value, the planner's (tms_sp may not import
+    tms_rp, a package of its level, so it reads that one key of the planner's file; tms_rp.zx200.planner's schema
+    checks the whole file and requires the key)."""
+    data, where = load_yaml(config_path("tms_rp", f"{kind}_planner.yaml"))
+    return Reader(data, where).number("approach_height", lo=0.0)
 
 
 def load_sensing_config(
@@ -255,6 +264,14 @@ def load_sensing_config(
     except ValueError as exc:
         raise fail(("arrival",), str(exc)) from None
 
+    approach_height = 0.0
+    if e.approach_record:
+        try:
+            approach_height = planner_approach_height(zx.kind)
+        except ConfigError as exc:
+            raise fail(("excavation", "approach_record"), f"the approach record is the target the planner's "
+                       f"approach_height higher: {exc}") from None
+
     swing_origin = zx.joints[0].origin_xyz  # the swing joint comes first in bus order
     return SensingConfig(
         blackboard_records=s.blackboard_records,
@@ -268,7 +285,7 @@ def load_sensing_config(
         excavation=excavation,
         excavation_record=e.record,
         approach_record=e.approach_record or "",
-        approach_height=e.approach_height,
+        approach_height=approach_height,
         excavation_update_threshold=e.update_threshold,
         carriers=carriers,
         vessels=MappingProxyType(vessels),

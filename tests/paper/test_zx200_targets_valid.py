@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from tests.tms_sp.treeutil import ROOT, load_seed
+from tms_common.errors import ConfigError
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.geometry import Pose2D
 from tms_rc.excavator.controller import load_controller_config
@@ -121,13 +122,31 @@ def test_every_sensed_excavation_target_passes_planner_validation():
         q_above = PLANNER.excavate([fields["x"], fields["y"], fields["z"]], fields["theta_w"], fields["offset"])[0].q
         end = PLANNER.pass_through_end(back)
         assert abs(end[0] - q_above[0]) < 1e-9, (end, q_above)
-        # same tip point: tms_sp's approach_height agrees with the planner's approach geometry
+        # same tip point: the approach record is the target the planner's approach_height higher
         np.testing.assert_allclose(KIN.tip_position(end), KIN.tip_position(q_above), atol=1e-6)
         for bound in (CFG.excavation.theta_w_min, CFG.excavation.theta_w_max):
             _validate(CFG.approach_record, {**approach, "theta_w": bound})
         seen += 1
         surface = syn.dig_pit(surface, a.target.x, a.target.y, radius=0.7, depth=0.5)
     assert seen >= 5
+
+
+def test_the_approach_height_is_the_planners_one_value_used_by_sensing_and_planner(tmp_path):
+    """Defined once (config/tms_rp/<kind>_planner.yaml): sensing's approach record reads it, sensing.yaml may not
+    hold it, and the planner's file must give it (no silent default on either side)."""
+    assert CFG.approach_height == PLANNER.cfg.approach_height == load_planner_config(KIN.machine.kind).approach_height
+    assert CFG.approach_height > 0.0
+    sensing = ROOT / "config" / "tms_sp" / "sensing.yaml"
+    assert "approach_height" not in yaml.safe_load(sensing.read_text())["excavation"]
+    text = sensing.read_text().replace("  roi_margin:", "  approach_height: 0.5\n  roi_margin:", 1)
+    (tmp_path / "sensing.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=r"sensing.yaml:\d+: excavation.approach_height: unknown key"):
+        load_sensing_config(tmp_path / "sensing.yaml")
+    planner = ROOT / "config" / "tms_rp" / f"{KIN.machine.kind}_planner.yaml"
+    lines = [line for line in planner.read_text().splitlines() if not line.startswith("approach_height:")]
+    (tmp_path / "planner.yaml").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigError, match=r"planner.yaml:\d+: approach_height: missing required key"):
+        load_planner_config(KIN.machine.kind, tmp_path / "planner.yaml")
 
 
 def _original_zx200() -> dict[str, dict]:

@@ -13,6 +13,7 @@ import yaml
 
 import tms_db
 from tests.tms_sp.treeutil import ROOT
+from tms_common.errors import ConfigError
 from tms_db.cli import seed
 from tms_model.fleet import load_named, machine_kind
 from tms_model.machines import CRAWLER_DUMP
@@ -80,13 +81,20 @@ def test_the_bucket_width_is_the_excavators_description():
     assert "bucket_radius" not in SENSING_YAML["excavation"]
 
 
-def test_names_from_yaml_or_parameters():
-    cfg = load_sensing_config(excavator="zx120", carriers=["mst2200"])
+def test_names_from_yaml_or_parameters(tmp_path: Path):
+    # the ZX120 has no planner file (config/tms_rp/<kind>_planner.yaml): sensing writes it no approach record
+    sensing = tmp_path / "sensing.yaml"
+    sensing.write_text(re.sub(r"(?m)^  approach_record: .*$", "  approach_record: null",
+                              (ROOT / "config" / "tms_sp" / "sensing.yaml").read_text()))
+    cfg = load_sensing_config(sensing, excavator="zx120", carriers=["mst2200"])
     assert cfg.excavator == "zx120" and cfg.carriers == ("mst2200",)
     assert cfg.vessel_geom.capacity == load_named("mst2200").vessel.capacity
     assert cfg.excavation.bucket_volume == load_named("zx120").bucket.capacity
     default = load_sensing_config()
     assert (default.excavator, default.carriers) == (SENSING_YAML["excavator"], tuple(SENSING_YAML["carriers"]))
+    # with an approach record, the excavator's planner gives its height: no planner file, no sensing
+    with pytest.raises(ConfigError, match=r"sensing.yaml:\d+: excavation.approach_record: .*zx120_planner.yaml"):
+        load_sensing_config(excavator="zx120", carriers=["mst2200"])
 
 
 def test_no_machine_name_or_kind_in_the_packages_code_strings():

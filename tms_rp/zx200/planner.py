@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from tms_common.config import config_path
-from tms_common.schema import load_schema
+from tms_common.schema import load_schema, setting
 from tms_model.excavator.codes import InvalidGoalError, JointLimitError, PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
@@ -36,7 +36,8 @@ __all__ = ["PlannerConfig", "load_planner_config", "planner_config_path", "Zx200
 class PlannerConfig:
     """Excavation/release geometry of an excavator kind (``config/tms_rp/<kind>_planner.yaml``)."""
 
-    approach_height: float = 1.0
+    approach_height: float = setting(lo=0.0, doc="[m] the excavate's first point: the bucket tip this far above "
+                                     "the target (sensing's approach record reads it: tms_sp.config)")
     penetrate_depth: float = 0.0
     drag_end_theta_w: float = 1.6
     drag_default: float = 1.0
@@ -78,7 +79,7 @@ class Zx200Planner:
 
     def __init__(self, kin: ExcavatorKinematics, cfg: PlannerConfig | None = None, ground_min_z: float = -2.5) -> None:
         self.kin = kin
-        self.cfg = cfg or PlannerConfig()
+        self.cfg = cfg or load_planner_config(kin.machine.kind)
         self.ground_min_z = ground_min_z
 
     # ------------------------------------------------------------------ validation helpers
