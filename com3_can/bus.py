@@ -19,10 +19,10 @@ import can
 
 from com3_can.errors import Com3BusError
 from tms_common.errors import ConfigError
-from tms_model.fleet import load_bus_config  # one reader of config/can/<kind>.yaml for every package
+from tms_model.fleet import BusConfig, load_bus_config  # the one reader of config/can/<kind>.yaml
 
-__all__ = ["BACKENDS", "IN_PROCESS_ENV", "open_bus", "socketcan_available", "load_bus_config", "link_config",
-           "in_process_machines"]
+__all__ = ["BusConfig", "BACKENDS", "IN_PROCESS_ENV", "open_bus", "socketcan_available", "load_bus_config",
+           "link_config", "in_process_machines"]
 
 _log = logging.getLogger(__name__)
 
@@ -54,37 +54,46 @@ def socketcan_available() -> bool:
 def open_bus(cfg: Mapping[str, Any]) -> can.BusABC:
     """Open the CAN bus described by ``cfg`` (``interface``, ``channel``, backend extras).
 
+    A :class:`BusConfig` (what :func:`load_bus_config` and :func:`link_config` return) knows where each option
+    was given: every error then starts with that ``file:line`` (or the site entry or node parameter).
+
     Raises:
         ConfigError: unknown interface, missing channel or an extra key the backend does not take.
         Com3BusError: the backend exists but cannot be opened here (message says why).
     """
+
+    def at(key: str = "") -> str:
+        where = cfg.at(key) if isinstance(cfg, BusConfig) else ""
+        return f"{where}: {key + ': ' if key else ''}" if where else ""
+
     interface = cfg.get("interface")
     if interface not in BACKENDS:
-        raise ConfigError(f"CAN interface {interface!r} unknown; expected one of {', '.join(BACKENDS)}")
+        raise ConfigError(f"{at('interface')}CAN interface {interface!r} unknown; expected one of "
+                          f"{', '.join(BACKENDS)}")
     channel = cfg.get("channel")
     if not channel:
-        raise ConfigError(f"CAN {interface}: 'channel' is required")
+        raise ConfigError(f"{at('channel')}CAN {interface}: 'channel' is required")
     extras = {k: v for k, v in cfg.items() if k not in {"interface", "channel"} | _IGNORED_KEYS}
     unknown = sorted(set(extras) - BACKENDS[interface])
     if unknown:
         raise ConfigError(
-            f"CAN {interface}: unknown option(s) {unknown}; accepted: {sorted(BACKENDS[interface])}"
+            f"{at(unknown[0])}CAN {interface}: unknown option(s) {unknown}; accepted: {sorted(BACKENDS[interface])}"
         )
     if interface == "socketcan":
         if not socketcan_available():
-            raise Com3BusError("SocketCAN is not available in this kernel (no AF_CAN sockets); "
+            raise Com3BusError(f"{at('interface')}SocketCAN is not available in this kernel (no AF_CAN sockets); "
                                "use interface udp_multicast or virtual, or run in a VM with vcan")
         if not Path("/sys/class/net", str(channel)).exists():
             raise Com3BusError(
-                f"SocketCAN interface {channel!r} does not exist (create it: ip link add dev {channel} type vcan; "
-                f"ip link set up {channel})"
+                f"{at('channel')}SocketCAN interface {channel!r} does not exist (create it: ip link add dev "
+                f"{channel} type vcan; ip link set up {channel})"
             )
     if interface == "udp_multicast":
         extras.setdefault("fd", False)
     try:
         bus = can.Bus(interface=interface, channel=channel, ignore_config=True, **extras)
     except (can.CanError, OSError, NotImplementedError, ImportError) as exc:
-        raise Com3BusError(f"cannot open CAN {interface} channel {channel!r}: {exc}") from exc
+        raise Com3BusError(f"{at('channel')}cannot open CAN {interface} channel {channel!r}: {exc}") from exc
     _log.info("opened CAN bus interface=%s channel=%s options=%s", interface, channel, extras)
     return bus
 
@@ -95,7 +104,7 @@ def in_process_machines() -> frozenset[str]:
 
 
 def link_config(machine: str, cfg: Mapping[str, Any], *, interface: str = "", channel: str = "",
-                port: int = 0) -> dict[str, Any]:
+                port: int = 0) -> BusConfig:
     """The bus options of ``machine``'s COM3 link, for either end (plant or converter): the one place that
     chooses the interface.
 
@@ -115,14 +124,15 @@ def link_config(machine: str, cfg: Mapping[str, Any], *, interface: str = "", ch
         if not isinstance(local, Mapping):
             raise ConfigError(f"CAN link of {machine!r}: {IN_PROCESS_ENV} names it but its bus config has no "
                               "'in_process' mapping (e.g. in_process: {interface: virtual, channel: com3_<machine>})")
-        return dict(local)
-    out = {k: v for k, v in cfg.items() if k not in _IGNORED_KEYS}
-    if interface:
-        out["interface"] = interface
-    if channel:
-        out["channel"] = channel
-    if port:
-        out["port"] = port
+        origin = cfg.origin if isinstance(cfg, BusConfig) else {}
+        return BusConfig(local, {"": origin.get("in_process", origin.get("", "")),
+                                 **{k: origin[f"in_process.{k}"] for k in local if f"in_process.{k}" in origin}})
+    out = BusConfig({k: v for k, v in cfg.items() if k not in _IGNORED_KEYS},
+                    cfg.origin if isinstance(cfg, BusConfig) else None)
+    for key, value in (("interface", interface), ("channel", channel), ("port", port)):
+        if value:
+            out[key] = value
+            out.origin[key] = f"the {key} given by a node parameter"
     if out.get("interface") != "udp_multicast":
         out.pop("port", None)
     return out

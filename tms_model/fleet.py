@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from tms_common.config import config_path, load_yaml
@@ -18,7 +19,7 @@ from tms_common.schema import Reader
 from tms_model.machines import Joint, Machine, load_machine
 from tms_model.site import Site, SiteMachine, load_site
 
-__all__ = ["CAN_KEYS", "load_bus_config", "load_named", "machine_kind", "machine_name", "site_machine",
+__all__ = ["BusConfig", "CAN_KEYS", "load_bus_config", "load_named", "machine_kind", "machine_name", "site_machine",
            "vessel_swing_joint"]
 
 #: keys of config/can/<kind>.yaml: the link (python-can's interface, channel and its backends' options), the
@@ -65,7 +66,21 @@ def vessel_swing_joint(machine: Machine) -> Joint | None:
     return next((j for j in machine.joints if tuple(j.axis) == (0.0, 0.0, 1.0)), None)
 
 
-def load_bus_config(name: str, path: str | Path | None = None, site: Site | None = None) -> dict[str, Any]:
+class BusConfig(dict[str, Any]):
+    """A machine's CAN bus options (a plain mapping, as python-can takes them) with where each was given:
+    ``origin[key]`` is ``file:line`` of the key in its config/can file, or the site entry or node parameter that
+    changed it (``origin[""]``: the file itself), so an error about an option names where to fix it."""
+
+    def __init__(self, data: Mapping[str, Any] = MappingProxyType({}), origin: Mapping[str, str] | None = None) -> None:
+        super().__init__(data)
+        self.origin = dict(origin or {})
+
+    def at(self, key: str = "") -> str:
+        """Where ``key`` was given, else where the options came from ("" when not known)."""
+        return self.origin.get(key) or self.origin.get("", "")
+
+
+def load_bus_config(name: str, path: str | Path | None = None, site: Site | None = None) -> BusConfig:
     """The CAN bus configuration of the machine called ``name``, for every reader of a bus (the converter, the
     plant, ``tms_rc_identify``): its kind's ``config/can/<kind>.yaml`` (or ``path``) read through
     :mod:`tms_common.schema` (unknown keys refused, types checked, ``file:line`` errors), with the site's ``can``
@@ -96,7 +111,14 @@ def load_bus_config(name: str, path: str | Path | None = None, site: Site | None
         local.string("channel")
     if reader.has("bridge"):
         reader.sub("bridge")  # a mapping; its keys are the converter's (com3_can.bridge_config)
-    out = _named(data, entry)
+    origin = {"": f"{where.file}:1"}
+    for key in data:
+        origin[key] = f"{where.file}:{where.line_of((key,))}"
+    for key in data.get("in_process") or {}:
+        origin[f"in_process.{key}"] = f"{where.file}:{where.line_of(('in_process', key))}"
+    for key in entry.can:
+        origin[key] = f"{site.source}: machines.{name}.can.{key}"
+    out = BusConfig(_named(data, entry), origin)
     link = _udp_link(out)
     if link and path == default:
         for other in site.machines.values():

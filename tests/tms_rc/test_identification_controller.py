@@ -53,11 +53,22 @@ def test_a_missing_identified_file_is_one_line_naming_it_and_the_command_that_ma
     (IDENTIFIED.format(name="zx120").replace("  bucket_joint:", "  bucket:"), "joints"),
     (IDENTIFIED.format(name="zx120").replace("lag_s: 0.2", "lag_s: -0.2"), r"joints.arm_joint.lag_s"),
     (IDENTIFIED.format(name="zx120").replace("pump_flow_lpm: 400.0\n", ""), "pump_flow_lpm"),
+    # read through tms_common.schema: unknown keys are refused, types checked, each error at its line
+    (IDENTIFIED.format(name="zx120").replace("pump_saturated: true", "pump_saturated: true\npump_flow: 300"),
+     "pump_flow"),
+    (IDENTIFIED.format(name="zx120").replace("lag_s: 0.3,", "lag_s: 0.3, lag: 0.3,"), r"joints.boom_joint.lag"),
+    (IDENTIFIED.format(name="zx120").replace("[300, 250]", "[300, fast]"), r"joints.arm_joint.flow_lpm_per_rad_s.1"),
+    (IDENTIFIED.format(name="zx120").replace("pump_saturated: true", "pump_saturated: 1"), "pump_saturated"),
 ])
 def test_a_bad_identified_file_names_the_key(tmp_path, text, key):
     (tmp_path / "zx120.yaml").write_text(text)
-    with pytest.raises(ConfigError, match=rf"zx120.yaml: {key}: "):
+    with pytest.raises(ConfigError, match=rf"zx120.yaml:\d+: {key}: ") as err:
         controller_config(_settings(tmp_path), load_machine("zx120"))
+    line = int(str(err.value).split("zx120.yaml:")[1].split(":")[0])
+    leaf = key.split(".")[-1] if not key.split(".")[-1].isdigit() else key.split(".")[-2]
+    # the line of the key (of its mapping when the key is missing)
+    assert leaf in text.splitlines()[line - 1] or key == "joints" or "missing" in str(err.value), (line, str(err.value))
+    assert "tms_rc_identify --machine zx120" in str(err.value) and "\n" not in str(err.value)
 
 
 def test_every_site_excavator_has_its_identified_file_with_every_joint():

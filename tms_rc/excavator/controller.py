@@ -44,7 +44,7 @@ import numpy as np
 
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_common.schema import load_schema, setting
+from tms_common.schema import load_schema, read_schema, setting
 from tms_model.excavator import codes
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import JointTarget, Target
@@ -57,6 +57,8 @@ __all__ = [
     "ControllerSettings",
     "controller_config",
     "IdentifiedHydraulics",
+    "IdentifiedFile",
+    "IdentifiedJoint",
     "identified_file",
     "load_identified",
     "load_controller_config",
@@ -128,44 +130,59 @@ def _remake(name: str) -> str:
             f"`tms_rc_identify --machine {name} --plant-config config/sim/<plant>.yaml` against a simulated one")
 
 
+@dataclass(frozen=True)
+class IdentifiedJoint:
+    """One joint of ``config/tms_rc/identified/<name>.yaml`` (written by :func:`tms_rc.identify.render`); pairs are
+    [negative, positive direction], null = not measured (only what the controller does not use may be null)."""
+
+    dead_time_s: float = setting(lo=0.0, doc="[s] first response after a velocity step (CAN link included)")
+    lag_s: float = setting(lo=0.0, doc="[s] first-order lag")
+    flow_lpm_per_rad_s: tuple[float, float] = setting(lo=0.0, doc="[L/min per rad/s] flow into the drive")
+    gain: float | None = setting(None, lo=0.0, doc="steady speed / command")
+    saturated_speed_rad_s: tuple[float | None, float | None] | None = setting(None, lo=0.0)
+    dead_band_rad_s: tuple[float | None, float | None] | None = setting(None, lo=0.0)
+    bandwidth_hz: float | None = setting(None, lo=0.0, doc="-3 dB of a chirp")
+
+
+@dataclass(frozen=True)
+class IdentifiedFile:
+    """The schema of ``config/tms_rc/identified/<name>.yaml``: unknown keys refused, types and bounds checked."""
+
+    machine: str = setting(doc="the machine's name on the site")
+    pump_flow_lpm: float = setting(lo=1.0, doc="[L/min] boom+arm+bucket together at full command")
+    joints: dict[str, IdentifiedJoint] = setting(doc="one entry per front joint")
+    pump_saturated: bool = setting(True, doc="false: the pump flow is a lower bound only")
+
+
 def load_identified(path: str | Path, name: str) -> IdentifiedHydraulics:
-    """The identified hydraulics of machine ``name`` from ``path``; a ConfigError naming the file (and, when it is
-    missing, the command that makes it) otherwise."""
+    """The identified hydraulics of machine ``name`` from ``path``, read through :mod:`tms_common.schema`
+    (:class:`IdentifiedFile`); a ConfigError ``file:line: key: problem`` (and the command that makes the file)
+    otherwise."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: no identified hydraulics of {name}: {_remake(name)}")
-    data, _ = load_yaml(path)
-
-    def bad(key: str, problem: str) -> ConfigError:
-        return ConfigError(f"{path}: {key}: {problem} ({_remake(name)})")
-
-    if not isinstance(data, dict) or data.get("machine") != name:
-        raise bad("machine", f"expected {name!r}, got {data.get('machine') if isinstance(data, dict) else data!r}")
-    joints = data.get("joints")
-    if not isinstance(joints, dict) or set(joints) != set(JOINTS):
-        raise bad("joints", f"expected an entry for each of {list(JOINTS)}, got "
-                  f"{sorted(joints) if isinstance(joints, dict) else joints!r}")
-
-    def number(key: str, value: Any, lo: float) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < lo:
-            raise bad(key, f"expected a number >= {lo}, got {value!r}")
-        return float(value)
+    try:
+        data, where = load_yaml(path)
+        doc = read_schema(IdentifiedFile, data, where)
+        if doc.machine != name:
+            raise where.error(("machine",), f"machine: expected {name!r}, got {doc.machine!r}")
+        if set(doc.joints) != set(JOINTS):
+            raise where.error(("joints",), f"joints: expected an entry for each of {list(JOINTS)}, got "
+                              f"{sorted(doc.joints)}")
+    except ConfigError as exc:
+        raise ConfigError(f"{exc} ({_remake(name)})") from None
 
     def per_joint(field_: str) -> np.ndarray:
-        out = []
-        for j in JOINTS:
-            value = joints[j].get(field_) if isinstance(joints[j], dict) else None
-            if isinstance(value, list):  # [negative, positive direction]: the pump row takes |dq|, the larger
-                value = max(number(f"joints.{j}.{field_}", v, 0.0) for v in value) if value else None
-            out.append(number(f"joints.{j}.{field_}", value, 0.0))
-        return np.array(out)
+        values = [getattr(doc.joints[j], field_) for j in JOINTS]
+        # [negative, positive direction]: the pump row takes |dq|, the larger
+        return np.array([max(v) if isinstance(v, tuple) else v for v in values], dtype=float)
 
     return IdentifiedHydraulics(
         source=str(path),
         dead_time_s=per_joint("dead_time_s"),
         lag_s=per_joint("lag_s"),
         flow_per_rad_s=per_joint("flow_lpm_per_rad_s"),
-        pump_flow_lpm=number("pump_flow_lpm", data.get("pump_flow_lpm"), 1.0),
+        pump_flow_lpm=float(doc.pump_flow_lpm),
     )
 
 
