@@ -20,6 +20,7 @@ import pytest
 
 from tms_model.cylinders import cylinder_length
 from tms_model.excavator.kinematics import load_kinematics
+from tms_rc.excavator.collision import SelfCollision
 from tms_rc.excavator.hermite import HermiteReference, Pid
 from tms_rc.excavator.ik_cylinder import CylinderIkHQP, IkReference, IkSettings
 
@@ -254,6 +255,104 @@ def test_collision_hook_rows(kin):
         ctl.solve(q, _hold_at(kin, q, (0.0, 0.0, 0.0)), collision_rows=(np.zeros((3, 4)), np.zeros(3)))
     with pytest.raises(ValueError, match="extra_collision_rows is 0"):
         CylinderIkHQP(kin).solve(q, _hold_at(kin, q, (0.0, 0.0, 0.0)), collision_rows=rows)
+
+
+#: bucket out in front, clear of everything / curled into the deck (as tests/tms_rc/test_collision.py's ID run)
+Q_START = np.array([0.0, -0.6, 1.6, 0.8])
+Q_GOAL = np.array([0.0, -0.15, 2.6, 0.8])
+PAIRS = ("bucket/undercarriage", "bucket/upper", "bucket/cab", "bucket/boom")
+
+
+def _approach(kin, settings: IkSettings, duration: float = 3.0, total: float = 5.0):
+    """Kinematic loop (q += dt qd of the solution) on minimum-jerk tip and theta_w references from Q_START's to
+    Q_GOAL's. Returns per step every pair's distance (an independent SelfCollision), the tip position error and
+    the theta_w error; and the controller."""
+    ctl = CylinderIkHQP(kin, settings)
+    check = SelfCollision(kin.model, kin.machine)
+    p0, p1 = kin.tip_position(Q_START), kin.tip_position(Q_GOAL)
+    t0, t1 = kin.theta_w(Q_START), kin.theta_w(Q_GOAL)
+    q, qd, dt = Q_START.copy(), np.zeros(4), ctl.dt
+    dist, pos_err, th_err = [], [], []
+    for k in range(round(total / dt)):
+        s = min(k * dt / duration, 1.0)
+        p = 10 * s**3 - 15 * s**4 + 6 * s**5
+        v = (30 * s**2 - 60 * s**3 + 30 * s**4) / duration
+        ref = IkReference(position=p0 + p * (p1 - p0), velocity=v * (p1 - p0), theta_w=t0 + p * (t1 - t0),
+                          theta_w_rate=v * (t1 - t0))
+        res = ctl.solve(q, ref, qd=qd)
+        assert not res.hqp.failed, res.hqp.failed
+        qd = res.qd
+        q = q + dt * qd
+        dist.append(check.distances(q))
+        pos_err.append(float(np.linalg.norm(kin.tip_position(q) - ref.position)))
+        th_err.append(kin.theta_w(q) - ref.theta_w)
+    return np.array(dist), np.array(pos_err), np.array(th_err), ctl
+
+
+def test_self_collision_keeps_the_bucket_off_the_body(kin):
+    """The reference ends with the bucket 0.2 m inside the deck. The swing-axis rows are set out of the way
+    (body_min_radius 0.5 m) so only the link-primitive pair rows can stop it: every pair stays at the safety
+    distance (less 1 cm), the bucket angle (above) is kept, the tip task (below) gives way. Without the pair
+    rows the same run goes into the deck."""
+    on = IkSettings(body_min_radius=0.5)
+    k = PAIRS.index("bucket/upper")
+    check = SelfCollision(kin.model, kin.machine)
+    assert check.distances(Q_GOAL)[k] < -0.1 and check.distances(Q_START).min() > 2.0
+    dist, pos_err, th_err, ctl = _approach(kin, on)
+    assert ctl.collision is not None and ctl.collision.names == PAIRS
+    ds, di = on.self_collision_safety, on.self_collision_influence
+    assert dist.min() >= ds - 0.01, dist.min(axis=0)
+    assert dist[:, k].min() < di  # the deck's row did act
+    assert dist[-1, k] < ds + 0.1  # pressed against the safety distance, not held far off
+    assert pos_err[-1] > 0.2  # the position task gave way ...
+    dist_off, pos_err_off, th_err_off, ctl_off = _approach(kin, IkSettings(body_min_radius=0.5,
+                                                                           self_collision=False))
+    # ... theta_w (above it) did not: at the end it is met, and on the way it lags the reference (up to 8 mrad:
+    # the loop's Euler step at 0.9 rad/s, no limit binds) exactly as much as without the pair rows
+    assert abs(th_err[-1]) < 1e-4
+    np.testing.assert_allclose(th_err, th_err_off, atol=1e-5)
+    assert ctl_off.collision is None
+    assert ctl_off.levels[3].rows == 4 and ctl.levels[3].rows == 4 + len(PAIRS)
+    assert dist_off[:, k].min() < -0.1  # into the deck
+    assert pos_err_off[-1] < 0.05
+    assert pos_err[-1] > pos_err_off[-1] + 0.15
+
+
+def test_pair_rows_free_when_far_and_hook_after_them(kin):
+    """At home every pair is beyond d_i: its rows are free and the collision level costs nothing; the hook's
+    rows come after the pairs' and still bind (with the pair rows present)."""
+    ctl = CylinderIkHQP(kin, IkSettings(extra_collision_rows=1))
+    q = kin.home.copy()
+    res = ctl.solve(q, _hold_at(kin, q, (0.0, 0.0, 0.0)))
+    assert not ctl.collision.active.any()
+    assert np.all(ctl._b[3][4:4 + len(PAIRS)] >= 1e8)
+    assert res.hqp.slack["collision"] == 0.0
+    assert ctl.levels[3].rows == 4 + len(PAIRS) + 1
+    with pytest.raises(ValueError, match="d_s < d_i"):
+        CylinderIkHQP(kin, IkSettings(self_collision_safety=0.5, self_collision_influence=0.5))
+
+
+def test_pair_row_is_the_distance_rate_in_piston_velocities(kin):
+    """Near the deck the active pair's row over v (scaled back) is the rate of coal's distance along the joint
+    motion qd = v / J_p: a finite difference of the distance along q + h qd."""
+    q = np.array([0.0, -0.4, 2.46, 0.98])  # curled bucket 0.05-0.5 m in front of the deck
+    ctl = CylinderIkHQP(kin, IkSettings(body_min_radius=0.5))
+    ctl.solve(q, _hold_at(kin, q, (0.0, 0.0, 0.0)))
+    k = PAIRS.index("bucket/upper")
+    assert ctl.collision.active[k]
+    row_v = -ctl._a[3][4 + k]  # d_dot = row_v @ v
+    g = ctl.actuator_state(q)[0].copy()
+    check = SelfCollision(kin.model, kin.machine)
+    v = np.array([0.0, 0.05, -0.03, 0.04])
+    qd = v / g
+    h = 1e-6
+    rate = (check.distances(q + h * qd)[k] - check.distances(q - h * qd)[k]) / (2 * h)
+    assert row_v @ v == pytest.approx(rate, rel=1e-4, abs=1e-7)
+    s = ctl.settings
+    d = check.distances(q)[k]
+    bound = s.self_collision_xi * (d - s.self_collision_safety) / (s.self_collision_influence
+                                                                    - s.self_collision_safety)
+    assert ctl._b[3][4 + k] == pytest.approx(bound, rel=1e-9)
 
 
 #: (time [s], tip x, z [m], theta_w [rad]) knots of a dig-like motion in the front's plane

@@ -18,12 +18,17 @@ autonomous walking excavator", sec. 4.3.2, eqs. 29-36; the cascade after Bellico
 3. cylinder position (stroke) limits as a velocity damper over a horizon T: ``l_min <= l + T v <= l_max``, the
    stroke ends being the cylinder lengths at the description's joint limits (each length is monotonic over its
    joint's range) less ``stroke_margin``; the swing is continuous (free rows);
-4. self-collision: first-order velocity dampers (Faverjon & Tournassoud) ``d_dot >= -xi (d - d_s) / (d_i - d_s)``
-   while ``d < d_i``, for the bucket tip and pin: height above ``ground_min_z`` and distance from the swing axis
-   beyond ``body_min_radius`` (the ID hierarchy's level 6 rows, one order down), mapped through J_p^-1. **Hook**:
-   ``IkSettings.extra_collision_rows`` more rows of this level are filled from ``solve(collision_rows=(A, b))``,
-   rows ``A qd <= b`` in joint velocities (what a link-primitive closest-point damper gives:
-   ``-n^T (J_p1 - J_p2) qd <= xi (d - d_s) / (d_i - d_s)``); unused rows are free;
+4. collision: first-order velocity dampers (Faverjon & Tournassoud) ``d_dot >= -xi (d - d_s) / (d_i - d_s)``
+   while ``d < d_i``, mapped through J_p^-1 (``qd = v / J_p``), in this order: (a) the bucket tip's and pin's
+   height above ``ground_min_z`` and distance from the swing axis beyond ``body_min_radius`` (rows 0-3; the ID
+   hierarchy's level 6 (a) rows, one order down); (b) self-collision between link primitives (rows 4..;
+   ``self_collision`` settings, the ID's primitives and pairs: :class:`~tms_rc.excavator.collision.SelfCollision`
+   on the kinematics' pinocchio model, closest points of boxes by coal), one row per pair
+   ``-(n^T (J_b - J_a) / J_p) v <= xi_c (d - d_s) / (d_i - d_s)`` while the pair is within d_i, else free
+   (:meth:`~tms_rc.excavator.collision.SelfCollision.first_order`'s rows; pairs whose bounding spheres are
+   farther apart than d_i skip coal); (c) **hook**: ``IkSettings.extra_collision_rows`` more rows filled from
+   ``solve(collision_rows=(A, b))``, rows ``A qd <= b`` in joint velocities (e.g. pairs of a machine-specific
+   check outside :class:`~tms_rc.excavator.collision.CollisionSettings`); unused rows are free;
 5. end-effector orientation: theta_w rate (bucket pin -> tip angle, :mod:`tms_model.excavator.kinematics`;
    ``[0, 1, 1, 1] J_p^-1 v``) = ``omega_ref + kp e_theta (+ ki, kd)``;
 6. end-effector position: tip velocity ``J_tip J_p^-1 v = v_d``, v_d from HEAP eq. 36 (:class:`~.hermite.Pid`:
@@ -32,8 +37,7 @@ autonomous walking excavator", sec. 4.3.2, eqs. 29-36; the cascade after Bellico
 7. minimal cylinder velocity ``v = 0`` (whatever freedom is left).
 
 Every buffer of a step is preallocated; the pump rows are constant (their OSQP matrix is never re-sent). Not yet
-done (``tms_rc/excavator/README.md``): link-primitive self-collision (the hook above), a node and a config file,
-the piston control below it on the plant.
+done (``tms_rc/excavator/README.md``): a node and a config file, the piston control below it on the plant.
 """
 
 from __future__ import annotations
@@ -48,6 +52,7 @@ import pinocchio as pin
 from tms_common.errors import ConfigError
 from tms_model.cylinders import Cylinder, cylinder_length, moment_arm
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
+from tms_rc.excavator.collision import CollisionSettings, SelfCollision
 from tms_rc.excavator.hermite import Pid
 from tms_rc.excavator.hqp import HierarchicalQP, HqpResult, LevelSpec
 
@@ -88,7 +93,15 @@ class IkSettings:
     damper_influence: float = 0.5  # [m] d_i: a damper row acts below this distance
     damper_safety: float = 0.0  # [m] d_s: the distance the damper keeps
     damper_xi: float = 0.5  # [m/s] xi: the largest approach speed the damper allows at d_i
-    extra_collision_rows: int = 0  # rows of the collision level filled by solve(collision_rows=...)
+    #: link-primitive self-collision (level 4 (b)), as the ID's (:class:`~tms_rc.excavator.id_hqp.IdSettings`);
+    #: HEAP's d_i, d_s and xi are not published: ours, the ID's values
+    self_collision: bool = True
+    self_collision_influence: float = 0.5  # [m] d_i: a pair's row acts below this distance
+    self_collision_safety: float = 0.1  # [m] d_s: the distance the damper holds (approached exponentially)
+    self_collision_xi: float = 0.5  # [m/s] xi: the largest approach speed a pair's row allows at d_i
+    #: primitive sizes and pairs (:class:`~tms_rc.excavator.collision.CollisionSettings`), the ID's default
+    collision_primitives: CollisionSettings = field(default_factory=CollisionSettings)
+    extra_collision_rows: int = 0  # rows of the collision level filled by solve(collision_rows=...), after the pairs
     eps: float = 1e-6  # OSQP tolerances
     max_iter: int = 2000
     regularisation: float = 1e-6
@@ -142,6 +155,12 @@ class CylinderIkHQP:
         if s.extra_collision_rows < 0:
             raise ValueError(f"extra_collision_rows must be >= 0, got {s.extra_collision_rows}")
         self.kin, self.settings = kin, s
+        self.collision = SelfCollision(kin.model, machine, s.collision_primitives) if s.self_collision else None
+        if self.collision is not None and not 0.0 <= s.self_collision_safety < s.self_collision_influence:
+            raise ValueError(f"self-collision: need 0 <= d_s < d_i, got d_s={s.self_collision_safety}, "
+                             f"d_i={s.self_collision_influence}")
+        self._n_pairs = len(self.collision.names) if self.collision is not None else 0
+        self._pairs_set = False
         self.dt = 1.0 / s.rate_hz
         by_joint = {c.joint: c for c in cyl.all}
         self.cylinders: list[Cylinder | None] = [None]
@@ -174,7 +193,8 @@ class CylinderIkHQP:
         if self.speed_limits.shape != (N,):
             raise ValueError(f"speed_limits needs {N} values, got {self.speed_limits.tolist()}")
         self._n_extra = s.extra_collision_rows
-        rows = (max(2 ** len(pump), 1), 2 * N, 2 * N, 4 + self._n_extra, 1, 3, N)
+        # collision: ground + swing axis of tip and pin, one row per primitive pair, then the hook's rows
+        rows = (max(2 ** len(pump), 1), 2 * N, 2 * N, 4 + self._n_pairs + self._n_extra, 1, 3, N)
         kinds = ("ineq", "ineq", "ineq", "ineq", "eq", "eq", "eq")
         self.levels = [LevelSpec(name, kind, r) for name, kind, r in zip(LEVEL_NAMES, kinds, rows, strict=True)]
         self.hqp = HierarchicalQP(N, self.levels, eps=s.eps, max_iter=s.max_iter, regularisation=s.regularisation,
@@ -264,7 +284,7 @@ class CylinderIkHQP:
             ref: tip position / velocity and theta_w / rate references (e.g. from :class:`~.hermite.HermiteReference`).
             qd: measured joint velocities (the PID's e_dot = v_ref - J qd); None: the error's finite difference.
             collision_rows: ``(A, b)`` with ``A qd <= b`` in joint velocities, at most ``extra_collision_rows`` rows,
-                added to the collision level (the hook for link-primitive dampers).
+                added to the collision level after the primitive pairs' own rows (the hook for more dampers).
         """
         s = self.settings
         q = np.asarray(q, dtype=float)
@@ -287,10 +307,13 @@ class CylinderIkHQP:
         b[2][1:N] /= t
         b[2][N + 1:] /= t
 
-        # 4. clearance dampers of tip and pin, plus the hook's rows
+        # 4. clearance dampers of tip and pin, the primitive pairs, the hook's rows
         self._dampers(tip, jt, pin_p, jp, ginv)
+        if self.collision is not None:
+            self._pair_dampers(ginv)
         if self._n_extra:
-            ax, bx = a[3][4:], b[3][4:]
+            first = 4 + self._n_pairs
+            ax, bx = a[3][first:], b[3][first:]
             ax.fill(0.0)
             bx.fill(_FREE)
             if collision_rows is not None:
@@ -352,3 +375,29 @@ class CylinderIkHQP:
             d = rho - s.body_min_radius
             b[r] = scale * (d - ds) if d < di else _FREE
             r += 1
+
+    def _pair_dampers(self, ginv) -> None:
+        """Collision rows 4.. : per primitive pair ``-(row / J_p) v <= xi (d - d_s)/(d_i - d_s)`` while d < d_i,
+        else free (zero row). :attr:`kin`'s pinocchio data holds this step's placements and joint Jacobians."""
+        s = self.settings
+        col = self.collision
+        assert col is not None
+        a, b = self._a[3], self._b[3]
+        di, ds, xi = s.self_collision_influence, s.self_collision_safety, s.self_collision_xi
+        end = 4 + self._n_pairs
+        if not col.update(self.kin.data, di, drift=False):
+            if self._pairs_set:  # clear the rows of the last active step once
+                a[4:end].fill(0.0)
+                b[4:end].fill(_FREE)
+                self._pairs_set = False
+            return
+        self._pairs_set = True
+        scale = xi / (di - ds)
+        for k, on in enumerate(col.active):
+            r = 4 + k
+            if on:  # row @ qd >= -xi (d - d_s)/(d_i - d_s), qd = v / J_p
+                np.multiply(col.rows[k], -ginv, out=a[r])
+                b[r] = scale * (float(col.distance[k]) - ds)
+            else:
+                a[r].fill(0.0)
+                b[r] = _FREE
