@@ -31,7 +31,7 @@ from types import MappingProxyType
 
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
-from tms_common.schema import Reader
+from tms_common.schema import Reader, setting
 from tms_model.cylinders import Cylinders
 
 __all__ = [
@@ -40,6 +40,7 @@ __all__ = [
     "Footprint",
     "Joint",
     "JointDrive",
+    "LinkBox",
     "Machine",
     "PilotCutoff",
     "TrackDrive",
@@ -141,6 +142,15 @@ class Bucket:
 
 
 @dataclass(frozen=True)
+class LinkBox:
+    """The box of an excavator's front link in the link's (URDF) frame: full lengths ``size`` centred at ``offset``
+    [m]. The plant's body of the link (its mass is centred in it) and the arm planner's collision box of it."""
+
+    size: tuple[float, float, float] = setting(lo=0.01, doc="[m] full lengths along the link frame's x, y, z")
+    offset: tuple[float, float, float] = setting((0.0, 0.0, 0.0), doc="[m] centre in the link frame")
+
+
+@dataclass(frozen=True)
 class Vessel:
     """The dump vessel on its rear hinge; angle 0 = lowered, + = raised (the URDF's sign is the opposite)."""
 
@@ -225,6 +235,8 @@ class Machine:
     swing: Swing | None = None  # crawler_dump: the rotating upper body, when it has one
     blade: Blade | None = None  # dozer
     cylinders: Cylinders | None = None  # excavator: the front's cylinders, bucket linkage and swing motor
+    #: excavator: the box of each front joint's child link (body, boom, arm, bucket), ``link_boxes:`` of the YAML
+    link_boxes: Mapping[str, LinkBox] = field(default_factory=lambda: MappingProxyType({}))
     dbc: str = ""  # DBC file of its COM3 bus in com3_can/dbc (can.dbc of the YAML)
     source: str = field(default="", compare=False)
     #: the machine's name on the site (its namespace; :func:`tms_model.fleet.load_named`); "" = the kind itself
@@ -416,10 +428,13 @@ def _excavator(top: Reader, kind: str, source: str) -> Machine:
         cut_min_speed=b.number("cut_min_speed", lo=0.0),
     )
     tracks, footprint = _tracks(top)
+    boxes = top.sub("link_boxes")
+    boxes.only({j.child for j in joints})
     return Machine(
         kind=kind,
         type=EXCAVATOR,
         cylinders=_cylinders(top, front),
+        link_boxes=MappingProxyType({j.child: boxes.schema(LinkBox, j.child) for j in joints}),
         joints=joints,
         drives=MappingProxyType(drives),
         home_pose=MappingProxyType(home),

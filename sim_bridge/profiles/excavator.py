@@ -31,14 +31,6 @@ from tms_model.machines import Joint
 
 __all__ = ["ExcavatorPlantProfile"]
 
-_LINK_BOX = {  # visual boxes per link: (half sizes, offset in link frame), ZX200-sized
-    "body_link": ((1.4, 1.3, 0.5), (-0.9, 0.0, 0.2)),
-    "boom_link": ((2.8, 0.3, 0.3), (2.75, 0.0, 1.0)),
-    "arm_link": ((1.4, 0.2, 0.2), (0.95, 0.0, 1.05)),
-    "bucket_link": ((0.6, 0.5, 0.3), (0.6, 0.0, 0.5)),
-}
-
-
 class ExcavatorPlantProfile(PlantProfile):
     machine_type = ExcavatorProfile.machine_type
     motion_frames = frozenset(f for frames in ExcavatorProfile.channels.values() for f in frames)
@@ -60,7 +52,8 @@ class ExcavatorPlantProfile(PlantProfile):
         indent = "      "
         closes = []
         for j in d.joints:
-            half, off = _LINK_BOX.get(j.child, ((0.2, 0.2, 0.2), (0, 0, 0)))
+            box = d.link_boxes[j.child]  # the kind's link box (config/machines/<kind>.yaml link_boxes)
+            half, off = tuple(s / 2 for s in box.size), box.offset
             mass = d.masses[j.child.removesuffix("_link")]
             lines.append(
                 f'{indent}<body name="{name}_{j.child}" pos="{vec(j.origin_xyz)}" euler="{vec(j.origin_rpy)}">'

@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import math
+import re
 
+import coal
 import numpy as np
 import pytest
 
 from tms_common.config import data_root
 from tms_common.errors import ConfigError
 from tms_model.excavator.codes import FAILURE
-from tms_model.excavator.kinematics import load_kinematics
+from tms_model.excavator.kinematics import ExcavatorKinematics, load_kinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
+from tms_model.machines import load_machine
 from tms_rp.zx200.collision import (
     ArmCollisionModel,
     CollisionError,
@@ -116,15 +119,30 @@ def test_bad_record_names_record_and_field(mutate, field: str, words: str) -> No
 
 
 # ------------------------------------------------------------------------------------------ the padded arm
-def test_padded_arm_encloses_the_plants_link_boxes(kin, model: ArmCollisionModel) -> None:
-    """The plant (MuJoCo) checks contacts with its own link boxes: every one must lie inside the planner's link."""
-    from sim_bridge.profiles.excavator import _LINK_BOX
+@pytest.mark.parametrize("kind", ["zx200", "zx120"])
+def test_the_plant_and_the_planner_use_the_kinds_own_link_boxes(kind: str) -> None:
+    """The link boxes are written once, in the description (config/machines/<kind>.yaml link_boxes): the plant's
+    (MuJoCo) link bodies and the planner's arm are those boxes, each kind its own."""
+    from types import SimpleNamespace
 
-    cfg = load_collision_config(kin.machine.kind)
-    for link, (half, off) in _LINK_BOX.items():
-        box = cfg.links[link].box
-        assert np.all(np.abs(np.array(off) - np.array(box.offset)) + np.array(half)
-                      <= np.array(box.size) / 2 + 1e-9), link
+    from sim_bridge.profiles.excavator import ExcavatorPlantProfile
+
+    machine = load_machine(kind)
+    assert set(machine.link_boxes) == {j.child for j in machine.joints}
+    mjcf = "\n".join(ExcavatorPlantProfile.mjcf(SimpleNamespace(name=kind, description=machine)))
+    arm = ArmCollisionModel(ExcavatorKinematics(machine), load_collision_config("zx200"))
+    boxes = {link: shape for link, shape, *_ in arm.shapes if isinstance(shape, coal.Box)}
+    for link, box in machine.link_boxes.items():
+        body = re.search(rf'<body name="{kind}_{link}"[^\n]*\n[^\n]*\n\s*<geom type="box" size="([^"]+)" pos="([^"]+)"',
+                         mjcf)
+        assert body is not None, link
+        assert np.allclose([float(v) for v in body[1].split()], np.array(box.size) / 2), link
+        assert np.allclose([float(v) for v in body[2].split()], box.offset), link
+        assert np.allclose(2 * boxes[link].halfSide, box.size), link
+    # the ZX120's are its own, smaller than the ZX200's
+    if kind != "zx200":
+        other = load_machine("zx200").link_boxes
+        assert all(np.prod(machine.link_boxes[k].size) < np.prod(other[k].size) for k in other)
 
 
 def test_distance_to_a_box_is_measured_with_the_padding(kin, model: ArmCollisionModel) -> None:

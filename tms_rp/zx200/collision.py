@@ -16,7 +16,9 @@ not name keep the configured default (the original's 0.25 m on boom_link, arm_li
 bucket_end_link). Ours beyond the original: an element may carry ``padding`` [m] (default 0), kept around that
 object as well.
 
-The arm is the union of per-link shapes (``config/tms_rp/<kind>_collision.yaml``) placed by the kinematics
+The arm is the union of per-link shapes placed by the kinematics: each link's box, the one the plant's link is
+(``link_boxes`` of ``config/machines/<kind>.yaml``), and the capsules and spheres of
+``config/tms_rp/<kind>_collision.yaml``
 (:class:`tms_model.excavator.kinematics.ExcavatorKinematics`). The distance of a link to an object is coal's
 (signed: negative inside); the link is in collision when that distance is below link padding + object padding.
 Pure Python (numpy, pinocchio, coal); no ROS.
@@ -205,19 +207,11 @@ class LinkShape:
 
 
 @dataclass(frozen=True)
-class BoxShape:
-    """A box of full lengths ``size`` centred at ``offset`` in the link's frame [m]."""
-
-    size: tuple[float, float, float] = setting(lo=0.0)
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
 class LinkShapes:
-    """A link's shapes, their union: a box, a capsule of ``capsule`` radius from the link's pin to the next (the
-    bucket: to its tip), a sphere of ``sphere`` radius at the origin [m]."""
+    """A link's shapes besides its box (the description's ``link_boxes``, :class:`tms_model.machines.LinkBox`),
+    their union: a capsule of ``capsule`` radius from the link's pin to the next (the bucket: to its tip), a sphere
+    of ``sphere`` radius at the origin [m]."""
 
-    box: BoxShape | None = None
     capsule: float | None = setting(None, lo=0.0)
     sphere: float | None = setting(None, lo=0.0)
 
@@ -287,11 +281,11 @@ class ArmCollisionModel:
         next_pin["bucket_link"] = np.array(machine.bucket.tip_xyz)
         self._joint_ids = {link: kin.model.getJointId(j) for link, j in _LINK_JOINT.items()}
         self.shapes: list[tuple[str, Any, np.ndarray, np.ndarray, float]] = []  # link, coal shape, R, t (link), bound
+        for link, box in machine.link_boxes.items():  # the boxes the plant's links are (config/machines/<kind>.yaml)
+            size = np.array(box.size, dtype=float)
+            off = np.array(box.offset, dtype=float)
+            self.shapes.append((link, coal.Box(*size), np.eye(3), off, float(np.linalg.norm(size) / 2)))
         for link, spec in self.cfg.links.items():
-            if spec.box is not None:
-                size = np.array(spec.box.size, dtype=float)
-                off = np.array(spec.box.offset, dtype=float)
-                self.shapes.append((link, coal.Box(*size), np.eye(3), off, float(np.linalg.norm(size) / 2)))
             if spec.capsule is not None:
                 r = spec.capsule
                 v = next_pin[link]
