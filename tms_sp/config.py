@@ -164,7 +164,7 @@ def planner_approach_height(kind: str) -> float:
     """``approach_height`` of excavator ``kind``'s planner, ``config/tms_rp/<kind>_planner.yaml``: the height above
     the target of the excavate's first point. The approach record sensing writes is the target this much higher, so
     the tree's return over the mound ends where the excavate begins: one value, the planner's (tms_sp may not import
-    tms_rp, a package of its level, so it reads that one key of the planner's file; tms_rp.zx200.planner's schema
+    tms_rp, a package of its level, so it reads that one key of the planner's file; tms_rp.arm.planner's schema
     checks the whole file and requires the key)."""
     data, where = load_yaml(config_path("tms_rp", f"{kind}_planner.yaml"))
     return Reader(data, where).number("approach_height", lo=0.0)

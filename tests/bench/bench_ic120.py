@@ -83,10 +83,10 @@ def bench_controller() -> None:
 
 def bench_ekf() -> None:
     from tests.tms_rp.synth import simulate
-    from tms_rp.tracked.ekf import Ic120Ekf
+    from tms_rp.tracked.ekf import TrackedEkf
 
     samples = simulate(120.0)
-    ekf = Ic120Ekf()
+    ekf = TrackedEkf()
     t_odom, t_gnss, t_az = [], [], []
     for s in samples:
         t = time.perf_counter()
@@ -120,7 +120,7 @@ def _ekf_loop_route(seed: int):
     from tests.tms_rp.harness import paper_legs, site_points
     from tests.tms_rp.kinematics import TrackedModel
     from tms_rp.tracked.config import load_nav_config
-    from tms_rp.tracked.ekf import Ic120Ekf
+    from tms_rp.tracked.ekf import TrackedEkf
 
     rng = np.random.default_rng(seed)
     cfg = load_nav_config(machine="ic120")
@@ -129,7 +129,7 @@ def _ekf_loop_route(seed: int):
     sx, sy, syaw = pts["ic120_start"]
     model = TrackedModel((sx + rng.normal(0, 0.3), sy + rng.normal(0, 0.3), syaw + rng.normal(0, 0.05)), dt=0.05,
                          slip=0.05 + rng.uniform(-0.02, 0.02), yaw_slip=0.15 + rng.uniform(-0.05, 0.05))
-    ekf = Ic120Ekf(cfg.ekf)
+    ekf = TrackedEkf(cfg.ekf)
     odom = [0.0, 0.0, model.yaw]
     t = 0.0
     results = {}

@@ -43,7 +43,7 @@ from tms_model.excavator import codes
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.geometry import Pose2D
 from tms_rc.excavator.controller import ArmController, load_controller_config
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 from tms_sp.config import load_sensing_config
 from tms_sp.heightgrid import HeightGrid
 from tms_sp.mound import assess_mound
@@ -86,7 +86,7 @@ class PassRig:
         # one controller for every action, as excavator_arm_controller keeps one: a goal that ends at a
         # pass-through point leaves commands in flight, and the next goal starts from their prediction
         self.ctl = ArmController(self.kin, cfg)
-        self.planner = Zx200Planner(self.kin, load_planner_config(self.kin.machine.kind), ground_min_z=cfg.ground_min_z)
+        self.planner = ArmPlanner(self.kin, load_planner_config(self.kin.machine.kind), ground_min_z=cfg.ground_min_z)
         self.sensing = load_sensing_config()
         self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
         self._measured: deque = deque(maxlen=TRANSPORT + 1)
@@ -194,7 +194,7 @@ def main() -> None:
             print(f"  pass {k + 1}: excavate ended {code}: {msg}")
         rpos, rth, angle = rig.release_target()
         # the seed's target_release_pose has pass_through: 1; the planner node plans the release from the
-        # carry's end while the arm is on its way there (Zx200Planner.start_state)
+        # carry's end while the arm is on its way there (ArmPlanner.start_state)
         carry = rig.planner.change_pose(positions_with_angle=[(rpos, rth)], current_q=rig.q, pass_through=PASS_THROUGH)
         code2, msg2, times["carry"] = rig.run(carry)
         carried = soil.bucket

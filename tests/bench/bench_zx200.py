@@ -32,7 +32,7 @@ from tms_model.excavator.codes import PlanningError
 from tms_model.excavator.kinematics import load_kinematics
 from tms_rc.excavator.controller import ArmController, load_controller_config
 from tms_rc.excavator.plant import LagDeadTimePlant
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 
 #: at most this many control steps of QP problems are recorded for the solve-alone replay
 _RECORD_STEPS = 12000
@@ -124,7 +124,7 @@ def _run(kin, cfg, q0, targets, solve_times, max_steps=8000, cpu_times=None, rec
 def core() -> None:
     kin = load_kinematics()
     cfg = load_controller_config(kin.machine)
-    planner = Zx200Planner(kin, load_planner_config(kin.machine.kind), ground_min_z=cfg.ground_min_z)
+    planner = ArmPlanner(kin, load_planner_config(kin.machine.kind), ground_min_z=cfg.ground_min_z)
     n = int(os.environ.get("ZX200_BENCH_N", "100"))
     rng = np.random.default_rng(7)
     solve_times: list[float] = []

@@ -2,7 +2,7 @@
 
 The seed's ZX200 records and what tms_sp writes live (excavation targets over a mound being dug, release
 points over the IC120 vessel at P1 with its arrival tolerances and any load shape) go through the same
-path as in the stack: record -> ``tms_ts.subtask_specs`` goal data -> ``tms_rp.zx200.planner``
+path as in the stack: record -> ``tms_ts.subtask_specs`` goal data -> ``tms_rp.arm.planner``
 (change_pose / excavate / release), so a target the planner would reject (JOINT_LIMIT, OUT_OF_REACH,
 INVALID_GOAL) fails here instead of stalling the experiment. No ROS.
 """
@@ -18,7 +18,7 @@ from tms_common.errors import ConfigError
 from tms_model.excavator.kinematics import JOINTS, load_kinematics
 from tms_model.geometry import Pose2D
 from tms_rc.excavator.controller import load_controller_config
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 from tms_sp import synthetic as syn
 from tms_sp.config import load_sensing_config
 from tms_sp.heightgrid import rasterize
@@ -26,7 +26,7 @@ from tms_sp.mound import assess_mound
 from tms_sp.vessel import assess_vessel, release_in_excavator
 
 KIN = load_kinematics()
-PLANNER = Zx200Planner(KIN, load_planner_config(KIN.machine.kind),
+PLANNER = ArmPlanner(KIN, load_planner_config(KIN.machine.kind),
                        ground_min_z=load_controller_config(KIN.machine).ground_min_z)
 CFG = load_sensing_config()
 SPILL_ANGLE = 1.2  # config/machines/zx200.yaml hydraulics.bucket.release_tip_angle: spills below this

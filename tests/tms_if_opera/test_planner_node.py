@@ -8,9 +8,9 @@ import time
 def test_the_planner_is_one_node_that_answers_and_refuses_to_change_its_start_up_parameters(ros_node) -> None:
     from rclpy.parameter import Parameter
 
-    from tms_if_opera.nodes.zx200_planner import Zx200PlannerNode
+    from tms_if_opera.nodes.zx200_planner import ArmPlannerNode
 
-    planner = Zx200PlannerNode(namespace="/zx200", context=ros_node.context)
+    planner = ArmPlannerNode(namespace="/zx200", context=ros_node.context)
     try:
         assert planner.get_fully_qualified_name() == "/zx200/zx200_planner"
         # its joint_states reader used to be a second node that advertised parameter services but was never

@@ -15,7 +15,7 @@ from tms_model.excavator.codes import FAILURE
 from tms_model.excavator.kinematics import ExcavatorKinematics, load_kinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_model.machines import load_machine
-from tms_rp.zx200.collision import (
+from tms_rp.arm.collision import (
     ArmCollisionModel,
     CollisionError,
     CollisionObject,
@@ -23,8 +23,8 @@ from tms_rp.zx200.collision import (
     load_collision_config,
     objects_from_record,
 )
-from tms_rp.zx200.collision_planner import CollisionPlanner, Scene
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.collision_planner import CollisionPlanner, Scene
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 
 RECORD = "zx200_collision_objects"
 
@@ -49,7 +49,7 @@ def model(kin):
 
 @pytest.fixture(scope="module")
 def cp(kin, model):
-    return CollisionPlanner(Zx200Planner(kin, load_planner_config(kin.machine.kind)), model)
+    return CollisionPlanner(ArmPlanner(kin, load_planner_config(kin.machine.kind)), model)
 
 
 def scene_of(doc: dict, model: ArmCollisionModel) -> Scene:

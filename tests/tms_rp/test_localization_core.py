@@ -9,11 +9,11 @@ import pytest
 
 from tests.tms_rp.synth import simulate
 from tms_model.geometry import wrap_angle
-from tms_rp.tracked.ekf import EkfParams, Ic120Ekf
+from tms_rp.tracked.ekf import EkfParams, TrackedEkf
 
 
 def _run(samples, *, outage=None, jump=None):
-    ekf = Ic120Ekf(EkfParams())
+    ekf = TrackedEkf(EkfParams())
     errors, traces, results = [], [], []
     for s in samples:
         ekf.odometry(s.t, *s.odom)
@@ -66,7 +66,7 @@ def test_persistent_offset_reinitialises_after_timeout():
 
 
 def test_yaw_wraps_across_pi():
-    ekf = Ic120Ekf()
+    ekf = TrackedEkf()
     ekf.azimuth(0.0, math.pi - 0.01)
     ekf.gnss(0.0, 0.0, 0.0)
     ekf.odometry(0.0, 0.0, 0.0, 0.0)
@@ -76,7 +76,7 @@ def test_yaw_wraps_across_pi():
 
 
 def test_map_to_odom_composes_back_to_pose():
-    ekf = Ic120Ekf()
+    ekf = TrackedEkf()
     ekf.azimuth(0.0, 0.5)
     ekf.gnss(0.0, 10.0, 20.0)
     ekf.odometry(0.0, 1.0, 2.0, 0.2)
@@ -91,7 +91,7 @@ def test_map_to_odom_composes_back_to_pose():
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf")])
 def test_non_finite_inputs_raise(bad):
-    ekf = Ic120Ekf()
+    ekf = TrackedEkf()
     with pytest.raises(ValueError, match="not finite"):
         ekf.gnss(0.0, bad, 0.0)
     with pytest.raises(ValueError, match="odometry x"):
@@ -109,7 +109,7 @@ def test_estimate_drift_is_recovered_not_gated_forever():
     # The odometry over-reports motion by 40 % for 5 s (a stalled plant, heavy slip): the estimate runs
     # ahead; the GNSS stream stays continuous, so the filter must follow it back instead of rejecting it.
     samples = simulate(40.0)
-    ekf = Ic120Ekf(EkfParams())
+    ekf = TrackedEkf(EkfParams())
     ox = oy = 0.0
     prev = None
     errors = []
@@ -137,7 +137,7 @@ def test_delayed_gnss_and_azimuth_are_carried_forward(window):
     plant campaign showed before the history existed.
     """
     samples = simulate(120.0, gnss_sigma=0.02, slip=0.04)
-    ekf = Ic120Ekf(EkfParams(latency_window_s=window))
+    ekf = TrackedEkf(EkfParams(latency_window_s=window))
     delay = 4  # samples of 0.1 s
     errors = []
     for i, s in enumerate(samples):
@@ -162,7 +162,7 @@ def test_delayed_gnss_with_jump_recovers_after_the_jump():
     good fixes after it are used again at once (no 10 s of dead reckoning until a re-initialisation)."""
     rng = np.random.default_rng(3)
     samples = simulate(60.0, dt=0.02, gnss_sigma=0.02, slip=0.05)
-    ekf = Ic120Ekf(EkfParams())
+    ekf = TrackedEkf(EkfParams())
     pending, after = [], []
     for i, s in enumerate(samples):
         ekf.odometry(s.t, *s.odom)

@@ -10,10 +10,10 @@ import pytest
 
 from tms_model.excavator.codes import InvalidGoalError, OutOfReachError
 from tms_model.excavator.kinematics import load_kinematics
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 
 KIN = load_kinematics()
-PLAN = Zx200Planner(KIN, load_planner_config(KIN.machine.kind))
+PLAN = ArmPlanner(KIN, load_planner_config(KIN.machine.kind))
 
 
 def test_seed_target_penetrates_at_the_point_drags_offset_and_keeps_soil() -> None:
@@ -39,7 +39,7 @@ def test_seed_target_penetrates_at_the_point_drags_offset_and_keeps_soil() -> No
 
 
 def test_curl_in_place_then_lift_when_not_curling_during_the_lift() -> None:
-    plan = Zx200Planner(KIN, dataclasses.replace(PLAN.cfg, curl_during_lift=0.0))
+    plan = ArmPlanner(KIN, dataclasses.replace(PLAN.cfg, curl_during_lift=0.0))
     targets = plan.excavate([5.85, -0.05, 1.15], math.radians(45.0), 1.5)
     assert [t.label for t in targets] == ["approach", "penetrate", "drag", "curl", "lift"]
     drag, curl, lift = targets[2:]

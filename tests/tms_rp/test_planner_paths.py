@@ -10,10 +10,10 @@ import pytest
 from tms_model.excavator.codes import InvalidGoalError, JointLimitError
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 
 KIN = load_kinematics()
-PLAN = Zx200Planner(KIN, load_planner_config(KIN.machine.kind))
+PLAN = ArmPlanner(KIN, load_planner_config(KIN.machine.kind))
 #: The seed's release pose over the IC120 at P1 (config/seeds/paper.yaml target_release_pose, 85 deg carry).
 RELEASE_TIP = np.array([-0.065, 6.475, 2.726])
 CARRY_THETA_W = math.radians(85.0)

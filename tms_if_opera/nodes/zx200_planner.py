@@ -7,7 +7,7 @@ Serves ``tms_rp_zx200_change_pose`` (tms_msg_rp/action/TmsRpZx200ChangePose), ``
 id, before the goal; a goal without options runs with the defaults) and ``tms_rp_zx200_outcome``
 (tms_msg/msg/Zx200PlanningOutcome: every goal's code and its text for people, published just before the
 goal ends; the original's result carries only ``error_code``). Each goal is planned
-and validated by :class:`tms_rp.zx200.planner.Zx200Planner` first: a NaN/empty/unreachable/out-of-limit
+and validated by :class:`tms_rp.arm.planner.ArmPlanner` first: a NaN/empty/unreachable/out-of-limit
 goal ends at once (no motion) with ``error_code.val`` INVALID_GOAL / OUT_OF_REACH / JOINT_LIMIT
 (Zx200PlanningOutcome classes) and an outcome ``message`` naming the joint or distance. A valid goal's phases go to the
 arm controller's action
@@ -27,7 +27,7 @@ for one (subscribed all the time, the 50 Hz stream cost ~16 % of a core in execu
 The original's collision-aware variants, same types: ``tms_rp_zx200_change_pose_plan`` (with its
 ``/options``) and ``tms_rp_zx200_excavate_simple_plan``. Each goal reads the collision-object record named by
 ``collision_object_record_name`` from the DB when it arrives and plans with
-:class:`tms_rp.zx200.collision_planner.CollisionPlanner` (dense path checks, detours over objects); a target or
+:class:`tms_rp.arm.collision_planner.CollisionPlanner` (dense path checks, detours over objects); a target or
 path it cannot clear ends with ``TmsRpErrorCodes.FAILURE`` and a message naming the object and its record.
 
 Parameters (read-only, read at start-up, :class:`tms_common.params.StartupParams`): ``machine`` (the excavator
@@ -85,16 +85,16 @@ from tms_msg.msg import Zx200ArmSegment, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_rp.action import TmsRpZx200ChangePose, TmsRpZx200ExcavateSimple, TmsRpZx200ReleaseSimple
 from tms_rc.excavator.controller import load_controller_settings
-from tms_rp.zx200.collision import (
+from tms_rp.arm.collision import (
     ArmCollisionModel,
     CollisionRecordError,
     load_collision_config,
     objects_from_record,
 )
-from tms_rp.zx200.collision_planner import CollisionPlanner, Scene
-from tms_rp.zx200.planner import Zx200Planner, load_planner_config
+from tms_rp.arm.collision_planner import CollisionPlanner, Scene
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 
-__all__ = ["Zx200PlannerNode", "main"]
+__all__ = ["ArmPlannerNode", "main"]
 
 JOINT_STATES_WAIT_S = 2.0  # [s wall] a goal waits this long for a joint_states to plan from
 GOAL_RESPONSE_TIMEOUT_S = 20.0  # [s wall] the controller answers at once (or after its <= 15 s joint_states wait)
@@ -106,8 +106,8 @@ _STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED", GoalStatus.STATUS_CAN
                  GoalStatus.STATUS_ABORTED: "ABORTED"}
 
 
-class Zx200PlannerNode(Node):
-    """Validates and sequences ZX200 goals; motion is delegated to ``arm_controller/move``."""
+class ArmPlannerNode(Node):
+    """Validates and sequences an excavator's arm goals; motion is delegated to ``arm_controller/move``."""
 
     def __init__(self, node_name: str = PLANNER_NODE, **kwargs) -> None:  # rclpy Node kwargs
         super().__init__(node_name, **kwargs)
@@ -123,7 +123,7 @@ class Zx200PlannerNode(Node):
         kin = ExcavatorKinematics(description)
         pcfg = load_planner_config(description.kind, path("planner_config"))
         ccfg = load_controller_settings(path("controller_config"))
-        self.planner = Zx200Planner(kin, pcfg, ground_min_z=ccfg.collision.ground_min_z)
+        self.planner = ArmPlanner(kin, pcfg, ground_min_z=ccfg.collision.ground_min_z)
         # the _plan actions: collision objects from the DB, as the original's planning servers read them
         self.collision = CollisionPlanner(self.planner, ArmCollisionModel(kin, load_collision_config(
             description.kind, path("collision_config"))), via_tolerance_rad=ccfg.via_tolerance_rad)
@@ -139,7 +139,7 @@ class Zx200PlannerNode(Node):
         self._q_waiters: list[Future] = []
         self._q_sub = None  # the joint_states subscription, only while a goal waits for one
         # where the last goal left the arm when it ended at a pass-through point (None otherwise): the
-        # next plan starts there while the arm is still on its way (Zx200Planner.start_state)
+        # next plan starts there while the arm is still on its way (ArmPlanner.start_state)
         self._pass_through_end: np.ndarray | None = None
         self._ctl = RaceFreeActionClient(self, Zx200ArmMove, "arm_controller/move", callback_group=self._group)
         self._goals = RunningGoals()  # SIGINT/SIGTERM: running goals cancel their controller goal, then abort
@@ -500,4 +500,4 @@ class Zx200PlannerNode(Node):
 
 def main() -> int:
     # stop_in_context: on SIGINT/SIGTERM running goals cancel their controller goals and end (on_stop_requested)
-    return run_node(Zx200PlannerNode, executor="single", stop_in_context=True)
+    return run_node(ArmPlannerNode, executor="single", stop_in_context=True)

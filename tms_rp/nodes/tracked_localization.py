@@ -1,4 +1,4 @@
-"""``tracked_localization``: localisation of a tracked machine (thin rclpy wrapper of Ic120Ekf / GlobalPoseRelay).
+"""``tracked_localization``: localisation of a tracked machine (thin rclpy wrapper of TrackedEkf / GlobalPoseRelay).
 
 Run in the machine's namespace: ``tracked_localization --ros-args -r __ns:=/ic120_1`` (the machine is the
 ``machine`` parameter, else the namespace's last segment; ``ic120_localization`` is this node under its
@@ -40,7 +40,7 @@ from tms_model.fleet import machine_name
 from tms_model.geometry import yaw_from_quaternion
 from tms_model.site import Projector, load_site
 from tms_rp.tracked.config import load_nav_config
-from tms_rp.tracked.ekf import Ic120Ekf
+from tms_rp.tracked.ekf import TrackedEkf
 from tms_rp.tracked.rtk import GlobalPoseRelay
 
 __all__ = ["main", "TrackedLocalization"]
@@ -61,7 +61,7 @@ class TrackedLocalization(Node):
         self.map_frame = str(declare_startup(self, "map_frame", "map").value)
         site = load_site(site_config or None)
         self.projector = Projector(site.crs, site.origin_plane, cfg.geodetic_crs)
-        self.ekf = Ic120Ekf(cfg.ekf)
+        self.ekf = TrackedEkf(cfg.ekf)
         self.relay = GlobalPoseRelay(window)
         self._pose_sigma = (cfg.ekf.gnss_sigma, cfg.ekf.azimuth_sigma)
         self._log = self.get_logger()

@@ -41,7 +41,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from tms_model.geometry import wrap_angle
 
-__all__ = ["EkfParams", "Ic120Ekf", "UpdateResult"]
+__all__ = ["EkfParams", "TrackedEkf", "UpdateResult"]
 
 LOGGER = logging.getLogger(__name__)
 
@@ -112,7 +112,7 @@ class _Stats:
     last: dict = field(default_factory=dict)
 
 
-class Ic120Ekf:
+class TrackedEkf:
     """The filter. Feed :meth:`odometry`, :meth:`gnss`, :meth:`azimuth`; read :attr:`pose` and :attr:`cov`.
 
     Times are seconds on any monotonic clock shared by the three inputs (message stamps or sim time).

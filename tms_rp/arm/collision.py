@@ -1,4 +1,4 @@
-"""ZX200 collision model of the ``_plan`` actions: collision objects from the DB and the padded arm.
+"""Excavator arm collision model of the ``_plan`` actions: collision objects from the DB and the padded arm.
 
 The objects are read from the records the original's planning servers read (irvs/tms_if_for_opera,
 ``zx200_change_pose_plan`` / ``zx200_excavate_simple_plan``): the ``parameter`` document named by the planner's
@@ -8,8 +8,8 @@ The objects are read from the records the original's planning servers read (irvs
      "pose": {"position": {"x": ..., "y": ..., "z": ...}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}}
 
 ``primitive_type`` and ``dimensions`` are shape_msgs/SolidPrimitive's (BOX 1: [x, y, z] full lengths; SPHERE 2:
-[radius]; CYLINDER 3: [height, radius], axis z), the pose is the shape's centre in the planning frame, the ZX200's
-``base_link`` (the frame the position_with_angle targets are in; the original's later scene manager,
+[radius]; CYLINDER 3: [height, radius], axis z), the pose is the shape's centre in the planning frame,
+the excavator's ``base_link`` (the frame the position_with_angle targets are in; the original's later scene manager,
 tms_ts_primitive ``excavator_scene_manager``, defaults its ``planning_frame`` to ``base_link`` too). The
 record may carry ``link_padding`` ``{link_name: metres}``, the field that scene manager reads; links it does
 not name keep the configured default (the original's 0.25 m on boom_link, arm_link, bucket_link and
@@ -44,7 +44,7 @@ __all__ = ["ARM_LINKS", "PRIMITIVES", "CollisionConfig", "CollisionError", "Coll
            "Contact", "ArmCollisionModel", "collision_config_path", "load_collision_config",
            "objects_from_record"]
 
-#: the ZX200 links the model places, base to tip (OPERA's zx200_description names)
+#: the arm links the model places, base to tip (OPERA's zx200_description names)
 ARM_LINKS = ("body_link", "boom_link", "arm_link", "bucket_link", "bucket_end_link")
 _LINK_JOINT = {"body_link": JOINTS[0], "boom_link": JOINTS[1], "arm_link": JOINTS[2], "bucket_link": JOINTS[3]}
 #: shape_msgs/SolidPrimitive type -> (name, number of dimensions, meaning)
@@ -265,7 +265,7 @@ class Contact:
 
 
 class ArmCollisionModel:
-    """The ZX200 arm as padded shapes placed by the kinematics; distances to a list of objects.
+    """The excavator arm as padded shapes placed by the kinematics; distances to a list of objects.
 
     ``padding`` overrides the configured link padding per link (a record's ``link_padding``).
     """

@@ -1,8 +1,8 @@
-"""Collision-aware ZX200 planning: the ``_plan`` variants of change_pose and excavate_simple.
+"""Collision-aware excavator arm planning: the ``_plan`` variants of change_pose and excavate_simple.
 
-:class:`CollisionPlanner` takes the targets :class:`~tms_rp.zx200.planner.Zx200Planner` plans and validates, and
+:class:`CollisionPlanner` takes the targets :class:`~tms_rp.arm.planner.ArmPlanner` plans and validates, and
 checks every configuration along them, densely (no joint moves more than ``path_step_rad`` between two checked
-configurations), against the padded collision objects (:mod:`tms_rp.zx200.collision`), the way the arm controller
+configurations), against the padded collision objects (:mod:`tms_rp.arm.collision`), the way the arm controller
 executes them: a joint target as a straight line in joint space (all joints on one spline), a Cartesian target as a
 straight tip line with the edge angle turning linearly (the IK of every sample).
 
@@ -32,8 +32,8 @@ import numpy as np
 
 from tms_model.excavator.codes import PlanningError
 from tms_model.excavator.targets import CartesianTarget, JointTarget
-from tms_rp.zx200.collision import ArmCollisionModel, CollisionError, CollisionObject, Contact
-from tms_rp.zx200.planner import Zx200Planner
+from tms_rp.arm.collision import ArmCollisionModel, CollisionError, CollisionObject, Contact
+from tms_rp.arm.planner import ArmPlanner
 
 __all__ = ["CollisionPlanner", "Scene", "PathReport"]
 
@@ -70,9 +70,9 @@ def _order(n: int) -> list[int]:
 
 
 class CollisionPlanner:
-    """Collision-aware planning on top of :class:`Zx200Planner` (see the module docstring)."""
+    """Collision-aware planning on top of :class:`ArmPlanner` (see the module docstring)."""
 
-    def __init__(self, planner: Zx200Planner, model: ArmCollisionModel, via_tolerance_rad: float = 0.05) -> None:
+    def __init__(self, planner: ArmPlanner, model: ArmCollisionModel, via_tolerance_rad: float = 0.05) -> None:
         self.planner = planner
         self.kin = planner.kin
         self.model = model
@@ -263,7 +263,7 @@ class CollisionPlanner:
 
     # ------------------------------------------------------------------ goals
     def change_pose(self, scene: Scene, *, current_q: np.ndarray | None, **goal: Any) -> list[Target]:
-        """change_pose_plan: :meth:`Zx200Planner.change_pose` (same goal, same validation), made collision-free."""
+        """change_pose_plan: :meth:`ArmPlanner.change_pose` (same goal, same validation), made collision-free."""
         if current_q is None:
             raise PlanningError("change_pose_plan needs the arm's joint state to plan from; none received")
         self.report = PathReport([])
@@ -277,7 +277,7 @@ class CollisionPlanner:
 
     def excavate(self, scene: Scene, position: Any, theta_w: float, offset: float,
                  current_q: np.ndarray | None) -> list[Target]:
-        """excavate_simple_plan: :meth:`Zx200Planner.excavate`, its approach made collision-free, its dig checked."""
+        """excavate_simple_plan: :meth:`ArmPlanner.excavate`, its approach made collision-free, its dig checked."""
         if current_q is None:
             raise PlanningError("excavate_simple_plan needs the arm's joint state to plan from; none received")
         self.report = PathReport([])

@@ -1,11 +1,11 @@
-"""ZX200 motion planning: planning goals -> validated controller targets, rejected before any motion.
+"""Excavator arm motion planning: planning goals -> validated controller targets, rejected before any motion.
 
-* :meth:`Zx200Planner.change_pose` — joint angles, bucket-tip poses or position + theta_w targets (a big
+* :meth:`ArmPlanner.change_pose` — joint angles, bucket-tip poses or position + theta_w targets (a big
   swing goes joint-space to the IK solution first, then a straight tip line to the goal);
-* :meth:`Zx200Planner.excavate` — approach above the target, penetrate, drag towards the machine by
+* :meth:`ArmPlanner.excavate` — approach above the target, penetrate, drag towards the machine by
   ``offset``, curl and lift clear (one segment, as an operator curls while raising the boom; or curl,
   then lift);
-* :meth:`Zx200Planner.release` — swing to the target angle (front held), open (dump) the bucket with its
+* :meth:`ArmPlanner.release` — swing to the target angle (front held), open (dump) the bucket with its
   tip held over the release point.
 
 Every target is checked here (finite, non-empty, reachable, inside the joint limits, above the
@@ -29,7 +29,7 @@ from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_model.geometry import wrap_angle
 
-__all__ = ["PlannerConfig", "load_planner_config", "planner_config_path", "Zx200Planner"]
+__all__ = ["PlannerConfig", "load_planner_config", "planner_config_path", "ArmPlanner"]
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def _finite(values: Any, what: str) -> np.ndarray:
     return arr
 
 
-class Zx200Planner:
+class ArmPlanner:
     """Turns planning goals into controller targets after validating every one of them."""
 
     def __init__(self, kin: ExcavatorKinematics, cfg: PlannerConfig | None = None, ground_min_z: float = -2.5) -> None:
@@ -267,7 +267,7 @@ class Zx200Planner:
     def excavate(self, position: Any, theta_w: float, offset: float = 0.0) -> list[JointTarget | CartesianTarget]:
         """approach -> penetrate -> drag -> curl + lift (or curl -> lift) at one excavation target, all validated.
 
-        ``position`` is the bucket-tip point the excavation penetrates to (ZX200 base frame; tms_sp
+        ``position`` is the bucket-tip point the excavation penetrates to (the excavator's base frame; tms_sp
         writes ``surface - penetration_depth``), ``penetrate_depth`` of the config goes that much deeper.
         ``theta_w`` is the edge angle at entry (approach and penetrate); where the arm cannot hold that
         angle at the point it is moved to the nearest reachable one (the excavation still happens at the
