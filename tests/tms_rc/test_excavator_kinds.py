@@ -3,7 +3,7 @@
 The control choices are one file (config/tms_rc/excavator_arm_controller.yaml); the pump flow, each joint's
 flow coefficient and the hydraulic delays were identified on the machine over its CAN bus
 (config/tms_rc/identified/<name>.yaml, made by tms_rc_identify). The ZX120's controller holds the pumps to its
-own identified flow (288 L/min), not the ZX200's (448 L/min); the tests read both figures from those files.
+own identified flow (280 L/min), not the ZX200's (448 L/min); the tests read both figures from those files.
 """
 
 from __future__ import annotations
