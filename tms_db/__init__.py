@@ -10,10 +10,12 @@ The public API, the one thing other packages import of tms_db: :func:`open_store
 node's ``db_uri`` / ``db_path`` parameters and the store they name) with :class:`StoreOwner` (closes it with the
 node), :class:`Store`, the errors, and
 :func:`normalise_task_xml` (the one-line form a task's tree is stored in), :func:`find_heightmap` (the newest stored
-terrain heightmap of a type, as the original's heightmap reader picks it).
+terrain heightmap of a type, as the original's heightmap reader picks it), :func:`put_design` / :func:`get_design` /
+:func:`list_designs` (design surfaces in the collection ``design`` of ours, :mod:`tms_db.design`).
 """
 
 from tms_db.backend import open_store
+from tms_db.design import DESIGN_COLLECTION, get_design, list_designs, put_design
 from tms_db.errors import BlobTooLarge, RecordNotFound, StoreError, ValidationError
 from tms_db.heightmap import find_heightmap
 from tms_db.nodes.common import StoreOwner, declare_and_open
@@ -21,4 +23,5 @@ from tms_db.schema import normalise_task_xml
 from tms_db.store import DATABASE, Store, default_path
 
 __all__ = ["open_store", "declare_and_open", "StoreOwner", "Store", "StoreError", "RecordNotFound", "ValidationError",
-           "BlobTooLarge", "normalise_task_xml", "DATABASE", "default_path", "find_heightmap"]
+           "BlobTooLarge", "normalise_task_xml", "DATABASE", "default_path", "find_heightmap", "put_design",
+           "get_design", "list_designs", "DESIGN_COLLECTION"]

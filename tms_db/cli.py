@@ -10,7 +10,9 @@
       param get RECORD [--model-name M]
       param set RECORD FIELD=VALUE... [--model-name M] [--upsert]   (VALUE parsed as JSON: true, 3, 1.5, "s")
       dump DIR | restore DIR [--drop] (MongoDB Extended JSON, one document per line; mongoimport reads it)
-      seed paper|fleet|original_202412 [--file config/seeds/<name>.yaml]
+      seed paper|fleet|original_202412|design_trench [--file config/seeds/<name>.yaml]
+      design put FILE.yaml            (one design document or {designs: [...]}, checked by Design.from_dict)
+      design list | design show NAME  (the newest stored version; collection ``design``, tms_db.design)
       check                           (the store's consistency check)
 
 The store is chosen as in :func:`tms_db.open_store`: ``--uri`` (default ``$TMS_DB_URI``) for MongoDB,
@@ -39,6 +41,7 @@ from tms_common.config import load_yaml, read_utf8, repo_root
 from tms_common.errors import TmsError
 from tms_db import dumpfmt
 from tms_db.backend import open_store
+from tms_db.design import get_design, list_designs, put_design
 from tms_db.errors import (
     InputRefusedError,
     StorageFullError,
@@ -48,10 +51,11 @@ from tms_db.errors import (
 )
 from tms_db.schema import check_document_size, validate_parameter
 from tms_db.store import Store, build_task_doc, check_import_document, parameter_key
+from tms_rp.excavation.design import Design, DesignError
 from tms_ts.limits import MAX_TREE_BYTES, check_tree_size, task_id_problem
 from tms_ts.loader import check_tree
 
-__all__ = ["main", "import_parameters", "check_parameters", "seed", "EXIT_CODES"]
+__all__ = ["main", "import_parameters", "check_parameters", "seed", "check_designs", "EXIT_CODES"]
 
 #: exit code -> meaning; the same table is in tms_db/README.md
 EXIT_CODES = {
@@ -121,8 +125,27 @@ def import_parameters(store: Store, path: str | Path, docs: Any = None, where: A
     return store.upsert_parameters(docs)
 
 
+def check_designs(path: str | Path, docs: Any, where: Any, key_path: tuple = ()) -> list[dict]:
+    """The design documents of a YAML file, each checked by ``Design.from_dict`` and returned in its stored form
+    (``to_dict``: defaults filled in, the area polygon given); StoreError naming ``file:line`` and the key."""
+    if not isinstance(docs, list):
+        raise StoreError(f"{path}:{where.line_of(key_path) if key_path else 1}: designs must be a list of documents")
+    out = []
+    for i, doc in enumerate(docs):
+        try:
+            out.append(Design.from_dict(doc).to_dict())
+        except DesignError as exc:
+            raise ValidationError(f"{path}:{where.line_of((*key_path, i))}: {exc}") from None
+    names = [d["name"] for d in out]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValidationError(f"{path}: design name(s) {twice} given more than once")
+    return out
+
+
 def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
-    """Load a seed file ``{tasks: [{task_id, file, description, model_name?, blackboard?}], parameters: [...]}``;
+    """Load a seed file ``{tasks: [{task_id, file, description, model_name?, blackboard?}], parameters: [...],
+    designs: [...]}`` (``designs``: design surfaces, :mod:`tms_db.design`, checked by ``Design.from_dict``);
     idempotent. A task's ``blackboard`` gives its parameters (initial blackboard entries, e.g. ``{machine: <machine
     name>}``).
 
@@ -135,10 +158,10 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     data, where = load_yaml(seed_file)
     if not isinstance(data, dict):
         raise StoreError(f"{seed_file}:1: expected a mapping with keys 'tasks' and 'parameters'")
-    unknown = sorted(set(data) - {"tasks", "parameters", "description"})
+    unknown = sorted(set(data) - {"tasks", "parameters", "designs", "description"})
     if unknown:
         raise StoreError(f"{seed_file}:{where.line_of((unknown[0],))}: unknown key(s) {unknown}; "
-                         "expected 'tasks' and 'parameters'")
+                         "expected 'tasks', 'parameters' and 'designs'")
     tasks = data.get("tasks") or []
     if not isinstance(tasks, list):
         raise StoreError(f"{seed_file}:{where.line_of(('tasks',))}: 'tasks' must be a list")
@@ -147,6 +170,7 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
     problems = check_parameters(seed_file, params, where, ("parameters",))
     if problems:
         raise InputRefusedError(f"{seed_file}: {len(problems)} problem(s) in its parameters; nothing seeded", problems)
+    designs = check_designs(seed_file, data["designs"], where, ("designs",)) if data.get("designs") else []
     loaded: list[tuple[int, dict, str, Path]] = []
     for i, entry in enumerate(tasks):
         line = where.line_of(("tasks", i))
@@ -177,6 +201,8 @@ def seed(store: Store, seed_file: str | Path) -> tuple[int, int]:
         except ValidationError as exc:
             raise ValidationError(f"{seed_file}:{line}: {xml_path}: {exc}") from None
     n_params = store.upsert_parameters(params) if params else 0
+    for design in designs:
+        put_design(store, design)
     return len(tasks), n_params
 
 
@@ -252,10 +278,31 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("dir")
     r.add_argument("--drop", action="store_true", help="empty each restored collection first")
     s = sub.add_parser("seed", help="load a named seed")
-    s.add_argument("name", choices=["paper", "fleet", "original_202412"])
+    s.add_argument("name", choices=["paper", "fleet", "original_202412", "design_trench"])
     s.add_argument("--file", default=None, help="seed file (default config/seeds/<name>.yaml)")
     sub.add_parser("check", help="run the store's consistency check")
+
+    design = sub.add_parser("design", help="design surfaces (collection design)").add_subparsers(
+        dest="design_cmd", required=True)
+    dput = design.add_parser("put", help="store design documents from YAML (a new version of each)")
+    dput.add_argument("file")
+    design.add_parser("list", help="list the stored designs")
+    dshow = design.add_parser("show", help="print the newest version of one design")
+    dshow.add_argument("name")
     return p
+
+
+def _design_file(path: str) -> list[dict]:
+    """The checked design documents of ``path`` (one document, a list, or ``{designs: [...]}``)."""
+    if not Path(path).is_file():
+        raise StoreError(f"{path}: design file not found")
+    docs, where = load_yaml(path)
+    key_path: tuple = ()
+    if isinstance(docs, dict) and "designs" in docs:
+        docs, key_path = docs["designs"], ("designs",)
+    elif isinstance(docs, dict):
+        docs = [docs]
+    return check_designs(path, docs, where, key_path)
 
 
 def _checked_task_file(path: str, task_id: int | None) -> str:
@@ -286,6 +333,7 @@ def _checked_task_file(path: str, task_id: int | None) -> str:
 
 def _run(args: argparse.Namespace) -> int:
     xml = _checked_task_file(args.file, args.id) if args.cmd == "task" and args.task_cmd == "add" else None
+    designs = _design_file(args.file) if args.cmd == "design" and args.design_cmd == "put" else None
     with open_store(uri=args.uri, path=args.path) as store:
         if args.cmd == "task":
             if args.task_cmd == "add":
@@ -336,6 +384,15 @@ def _run(args: argparse.Namespace) -> int:
                 raise StoreError(f"{seed_file}: seed file not found; pass --file SEED.yaml")
             n_tasks, n_params = seed(store, seed_file)
             print(f"seed {args.name}: {n_tasks} task(s), {n_params} parameter document(s) from {seed_file}")
+        elif args.cmd == "design":
+            if args.design_cmd == "put":
+                for design in designs or []:
+                    print(f"design {design['name']!r} ({design['kind']}): {put_design(store, design)}")
+            elif args.design_cmd == "list":
+                for name in list_designs(store):
+                    print(name)
+            else:
+                _print_doc(get_design(store, args.name))
         elif args.cmd == "check":
             problems = store.check()
             for doc in store.list_tasks():  # the trees as the task manager loads them
