@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 __all__ = ["Plan", "ChangePosePlan", "ExcavatePlan", "AnglePlan", "SwingAlignPlan", "SamplePlan", "PosePlan",
-           "PosesPlan", "JOINTS", "POSE", "POSITION_WITH_ANGLE"]
+           "PosesPlan", "DesignPlan", "JOINTS", "POSE", "POSITION_WITH_ANGLE"]
 
 #: ChangePosePlan modes: a joint target, an end-effector pose, a bucket-tip position with its edge angle theta_w
 JOINTS, POSE, POSITION_WITH_ANGLE = "joints", "pose", "position_with_angle"
@@ -74,4 +74,20 @@ class PosesPlan:
     poses: tuple[Mapping[str, float], ...]
 
 
-Plan = ChangePosePlan | ExcavatePlan | AnglePlan | SwingAlignPlan | SamplePlan | PosePlan | PosesPlan
+@dataclass(frozen=True)
+class DesignPlan:
+    """Excavation to a stored design surface: the ``design``'s name (tms_db collection ``design``), the excavator's
+    ``base`` {x, y, yaw, z} on the map, the ``dump`` point {x, y} on the map (None: the pass planner's place), the
+    bucket tip's height over the dump ground when it is emptied, the edge angle at entry ``theta_w`` [rad], at most
+    ``max_passes`` passes, the dynamic terrain's DATA_ID ``terrain_id``."""
+
+    design: str
+    base: Mapping[str, float]
+    dump: Mapping[str, float] | None
+    dump_height: float
+    theta_w: float
+    max_passes: int
+    terrain_id: int
+
+
+Plan = ChangePosePlan | ExcavatePlan | AnglePlan | SwingAlignPlan | SamplePlan | PosePlan | PosesPlan | DesignPlan

@@ -28,6 +28,13 @@ Planning goal data (``kind`` -> keys):
   target without waiting for rest, the next goal continues the motion); ``theta_w_tolerance`` (optional
   [rad], default 0: the nearest holdable edge angle within it where theta_w cannot be held)
 * ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
+* ``excavate_design`` (ours, beside the original's): :class:`~tms_ts.plans.DesignPlan` from the record's
+  ``design`` (a design's name, tms_db collection ``design``), ``base_x``, ``base_y``, ``base_yaw`` [rad] (and
+  ``base_z``, default 0: the excavator's base_link on the map), optional ``dump_x``, ``dump_y`` (map; both or none:
+  a fixed dump place, e.g. a carrier's vessel or a spoil heap; absent: the pass planner's place) and ``dump_z``
+  (its ground), ``dump_height`` (1.5 m), ``theta_w`` (1.1 rad), ``max_passes`` (200), ``terrain_id`` (3031, the
+  dynamic terrain's DATA_ID). The row's ``steps`` name the rows whose planning actions each pass runs
+  (excavate, change_pose, release; :mod:`tms_ts.design_excavation`); the server loops until the pass planner stops.
 * ``navigate_to_pose``: ``pose`` {x, y, z, qx..qw}; ``follow_waypoints`` / ``navigate_through_poses``:
   ``poses`` [{x, y, z, qx..qw}, ...] in frame ``map``. ``_deg`` variants give yaw in degrees.
 * ``swing``: ``target_angle`` [rad] (SetSwingAngle); ``swing_align``: ``target_angle`` 0 or pi, whichever is
@@ -76,6 +83,7 @@ from tms_ts.plans import (
     POSITION_WITH_ANGLE,
     AnglePlan,
     ChangePosePlan,
+    DesignPlan,
     ExcavatePlan,
     Plan,
     PosePlan,
@@ -174,6 +182,35 @@ def build_excavate(doc: dict, record: str) -> ExcavatePlan:
     pwa = {k: _num(doc, record, k) for k in ("x", "y", "z", "theta_w")}
     pwa["offset"] = _num(doc, record, "offset", 0.0)
     return ExcavatePlan(pwa)
+
+
+def build_excavate_design(doc: dict, record: str) -> DesignPlan:
+    """The design subtask's record (see the module docstring): a design name, the base pose, the dump place."""
+    design = doc.get("design")
+    if not isinstance(design, str) or not design.strip():
+        raise SubtaskRecordError(record, "design", f"must be a design's name (tms-db design list), got {design!r}")
+    base = {k: _num(doc, record, f"base_{k}") for k in ("x", "y", "yaw")}
+    base["z"] = _num(doc, record, "base_z", 0.0)
+    given = [k for k in ("dump_x", "dump_y") if k in doc]
+    if len(given) == 1:
+        raise SubtaskRecordError(record, "dump_x|dump_y", f"give both or neither (only {given[0]} is there)")
+    dump = None
+    if given:
+        dump = {"x": _num(doc, record, "dump_x"), "y": _num(doc, record, "dump_y")}
+        if "dump_z" in doc:
+            dump["z"] = _num(doc, record, "dump_z")
+    height = _num(doc, record, "dump_height", 1.5)
+    if not 0.0 < height <= 10.0:
+        raise SubtaskRecordError(record, "dump_height", f"must be in (0, 10] m, got {height}")
+    passes = _num(doc, record, "max_passes", 200)
+    if passes != int(passes) or not 1 <= passes <= 100000:
+        raise SubtaskRecordError(record, "max_passes", f"must be an integer 1..100000, got {passes}")
+    terrain = _num(doc, record, "terrain_id", 3031)
+    if terrain != int(terrain):
+        raise SubtaskRecordError(record, "terrain_id", f"must be an integer, got {terrain}")
+    theta_w = _num(doc, record, "theta_w", 1.1)
+    return DesignPlan(design=design, base=base, dump=dump, dump_height=height, theta_w=theta_w,
+                      max_passes=int(passes), terrain_id=int(terrain))
 
 
 def build_angle(what: str) -> Callable[[dict, str], AnglePlan]:
@@ -386,6 +423,9 @@ class SubtaskSpec:
     reads_record: bool = True
     #: (plan, joints {name: rad} from /<model_name>/joint_states, the machine's description or None) -> plan
     resolve: Callable[[Any, dict[str, float], Any], Plan] | None = None
+    #: a row that runs several downstream goals (the design subtask): step name -> the row whose planning action,
+    #: goal and check serve it (tms_ts.design_excavation); None: one goal to ``planning_action``
+    steps: dict[str, SubtaskSpec] | None = None
 
 
 def _excavate_goal(plan: ExcavatePlan) -> TmsRpZx200ExcavateSimple.Goal:
@@ -437,12 +477,27 @@ def _sample_rows(prefix: str) -> list[SubtaskSpec]:
                         goal, arm_ok, resolve=resolve_sample) for j in ("swing", "boom", "arm", "bucket")]
 
 
+def _design_row(prefix: str, change_pose: SubtaskSpec, excavate: SubtaskSpec, release: SubtaskSpec) -> SubtaskSpec:
+    """Ours: excavation to a stored design, each pass through the original's excavate, change_pose and release
+    planning actions (their rows' goals and checks; no LOCK_FLG: the design record is not sensing's target)."""
+    steps = {"excavate": replace(excavate, clears_lock_flg=False),
+             "change_pose": replace(change_pose, clears_lock_flg=False), "release": release}
+    return SubtaskSpec(f"subtask_{prefix}_excavate_design", prefix, excavate.planning_action, excavate.action_type,
+                       build_excavate_design, excavate.goal, zx200_ok, outcome_topic=True, steps=steps)
+
+
+_ZX200_CHANGE_POSE = SubtaskSpec("subtask_zx200_change_pose", "zx200", CHANGE_POSE, TmsRpZx200ChangePose,
+                                 build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True,
+                                 options=change_pose_options, outcome_topic=True)
+_ZX200_EXCAVATE = SubtaskSpec("subtask_zx200_excavate_simple", "zx200", EXCAVATE_SIMPLE, TmsRpZx200ExcavateSimple,
+                              build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, outcome_topic=True)
+_ZX200_RELEASE = SubtaskSpec("subtask_zx200_release_simple", "zx200", RELEASE_SIMPLE, TmsRpZx200ReleaseSimple,
+                             build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan.target_angle),
+                             zx200_ok, outcome_topic=True)
+
 _SPECS = [
-    SubtaskSpec("subtask_zx200_change_pose", "zx200", CHANGE_POSE, TmsRpZx200ChangePose,
-                build_change_pose, change_pose_goal, zx200_ok, clears_lock_flg=True, options=change_pose_options,
-                outcome_topic=True),
-    SubtaskSpec("subtask_zx200_excavate_simple", "zx200", EXCAVATE_SIMPLE, TmsRpZx200ExcavateSimple,
-                build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, outcome_topic=True),
+    _ZX200_CHANGE_POSE,
+    _ZX200_EXCAVATE,
     # the original's _plan variants: the same records; the planning server plans around the collision objects of
     # its DB record (collision_object_record_name) and refuses with FAILURE naming the object
     SubtaskSpec("subtask_zx200_change_pose_plan", "zx200", CHANGE_POSE_PLAN, TmsRpZx200ChangePose,
@@ -450,9 +505,8 @@ _SPECS = [
                 outcome_topic=True),
     SubtaskSpec("subtask_zx200_excavate_simple_plan", "zx200", EXCAVATE_SIMPLE_PLAN, TmsRpZx200ExcavateSimple,
                 build_excavate, _excavate_goal, zx200_ok, clears_lock_flg=True, outcome_topic=True),
-    SubtaskSpec("subtask_zx200_release_simple", "zx200", RELEASE_SIMPLE, TmsRpZx200ReleaseSimple,
-                build_release, lambda plan: TmsRpZx200ReleaseSimple.Goal(target_angle=plan.target_angle), zx200_ok,
-                outcome_topic=True),
+    _ZX200_RELEASE,
+    _design_row("zx200", _ZX200_CHANGE_POSE, _ZX200_EXCAVATE, _ZX200_RELEASE),  # ours: to a stored design
     *travel_rows("ic120"),
     SubtaskSpec("st_ic120_release_soil", "ic120", "set_dump_angle", SetDumpAngle,
                 build_dump, lambda plan: SetDumpAngle.Goal(target_angle=plan.target_angle), dump_ok),

@@ -40,7 +40,16 @@ sensing may update the excavation target again), as the original subtasks did.
 Parameters (read-only, read at start-up): ``machine`` (the kind whose subtasks are served; default the kind of
 ``model_name`` on the site, config/site.yaml ``machines``), ``model_name`` (the namespace; default = machine),
 ``planning_wait_s`` (5.0), ``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``service_timeout_s`` (60.0),
-``joint_states_wait_s`` (2.0), ``db_uri``, ``db_path``.
+``joint_states_wait_s`` (2.0), ``terrain_wait_s`` (20.0), ``db_uri``, ``db_path``.
+
+A row with ``steps`` (ours: ``*_excavate_design``, excavation to a design stored in tms_db's ``design``
+collection) runs several planning goals: before each pass it reads the design and the newest dynamic heightmap
+(``type: dynamic``, the record's ``terrain_id``; after the first pass a heightmap newer than the one the last pass
+was planned on, waiting up to ``terrain_wait_s``), asks :class:`tms_ts.design_excavation.DesignExcavation` for
+the pass and runs its excavate, change_pose and release goals through those rows' planning actions (failures as
+the single-goal rows', the message naming the design and the pass). It ends SUCCEEDED when the pass planner says
+the surface is within tolerance, else with PLANNING_FAILED naming the design and the planner's reason; a design
+not in the store ends RECORD_INVALID, no terrain PLANNING_UNAVAILABLE.
 The node is named ``<machine>_subtasks`` when ``-p machine:=<m>`` is on the command line, so the two
 machines' servers started by hand do not share a name.
 """
@@ -54,6 +63,7 @@ import time
 import uuid
 from collections import OrderedDict
 from collections.abc import Sequence
+from typing import Any
 
 from action_msgs.msg import GoalStatus
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -64,22 +74,24 @@ from std_msgs.msg import Bool, String
 from unique_identifier_msgs.msg import UUID
 
 from tms_common.action_client import RaceFreeActionClient
-from tms_common.errors import ConfigError
+from tms_common.errors import ConfigError, TmsError
 from tms_common.goals import OUTCOME_QOS, RunningGoals
 from tms_common.node import ACTION_RESULT_TIMEOUT_S, run_node
 from tms_common.params import StartupParams
 from tms_common.ticker import Ticker
-from tms_db import RecordNotFound, open_store
+from tms_db import RecordNotFound, StoreError, get_design, open_store
 from tms_if_opera.interface import OUTCOME_GRACE_S as PLANNING_OUTCOME_GRACE_S
 from tms_if_opera.interface import PLANNING_OUTCOME
 from tms_model.fleet import load_named
 from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_ts.action import LeafNodeBase
+from tms_sp.terrain import TerrainError, heightmap_from_blob, latest_heightmap
+from tms_ts.design_excavation import DesignExcavation, Done
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
 from tms_ts.outcomes import SUBTASK_OUTCOME_TOPIC, code_name
-from tms_ts.plans import Plan
+from tms_ts.plans import DesignPlan, Plan
 from tms_ts.subtask_specs import SubtaskSpec, planning_verdict, subtasks_for
 
 __all__ = ["SubtaskServers", "main", "node_name_from_args"]
@@ -139,6 +151,7 @@ class SubtaskServers(Node):
         self.server_lost_s = p.number("server_lost_s", 3.0, lo=0.0)
         self.service_timeout_s = p.number("service_timeout_s", 60.0, lo=0.0)
         self.joint_states_wait_s = p.number("joint_states_wait_s", 2.0, lo=0.0)
+        self.terrain_wait_s = p.number("terrain_wait_s", 20.0, lo=0.0)
         db_uri = p.text("db_uri")
         db_path = p.text("db_path")
         specs = subtasks_for(machine)  # ConfigError naming the known kinds
@@ -164,6 +177,11 @@ class SubtaskServers(Node):
                                      self._on_planning_outcome, OUTCOME_QOS, callback_group=group)
         self.action_servers = []
         for spec in specs:
+            for step in (spec.steps or {}).values():  # the planning actions a multi-goal row runs
+                planning = f"/{self.model_name}/{step.planning_action}"
+                if planning not in self.planners:
+                    self.planners[planning] = RaceFreeActionClient(self, step.action_type, planning,
+                                                                   callback_group=group)
             planning = f"/{self.model_name}/{spec.planning_action}"
             if spec.downstream == "service":
                 if planning not in self.service_clients:
@@ -322,17 +340,24 @@ class SubtaskServers(Node):
         planning = f"/{self.model_name}/{spec.planning_action}"
         if spec.downstream == "service":
             return await self._call_service(gh, spec, plan, planning)
+        if spec.steps is not None:
+            return await self._execute_steps(gh, spec, plan)
+        return self._finish(gh, spec, *await self._run_planning(gh, spec, plan, record))
+
+    async def _run_planning(self, gh, spec: SubtaskSpec, plan: Plan, record: str) -> tuple[int, str]:
+        """One goal to the planning action of ``spec`` built from ``plan``, followed to its end: (code, message)."""
+        planning = f"/{self.model_name}/{spec.planning_action}"
         client = self.planners[planning]
         deadline = time.monotonic() + self.planning_wait_s
         while not client.server_is_ready():
             if gh.is_cancel_requested:
-                return self._finish(gh, spec, R.CANCELED, f"canceled while waiting for planning server {planning} "
+                return (R.CANCELED, f"canceled while waiting for planning server {planning} "
                                     "(nothing was sent)")
             if self._goals.stopping.is_set():
-                return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping while waiting for "
+                return (R.SERVER_STOPPING, f"subtask server stopping while waiting for "
                                     f"planning server {planning} (nothing was sent)")
             if time.monotonic() > deadline:
-                return self._finish(gh, spec, R.PLANNING_UNAVAILABLE,
+                return (R.PLANNING_UNAVAILABLE,
                                     f"planning server {planning} not available within {self.planning_wait_s:g} s")
             await self._ticker.next()
 
@@ -342,7 +367,7 @@ class SubtaskServers(Node):
         if options is not None:
             failed = await self._send_options(gh, planning, options, goal_id, deadline)
             if failed is not None:
-                return self._finish(gh, spec, *failed)
+                return failed
 
         def on_feedback(msg) -> None:
             gh.publish_feedback(LeafNodeBase.Feedback(status=_feedback_text(msg.feedback)))
@@ -350,7 +375,7 @@ class SubtaskServers(Node):
         # the goal response is awaited even when a cancel comes meanwhile: its handle is what cancels planning
         handle = await client.send_goal_async(spec.goal(plan), feedback_callback=on_feedback, goal_uuid=goal_id)
         if handle is None or not handle.accepted:
-            return self._finish(gh, spec, R.PLANNING_REJECTED, f"planning {planning} rejected the goal for record "
+            return (R.PLANNING_REJECTED, f"planning {planning} rejected the goal for record "
                                 f"'{record}'")
         result_future = self._ticker.wake_on(handle.get_result_async())
         cancel_deadline = None
@@ -369,7 +394,7 @@ class SubtaskServers(Node):
                     lost_since = now
                 elif now - lost_since >= self.server_lost_s:
                     self.emg.publish(Bool(data=True))
-                    return self._finish(gh, spec, R.SERVER_LOST, f"planning server {planning} lost while running "
+                    return (R.SERVER_LOST, f"planning server {planning} lost while running "
                                         f"record '{record}' (unavailable for {now - lost_since:.1f} s): "
                                         f"/{self.model_name}/emg_stop latched")
             if (gh.is_cancel_requested or self._goals.stopping.is_set()) and cancel_deadline is None:
@@ -377,7 +402,7 @@ class SubtaskServers(Node):
                 cancel_deadline = now + self.stop_timeout_s
             if cancel_deadline is not None and now > cancel_deadline:
                 self.emg.publish(Bool(data=True))
-                return self._finish(gh, spec, R.STOP_TIMEOUT, f"planning {planning} did not confirm the stop within "
+                return (R.STOP_TIMEOUT, f"planning {planning} did not confirm the stop within "
                                     f"{self.stop_timeout_s:g} s: /{self.model_name}/emg_stop latched")
         res = result_future.result()
         # the status and the result together: an aborted goal's (empty) result never passes for a success code
@@ -385,15 +410,75 @@ class SubtaskServers(Node):
         status = {GoalStatus.STATUS_CANCELED: "CANCELED", GoalStatus.STATUS_SUCCEEDED: "SUCCEEDED"}.get(
             res.status, "ABORTED")
         if gh.is_cancel_requested:
-            return self._finish(gh, spec, R.CANCELED, f"canceled; planning {planning} confirmed stop ({status})")
+            return (R.CANCELED, f"canceled; planning {planning} confirmed stop ({status})")
         if self._goals.stopping.is_set():
-            return self._finish(gh, spec, R.SERVER_STOPPING, f"subtask server stopping (SIGINT/SIGTERM): planning "
+            return (R.SERVER_STOPPING, f"subtask server stopping (SIGINT/SIGTERM): planning "
                                 f"{planning} canceled ({status})")
         if ok:
-            return self._finish(gh, spec, R.NONE, f"{spec.name} '{record}' done")
+            return (R.NONE, f"{spec.name} '{record}' done")
         if spec.outcome_topic:
             detail = f"{detail}: {await self._planning_text(goal_id)}"
-        return self._finish(gh, spec, R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
+        return (R.PLANNING_FAILED, f"planning {planning} failed for record '{record}': {detail}")
+
+    async def _fresh_terrain(self, gh, plan: DesignPlan, last_id: str | None) -> tuple[str, Any]:
+        """The newest dynamic heightmap once it is not ``last_id`` (a scan after the last pass), within
+        ``terrain_wait_s``; SubtaskStateError naming the design and the terrain id when none comes."""
+        deadline = time.monotonic() + self.terrain_wait_s
+        why = "none stored"
+        while True:
+            try:
+                doc, data = latest_heightmap(self.store, "dynamic", ident=plan.terrain_id)
+                if str(doc["_id"]) != last_id:
+                    return str(doc["_id"]), heightmap_from_blob(data, doc, source=f"dynamic terrain {doc['_id']}")
+                why = f"the newest ({doc.get('time')}) is the one the last pass was planned on"
+            except TerrainError as exc:
+                why = str(exc)
+            if time.monotonic() > deadline or gh.is_cancel_requested or self._goals.stopping.is_set():
+                raise SubtaskStateError(f"design {plan.design!r}: no new dynamic terrain (id {plan.terrain_id}) within "
+                                        f"terrain_wait_s = {self.terrain_wait_s:g} s: {why}")
+            await self._ticker.next()
+
+    async def _execute_steps(self, gh, spec: SubtaskSpec, plan: Plan) -> LeafNodeBase.Result:
+        """The design subtask: per pass the newest design and terrain -> the pass planner -> its goals through the
+        planning actions of the row's ``steps`` (tms_ts.design_excavation), until the planner stops."""
+        record = gh.request.record_name
+        assert isinstance(plan, DesignPlan) and spec.steps is not None
+        if self.description is None:
+            return self._finish(gh, spec, R.PLANNING_UNAVAILABLE, f"design {plan.design!r}: no description of "
+                                f"{self.model_name} on the site (the pass planner needs its bucket and reach)")
+        try:
+            run = DesignExcavation(plan, self.description)
+        except TmsError as exc:
+            return self._finish(gh, spec, R.PLANNING_UNAVAILABLE, str(exc))
+        started = time.monotonic()
+        terrain_id = None
+        while True:
+            if gh.is_cancel_requested:
+                return self._finish(gh, spec, R.CANCELED, f"design {plan.design!r} canceled after {run.summary()}")
+            if self._goals.stopping.is_set():
+                return self._finish(gh, spec, R.SERVER_STOPPING, f"design {plan.design!r}: subtask server stopping "
+                                    f"after {run.summary()}")
+            try:
+                design_doc = get_design(self.store, plan.design)
+            except StoreError as exc:
+                return self._finish(gh, spec, R.RECORD_INVALID, f"record '{record}': {exc}")
+            try:
+                terrain_id, terrain = await self._fresh_terrain(gh, plan, terrain_id)
+            except SubtaskStateError as exc:
+                return self._finish(gh, spec, R.PLANNING_UNAVAILABLE, f"{exc} ({run.summary()})")
+            step = run.step(design_doc, terrain)
+            if isinstance(step, Done):
+                took = f"; {time.monotonic() - started:.1f} s"
+                return self._finish(gh, spec, R.NONE if step.ok else R.PLANNING_FAILED, step.message + took)
+            cut = step.cut
+            gh.publish_feedback(LeafNodeBase.Feedback(
+                status=f"design {plan.design!r} pass {step.number}: cut {cut.volume:.3f} m3 depth {cut.depth:.2f} m "
+                       f"length {cut.length:.2f} m, dump to {cut.dump_kind}; MAE {step.error.mae * 100:.2f} cm"))
+            for what, goal_plan in step.goals:
+                code, message = await self._run_planning(gh, spec.steps[what], goal_plan, record)
+                if code != R.NONE:
+                    return self._finish(gh, spec, code, f"design {plan.design!r} pass {step.number} ({what}): "
+                                        f"{message} ({run.summary()})")
 
     async def _call_service(self, gh, spec: SubtaskSpec, plan: Plan, service: str) -> LeafNodeBase.Result:
         """A row whose downstream is a service: wait for it, call it, read its reply (cannot be canceled)."""

@@ -1,0 +1,212 @@
+"""The design subtask's pure core (tms_ts.design_excavation) and its record (the ``*_excavate_design`` row of
+tms_ts.subtask_specs): passes as the original's excavate / change_pose / release goals in the base frame, the stop
+reasons named with the design, and the seed's trench within the paper site's excavator's reach, off the mound."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.rosproc import ROOT
+from tms_common.config import load_yaml
+from tms_model.excavator.kinematics import site_excavator_kind
+from tms_model.machines import load_machine
+from tms_model.site import load_site
+from tms_rp.arm.planner import load_planner_config
+from tms_rp.excavation.design import Design, Grid, cell_centres
+from tms_rp.excavation.planner import BasePose
+from tms_ts.design_excavation import DUMP_THETA_W, DesignExcavation, Done, PassGoals, to_base
+from tms_ts.errors import SubtaskRecordError
+from tms_ts.plans import AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
+from tms_ts.subtask_specs import SUBTASKS, build_excavate_design
+
+KIND = site_excavator_kind()
+MACHINE = load_machine(KIND)
+ROW = next(s for s in SUBTASKS.values() if s.name.endswith("_excavate_design") and s.machine == KIND)
+SEED = ROOT / "config" / "seeds" / "design_trench.yaml"
+TRENCH = {"name": "tr", "kind": "trench", "start": [-5.0, -5.0], "end": [-5.0, 5.0], "width": 1.0, "depth": 0.5,
+          "ground_z": 0.0, "margin": 0.5}
+RECORD = {"design": "tr", "base_x": 0.0, "base_y": 0.0, "base_yaw": 0.0}
+
+
+def flat(x0: float = -11.0, x1: float = 3.0, y0: float = -9.0, y1: float = 9.0, cell: float = 0.1) -> Grid:
+    return Grid(z=np.zeros((round((y1 - y0) / cell), round((x1 - x0) / cell))), x_min=x0, y_min=y0, x_max=x1,
+                y_max=y1)
+
+
+def plan_of(**fields: object) -> DesignPlan:
+    return build_excavate_design({**RECORD, **fields}, "job")
+
+
+def dig(grid: Grid, step: PassGoals) -> None:
+    """An idealised machine: the pass's cells to their planned heights, the volume onto its dump cells."""
+    cut = step.cut
+    z = grid.z
+    area = (grid.x_max - grid.x_min) / z.shape[1] * (grid.y_max - grid.y_min) / z.shape[0]
+    r, c = cut.cells[:, 0], cut.cells[:, 1]
+    removed = float(np.sum(z[r, c] - cut.cut_to)) * area
+    z[r, c] = cut.cut_to
+    dr, dc = cut.dump_cells[:, 0], cut.dump_cells[:, 1]
+    z[dr, dc] += removed / (len(dr) * area)
+
+
+# ---- the record ---------------------------------------------------------------------------------------------
+def test_the_row_is_ours_beside_the_originals() -> None:
+    assert ROW.steps is not None and set(ROW.steps) == {"excavate", "change_pose", "release"}
+    for what, step in ROW.steps.items():
+        assert step.planning_action == SUBTASKS[step.name].planning_action, what
+        assert not step.clears_lock_flg  # the design record is not sensing's target
+    assert SUBTASKS[ROW.steps["excavate"].name].clears_lock_flg  # the original's row keeps its behaviour
+
+
+def test_record_defaults_and_fields() -> None:
+    p = plan_of(dump_x=1.0, dump_y=-7.5)
+    assert p.design == "tr" and p.base == {"x": 0.0, "y": 0.0, "yaw": 0.0, "z": 0.0}
+    assert p.dump == {"x": 1.0, "y": -7.5} and p.dump_height == 1.5 and p.max_passes == 200 and p.terrain_id == 3031
+    assert plan_of().dump is None
+
+
+@pytest.mark.parametrize(("fields", "match"), [
+    ({"design": ""}, r"record 'job'.*design.*must be a design's name"),
+    ({"design": None}, r"design"),
+    ({"base_x": "0"}, r"base_x.*finite number"),
+    ({"dump_x": 1.0}, r"dump_x\|dump_y.*both or neither"),
+    ({"max_passes": 2.5}, r"max_passes.*integer"),
+    ({"dump_height": 0.0}, r"dump_height"),
+])
+def test_record_errors_name_the_record_and_field(fields: dict, match: str) -> None:
+    doc = {**RECORD, **fields}
+    if fields.get("design", "x") is None:
+        del doc["design"]
+    with pytest.raises(SubtaskRecordError, match=match):
+        build_excavate_design(doc, "job")
+
+
+def test_a_missing_base_is_named() -> None:
+    doc = dict(RECORD)
+    del doc["base_yaw"]
+    with pytest.raises(SubtaskRecordError, match="base_yaw"):
+        build_excavate_design(doc, "job")
+
+
+# ---- the passes as goals --------------------------------------------------------------------------------------
+def test_a_pass_becomes_excavate_carry_release_in_the_base_frame() -> None:
+    run = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE)
+    step = run.step(TRENCH, flat())
+    assert isinstance(step, PassGoals) and step.number == 1
+    (w1, exc), (w2, carry), (w3, rel) = step.goals
+    assert (w1, w2, w3) == ("excavate", "change_pose", "release")
+    assert isinstance(exc, ExcavatePlan) and isinstance(carry, ChangePosePlan) and isinstance(rel, AnglePlan)
+    cut = step.cut
+    depth = load_planner_config(KIND).penetrate_depth
+    assert exc.pwa["x"] == pytest.approx(cut.start[0]) and exc.pwa["y"] == pytest.approx(cut.start[1])
+    assert exc.pwa["z"] == pytest.approx(cut.start[2] + depth)  # the arm planner goes penetrate_depth deeper
+    assert exc.pwa["offset"] == pytest.approx(cut.length) and exc.pwa["theta_w"] == pytest.approx(1.1)
+    assert carry.pwa == pytest.approx({"x": 1.0, "y": -7.5, "z": 1.5, "theta_w": DUMP_THETA_W})
+    assert carry.pass_through
+    origin = run.planner.kin.swing_origin
+    assert rel.what == "release" and rel.target_angle == pytest.approx(math.atan2(-7.5 - origin[1], 1.0 - origin[0]))
+    assert run.volume == pytest.approx(cut.volume) and run.passes == 1
+
+
+def test_the_base_frame_follows_the_base_pose() -> None:
+    base = BasePose(2.0, 1.0, math.pi / 2, 0.3)
+    assert to_base(base, 2.0, 4.0, 0.3) == pytest.approx((3.0, 0.0, 0.0))  # 3 m ahead of a machine facing north
+    assert to_base(base, 0.0, 1.0, 1.3) == pytest.approx((0.0, 2.0, 1.0))  # 2 m to its left
+    # the same design and terrain seen from a machine moved and turned: the goals move with it
+    shifted = {**TRENCH, "start": [2.0 - 5.0, 1.0 - 5.0], "end": [2.0 - 5.0, 1.0 + 5.0]}
+    rotated = {**TRENCH, "start": [2.0 + 5.0, 1.0 - 5.0], "end": [2.0 - 5.0, 1.0 - 5.0]}  # west of a north-facer
+    a = DesignExcavation(plan_of(base_x=2.0, base_y=1.0), MACHINE).step(shifted, flat(-9, 5, -8, 10))
+    b = DesignExcavation(plan_of(base_x=2.0, base_y=1.0, base_yaw=math.pi / 2), MACHINE).step(
+        rotated, flat(-8, 12, -9, 4))
+    assert isinstance(a, PassGoals) and isinstance(b, PassGoals)
+    for step in (a, b):  # in its own frame each machine cuts the trench 5 m behind it
+        pwa = step.goals[0][1].pwa
+        assert -6.0 <= pwa["x"] <= -4.0 and abs(pwa["y"]) <= 5.5, pwa
+
+
+def test_the_run_ends_within_tolerance_naming_the_design() -> None:
+    grid = flat()
+    run = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE)
+    for _ in range(200):
+        step = run.step(TRENCH, grid)
+        if isinstance(step, Done):
+            break
+        dig(grid, step)
+    assert isinstance(step, Done) and step.ok, step
+    assert step.message.startswith("design 'tr' done after") and "within tolerance" in step.message
+    assert run.volume == pytest.approx(5.0, rel=0.05)  # 10 m x 1 m x 0.5 m
+    assert step.error is not None and step.error.mae <= 0.02
+
+
+# ---- stops, each naming the design ----------------------------------------------------------------------------
+def test_a_design_out_of_reach_fails_naming_it() -> None:
+    far = {**TRENCH, "name": "far", "start": [-25.0, -5.0], "end": [-25.0, 5.0]}
+    step = DesignExcavation(plan_of(design="far"), MACHINE).step(far, flat(-30, 3, -9, 9))
+    assert isinstance(step, Done) and not step.ok
+    assert step.message.startswith("design 'far': the pass planner stops after 0 pass(es)")
+    assert "nothing reachable to cut" in step.message
+
+
+def test_terrain_not_covering_the_design_fails_naming_both() -> None:
+    step = DesignExcavation(plan_of(), MACHINE).step(TRENCH, flat(-5.2, 3, -9, 9))
+    assert isinstance(step, Done) and not step.ok
+    assert "design 'tr': its area x [-6, -4]" in step.message and "sensed terrain (dynamic heightmap id 3031)" \
+        in step.message and "x [-5.2, 3]" in step.message
+
+
+def test_a_bad_stored_document_fails_naming_the_design_and_key() -> None:
+    step = DesignExcavation(plan_of(), MACHINE).step({**TRENCH, "width": -1}, flat())
+    assert isinstance(step, Done) and not step.ok
+    assert "design 'tr': the stored document is refused" in step.message and "width" in step.message
+    other = DesignExcavation(plan_of(), MACHINE).step({**TRENCH, "name": "other"}, flat())
+    assert isinstance(other, Done) and "stored document is named 'other'" in other.message
+
+
+def test_max_passes_fails_naming_the_design() -> None:
+    run = DesignExcavation(plan_of(max_passes=2), MACHINE)
+    grid = flat()
+    for _ in range(2):
+        step = run.step(TRENCH, grid)
+        assert isinstance(step, PassGoals)
+        dig(grid, step)
+    step = run.step(TRENCH, grid)
+    assert isinstance(step, Done) and not step.ok
+    assert step.message.startswith("design 'tr': not within tolerance after max_passes = 2 (2 pass(es)")
+
+
+# ---- the seed ----------------------------------------------------------------------------------------------------
+def test_the_seed_trench_is_reachable_on_flat_ground_and_off_the_mound() -> None:
+    data, _ = load_yaml(SEED)
+    job = next(p for p in data["parameters"] if p["record_name"] == "design_trench_job")
+    design = Design.from_dict(next(d for d in data["designs"] if d["name"] == job["design"]))
+    assert design.kind == "trench" and (design.params["width"], design.params["depth"]) == (1.0, 0.5)
+    assert math.dist(design.params["start"], design.params["end"]) == pytest.approx(10.0)
+    site = load_site()
+    base = site.points[f"{KIND}_base"]
+    assert (job["base_x"], job["base_y"], job["base_yaw"]) == pytest.approx((base.x, base.y, base.yaw))
+    # off the mound: every corner of the design area further from its centre than its base radius + 1 m
+    mound = site.mound
+    for x, y in design.area:
+        assert math.hypot(x - mound.cx, y - mound.cy) > mound.base_radius + 1.0, (x, y)
+    # every trench cell reachable at its bottom from the base; the dump place reachable and clear of the area
+    run = DesignExcavation(build_excavate_design(job, "design_trench_job"), MACHINE)
+    grid = flat()
+    xc, yc = cell_centres(grid)
+    sampled = design.sample(grid)
+    axis = run.planner.swing_axis(run.base)
+    bottom = sampled.inside & (sampled.target < -0.4)
+    radius = np.hypot(xc - axis[0], yc - axis[1])
+    assert bottom.sum() > 900 and run.planner.reachable(radius[bottom], sampled.target[bottom]).all()
+    dump = np.array([[job["dump_x"], job["dump_y"]]])
+    assert not design.contains(dump[:, 0], dump[:, 1]).any()
+    assert run.planner.reachable(np.hypot(*(dump[0] - axis)), np.array(job["dump_height"])).all()
+
+
+def test_the_tree_runs_the_row_on_the_seed_record() -> None:
+    xml = (ROOT / "trees" / "design_trench.xml").read_text()
+    assert f'subtask_name="{ROW.name}"' in xml and 'record_name="design_trench_job"' in xml
+    assert Path(SEED).is_file()

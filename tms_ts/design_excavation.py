@@ -1,0 +1,151 @@
+"""Excavation to a stored design surface, pass by pass: the pure core of the design subtask (no rclpy, no store).
+
+The subtask row (``tms_ts.subtask_specs``, the ``*_excavate_design`` row) reads a record naming a design (tms_db
+collection ``design``), the excavator's base pose on the map and optionally a fixed dump point; the subtask server
+then calls :meth:`DesignExcavation.step` once per pass with the newest stored design document and the newest sensed
+terrain (the dynamic heightmap), and runs the goals it answers through the original's planning actions:
+
+1. ``excavate`` (TmsRpZx200ExcavateSimple's ``position_with_angle``): the pass's far end, the bucket-tip point the
+   arm penetrates to, raised by the arm planner's ``penetrate_depth`` (which it goes deeper) so that the edge
+   reaches the pass's edge height; ``offset`` the pass's length (the arm planner drags radially toward the swing
+   axis, the direction the pass planner cuts in); ``theta_w`` the record's entry edge angle;
+2. ``change_pose`` (position_with_angle, ``pass_through``): the tip ``dump_height`` over the dump place, bucket
+   closed (``DUMP_THETA_W``, the paper's release pose);
+3. ``release`` (TmsRpZx200ReleaseSimple): the swing angle of the dump place from the swing axis; the bucket opens.
+
+Points of the goals are the excavator's base frame (as the original's targets): the map point moved by the base
+pose (x, y, yaw; heights relative to the base's ``z``). The step answers :class:`Done` instead when the pass
+planner stops: ``ok`` when it says the surface is within tolerance, else a failure whose message names the design,
+the passes done and the planner's reason (nothing reachable, no place to dump, ...). A design document that is
+wrong, a terrain that does not cover the design's area, or more than ``max_passes`` passes end it as a failure
+naming the design too. Machine-independent: the machine's description gives the bucket, the reach and the swing
+origin; the arm planner's settings of its kind give ``penetrate_depth``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from tms_common.errors import TmsError
+from tms_rp.arm.planner import load_planner_config
+from tms_rp.excavation.design import Design, DesignError, GridLike, SurfaceError
+from tms_rp.excavation.planner import BasePose, Pass, PassPlanner, PlannerSettings
+from tms_ts.plans import POSITION_WITH_ANGLE, AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
+
+__all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "DesignExcavation", "to_base"]
+
+#: [rad] the edge angle the bucket is carried over the dump place with (85 deg, bucket closed: the paper's release pose)
+DUMP_THETA_W = 1.483530
+#: [rad] where that angle cannot be held over the dump place, the nearest holdable one within this
+DUMP_THETA_W_TOLERANCE = 0.5
+
+
+@dataclass(frozen=True)
+class Done:
+    """The design subtask ends: ``ok`` (within tolerance) or a failure; ``message`` names the design."""
+
+    ok: bool
+    message: str
+    error: SurfaceError | None = None
+
+
+@dataclass(frozen=True)
+class PassGoals:
+    """One pass as downstream goals, in order: (``what``, plan) with what ``excavate``, ``change_pose``,
+    ``release``; ``cut`` the pass planned (map frame), ``number`` its count from 1."""
+
+    goals: tuple[tuple[str, Any], ...]
+    cut: Pass = field(repr=False)
+    number: int
+    error: SurfaceError = field(repr=False)
+
+
+def to_base(base: BasePose, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """A map point in the base frame of an excavator whose base_link stands at ``base`` (z relative to ``base.z``)."""
+    dx, dy = x - base.x, y - base.y
+    c, s = math.cos(base.yaw), math.sin(base.yaw)
+    return c * dx + s * dy, -s * dx + c * dy, z - (base.z or 0.0)
+
+
+class DesignExcavation:
+    """One run of a design subtask (see the module docstring): call :meth:`step` with each fresh terrain."""
+
+    def __init__(self, plan: DesignPlan, machine: Any, settings: PlannerSettings | None = None) -> None:
+        self.plan = plan
+        self.who = f"design {plan.design!r}"
+        try:
+            self.planner = PassPlanner(machine, settings)
+            self.penetrate_depth = float(load_planner_config(machine.kind).penetrate_depth)
+        except TmsError as exc:
+            raise DesignError(f"{self.who}: machine {getattr(machine, 'kind', machine)!r} cannot excavate it: "
+                              f"{exc}") from None
+        b = plan.base
+        self.base = BasePose(float(b["x"]), float(b["y"]), float(b["yaw"]), float(b.get("z", 0.0)))
+        self.passes = 0
+        self.volume = 0.0  # [m^3 bank] planned volume of the passes sent
+        self.first_error: SurfaceError | None = None
+
+    def _covered(self, design: Design, terrain: GridLike) -> str | None:
+        xs = [p[0] for p in design.area]
+        ys = [p[1] for p in design.area]
+        if (min(xs) < terrain.x_min or max(xs) > terrain.x_max or min(ys) < terrain.y_min
+                or max(ys) > terrain.y_max):
+            return (f"{self.who}: its area x [{min(xs):g}, {max(xs):g}] y [{min(ys):g}, {max(ys):g}] is not inside "
+                    f"the sensed terrain (dynamic heightmap id {self.plan.terrain_id}) x [{terrain.x_min:g}, "
+                    f"{terrain.x_max:g}] y [{terrain.y_min:g}, {terrain.y_max:g}]")
+        return None
+
+    def summary(self) -> str:
+        return f"{self.passes} pass(es), {self.volume:.3f} m3 planned moved"
+
+    def step(self, design_doc: Any, terrain: GridLike) -> Done | PassGoals:
+        """The next pass's goals for the newest ``design_doc`` and ``terrain``, or :class:`Done`."""
+        try:
+            design = Design.from_dict(design_doc)
+        except DesignError as exc:
+            return Done(False, f"{self.who}: the stored document is refused: {exc}")
+        if design.name != self.plan.design:
+            return Done(False, f"{self.who}: the stored document is named {design.name!r}")
+        uncovered = self._covered(design, terrain)
+        if uncovered:
+            return Done(False, uncovered)
+        try:
+            decision = self.planner.next_pass(terrain, design, self.base)
+        except DesignError as exc:
+            return Done(False, f"{self.who}: {exc}")
+        err = decision.error
+        if self.first_error is None:
+            self.first_error = err
+        figures = (f"MAE {err.mae * 100:.2f} cm, p95 {err.p95 * 100:.2f} cm, max {err.max_abs * 100:.2f} cm, "
+                   f"{err.cut_volume:.3f} m3 above and {err.fill_volume:.3f} m3 below the design")
+        if decision.cut is None:
+            if decision.reason.startswith("within tolerance"):
+                return Done(True, f"{self.who} done after {self.summary()}: {decision.reason}", err)
+            return Done(False, f"{self.who}: the pass planner stops after {self.summary()} ({figures}): "
+                               f"{decision.reason}", err)
+        if self.passes >= self.plan.max_passes:
+            return Done(False, f"{self.who}: not within tolerance after max_passes = {self.plan.max_passes} "
+                               f"({self.summary()}; {figures})", err)
+        cut = decision.cut
+        self.passes += 1
+        self.volume += cut.volume
+        return PassGoals(self._goals(cut), cut, self.passes, err)
+
+    def _goals(self, cut: Pass) -> tuple[tuple[str, Any], ...]:
+        p = self.plan
+        sx, sy, sz = to_base(self.base, *cut.start)
+        excavate = ExcavatePlan({"x": sx, "y": sy, "z": sz + self.penetrate_depth, "theta_w": p.theta_w,
+                                 "offset": cut.length})
+        if p.dump is not None:
+            dx, dy = float(p.dump["x"]), float(p.dump["y"])
+            dz = float(p.dump.get("z", cut.dump[2]))
+        else:
+            dx, dy, dz = cut.dump
+        bx, by, bz = to_base(self.base, dx, dy, dz + p.dump_height)
+        carry = ChangePosePlan(POSITION_WITH_ANGLE, pwa={"x": bx, "y": by, "z": bz, "theta_w": DUMP_THETA_W},
+                               pass_through=True, theta_w_tolerance=DUMP_THETA_W_TOLERANCE)
+        ox, oy = float(self.planner.kin.swing_origin[0]), float(self.planner.kin.swing_origin[1])
+        release = AnglePlan("release", math.atan2(by - oy, bx - ox))
+        return ("excavate", excavate), ("change_pose", carry), ("release", release)
