@@ -1,0 +1,32 @@
+"""The design_trench seed (config/seeds/design_trench.yaml): its design goes into the store's collection ``design``
+beside its task and record; a seed with a bad design stores nothing (both backends)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.rosproc import ROOT
+from tms_db import DESIGN_COLLECTION, Store, ValidationError, get_design, list_designs
+from tms_db.cli import seed
+from tms_rp.excavation.design import Design
+
+
+def test_the_design_trench_seed_puts_its_design(store: Store) -> None:
+    n_tasks, n_params = seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")
+    assert (n_tasks, n_params) == (1, 1)
+    job = store.get_parameter("zx200", "design_trench_job")
+    design = Design.from_dict(get_design(store, job["design"]))
+    assert design.kind == "trench" and design.params["depth"] == 0.5 and design.params["width"] == 1.0
+    seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")  # idempotent: no second version
+    assert len(store.find_data(DESIGN_COLLECTION, 3040, name=job["design"])) == 1
+
+
+def test_a_seed_with_a_bad_design_stores_nothing(store: Store, tmp_path: Path) -> None:
+    f = tmp_path / "s.yaml"
+    f.write_text("parameters:\n  - model_name: m\n    record_name: r\n    a: 1\n"
+                 "designs:\n  - name: x\n    kind: pond\n")
+    with pytest.raises(ValidationError, match=r"s.yaml:6: design 'x': kind must be one of"):
+        seed(store, f)
+    assert store.list_parameters() == [] and list_designs(store) == []
