@@ -16,6 +16,18 @@ hierarchical optimisation it builds on). One OSQP instance per level is created 
 dense sparsity pattern and kept between control steps, so every solve is warm-started from the
 previous step's solution.
 
+Every level below the first stays feasible (z = 0, "keep x_star", always is), also when a level is left unmet
+against the limits above it (a binding or initially violated collision damper):
+
+- a row of a level above that an OSQP solution overshot within OSQP's eps (beyond the fix tolerance) is relaxed
+  to the value that solution achieves, so the bounds handed down are never below what the levels above achieved;
+- a level left unmet (slack above ``_UNMET`` fix tolerances) has its optimum on a face of the constraints: every
+  row active there with a positive multiplier keeps its value at any of the level's optima (KKT), so those rows
+  join the nullspace projector like an equality task's (without this the lower levels got a feasible set as thin
+  as the fix tolerance, which OSQP answered with "primal infeasible" or ``max_iter``);
+- an OSQP solve that ends unfinished (``max_iter``, inaccurate) gives its iterate shortened to keep every row
+  above (``HqpResult.inexact``), or no step when that would not lower the level's objective.
+
 Exact shortcuts keep a 100 Hz step cheap (measured figures: tms_rc/excavator/README.md):
 
 - an inequality level whose rows already hold at x = 0 (and every level above it was satisfied at
@@ -49,9 +61,17 @@ from scipy.linalg.lapack import dposv as _posv
 __all__ = ["LevelSpec", "HqpResult", "HierarchicalQP"]
 
 _INF = float(osqp.constant("OSQP_INFTY"))
-_OK = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+_SOLVED = osqp.SolverStatus.OSQP_SOLVED
+_OK = (_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+_MAX_ITER = osqp.SolverStatus.OSQP_MAX_ITER_REACHED
 EQ = "eq"
 INEQ = "ineq"
+#: a level whose slack exceeds this many fix tolerances is unmet: its active rows are pinned for the levels below
+_UNMET = 10.0
+#: a row is pinned when its multiplier exceeds this fraction of the level's largest ...
+_PIN_DUAL = 1e-3
+#: ... and its value is within this many fix tolerances of its bound (or beyond it)
+_PIN_ACTIVE = 10.0
 
 
 @dataclass(frozen=True)
@@ -77,6 +97,9 @@ class HqpResult:
     solve_cpu_s: float = 0.0
     #: levels whose QP optimum was found in closed form (unconstrained optimum inside every constraint)
     closed_form: list[str] = field(default_factory=list)
+    #: levels whose OSQP solve ended unfinished (inaccurate or at max_iter): its iterate was shortened to keep
+    #: every level above, and taken only where it lowered the level's objective
+    inexact: list[str] = field(default_factory=list)
 
 
 class HierarchicalQP:
@@ -117,6 +140,7 @@ class HierarchicalQP:
         self._fix_tol = fix_tolerance
         self._reg = regularisation
         self._closed_form = closed_form
+        self._exact = True  # the last OSQP solve ended SOLVED (its multipliers are meaningful)
         box = np.vstack([np.eye(n), -np.eye(n)])
         # per level: the rows [I; -I] if an inequality level has that shape (its closed form applies)
         self._box = [box if lv.kind == INEQ and lv.rows == 2 * n else None for lv in levels]
@@ -281,7 +305,8 @@ class HierarchicalQP:
                     x_new += x_star
                 if s0 and not (a_all[:s0] @ x_new <= hi_fixed[:s0]).all():
                     x_new = None  # a constraint of the levels above is active there: OSQP finds the optimum
-            if x_new is not None:
+            by_osqp = x_new is None
+            if not by_osqp:
                 result.closed_form.append(lv.name)
             else:
                 z = self._osqp_solve(k, lv, a_eff, b_eff, proj, proj_eye, x_zero, x_star, result)
@@ -293,19 +318,64 @@ class HierarchicalQP:
             x_zero = False
             achieved = a @ x_star
             solved[lv.name] = True
+            tol = self._fix_tol
+            if by_osqp and s0:
+                # OSQP meets the rows above within its own eps, which may exceed the fix tolerance: relax a row it
+                # overshot to what this solution achieves (not more: no creep), so that x_star (z = 0) stays
+                # feasible for every level below
+                above = a_all[:s0] @ x_star
+                over = above > hi_fixed[:s0]
+                if over.any():
+                    hi_fixed[:s0][over] = above[over]
             if ineq:
-                slack[lv.name] = _norm(np.maximum(achieved - b, 0.0))
-                np.add(np.maximum(b, achieved), self._fix_tol, out=hi_fixed[s0:s1])
+                level_slack = slack[lv.name] = _norm(np.maximum(achieved - b, 0.0))
+                np.add(np.maximum(b, achieved), tol, out=hi_fixed[s0:s1])
             else:
-                slack[lv.name] = _norm(achieved - b)
-                if k + 1 < len(self.levels):  # the last level's nullspace is never used
-                    proj, proj_zero = self._shrink(proj, a_eff)
-                    proj_eye = proj_eye and proj is self._eye
+                level_slack = slack[lv.name] = _norm(achieved - b)
+            if k + 1 == len(self.levels):  # the last level's nullspace is never used
+                continue
+            unmet = by_osqp and self._exact and level_slack > _UNMET * tol
+            pinned = self._pinned_rows(k, s0, s1, x_star) if unmet else None
+            if pinned is not None:
+                # a level left unmet: its optimum lies on a face of the higher levels' constraints (and, for an
+                # inequality level, its violated rows are at their least violation). Every row active there with
+                # a positive multiplier keeps its value at any optimum of this level (KKT), so it is an equality
+                # for the levels below: taken into the nullspace like an equality task, instead of leaving the
+                # lower levels a feasible set as thin as the fix tolerance (degenerate for OSQP)
+                rows = pinned @ proj if not proj_eye else pinned
+                proj, proj_zero = self._shrink(proj, np.vstack([a_eff, rows]) if not ineq else rows)
+                proj_eye = proj_eye and proj is self._eye
+            elif not ineq:
+                proj, proj_zero = self._shrink(proj, a_eff)
+                proj_eye = proj_eye and proj is self._eye
         result.x = x_star
         result.solve_time_s = time.perf_counter() - start
         result.solve_cpu_s = time.thread_time() - cpu_start
         return result
 
+
+    def _pinned_rows(self, k: int, s0: int, s1: int, x_star: np.ndarray) -> np.ndarray | None:
+        """Rows (of the levels above and, for an inequality level, its own) active at level ``k``'s OSQP optimum
+        with a multiplier above ``_PIN_DUAL`` of the largest; None when there is none. A bound below the value
+        such a row keeps is raised to it."""
+        hi_fixed = self._hi_fixed
+        end = s1 if self.levels[k].kind == INEQ else s0
+        if not end:
+            return None
+        y = self._solvers[k]._solver.solution.y[:end]
+        top = float(y.max())
+        if not top > 0.0:
+            return None
+        rows = self._a_all[:end]
+        value = rows @ x_star
+        margin = hi_fixed[:end] - value
+        if end > s0:  # the level's own rows: bound b (their hi_fixed was just set to the achieved value + tol)
+            margin[s0:] = self._b_all[s0:end] - value[s0:]
+        mask = (y > _PIN_DUAL * top) & (margin <= _PIN_ACTIVE * self._fix_tol)
+        if not mask.any():
+            return None
+        hi_fixed[:end][mask] = np.maximum(hi_fixed[:end][mask], value[mask])
+        return rows[mask]
 
     def _unconstrained_optimum(
         self, k: int, a: np.ndarray, a_eff: np.ndarray, b_eff: np.ndarray, proj: np.ndarray, proj_eye: bool
@@ -381,10 +451,36 @@ class HierarchicalQP:
             self._ax_sent[k], self._px_sent[k] = a_key, p_key
         solver.solve()
         z = solver.solution.x[:n]
-        if solver.info.status_val not in _OK or not math.isfinite(z.sum()):
+        status = solver.info.status_val
+        self._exact = status == _SOLVED
+        if status not in _OK and status != _MAX_ITER or not math.isfinite(z.sum()):
             result.failed.append(f"{lv.name} ({solver.info.status})")
             return None
+        if not self._exact:
+            z = self._clip(lv, z, a_eff, b_eff, proj, proj_eye, hi[:s0])
+            result.inexact.append(f"{lv.name} ({solver.info.status})")
         return z
+
+    def _clip(self, lv: LevelSpec, z: np.ndarray, a_eff: np.ndarray, b_eff: np.ndarray, proj: np.ndarray,
+              proj_eye: bool, room: np.ndarray) -> np.ndarray:
+        """An unfinished OSQP iterate ``z`` made safe: the longest step ``t z`` (0 <= t <= 1) that keeps every row
+        of the levels above within ``room`` (their bounds less their values at x_star, >= 0: z = 0 is feasible),
+        taken when it lowers the level's objective, else 0 (the levels above are never bent by an unfinished
+        solve; the level keeps what the step achieves)."""
+        s0 = room.size
+        t = 1.0
+        if s0:
+            change = self._a_all[:s0] @ (z if proj_eye else proj @ z)
+            up = change > 0.0
+            if up.any():
+                t = min(1.0, float((np.maximum(room[up], 0.0) / change[up]).min()))
+        if t <= 0.0:
+            return np.zeros_like(z)
+        z = t * z
+        r, r0 = a_eff @ z - b_eff, -b_eff
+        if lv.kind == INEQ:
+            r, r0 = np.maximum(r, 0.0), np.maximum(r0, 0.0)
+        return z if float(r @ r) + self._reg * float(z @ z) < float(r0 @ r0) else np.zeros_like(z)
 
 def _norm(v: np.ndarray) -> float:
     """Euclidean norm of a vector (what np.linalg.norm computes, without its ~2 us of dispatch)."""
