@@ -257,10 +257,11 @@ def test_collision_hook_rows(kin):
         CylinderIkHQP(kin).solve(q, _hold_at(kin, q, (0.0, 0.0, 0.0)), collision_rows=rows)
 
 
-#: bucket out in front, clear of everything / curled into the deck (as tests/tms_rc/test_collision.py's ID run)
-Q_START = np.array([0.0, -0.6, 1.6, 0.8])
-Q_GOAL = np.array([0.0, -0.15, 2.6, 0.8])
-PAIRS = ("bucket/undercarriage", "bucket/upper", "bucket/cab", "bucket/boom")
+#: swung 43 deg: bucket out in front, clear of everything / into the front end of the left track (as
+#: tests/tms_rc/test_collision.py's ID run)
+Q_START = np.array([0.75, -0.6, 1.6, 0.8])
+Q_GOAL = np.array([0.75, -0.12, 2.65, 0.4])
+PAIRS = ("bucket/undercarriage", "bucket/cab")
 
 
 def _approach(kin, settings: IkSettings, duration: float = 3.0, total: float = 5.0):
@@ -290,14 +291,14 @@ def _approach(kin, settings: IkSettings, duration: float = 3.0, total: float = 5
 
 
 def test_self_collision_keeps_the_bucket_off_the_body(kin):
-    """The reference ends with the bucket 0.2 m inside the deck. The swing-axis rows are set out of the way
+    """The reference ends with the bucket 0.1 m inside the track box. The swing-axis rows are set out of the way
     (body_min_radius 0.5 m) so only the link-primitive pair rows can stop it: every pair stays at the safety
     distance (less 1 cm), the bucket angle (above) is kept, the tip task (below) gives way. Without the pair
-    rows the same run goes into the deck."""
+    rows the same run goes into the tracks."""
     on = IkSettings(body_min_radius=0.5)
-    k = PAIRS.index("bucket/upper")
+    k = PAIRS.index("bucket/undercarriage")
     check = SelfCollision(kin.model, kin.machine)
-    assert check.distances(Q_GOAL)[k] < -0.1 and check.distances(Q_START).min() > 2.0
+    assert check.distances(Q_GOAL)[k] < -0.09 and check.distances(Q_START).min() > 2.0
     dist, pos_err, th_err, ctl = _approach(kin, on)
     assert ctl.collision is not None and ctl.collision.names == PAIRS
     ds, di = on.self_collision_safety, on.self_collision_influence
@@ -313,7 +314,7 @@ def test_self_collision_keeps_the_bucket_off_the_body(kin):
     np.testing.assert_allclose(th_err, th_err_off, atol=1e-5)
     assert ctl_off.collision is None
     assert ctl_off.levels[3].rows == 4 and ctl.levels[3].rows == 4 + len(PAIRS)
-    assert dist_off[:, k].min() < -0.1  # into the deck
+    assert dist_off[:, k].min() < -0.05  # into the tracks
     assert pos_err_off[-1] < 0.05
     assert pos_err[-1] > pos_err_off[-1] + 0.15
 
@@ -333,17 +334,18 @@ def test_pair_rows_free_when_far_and_hook_after_them(kin):
 
 
 def test_pair_row_is_the_distance_rate_in_piston_velocities(kin):
-    """Near the deck the active pair's row over v (scaled back) is the rate of coal's distance along the joint
-    motion qd = v / J_p: a finite difference of the distance along q + h qd."""
-    q = np.array([0.0, -0.4, 2.46, 0.98])  # curled bucket 0.05-0.5 m in front of the deck
+    """Near the tracks the active pair's row over v (scaled back) is the rate of coal's distance along the joint
+    motion qd = v / J_p (the swing too: the undercarriage does not turn): a finite difference of the distance
+    along q + h qd."""
+    q = np.array([1.0, -0.15, 2.6, 0.3])  # bucket swung over the left track's front end, 0.1-0.5 m above it
     ctl = CylinderIkHQP(kin, IkSettings(body_min_radius=0.5))
     ctl.solve(q, _hold_at(kin, q, (0.0, 0.0, 0.0)))
-    k = PAIRS.index("bucket/upper")
+    k = PAIRS.index("bucket/undercarriage")
     assert ctl.collision.active[k]
     row_v = -ctl._a[3][4 + k]  # d_dot = row_v @ v
     g = ctl.actuator_state(q)[0].copy()
     check = SelfCollision(kin.model, kin.machine)
-    v = np.array([0.0, 0.05, -0.03, 0.04])
+    v = np.array([0.1, 0.05, -0.03, 0.04])
     qd = v / g
     h = 1e-6
     rate = (check.distances(q + h * qd)[k] - check.distances(q - h * qd)[k]) / (2 * h)

@@ -6,17 +6,19 @@ Faverjon & Tournassoud, ICRA 1987, "A local based approach for path planning of 
 degrees of freedom", doi:10.1109/ROBOT.1987.1087982). Here the closest points come from coal (the maintained fork
 of hpp-fcl: GJK/EPA on convex primitives, signed distance when they overlap), never from a routine of our own.
 
-Primitives (boxes; sizes in :class:`CollisionSettings`, lengths from the machine description through the
-pinocchio model of :mod:`tms_model.excavator.kinematics` / :mod:`tms_rc.excavator.dynamics`):
+Primitives (boxes):
 
-- ``boom``, ``arm``, ``bucket``: a box along each link's pin-to-pin line (boom foot -> arm pin, arm pin -> bucket
-  pin, bucket pin -> tip: the description's joint origins and ``bucket_tip_xyz``), its width across the front
-  (y), its height in the front's plane; the bucket's width is the description's cutting-edge width;
-- ``upper`` (upper structure: deck, engine hood, counterweight) and ``cab``: boxes turning with the swing;
-- ``undercarriage``: a box fixed in base_link over the description's track footprint.
+- ``boom``, ``arm``, ``bucket``: the machine description's link boxes (``link_boxes:`` of
+  ``config/machines/<kind>.yaml``, :class:`tms_model.machines.LinkBox`: full lengths and centre in the link's URDF
+  frame, axes along the link frame's), the boxes the plant's links are and the arm planner checks;
+- ``upper`` (upper structure: deck, engine hood, counterweight): the description's ``body_link`` box, the upper
+  structure the plant and the planner use (it turns with the swing);
+- ``cab``: a box turning with the swing, and ``undercarriage``: a box fixed in base_link over the description's
+  track footprint; the description has no cab or undercarriage box, so their sizes are :class:`CollisionSettings`'.
 
 Pairs (``CollisionSettings.pairs``): the ones that can meet (any two primitives may be named; the default is the
-bucket vs the undercarriage, the upper structure, the cab and the boom: on the ZX200 nothing else comes near).
+bucket vs the undercarriage and the cab: with the description's boxes nothing else on the ZX200 comes within d_i
+without also overlapping at poses the machine reaches, see :attr:`CollisionSettings.pairs`).
 Never checked: neighbours on a joint (boom/upper, boom/arm, arm/bucket: they touch at their pin by construction)
 and boom/cab (the boom pivots beside the cab at a lateral
 clearance fixed by the design, which no joint changes).
@@ -63,42 +65,30 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 @dataclass(frozen=True)
 class CollisionSettings:
-    """Sizes of the primitives where the description gives none, and the pairs checked.
+    """Sizes of the primitives the description gives no box for (cab, undercarriage), and the pairs checked.
 
-    The description has link lengths (joint origins, bucket tip), the bucket's cutting-edge width and the track
-    footprint; every other figure here is ours, for a 20 t class machine (ZX200), and says why.
+    The boom, arm, bucket and upper structure boxes are the description's ``link_boxes``; the undercarriage's
+    length and width its track footprint. Every figure here is ours, for a 20 t class machine (ZX200), and says why.
     """
 
-    #: [m] (width y, height in the front's plane) of the boom and arm boxes: the cross-sections the dynamic model
-    #: gives the links (:data:`tms_rc.excavator.dynamics.LINK_SECTIONS`), the welded box sections of a 20 t front
-    boom_section: tuple[float, float] = (0.6, 0.7)
-    arm_section: tuple[float, float] = (0.4, 0.5)
-    #: [m] the bucket box's height across its pin -> tip line (its width is the description's cutting edge): the
-    #: dynamic model's 0.8 m, the depth of a 0.8 m^3 bucket's shell measured from the pin-tip chord
-    bucket_height: float = 0.8
-    #: [m] upper structure (length x, width y, height z): the dynamic model's body box (4.5 x 2.5 m) ...
-    upper_size: tuple[float, float, float] = (4.5, 2.5, 1.0)
-    #: [m] ... and its centre in body_link. The body frame is the top of the slewing ring (1.12 m above the
-    #: ground on the ZX200); the deck and engine hood rise about 1 m above it (ZX200 class: engine cover ~2.1 m
-    #: above ground), so the box spans z 0 .. 1 m of the body frame, centred on the swing axis
-    upper_center: tuple[float, float, float] = (0.0, 0.0, 0.5)
     #: [m] cab (length x, width y, height z) and centre in body_link: a ~0.9 m wide, 1.7 m long cab on the left
     #: (+y) front of the deck, beside the boom, its roof 1.8 m above the body frame (ZX200 class: ~2.95 m overall
-    #: height); its inner side 0.35 m left of the swing axis leaves the boom box (0.6 m wide on the front's
-    #: plane) clear of it, as on the machine
+    #: height); its inner side 0.35 m left of the swing axis leaves the boom box (the description's, 0.6 m wide
+    #: on the front's plane) clear of it, as on the machine
     cab_size: tuple[float, float, float] = (1.7, 0.9, 1.8)
     cab_center: tuple[float, float, float] = (0.45, 0.8, 0.9)
     #: [m] height of the undercarriage box (tracks and car body) from the ground (base_link z = 0); its length and
     #: width are the description's track footprint. 0.9 m: a 20 t crawler's track height (~0.9 m class)
     undercarriage_height: float = 0.9
-    #: the pairs checked, (a, b): names of :data:`PRIMITIVES`. On the ZX200 with these sizes only the bucket can
-    #: reach the body or the boom (closest approach over the joint range: bucket/upper and bucket/boom overlap,
-    #: bucket/undercarriage 0.2 m, bucket/cab 0.25 m); arm/upper, arm/cab, arm/undercarriage and
-    #: boom/undercarriage never come closer than 0.7 m (tests/tms_rc/test_collision.py checks it), so they are
-    #: left out of the default to keep the step cheap: add them for a machine where they can meet
-    pairs: tuple[tuple[str, str], ...] = (
-        ("bucket", "undercarriage"), ("bucket", "upper"), ("bucket", "cab"), ("bucket", "boom"),
-    )
+    #: the pairs checked, (a, b): names of :data:`PRIMITIVES`. On the ZX200 with the description's boxes only the
+    #: bucket comes near the body, over the joint range: bucket/undercarriage to -0.15 m (overlap, swung ~45 deg
+    #: over a track end), bucket/cab to 0.44 m (within d_i). Left out (tests/tms_rc/test_collision.py checks each
+    #: claim): bucket/upper (the body box ends 0.5 m ahead of the swing axis: never closer than 1.4 m, beyond any
+    #: d_i); bucket/boom (the boxes overlap, to -0.79 m, over a fifth of the legal joint range, e.g. arm crowded
+    #: and bucket curled: the boom box is the boom's pin-to-pin envelope, not its underside, so the pair would
+    #: forbid poses the machine reaches; name it with boxes that follow the boom); arm/upper, arm/cab,
+    #: arm/undercarriage and boom/undercarriage (never closer than 0.8 m)
+    pairs: tuple[tuple[str, str], ...] = (("bucket", "undercarriage"), ("bucket", "cab"))
 
 
 @dataclass(eq=False)
@@ -111,23 +101,12 @@ class _Primitive:
     index: int  # row in the per-step pose arrays
 
 
-def _link_box(start: np.ndarray, end: np.ndarray, width: float, height: float) -> tuple[np.ndarray, np.ndarray, tuple]:
-    """Axes, centre and size of a box from ``start`` to ``end`` (joint frame), y kept across the front."""
-    axis = end - start
-    length = float(np.linalg.norm(axis))
-    x = axis / length
-    y = np.array([0.0, 1.0, 0.0]) - x[1] * x
-    y /= np.linalg.norm(y)
-    rot = np.column_stack([x, y, np.cross(x, y)])
-    return rot, 0.5 * (start + end), (length, width, height)
-
-
 class SelfCollision:
     """Distances, closest points and damper rows of the collision pairs, on a pinocchio model of the front.
 
     Args:
         model: a pinocchio model whose joints are named :data:`JOINTS` (the kinematics' or the dynamics' model).
-        machine: the description it was built from (link lengths, bucket width, track footprint).
+        machine: the description it was built from (link boxes, track footprint).
         settings: sizes and pairs.
 
     Call :meth:`update` after forward kinematics (and, for rows and drift, joint Jacobians and velocities) on a
@@ -136,35 +115,33 @@ class SelfCollision:
 
     def __init__(self, model: pin.Model, machine: Machine, settings: CollisionSettings | None = None) -> None:
         machine.require(EXCAVATOR)
-        if machine.bucket is None:
-            raise ConfigError(f"{machine.source}: self-collision needs a bucket (bucket_tip_xyz, width)")
+        # the primitive on each joint's child link is that link's box: body_link's is the upper structure
+        links = {name: machine.joint(PRIMITIVES[name]).child for name in ("upper", "boom", "arm", "bucket")}
+        missing = [link for link in links.values() if link not in machine.link_boxes]
+        if missing:
+            raise ConfigError(f"{machine.source}: self-collision needs link_boxes of {missing}")
         s = settings or CollisionSettings()
         self.settings = s
         self.model = model
         self.data = model.createData()
-        origins = [np.array(j.origin_xyz, dtype=float) for j in machine.joints]
-        tip = np.array(machine.bucket.tip_xyz, dtype=float)
-        zero = np.zeros(3)
         fp = machine.footprint
-        boxes = {
-            "undercarriage": (np.eye(3), np.array([0.0, 0.0, 0.5 * s.undercarriage_height]),
-                              (fp.length, fp.width, s.undercarriage_height)),
-            "upper": (np.eye(3), np.array(s.upper_center, dtype=float), s.upper_size),
-            "cab": (np.eye(3), np.array(s.cab_center, dtype=float), s.cab_size),
-            "boom": _link_box(zero, origins[2], *s.boom_section),
-            "arm": _link_box(zero, origins[3], *s.arm_section),
-            "bucket": _link_box(zero, tip, machine.bucket.width, s.bucket_height),
+        boxes = {  # (centre, size) in the joint frame, axes along it
+            "undercarriage": ((0.0, 0.0, 0.5 * s.undercarriage_height), (fp.length, fp.width, s.undercarriage_height)),
+            "cab": (s.cab_center, s.cab_size),
         }
+        for name, link in links.items():  # the description's boxes (config/machines/<kind>.yaml link_boxes)
+            box = machine.link_boxes[link]
+            boxes[name] = (box.offset, box.size)
         prims: dict[str, _Primitive] = {}
         for name, joint in PRIMITIVES.items():
-            rot, pos, size = boxes[name]
+            pos, size = boxes[name]
             if min(size) <= 0.0:
                 raise ConfigError(f"self-collision primitive {name}: size {size} must be positive")
             jid = model.getJointId(joint) if joint else 0
             if joint and jid >= model.njoints:
                 raise ConfigError(f"self-collision: the model has no joint {joint!r}")
             local = np.eye(4)
-            local[:3, :3], local[:3, 3] = rot, pos
+            local[:3, 3] = pos
             prims[name] = _Primitive(name, jid, coal.Box(*size), local, 0.5 * np.array(size, dtype=float), len(prims))
         for a, b in s.pairs:
             bad = [x for x in (a, b) if x not in prims]

@@ -6,11 +6,11 @@ with inertias: that module gives every link a placeholder (a 0.5 m sphere centre
 kinematics but not for dynamics, so the dynamic model is a second pinocchio model of the same description
 (kinematic results are identical: same joints, same frames).
 
-Inertias (an assumption; the description gives masses only): each link's mass (``masses:`` of the description,
-read through :func:`tms_model.machines.load_machine`; never the plant's ``config/sim/*``) is a **uniform box**
-whose long axis runs from the link's joint to the next joint (boom: boom foot -> arm pin; arm: arm pin -> bucket
-pin; bucket: bucket pin -> tip), with the cross-sections of :data:`LINK_SECTIONS`; the upper body ("body") is a
-box of :data:`BODY_BOX` centred on the swing axis at the body frame. The base/undercarriage is the fixed world.
+Inertias (an assumption; the description gives masses and boxes only): each link's mass (``masses:`` of the
+description, read through :func:`tms_model.machines.load_machine`; never the plant's ``config/sim/*``) is a
+**uniform box**, the link's box of the description (``link_boxes:``, :class:`tms_model.machines.LinkBox`: full
+lengths along the link frame's axes, centred at its offset in the link frame; the box the plant's link is): body
+(the upper structure, on the swing joint), boom, arm and bucket. The base/undercarriage is the fixed world.
 Cylinders, hoses and the bucket linkage have no mass of their own (their mass is in the links').
 
 The actuator map (HEAP eq. 14, by virtual work): tau_i = g_i f_i, actuator speed v_i = g_i qd_i with
@@ -32,16 +32,10 @@ from tms_model.cylinders import Cylinder, moment_arm
 from tms_model.excavator.kinematics import JOINTS
 from tms_model.machines import EXCAVATOR, Machine
 
-__all__ = ["BODY_BOX", "LINK_SECTIONS", "Actuator", "FrontDynamics", "G"]
+__all__ = ["Actuator", "FrontDynamics", "G"]
 
 N = len(JOINTS)
 G = 9.81
-#: [m] (length x, width y, height z) of the upper body's box, centred on the swing axis (ZX200 class: ~2.75 m tail
-#: swing radius, 2.5 m wide; our assumption)
-BODY_BOX = (4.5, 2.5, 1.0)
-#: [m] (width, height) of the boom, arm and bucket boxes across their pin-to-pin axis (our assumption; the bucket's
-#: width is the 0.8 m^3 class cutting edge)
-LINK_SECTIONS = {"boom": (0.6, 0.7), "arm": (0.4, 0.5), "bucket": (1.0, 0.8)}
 _BODIES = ("body", "boom", "arm", "bucket")
 
 
@@ -63,18 +57,6 @@ class Actuator:
     pitch: float = 0.0
 
 
-def _box_inertia(mass: float, start: np.ndarray, end: np.ndarray, width: float, height: float) -> pin.Inertia:
-    """A uniform box of ``mass`` from ``start`` to ``end`` (link frame) with the given cross-section."""
-    axis = end - start
-    length = float(np.linalg.norm(axis))
-    x = axis / length
-    y = np.array([0.0, 1.0, 0.0]) - x[1] * x
-    y /= np.linalg.norm(y)
-    rot = np.column_stack([x, y, np.cross(x, y)])
-    box = pin.Inertia.FromBox(mass, length, width, height)
-    return pin.SE3(rot, 0.5 * (start + end)).act(box)
-
-
 class FrontDynamics:
     """M(q), h(q, qd) (Coriolis + centrifugal + gravity), bucket-tip Jacobian and J̇·qd, the actuator map.
 
@@ -91,6 +73,9 @@ class FrontDynamics:
         missing = [b for b in _BODIES if b not in machine.masses]
         if missing:
             raise ConfigError(f"{machine.source}: masses: no mass for {missing}")
+        missing = [j.child for j in machine.joints if j.child not in machine.link_boxes]
+        if missing:
+            raise ConfigError(f"{machine.source}: link_boxes: no box for {missing}")
         self.machine = machine
         tip = np.array(machine.bucket.tip_xyz, dtype=float)
         origins = [np.array(j.origin_xyz, dtype=float) for j in machine.joints]
@@ -102,13 +87,9 @@ class FrontDynamics:
             placement = pin.SE3(pin.rpy.rpyToMatrix(*joint.origin_rpy), origins[k])
             jmodel = pin.JointModelRZ() if joint.axis == (0.0, 0.0, 1.0) else pin.JointModelRY()
             parent = model.addJoint(parent, jmodel, placement, joint.name)
-            mass = float(machine.masses[body])
-            if body == "body":
-                inertia = pin.SE3(np.eye(3), np.zeros(3)).act(pin.Inertia.FromBox(mass, *BODY_BOX))
-            else:
-                end = origins[k + 1] if k + 1 < N else tip
-                inertia = _box_inertia(mass, np.zeros(3), end, *LINK_SECTIONS[body])
-            model.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
+            box = machine.link_boxes[joint.child]  # a uniform box of the link's mass, axes along the link frame
+            inertia = pin.Inertia.FromBox(float(machine.masses[body]), *box.size)
+            model.appendBodyToJoint(parent, inertia, pin.SE3(np.eye(3), np.array(box.offset, dtype=float)))
         self.tip_frame = model.addFrame(
             pin.Frame("bucket_tip", model.getJointId(JOINTS[3]), pin.SE3(np.eye(3), tip), pin.FrameType.OP_FRAME)
         )
