@@ -29,8 +29,11 @@ def test_background_checkpoint_bounds_the_wal_and_keeps_every_write(tmp_path) ->
     assert store._query("PRAGMA wal_autocheckpoint") == [(BACKSTOP_CHECKPOINT_PAGES,)]
     _write(store, 300, 0.01)
     wal = tmp_path / "db" / f"{DB_FILE}-wal"
-    # 300 commits of >= 1 page (4 KiB) each: 1.2 MB and more if nothing had checkpointed and restarted the WAL
-    assert os.path.getsize(wal) < 0.4e6, os.path.getsize(wal)
+    # 300 commits of >= 1 page (4 KiB + a 24-byte frame header) each: 1.24 MB and more had nothing checkpointed
+    # and restarted the WAL (the backstop is 10,000 pages away). Alone it stays near 0.1 MB; on a loaded 2-core CI
+    # machine the thread catches up less often (0.61 MB seen), so the bound is the WAL of 200 of the 300 commits:
+    # the WAL restarted at least once, which only the thread can have done here
+    assert os.path.getsize(wal) < 200 * (4096 + 24), os.path.getsize(wal)
     store.close()
     assert not thread.is_alive()
     with open_store(path=tmp_path / "db") as again:
