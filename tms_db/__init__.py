@@ -17,11 +17,11 @@ terrain heightmap of a type, as the original's heightmap reader picks it), :func
 from tms_db.backend import open_store
 from tms_db.design import DESIGN_COLLECTION, get_design, list_designs, put_design
 from tms_db.errors import BlobTooLarge, RecordNotFound, StoreError, ValidationError
-from tms_db.heightmap import find_heightmap
+from tms_db.heightmap import find_heightmap, find_heightmap_doc
 from tms_db.nodes.common import StoreOwner, declare_and_open
 from tms_db.schema import normalise_task_xml
 from tms_db.store import DATABASE, Store, default_path
 
 __all__ = ["open_store", "declare_and_open", "StoreOwner", "Store", "StoreError", "RecordNotFound", "ValidationError",
-           "BlobTooLarge", "normalise_task_xml", "DATABASE", "default_path", "find_heightmap", "put_design",
-           "get_design", "list_designs", "DESIGN_COLLECTION"]
+           "BlobTooLarge", "normalise_task_xml", "DATABASE", "default_path", "find_heightmap", "find_heightmap_doc",
+           "put_design", "get_design", "list_designs", "DESIGN_COLLECTION"]

@@ -25,9 +25,10 @@ TERRAIN_TYPES = ("static", "heightmap", "texture", "dynamic")
 ENCODINGS = ("bgr8", "mono16")
 
 
-def find_heightmap(store: Any, kind: str, ident: int = 0, filename: str = "") -> tuple[dict, bytes]:
-    """The newest file document matching the request and its bytes. ValidationError for a type not in
-    :data:`TERRAIN_TYPES`; RecordNotFound naming type, id and filename when nothing is stored."""
+def find_heightmap_doc(store: Any, kind: str, ident: int = 0, filename: str = "") -> dict:
+    """The newest file document matching the request, without its bytes (to see whether a newer one came).
+    ValidationError for a type not in :data:`TERRAIN_TYPES`; RecordNotFound naming type, id and filename when
+    nothing is stored."""
     if kind not in TERRAIN_TYPES:
         raise ValidationError(f"terrain type {kind!r}: must be one of {', '.join(TERRAIN_TYPES)}")
     # DataType as the original's save_image_to_mongodb.py writes it: a type's other blobs (the original's dynamic
@@ -41,7 +42,13 @@ def find_heightmap(store: Any, kind: str, ident: int = 0, filename: str = "") ->
     if not found:
         raise RecordNotFound(f"no {kind!r} terrain stored" + (f" with id {ident}" if ident else "")
                              + (f" named {filename!r}" if filename else ""))
-    return found[0], store.get_blob(found[0]["_id"])
+    return found[0]
+
+
+def find_heightmap(store: Any, kind: str, ident: int = 0, filename: str = "") -> tuple[dict, bytes]:
+    """The newest file document matching the request and its bytes (:func:`find_heightmap_doc`'s errors)."""
+    doc = find_heightmap_doc(store, kind, ident, filename)
+    return doc, store.get_blob(doc["_id"])
 
 
 def image_of(data: bytes, encoding: str = "bgr8", *, source: str = "heightmap") -> dict:

@@ -47,15 +47,15 @@ from scipy import ndimage
 from scipy.interpolate import griddata
 from scipy.stats import binned_statistic_2d
 
-from tms_db import StoreError, find_heightmap
+from tms_db import StoreError, find_heightmap, find_heightmap_doc
 from tms_sp.errors import SensingError
 from tms_sp.heightgrid import GridSpec
 
 __all__ = [
     "HEIGHT_SCALE", "MAX_RELIEF", "STATIC_ID", "DYNAMIC_ID", "TerrainError", "Heightmap", "heightmap_from_points",
     "read_las", "encode_png", "decode_png", "heightmap_from_png", "heightmap_from_file", "file_fields",
-    "heightmap_from_blob", "store_heightmap", "latest_heightmap", "dem", "colored_mesh", "cloud_xyzrgb",
-    "image_8bit", "MeshArrays", "DynamicTerrain", "now_text",
+    "heightmap_from_blob", "store_heightmap", "latest_heightmap", "latest_heightmap_doc", "dem", "colored_mesh",
+    "cloud_xyzrgb", "image_8bit", "MeshArrays", "DynamicTerrain", "now_text",
 ]
 
 HEIGHT_SCALE = 4096.0  # pixel units per metre above z_min (las2heightmap: ``iz = z * 4096``)
@@ -278,6 +278,14 @@ def store_heightmap(store: Any, hm: Heightmap, *, kind: str, ident: int, filenam
         for doc in docs[:-keep]:
             store.delete_blob(doc["_id"])
     return file_id
+
+
+def latest_heightmap_doc(store: Any, kind: str, *, ident: int = 0, filename: str = "") -> dict:
+    """:func:`latest_heightmap`'s document alone, without reading its bytes; TerrainError as there."""
+    try:
+        return find_heightmap_doc(store, kind, ident, filename)
+    except StoreError as exc:
+        raise TerrainError(str(exc)) from None
 
 
 def latest_heightmap(store: Any, kind: str, *, ident: int = 0, filename: str = "") -> tuple[dict, bytes]:

@@ -86,7 +86,7 @@ from tms_model.fleet import load_named
 from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_ts.action import LeafNodeBase
-from tms_sp.terrain import TerrainError, heightmap_from_blob, latest_heightmap
+from tms_sp.terrain import TerrainError, heightmap_from_blob, latest_heightmap, latest_heightmap_doc
 from tms_ts.design_excavation import DesignExcavation, Done
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
@@ -427,8 +427,10 @@ class SubtaskServers(Node):
         why = "none stored"
         while True:
             try:
-                doc, data = latest_heightmap(self.store, "dynamic", ident=plan.terrain_id)
+                # the document alone each tick; the heightmap's bytes only once a new one is there
+                doc = latest_heightmap_doc(self.store, "dynamic", ident=plan.terrain_id)
                 if str(doc["_id"]) != last_id:
+                    doc, data = latest_heightmap(self.store, "dynamic", ident=plan.terrain_id)
                     return str(doc["_id"]), heightmap_from_blob(data, doc, source=f"dynamic terrain {doc['_id']}")
                 why = f"the newest ({doc.get('time')}) is the one the last pass was planned on"
             except TerrainError as exc:
