@@ -41,13 +41,19 @@ def test_map_round_trip_and_orientation(tmp_path):
 def test_map_errors_name_file_and_key(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("image: nope.pgm\nresolution: -1\norigin: [0, 0, 0]\n")
-    with pytest.raises(ConfigError, match=r"bad.yaml:2: resolution must be a positive number"):
+    with pytest.raises(ConfigError, match=r"bad.yaml:2: resolution: must be >= 1e-06, got -1"):
         load_map(bad)
     bad.write_text("image: nope.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n")
     with pytest.raises(ConfigError, match="cannot read map image"):
         load_map(bad)
     bad.write_text("image: nope.pgm\nresolution: 0.1\norigin: [0, 0, 0]\ncolour: 3\n")
-    with pytest.raises(ConfigError, match="unknown map key 'colour'"):
+    with pytest.raises(ConfigError, match=r"bad.yaml:4: colour: unknown key"):
+        load_map(bad)
+    bad.write_text("image: nope.pgm\nresolution: 0.1\norigin: [0, 0, 0.5]\n")
+    with pytest.raises(ConfigError, match="rotated maps are not supported"):
+        load_map(bad)
+    bad.write_text("image: nope.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 2\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml:4: negate: must be <= 1"):
         load_map(bad)
 
 

@@ -19,9 +19,11 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from tms_common.config import load_yaml
+from tms_common.errors import ConfigError
+from tms_common.schema import load_schema, setting
 
-__all__ = ["OccupancyMap", "Costmap", "CostmapParams", "Footprint", "load_map", "save_map", "LETHAL", "INSCRIBED"]
+__all__ = ["OccupancyMap", "Costmap", "CostmapParams", "Footprint", "NavMapYaml", "load_map", "save_map", "LETHAL",
+           "INSCRIBED"]
 
 LETHAL = 254
 INSCRIBED = 253
@@ -95,49 +97,47 @@ class OccupancyMap:
         )
 
 
-_MAP_KEYS = {"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode"}
+@dataclass(frozen=True, kw_only=True)
+class NavMapYaml:
+    """The keys of a Nav2 map_server map YAML (its defaults); read by :func:`tms_common.schema.load_schema`, so an
+    unknown or missing key, a wrong type or a value out of range is a ``file:line: key: problem`` error."""
+
+    image: str = setting(doc="the PGM/PNG beside the YAML")
+    resolution: float = setting(lo=1e-6, doc="[m] per cell")
+    origin: tuple[float, float, float] = setting(doc="[x, y, yaw] of the lower-left cell; yaw must be 0")
+    negate: int = setting(0, lo=0, hi=1, doc="1: white is occupied")
+    occupied_thresh: float = setting(0.65, lo=0.0, hi=1.0)
+    free_thresh: float = setting(0.25, lo=0.0, hi=1.0)
+    mode: str = setting("trinary", doc="only trinary is supported")
+
+    def __post_init__(self) -> None:
+        if self.origin[2] != 0:
+            raise ValueError(f"origin: rotated maps are not supported (origin yaw {self.origin[2]!r})")
+        if self.mode != "trinary":
+            raise ValueError(f"mode: only mode 'trinary' is supported, got {self.mode!r}")
+        if not self.free_thresh < self.occupied_thresh:
+            raise ValueError(f"free_thresh: need free_thresh < occupied_thresh, got {self.free_thresh}, "
+                             f"{self.occupied_thresh}")
 
 
 def load_map(yaml_path: str | Path) -> OccupancyMap:
     """Load a Nav2 map_server map; errors name the file, line and key."""
     from PIL import Image
 
-    data, where = load_yaml(yaml_path)
-    if not isinstance(data, dict):
-        raise where.error((), "map YAML must be a mapping")
-    unknown = set(data) - _MAP_KEYS
-    if unknown:
-        raise where.error((sorted(unknown)[0],), f"unknown map key {sorted(unknown)[0]!r}; known: {sorted(_MAP_KEYS)}")
-    for key in ("image", "resolution", "origin"):
-        if key not in data:
-            raise where.error((), f"map YAML: missing key {key!r}")
-    res = data["resolution"]
-    if not isinstance(res, (int, float)) or not res > 0:
-        raise where.error(("resolution",), f"resolution must be a positive number, got {res!r}")
-    origin = data["origin"]
-    if not (isinstance(origin, list) and len(origin) == 3 and all(isinstance(v, (int, float)) for v in origin)):
-        raise where.error(("origin",), f"origin must be [x, y, yaw], got {origin!r}")
-    if origin[2] != 0:
-        raise where.error(("origin",), f"rotated maps are not supported (origin yaw {origin[2]!r})")
-    mode = data.get("mode", "trinary")
-    if mode != "trinary":
-        raise where.error(("mode",), f"only mode 'trinary' is supported, got {mode!r}")
-    occ_t = float(data.get("occupied_thresh", 0.65))
-    free_t = float(data.get("free_thresh", 0.25))
-    if not 0 <= free_t < occ_t <= 1:
-        raise where.error(("free_thresh",), f"need 0 <= free_thresh < occupied_thresh <= 1, got {free_t}, {occ_t}")
-    image_path = Path(yaml_path).parent / str(data["image"])
+    m = load_schema(NavMapYaml, yaml_path)
+    occ_t, free_t = m.occupied_thresh, m.free_thresh
+    image_path = Path(yaml_path).parent / m.image
     try:
         with Image.open(image_path) as img:
             pixels = np.asarray(img.convert("L"), dtype=np.float64)
     except (OSError, ValueError) as exc:
-        raise where.error(("image",), f"cannot read map image {image_path}: {exc}") from None
-    negate = bool(data.get("negate", 0))
+        raise ConfigError(f"{yaml_path}: image: cannot read map image {image_path}: {exc}") from None
+    negate = bool(m.negate)
     occ_prob = pixels / 255.0 if negate else (255.0 - pixels) / 255.0
     grid = np.full(pixels.shape, UNKNOWN, dtype=np.int8)
     grid[occ_prob > occ_t] = OCCUPIED
     grid[occ_prob < free_t] = FREE
-    return OccupancyMap(np.ascontiguousarray(grid[::-1]), float(res), (float(origin[0]), float(origin[1])))
+    return OccupancyMap(np.ascontiguousarray(grid[::-1]), m.resolution, (m.origin[0], m.origin[1]))
 
 
 def save_map(omap: OccupancyMap, yaml_path: str | Path) -> None:
