@@ -109,11 +109,15 @@ class PistonControlSettings:
     rate_hz: float = setting(lo=1.0, doc="[Hz] control rate (HEAP: 100)")
     zero_band_mpa: float = setting(lo=0.0, doc="[MPa] a controller output this small commands nothing")
     velocity: dict[str, PiGains] = setting(doc="PI of the piston speed error [m/s] per function")
-    force: dict[str, PiGains] = setting(doc="PI of the cylinder force error [kN] per function")
+    force: dict[str, PiGains] = setting(doc="PI of the cylinder force error [kN] per function, for a stiff stall "
+                                        "(the bucket held in the soil: the oil column alone is the spring)")
+    force_contact: dict[str, PiGains] = setting(doc="PI of the cylinder force error [kN] per function with the bucket "
+                                                "pressed on the ground (the soil and the front in series with the "
+                                                "oil: a softer load, the same PI ~3x too slow)")
     identification: LutIdentificationSettings = setting(doc="the look-up table's identification")
 
     def __post_init__(self) -> None:
-        for what in ("velocity", "force"):
+        for what in ("velocity", "force", "force_contact"):
             missing = [f for f in CYLINDER_FUNCTIONS if f not in getattr(self, what)]
             if missing:
                 raise ValueError(f"{what}: missing {', '.join(missing)}")
