@@ -3,20 +3,22 @@ bearing (``soil.penetration``), against the plant core in-process.
 
 ``python -m tests.bench force_steps``: identifies the arm's and the bucket's look-up tables on
 ``config/sim/paper_plant.yaml`` as ``python -m tests.bench piston`` does (the dead-zone compensation of
-:class:`tms_rc.excavator.piston.PistonForceController` needs their crack pilots), then per case:
+:class:`tms_rc.excavator.piston.PistonForceController` needs their crack pilots), then per function and case:
 
 * ``ON, flat ground``: the plant with ``soil.penetration: true``, the ZX200 swung a quarter turn away from the mound
   over flat ground, boom at its lowest and arm reached out (there the arm's and the bucket's motion moves the edge
-  more down than along); the function under test presses the edge onto the ground (1 MPa of pilot until it
-  stalls or 1 m deep), rests, then steps of its commanded cylinder force;
+  more down than along); the arm presses the edge onto the ground (1 MPa of pilot until it stalls or 1 m deep),
+  rests, then steps of the function's commanded cylinder force, once with the stall's PI gains (``force`` of
+  ``config/tms_rc/piston_control.yaml``) and once with the contact gains (``force_contact``);
 * ``OFF, flat ground``: the same without the bearing (the shipped plants): nothing carries the edge, it sinks;
 * ``OFF, in the mound``: bench_piston's old scenario (the bucket lowered 1 m into the mound, held by the cutting
-  resistance as joint friction), the figures the README quotes for the stalled bucket.
+  resistance as joint friction), the figures the README quotes for the stalled bucket (stall gains).
 
 Printed per step: time to 10 %, rise 10-90 %, steady-state error (mean of f_ref - f over the last 2 s of 8 s); per
-case the edge's depth and the soil's bearing force after the last step.
-``FORCE_STEPS_FUNCTIONS=arm_joint,bucket_joint`` adds the bucket (default: the arm only; in this pose a curl at
-1 MPa does not bring the edge down onto the ground, so the bucket's flat-ground steps press nothing).
+case the edge's depth, the soil's bearing force and the boom cylinder's force against its pulling relief force (the
+description's bores and relief) after the steps: pressing the edge down lifts the front, which the boom holds down
+on its rod side; at the rod-side relief (~387 kN on the ZX200) the boom rises and the pressing force stops growing.
+``FORCE_STEPS_FUNCTIONS=arm_joint`` limits the functions (default arm and bucket).
 """
 
 from __future__ import annotations
@@ -29,16 +31,26 @@ from types import MappingProxyType
 
 from sim_bridge.plant import Plant
 from tests.bench.bench_piston import PlantRig, bury_bucket, force_steps, identify
-from tms_rc.excavator.piston import CYLINDER_FUNCTIONS, PilotPair, load_piston_settings, piston_length
+from tms_rc.excavator.piston import (
+    CYLINDER_FUNCTIONS,
+    PiGains,
+    PilotPair,
+    cylinder_of,
+    load_piston_settings,
+    piston_length,
+)
 
 #: over flat ground east of the machine (the mound is north), boom 0.05 rad above its lowest, arm reached out: the
 #: edge about 0.4 m above the ground, 9.7 m out; the arm's and the bucket's motion there moves the edge about twice
 #: as much down as along (tip Jacobian)
 FLAT_FRONT = {"swing_joint": -math.pi / 2, "boom_joint": -0.15, "arm_joint": 0.75, "bucket_joint": -0.2}
 TARGETS = [100e3, 250e3, 150e3, 0.0, -100e3]  # [N] as bench_piston's (the buried bucket)
-#: [N] on flat ground: all above the ~100 kN the arm needs to hold the reached-out front up (below it the edge
-#: lifts off the ground and nothing is pressed)
-FLAT_TARGETS = [150e3, 250e3, 200e3, 300e3, 150e3]
+#: [N] on flat ground after the arm's press, per function: above what holds the reached-out front up (the arm ~100 kN,
+#: below it the edge lifts off and nothing is pressed) and below where the boom's rod-side relief lets the front rise
+#: (the arm ~238 kN, the bucket ~171 kN in this pose: measured, the boom at -387 kN); the former targets 250 and 300 kN
+#: of the arm lie beyond it and were never reached
+FLAT_TARGETS = {"arm_joint": [150e3, 220e3, 180e3, 120e3, 200e3],
+                "bucket_joint": [110e3, 160e3, 130e3, 90e3, 150e3]}
 PRESS_PILOT = 1.0  # [MPa] the function pressing the edge onto the ground
 HOLD_S, WINDOW_S = 8.0, 2.0
 
@@ -76,22 +88,26 @@ def press(rig: PlantRig, fn: str, limit_s: float = 6.0, depth: float = 1.0) -> N
     rig.rest(2.0)
 
 
-def run_case(label: str, rig: PlantRig, fn: str, lut, settings, flat: bool) -> None:
-    targets = FLAT_TARGETS if flat else TARGETS
+def run_case(label: str, rig: PlantRig, fn: str, lut, settings, flat: bool, gains: PiGains | None = None) -> None:
+    targets = FLAT_TARGETS[fn] if flat else TARGETS
     f0 = rig.force(fn)
+    boom = cylinder_of(rig.machine, "boom_joint")
+    boom_pull = rig.machine.cylinders.relief_pa * boom.rod_area  # [N] the boom's pulling force at its relief
     print(f"  {label}: edge {100 * rig.tip_depth():.1f} cm into the ground, {fn} holding {f0 / 1e3:.1f} kN, bearing "
           f"{rig.plant.press_force / 1e3:.1f} kN")
     t0 = time.monotonic()
-    for st in force_steps(rig, fn, lut, settings, targets, hold_s=HOLD_S, window_s=WINDOW_S):
+    for st in force_steps(rig, fn, lut, settings, targets, hold_s=HOLD_S, window_s=WINDOW_S, gains=gains):
+        rise = f"{st.rise_s:.2f} s" if math.isfinite(st.rise_s) else "never (90 % not reached)"
         print(f"    {st.f_from / 1e3:+7.1f} -> {st.f_to / 1e3:+7.1f} kN: 10 % after {st.delay_s:.2f} s, rise 10-90 % "
-              f"{st.rise_s:.2f} s, steady-state error {st.steady_error / 1e3:+.2f} kN")
+              f"{rise}, steady-state error {st.steady_error / 1e3:+.2f} kN")
     print(f"    after the steps: edge {100 * rig.tip_depth():.1f} cm into the ground, bearing "
-          f"{rig.plant.press_force / 1e3:.1f} kN ({time.monotonic() - t0:.1f} s wall)")
+          f"{rig.plant.press_force / 1e3:.1f} kN, boom {rig.force('boom_joint') / 1e3:+.0f} kN (its pulling relief "
+          f"-{boom_pull / 1e3:.0f} kN) ({time.monotonic() - t0:.1f} s wall)")
 
 
 def main() -> None:
     settings = load_piston_settings()
-    functions = [f for f in os.environ.get("FORCE_STEPS_FUNCTIONS", "arm_joint").split(",") if f]
+    functions = [f for f in os.environ.get("FORCE_STEPS_FUNCTIONS", "arm_joint,bucket_joint").split(",") if f]
     wall0 = time.monotonic()
     rig = PlantRig()
     print(f"force steps in-process (MuJoCo plant core, config/sim/paper_plant.yaml, {settings.rate_hz:.0f} Hz); "
@@ -100,14 +116,15 @@ def main() -> None:
     print(f"  tables identified for {', '.join(functions)} ({time.monotonic() - wall0:.0f} s wall)")
     for fn in functions:
         print(f"{fn} cylinder:")
-        for on in (True, False):
+        for on, which in ((True, "force"), (True, "force_contact"), (False, "force_contact")):
             rig = FlatRig(on)
-            press(rig, fn)
-            run_case(f"{'ON' if on else 'OFF'}, flat ground (pressed by {fn} at {PRESS_PILOT:g} MPa)", rig, fn,
-                     luts[fn], settings, flat=True)
+            press(rig, "arm_joint")
+            run_case(f"{'ON' if on else 'OFF'}, flat ground (pressed by arm_joint at {PRESS_PILOT:g} MPa), {which} "
+                     "gains", rig, fn, luts[fn], settings, flat=True, gains=getattr(settings, which)[fn])
         rig = PlantRig()
         bury_bucket(rig)
-        run_case("OFF, buried 1 m in the mound (bench_piston's scenario)", rig, fn, luts[fn], settings, flat=False)
+        run_case("OFF, buried 1 m in the mound (bench_piston's scenario), force gains", rig, fn, luts[fn], settings,
+                 flat=False)
     lengths = {fn: piston_length(rig.machine, fn, FLAT_FRONT[fn]) for fn in functions}
     print(f"  flat-ground start lengths {', '.join(f'{k} {v:.3f} m' for k, v in lengths.items())}; "
           f"{time.monotonic() - wall0:.1f} s wall")

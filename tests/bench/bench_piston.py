@@ -28,6 +28,7 @@ from tms_common.config import config_path
 from tms_model.excavator.kinematics import load_kinematics
 from tms_rc.excavator.piston import (
     CYLINDER_FUNCTIONS,
+    PiGains,
     PilotPair,
     PistonControlSettings,
     PistonForceController,
@@ -221,9 +222,10 @@ class ForceStep:
 
 
 def force_steps(rig: PlantRig, fn: str, lut: PistonLut, settings: PistonControlSettings, targets: list[float],
-                hold_s: float = 5.0, window_s: float = 1.0) -> list[ForceStep]:
-    """Steps of the commanded cylinder force [N] of ``fn``, ``hold_s`` each, from the force it holds now."""
-    ctl = PistonForceController(lut, settings.force[fn], 1.0 / settings.rate_hz, extend=rig.extend[fn],
+                hold_s: float = 5.0, window_s: float = 1.0, gains: PiGains | None = None) -> list[ForceStep]:
+    """Steps of the commanded cylinder force [N] of ``fn``, ``hold_s`` each, from the force it holds now; ``gains``
+    default the stall's (``settings.force``)."""
+    ctl = PistonForceController(lut, gains or settings.force[fn], 1.0 / settings.rate_hz, extend=rig.extend[fn],
                                 zero_band=settings.zero_band_mpa, p_max=rig.p_max)
     out = []
     f_from = rig.force(fn)
