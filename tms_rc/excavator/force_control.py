@@ -23,7 +23,7 @@ along the cut), and
 What of HEAP is not here (README "Not done yet"): HEAP's pressure control runs on servo valves at 100 Hz with a
 fast pressure loop and puts every cylinder under it; the COM3 pilot valves have ~0.3-0.65 s of dead time, so the
 tracking of the ID's cylinder forces is ~1 s slow, the ID's own tip PD must be gentle (the settings here lower its
-gains), and boom, arm and bucket all under force control on one contact limit-cycle (measured, below): here only
+gains), and boom, arm and bucket all under force control on one contact oscillate (measured, below): here only
 some cylinders are force controlled, the others held or velocity controlled (roles, :class:`ForceLoopSettings`).
 The swing motor is not force controlled (its pilot stays 0: the spool centred, the brake holds). No soil-force model
 in the loop: the cutting resistance along the cut is what ``force_d``'s tangential part or the velocity-controlled
@@ -74,9 +74,9 @@ class ForceLoopSettings:
     force_i_zone: float = 60e3
     #: the cylinder functions under force control; the others get no pilot (the spool centres and the trapped oil
     #: holds the cylinder: it carries whatever the statics asks of it). Default arm and bucket, the boom held: with
-    #: the boom's force loop too, three integrating loops with 0.3-0.65 s of dead time act on one contact and
-    #: limit-cycle (the edge lifting off and pressing again every ~4 s; force_dig bench: bearing force s.d. 27 kN
-    #: about a 20 kN reference against 1.6 kN with the boom held)
+    #: the boom's force loop too, three integrating loops with 0.3-0.65 s of dead time act on one contact (force_dig
+    #: bench, bearing force s.d. over the last 4 s of 8 s steps of 20-60 kN: 4-10 kN at the boom's force_contact
+    #: gains, 27-29 kN and the edge lifting off at the arm's, 0.3-2.5 kN with the boom held)
     functions: tuple[str, ...] = ("arm_joint", "bucket_joint")
     #: which PI set of ``piston_control.yaml`` the cylinders use: ``force_contact`` (pressed on the ground) or
     #: ``force`` (stiff stall)

@@ -37,9 +37,9 @@ J^T F_ext]``: the EoM level then has b = 0, holds at x = 0 and is eliminated exa
 against gravity", not towards zero torque. Cylinder forces f_i = tau_i / J_p,i (the swing's "force" is its motor's
 port pressure difference [Pa]).
 
-Pure Python core (numpy, pinocchio, OSQP); every buffer of a step is preallocated. Not yet done (see
-``tms_rc/excavator/README.md``): the force-control loop around it, piston (pressure) control, the switch between
-IK and ID in the excavate subtask, the IK's use of the link-primitive pairs (its rows are still tip/pin clearance).
+Pure Python core (numpy, pinocchio, OSQP); every buffer of a step is preallocated. The force loop around it
+(a desired soil force in, piston force control out) is :mod:`tms_rc.excavator.force_control`. Not yet done (see
+``tms_rc/excavator/README.md``): the switch between IK and ID in the excavate subtask, a node.
 """
 
 from __future__ import annotations
