@@ -5,6 +5,10 @@
 # once the launch has ended and the bag is closed, the report's replay page replay.html.
 #   SCENARIO=paper (default): config/seeds/paper.yaml, config/launch/paper_experiment.yaml
 #   SCENARIO=fleet:           config/seeds/fleet.yaml, config/launch/fleet.yaml (one ZX200 loads three carriers)
+#   SCENARIO=design:          config/seeds/design_trench.yaml, config/launch/design_trench.yaml (the ZX200 digs the
+#                             trench design of task 35 pass by pass over CAN); the plant writes its true height field
+#                             to heights.npz and tests/bench/bench_design_trench.py --report then writes the surface
+#                             error against the design (truth and sensed) to design.json and design_error.png
 #   RECORD=0:                 no recording (and no replay page)
 # A first argument (a launch file) replaces the scenario's launch file.
 set -euo pipefail
@@ -13,8 +17,10 @@ SCENARIO=${SCENARIO:-paper}
 case "$SCENARIO" in
   paper) DEFAULT_LAUNCH=config/launch/paper_experiment.yaml ;;
   fleet) DEFAULT_LAUNCH=config/launch/fleet.yaml ;;
-  *) echo "demo.sh: unknown SCENARIO=$SCENARIO (paper or fleet)" >&2; exit 2 ;;
+  design) DEFAULT_LAUNCH=config/launch/design_trench.yaml; SEED=design_trench ;;
+  *) echo "demo.sh: unknown SCENARIO=$SCENARIO (paper, fleet or design)" >&2; exit 2 ;;
 esac
+SEED=${SEED:-$SCENARIO}
 LAUNCH=${1:-$DEFAULT_LAUNCH}
 shift || true
 STAMP=$(date +%Y%m%d-%H%M%S)
@@ -22,7 +28,7 @@ RUN_DIR=${RUN_DIR:-$PWD/runs/$STAMP}
 export TMS_DB_PATH=${TMS_DB_PATH:-$PWD/runs/db-$STAMP}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
 mkdir -p "$TMS_DB_PATH" "$RUN_DIR"
-.venv/bin/tms-db seed "$SCENARIO"
+.venv/bin/tms-db seed "$SEED"
 ARGS=()
 # the supervisor writes its report into the same run directory (its run_dir parameter), when the launch has one
 if .venv/bin/tms-launch --list "$LAUNCH" | cut -f1 | grep -qx /tms_ur_experiment; then
@@ -31,12 +37,18 @@ fi
 if [ "${RECORD:-1}" != 0 ]; then
   ARGS+=(--record "$RUN_DIR/bag")
 fi
+if [ "$SCENARIO" = design ]; then
+  ARGS+=(--param "sim_plant:heights_npz=$RUN_DIR/heights.npz")
+fi
 set +e
 .venv/bin/tms-launch "$LAUNCH" "${ARGS[@]}" "$@"
 rc=$?
 set -e
 if [ "${RECORD:-1}" != 0 ] && [ -f "$RUN_DIR/bag/metadata.yaml" ]; then
   .venv/bin/python -m tms_ur.replay_page "$RUN_DIR" || echo "demo.sh: no replay page (see above)" >&2
+fi
+if [ "$SCENARIO" = design ]; then
+  .venv/bin/python -m tests.bench.bench_design_trench --report "$RUN_DIR" || echo "demo.sh: no design figures (see above)" >&2
 fi
 echo "demo.sh: run directory $RUN_DIR"
 exit $rc

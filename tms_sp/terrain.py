@@ -55,7 +55,7 @@ __all__ = [
     "HEIGHT_SCALE", "MAX_RELIEF", "STATIC_ID", "DYNAMIC_ID", "TerrainError", "Heightmap", "heightmap_from_points",
     "read_las", "encode_png", "decode_png", "heightmap_from_png", "heightmap_from_file", "file_fields",
     "heightmap_from_blob", "store_heightmap", "latest_heightmap", "latest_heightmap_doc", "dem", "colored_mesh",
-    "cloud_xyzrgb", "image_8bit", "MeshArrays", "DynamicTerrain", "now_text",
+    "cloud_xyzrgb", "image_8bit", "MeshArrays", "DynamicTerrain", "now_text", "region_box",
 ]
 
 HEIGHT_SCALE = 4096.0  # pixel units per metre above z_min (las2heightmap: ``iz = z * 4096``)
@@ -372,6 +372,32 @@ def cloud_xyzrgb(hm: Heightmap) -> tuple[bytes, int]:
 def now_text() -> str:
     """The original's ``time`` field: local wall time, ISO 8601 with microseconds (sorts as it reads)."""
     return datetime.now().isoformat(timespec="microseconds")
+
+
+def region_box(values: Any, cell: float, *, source: str = "box") -> GridSpec | None:
+    """``[x_min, y_min, x_max, y_max]`` [m, map] as the box a dynamic terrain rasterises at ``cell``; all zero: None
+    (the caller's default region). TerrainError naming ``source`` for a wrong length, a non-finite value, an empty
+    box or sides that are not whole cells (a box that does not tile would shift its cells off the scan's)."""
+    try:
+        box = [float(v) for v in values]
+    except (TypeError, ValueError):
+        raise TerrainError(f"{source}: expected [x_min, y_min, x_max, y_max] numbers, got {values!r}") from None
+    if len(box) != 4:
+        raise TerrainError(f"{source}: expected [x_min, y_min, x_max, y_max], got {len(box)} value(s) {box}")
+    if not any(box):
+        return None
+    if not all(math.isfinite(v) for v in box):
+        raise TerrainError(f"{source}: non-finite value in {box}")
+    x0, y0, x1, y1 = box
+    if not (x1 > x0 and y1 > y0):
+        raise TerrainError(f"{source}: empty box x [{x0:g}, {x1:g}] y [{y0:g}, {y1:g}]")
+    if not cell > 0:
+        raise TerrainError(f"{source}: cell must be > 0, got {cell}")
+    for axis, size in (("x", x1 - x0), ("y", y1 - y0)):
+        n = size / cell
+        if abs(n - round(n)) > 1e-6:
+            raise TerrainError(f"{source}: the {axis} side {size:g} m is not a whole number of {cell:g} m cells")
+    return GridSpec(x0, y0, x1, y1, cell)
 
 
 @dataclass

@@ -23,8 +23,16 @@ The plant loop runs in its own thread (paced to ``speed`` x real time, or free-r
   (:mod:`sim_bridge.scanners`), every ``scan_period_s`` of
   simulated time (0.5 s; the mound's every ``mound_scan_period_s``, default the same), noise ``scan_noise_m``
   (0.02 m),
+* ``/sim/sensors/region/points`` (PointCloud2, ``map``) when ``region_scan`` names a rectangle ``[x_min, y_min,
+  x_max, y_max]`` (default ``[0, 0, 0, 0]``: none): the ground over it on a ``region_scan_spacing`` grid (0.05 m),
+  read from the fine patch where there is one (:func:`sim_bridge.scanners.region_scan`; a design's work area,
+  ``config/launch/design_trench.yaml``), every ``region_scan_period_s`` (0: the mound scan's period),
 * ``/sim/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame counters per machine (received, sent,
   ignored_out_of_range, ignored_bad_dlc, ignored_unknown_id, watchdog_trips) and the real-time factor.
+
+``heights_npz`` (a path, default none): at the node's end the plant's true height field is written there
+(``numpy.savez``: the coarse grid ``h``, ``x0``, ``y0``, ``res`` and, with a fine patch, ``fine_h``, ``fine_x0``,
+``fine_y0``, ``fine_res``; rows = y from south, cols = x from west), the truth a run's surface is judged on.
 """
 
 from __future__ import annotations
@@ -54,7 +62,7 @@ from sim_bridge.errors import SimConfigError
 from sim_bridge.plant import Plant, stamp_parts
 from sim_bridge.render import render_png
 from sim_bridge.runner import PlantRunner, TruthLog, TruthRecorder
-from sim_bridge.scanners import mound_scan, pack_xyz, vessel_scan
+from sim_bridge.scanners import ScanRegion, mound_scan, pack_xyz, region_scan, vessel_scan
 from tms_common.node import realtime_thread, run_node
 from tms_common.params import startup_parameters
 
@@ -135,6 +143,11 @@ class SimPlantNode(Node):
         self._next_scan = self._next_mound_scan = 0.0
         self._scan_rng = np.random.default_rng(spec.sensors.seed + 1)
         self.mound_pub = self.create_publisher(PointCloud2, "/sim/sensors/mound/points", 2)
+        self._region, self._region_period = self._region_parameters(p)
+        self._next_region_scan = 0.0
+        self.region_pub = (self.create_publisher(PointCloud2, "/sim/sensors/region/points", 2)
+                           if self._region is not None else None)
+        self._heights_npz = str(p("heights_npz", "").value)
         self.vessel_pub = {m: self.create_publisher(PointCloud2, f"/sim/sensors/{m}/vessel_points", 2)
                            for m in self.plant.carriers}
         self.carrier_soil_pub = {m: self.create_publisher(Float64MultiArray, f"/sim/truth/{m}/soil", 10)
@@ -148,6 +161,24 @@ class SimPlantNode(Node):
         self.get_logger().info(
             f"sim_plant: running at speed {speed} ({'free-running' if speed == 0 else 'paced'}), {mode}"
         )
+
+    @staticmethod
+    def _region_parameters(p) -> tuple[ScanRegion | None, float]:
+        """``region_scan`` (all zero: none), its spacing and period; SimConfigError naming the parameter."""
+        box = [float(v) for v in p("region_scan", [0.0, 0.0, 0.0, 0.0]).value]
+        spacing = float(p("region_scan_spacing", 0.05).value)
+        period = float(p("region_scan_period_s", 0.0).value)
+        if len(box) != 4:
+            raise SimConfigError(f"sim_plant: parameter region_scan: [x_min, y_min, x_max, y_max], got {box}")
+        if not any(box):
+            return None, 0.0
+        region = ScanRegion(*box, spacing)
+        problem = region.problem()
+        if problem is not None:
+            raise SimConfigError(f"sim_plant: parameters region_scan / region_scan_spacing: {problem}")
+        if period < 0:
+            raise SimConfigError(f"sim_plant: parameter region_scan_period_s must be >= 0, got {period}")
+        return region, period
 
     def _loop(self) -> None:
         realtime_thread(self._rt_priority, "sim_plant loop", self.get_logger())  # the loop thread only
@@ -176,6 +207,10 @@ class SimPlantNode(Node):
         if self._mound_scan_period > 0 and plant.time + 1e-9 >= self._next_mound_scan:
             self._next_mound_scan += self._mound_scan_period
             self._publish_mound_scan(plant, stamp)
+        if self._region is not None and plant.time + 1e-9 >= self._next_region_scan:
+            self._next_region_scan += self._region_period or self._mound_scan_period or 1.0
+            pts = region_scan(plant.ground, self._region, noise=self._scan_noise, rng=self._scan_rng)
+            self.region_pub.publish(self._cloud(pts, "map", stamp))
         if self._scan_period > 0 and plant.time + 1e-9 >= self._next_scan:
             self._next_scan += self._scan_period
             self._publish_vessel_scans(plant, stamp)
@@ -265,11 +300,25 @@ class SimPlantNode(Node):
         )
         self.diag_pub.publish(arr)
 
+    def _write_heights(self, path: Path) -> None:
+        g = self.plant.ground
+        arrays = {"h": g.h, "x0": g.x0, "y0": g.y0, "res": g.res}
+        if g.fine is not None:
+            arrays.update(fine_h=g.fine.h, fine_x0=g.fine.x0, fine_y0=g.fine.y0, fine_res=g.fine.res)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            np.savez(path, **arrays)
+            self.get_logger().info(f"true height field written to {path}")
+        except OSError as exc:
+            self.get_logger().error(f"true height field not written to {path}: {exc}")
+
     def destroy_node(self) -> None:
         self.runner.stop()
         self._thread.join(timeout=5.0)
         if self.recorder is not None:
             self.recorder.close()
+        if self._heights_npz:
+            self._write_heights(Path(self._heights_npz))
         if self._snapshot:
             try:
                 render_png(self.plant, Path(self._snapshot))

@@ -1,0 +1,127 @@
+"""Excavation to a design surface on the MuJoCo plant over CAN: the trench of task 35 (issue 35).
+
+``python -m tests.bench design_trench`` runs ``SCENARIO=design scripts/demo.sh`` (config/launch/design_trench.yaml:
+plant, the ZX200's converter, arm controller and planner, dynamic terrain, subtask server, manager, supervisor; a
+full run of ~30 passes, 10-20 min of wall time on 2 cores), which ends by calling this module with ``--report``.
+
+``python -m tests.bench.bench_design_trench --report RUN_DIR [--db PATH]`` judges a finished run: the design and
+the record of the seed (``config/seeds/design_trench.yaml``, the parameter that names a ``design``) from the run's
+store (``TMS_DB_PATH`` or ``--db``), the plant's true height field (``RUN_DIR/heights.npz``) and the newest sensed
+dynamic heightmap against the design (:mod:`tms_rp.excavation.evaluation`), the task's end and times from the
+supervisor's ``metrics.json``. Writes ``RUN_DIR/design.json`` and ``RUN_DIR/design_error.png`` (linked from the
+report's ``index.html``) and prints the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from tms_common.config import load_yaml, repo_root
+from tms_db import get_design, open_store
+from tms_rp.excavation.design import Design
+from tms_rp.excavation.evaluation import excavated_volume, figures, plot_errors, truth_grid
+from tms_sp.terrain import DYNAMIC_ID, heightmap_from_blob, latest_heightmap
+
+SEED = "design_trench"
+PASSES = re.compile(r"after (\d+) pass\(es\), ([0-9.]+) m3 planned moved")
+
+
+def _job(seed: Path) -> dict:
+    """The seed's design record (the parameter naming a ``design``)."""
+    data, _ = load_yaml(seed)
+    for doc in data.get("parameters", []):
+        if "design" in doc:
+            return doc
+    raise SystemExit(f"{seed}: no parameter names a design")
+
+
+def _task_end(metrics: dict) -> tuple[str, str]:
+    """(state, message) of the run's one task from the supervisor's metrics."""
+    tasks = metrics.get("tasks") or {}
+    for info in (tasks.values() if isinstance(tasks, dict) else tasks):
+        if isinstance(info, dict):
+            return str(info.get("state", "")), str(info.get("message", ""))
+    return "", ""
+
+
+def report(run_dir: Path, db: str | None) -> dict[str, Any]:
+    root = repo_root()
+    job = _job(root / "config" / "seeds" / f"{SEED}.yaml")
+    store = open_store(path=db or os.environ.get("TMS_DB_PATH"))
+    design = Design.from_dict(get_design(store, str(job["design"])))
+    ground = float(job.get("base_z", 0.0))
+    doc, blob = latest_heightmap(store, "dynamic", ident=int(job.get("terrain_id", DYNAMIC_ID)))
+    sensed = heightmap_from_blob(blob, doc, source="newest dynamic heightmap")
+    truth = truth_grid(run_dir / "heights.npz", design)
+    metrics_path = run_dir / "metrics.json"
+    metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+    state, message = _task_end(metrics)
+    found = PASSES.search(message)
+    out: dict[str, Any] = {
+        "design": design.name,
+        "task_state": state,
+        "task_message": message,
+        "passes": int(found.group(1)) if found else None,
+        "planned_volume_m3": float(found.group(2)) if found else None,
+        "truth": figures(design, truth),
+        "sensed": figures(design, sensed),
+        "sensed_time": doc.get("time"),
+        "excavated_from_area_m3_truth": excavated_volume(truth, design, ground),
+        "design_volume_m3": excavated_volume(truth.__class__(z=design.sample(truth).target, x_min=truth.x_min,
+                                                             y_min=truth.y_min, x_max=truth.x_max,
+                                                             y_max=truth.y_max), design, ground),
+    }
+    for key in ("sim_time_s", "wall_time_s", "real_time_factor", "ended", "soil_moved_m3"):
+        if key in metrics:
+            out[key] = metrics[key]
+    (run_dir / "design.json").write_text(json.dumps(out, indent=2, default=float) + "\n")
+    png = plot_errors(design, {"plant truth (0.05 m patch)": truth, "sensed (newest dynamic heightmap)": sensed},
+                      run_dir / "design_error.png",
+                      title=f"{design.name}: {out['passes']} passes, task {state or '?'}")
+    index = run_dir / "index.html"
+    if index.is_file():
+        html = index.read_text()
+        link = f'<h2>Design surface</h2><p><a href="design.json">design.json</a></p><img src="{png.name}">'
+        if png.name not in html:
+            index.write_text(html.replace("</body>", link + "</body>") if "</body>" in html else html + link)
+    for label in ("truth", "sensed"):
+        f = out[label]
+        print(f"{label:6s}: MAE {f['mae_cm']:.2f} cm, p95 {f['p95_cm']:.2f} cm, max {f['max_cm']:.2f} cm, signed mean "
+              f"{f['signed_mean_cm']:+.2f} cm, {f['cut_remaining_m3']:.3f} m3 above, {f['fill_remaining_m3']:.3f} m3 "
+              f"below ({f['cells']} cells of {f['cell_m']:.2f} m)")
+    print(f"passes {out['passes']}, planned {out['planned_volume_m3']} m3, dug out of the area (truth) "
+          f"{out['excavated_from_area_m3_truth']:.3f} m3 of the design's {out['design_volume_m3']:.3f} m3; task "
+          f"{state}; {run_dir / 'design.json'}, {png}")
+    return out
+
+
+def main() -> None:
+    """The full run (demo.sh, which then writes the report through ``--report``)."""
+    root = repo_root()
+    run_dir = root / "runs" / f"bench-design-{time.strftime('%Y%m%d-%H%M%S')}"
+    env = dict(os.environ, SCENARIO="design", RECORD="0", RUN_DIR=str(run_dir))
+    start = time.monotonic()
+    rc = subprocess.run([str(root / "scripts" / "demo.sh")], cwd=root, env=env, check=False).returncode
+    print(f"design run: exit {rc} after {time.monotonic() - start:.0f} s wall; {run_dir}")
+    if not (run_dir / "design.json").is_file():
+        raise RuntimeError(f"no design figures in {run_dir} (demo.sh exit {rc})")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--report", metavar="RUN_DIR", type=Path, help="judge a finished run")
+    parser.add_argument("--db", help="the run's embedded store (default TMS_DB_PATH)")
+    args = parser.parse_args()
+    if args.report is None:
+        main()
+    else:
+        report(args.report, args.db)
+    sys.exit(0)
