@@ -75,6 +75,9 @@ class DesignExcavation:
     def __init__(self, plan: DesignPlan, machine: Any, settings: PlannerSettings | None = None) -> None:
         self.plan = plan
         self.who = f"design {plan.design!r}"
+        # the arm's excavate drags the edge level over the whole bucket width: the passes are planned as that sweep
+        # (clipped strips cut the trench's walls and apron on the plant: tms_rp/excavation/README.md)
+        settings = settings or PlannerSettings(level_sweep=True)
         try:
             self.planner = PassPlanner(machine, settings)
             self.penetrate_depth = float(load_planner_config(machine.kind).penetrate_depth)

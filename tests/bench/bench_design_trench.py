@@ -31,7 +31,7 @@ from tms_rp.excavation.evaluation import excavated_volume, figures, plot_errors,
 from tms_sp.terrain import DYNAMIC_ID, heightmap_from_blob, latest_heightmap
 
 SEED = "design_trench"
-PASSES = re.compile(r"after (\d+) pass\(es\), ([0-9.]+) m3 planned moved")
+PASSES = re.compile(r"(\d+) pass\(es\), ([0-9.]+) m3 planned moved")
 
 
 def _job(seed: Path) -> dict:
@@ -43,13 +43,17 @@ def _job(seed: Path) -> dict:
     raise SystemExit(f"{seed}: no parameter names a design")
 
 
-def _task_end(metrics: dict) -> tuple[str, str]:
-    """(state, message) of the run's one task from the supervisor's metrics."""
-    tasks = metrics.get("tasks") or {}
-    for info in (tasks.values() if isinstance(tasks, dict) else tasks):
-        if isinstance(info, dict):
-            return str(info.get("state", "")), str(info.get("message", ""))
-    return "", ""
+def _task_end(metrics: dict, log: Path) -> tuple[str, str]:
+    """(state, message) of the run's one task: the state from the supervisor's metrics, the message from its last
+    line about the task in the launch's output (``launch.log``, which demo.sh writes), if there is one."""
+    states = metrics.get("task_end_states") or {}
+    state = str(next(iter(states.values()), "")) if isinstance(states, dict) else ""
+    message = ""
+    if log.is_file():
+        for line in log.read_text(errors="replace").splitlines():
+            if "[experiment] task " in line and ("pass(es)" in line or state in line):
+                message = line.split("[experiment] ", 1)[1].strip()
+    return state, message
 
 
 def report(run_dir: Path, db: str | None) -> dict[str, Any]:
@@ -63,7 +67,7 @@ def report(run_dir: Path, db: str | None) -> dict[str, Any]:
     truth = truth_grid(run_dir / "heights.npz", design)
     metrics_path = run_dir / "metrics.json"
     metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
-    state, message = _task_end(metrics)
+    state, message = _task_end(metrics, run_dir / "launch.log")
     found = PASSES.search(message)
     out: dict[str, Any] = {
         "design": design.name,
@@ -79,7 +83,7 @@ def report(run_dir: Path, db: str | None) -> dict[str, Any]:
                                                              y_min=truth.y_min, x_max=truth.x_max,
                                                              y_max=truth.y_max), design, ground),
     }
-    for key in ("sim_time_s", "wall_time_s", "real_time_factor", "ended", "soil_moved_m3"):
+    for key in ("sim_time_s", "wall_time_s", "real_time_factor", "ended"):
         if key in metrics:
             out[key] = metrics[key]
     (run_dir / "design.json").write_text(json.dumps(out, indent=2, default=float) + "\n")

@@ -17,7 +17,7 @@ from tms_model.machines import load_machine
 from tms_model.site import load_site
 from tms_rp.arm.planner import load_planner_config
 from tms_rp.excavation.design import Design, Grid, cell_centres
-from tms_rp.excavation.planner import BasePose
+from tms_rp.excavation.planner import BasePose, PlannerSettings
 from tms_ts.design_excavation import DUMP_THETA_W, DesignExcavation, Done, PassGoals, to_base
 from tms_ts.errors import SubtaskRecordError
 from tms_ts.plans import AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
@@ -130,7 +130,8 @@ def test_the_base_frame_follows_the_base_pose() -> None:
 
 def test_the_run_ends_within_tolerance_naming_the_design() -> None:
     grid = flat()
-    run = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE)
+    # clipped strips (not the subtask's default): this digger lowers exactly the planned cells
+    run = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE, PlannerSettings(level_sweep=False))
     for _ in range(200):
         step = run.step(TRENCH, grid)
         if isinstance(step, Done):
@@ -140,6 +141,25 @@ def test_the_run_ends_within_tolerance_naming_the_design() -> None:
     assert step.message.startswith("design 'tr' done after") and "within tolerance" in step.message
     assert run.volume == pytest.approx(5.0, rel=0.05)  # 10 m x 1 m x 0.5 m
     assert step.error is not None and step.error.mae <= 0.02
+
+
+def test_by_default_a_pass_is_the_level_sweep_the_arm_drags() -> None:
+    """The arm's excavate drags the edge level over the whole bucket width: the subtask plans that sweep, one edge
+    height, the whole band inside the trench's floor (no wall or apron cell under the bucket)."""
+    grid = flat()
+    run = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE)
+    assert run.planner.settings.level_sweep
+    design = Design.from_dict(TRENCH)
+    target = design.sample(grid).target
+    for _ in range(5):
+        step = run.step(TRENCH, grid)
+        assert isinstance(step, PassGoals)
+        cut = step.cut
+        assert np.ptp(cut.path[:, 2]) == 0.0 and step.goals[0][1].pwa["z"] == pytest.approx(cut.start[2])
+        rows, cols = cut.cells[:, 0], cut.cells[:, 1]
+        assert np.all(target[rows, cols] == pytest.approx(-0.5))  # only floor cells under the bucket
+        assert np.all(cut.cut_to >= target[rows, cols] - 1e-9)
+        grid.z[rows, cols] = cut.cut_to
 
 
 # ---- stops, each naming the design ----------------------------------------------------------------------------

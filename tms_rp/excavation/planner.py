@@ -70,6 +70,12 @@ class PlannerSettings:
     spoil_clearance: float = 1.0  # spoil (the whole dump disc) stays this far outside the design area
     reach_band: float = 0.2  # height band [m] of the reach table's rows
     seeds: int = 8  # seed cells tried, best first, before the planner says nothing is worth a pass
+    #: plan what the arm's excavate does (tms_rp.arm.planner: the edge dragged level, the bucket's whole width):
+    #: every cell the edge sweeps is cut to one edge height, never below the design of any of them, so the drag
+    #: stops where a wall of the design would come under the bucket; False: the strip is clipped to the cuttable
+    #: cells and the edge follows each bin's own height (the idealised digger of the tests; on the plant the
+    #: subtask's level drag then cut the walls and the apron: tms_rp/excavation/README.md)
+    level_sweep: bool = False
 
     def __post_init__(self) -> None:
         for name in ("tolerance", "tolerance_p95", "tolerance_max", "min_cut", "max_pass_depth", "max_pass_length",
@@ -304,6 +310,8 @@ class PassPlanner:
              xc: np.ndarray, yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any]
              ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
         st = self.settings
+        if st.level_sweep:
+            return self._sweep(s, z, cuttable, axis, xc, yc, cx, cy, cap, rc)
         w = self.bucket_width
         r, c = rc
         seed = np.array([xc[r, c], yc[r, c]])
@@ -356,6 +364,80 @@ class PassPlanner:
         pts = seed[None, :] + (ks[ok] * step)[:, None] * u[None, :]
         path = np.column_stack([pts, edge[ok]])
         # the cut's ends are the strip's outer cell edges
+        path[0, :2] -= 0.5 * step * u
+        path[-1, :2] += 0.5 * step * u
+        return sel, cut_to, float(depth), volume, path, u
+
+    def _sweep(self, s: Sampled, z: np.ndarray, cuttable: np.ndarray, axis: np.ndarray, xc: np.ndarray,
+               yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any]
+               ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
+        """The ``level_sweep`` pass from seed cell ``rc``: the bucket-wide band along the drag, its bins (one cell
+        step along the drag) kept while each holds a cuttable cell and no cell whose floor (the design inside the
+        area, the surface outside it) lies above the seed bin's; every cell of the band cut to one edge height,
+        ``depth`` under the seed's surface and never under that floor, the depth shrunk to fit ``cap``."""
+        st = self.settings
+        w = self.bucket_width
+        r, c = rc
+        seed = np.array([xc[r, c], yc[r, c]])
+        toward = axis - seed
+        u = toward / float(np.hypot(*toward))
+        n = np.array([-u[1], u[0]])
+        along = (xc - seed[0]) * u[0] + (yc - seed[1]) * u[1]
+        across = (xc - seed[0]) * n[0] + (yc - seed[1]) * n[1]
+        step = min(cx, cy)
+        band = np.abs(across) <= w / 2.0 + 1e-9
+        b = np.rint(along / step).astype(int)
+        floor_cell = np.where(s.inside, s.target, z)
+        kb = b[band]
+        k0 = int(kb.min())
+        top = np.full(int(kb.max()) - k0 + 1, -np.inf)
+        np.maximum.at(top, kb - k0, floor_cell[band])
+        has_cut = np.zeros_like(top, dtype=bool)
+        has_cut[b[band & cuttable] - k0] = True
+        base_floor = top[-k0] + 1e-6
+
+        def ok(k: int) -> bool:
+            i = k - k0
+            return 0 <= i < len(top) and has_cut[i] and top[i] <= base_floor
+
+        if not ok(0):
+            return None
+        lo = 0
+        while ok(lo - 1):
+            lo -= 1
+        hi = 0
+        while ok(hi + 1):
+            hi += 1
+        bins = max(1, int(st.max_pass_length / step))
+        first = max(lo, -(bins - 1))
+        last = min(hi, first + bins - 1)
+        sel = band & (b >= first) & (b <= last)
+        floor = float(np.max(floor_cell[sel]))
+        surface = float(z[r, c])
+
+        def plan(depth: float) -> tuple[np.ndarray, float, float]:
+            level = max(floor, surface - depth)
+            cut_to = z.copy()
+            cut_to[sel] = np.minimum(z[sel], level)
+            return cut_to, level, float(np.sum(z[sel] - cut_to[sel])) * s.cell_area
+
+        depth = st.max_pass_depth
+        cut_to, level, volume = plan(depth)
+        if volume > cap:
+            lo_d, hi_d = 0.0, depth
+            for _ in range(40):
+                mid = 0.5 * (lo_d + hi_d)
+                if plan(mid)[2] > cap:
+                    hi_d = mid
+                else:
+                    lo_d = mid
+            depth = lo_d
+            cut_to, level, volume = plan(depth)
+        if volume <= 0.0:
+            return None
+        ks = np.arange(first, last + 1)
+        pts = seed[None, :] + (ks * step)[:, None] * u[None, :]
+        path = np.column_stack([pts, np.full(len(ks), level)])
         path[0, :2] -= 0.5 * step * u
         path[-1, :2] += 0.5 * step * u
         return sel, cut_to, float(depth), volume, path, u
