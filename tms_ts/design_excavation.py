@@ -77,7 +77,9 @@ class DesignExcavation:
         self.who = f"design {plan.design!r}"
         # the arm's excavate drags the edge level over the whole bucket width: the passes are planned as that sweep
         # (clipped strips cut the trench's walls and apron on the plant: tms_rp/excavation/README.md)
-        settings = settings or PlannerSettings(level_sweep=True)
+        # with the record's fixed dump place the bucket never fills the design's low cells, so their room must not
+        # cap the passes (on the plant: 0.024 m3 a pass once the first passes had left 3 cm dips)
+        settings = settings or PlannerSettings(level_sweep=True, fill=plan.dump is None)
         try:
             self.planner = PassPlanner(machine, settings)
             self.penetrate_depth = float(load_planner_config(machine.kind).penetrate_depth)

@@ -53,3 +53,17 @@ def test_level_sweeps_executed_as_goals_never_cut_below_the_design_and_move_what
     # what a level, bucket-wide radial drag from one base pose leaves: the trench's corners toward its ends, where
     # the slanted bucket would cut the walls (measured: MAE 5.5 cm, 3.9 of 5 m3)
     assert e.fill_volume == 0.0 and 0.5 < e.cut_volume < 2.0
+
+
+def test_without_fill_a_small_dip_in_the_design_does_not_cap_the_pass():
+    design = Design.from_dict(TRENCH)
+    grid = Grid(z=np.zeros((160, 60)), x_min=-8.0, y_min=-8.0, x_max=-2.0, y_max=8.0)
+    xc, yc = cell_centres(grid)
+    grid.z[(np.abs(xc + 4.3) < 0.1) & (np.abs(yc) < 0.3)] = -0.05  # a 5 cm dip in the apron: room for 0.006 m3
+    base = BasePose(0.0, 0.0, 0.0, 0.0)
+    capped = PassPlanner(MACHINE, PlannerSettings(level_sweep=True, min_fill_volume=0.001)).next_pass(
+        grid, design, base)
+    free = PassPlanner(MACHINE, PlannerSettings(level_sweep=True, min_fill_volume=0.001, fill=False)).next_pass(
+        grid, design, base)
+    assert capped.cut.dump_kind == "fill" and capped.cut.volume <= 0.01
+    assert free.cut.dump_kind == "spoil" and free.cut.volume > 0.1

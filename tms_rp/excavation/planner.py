@@ -76,6 +76,9 @@ class PlannerSettings:
     #: cells and the edge follows each bin's own height (the idealised digger of the tests; on the plant the
     #: subtask's level drag then cut the walls and the apron: tms_rp/excavation/README.md)
     level_sweep: bool = False
+    #: dump into the design's low cells when they take a bucket (``fill``); False: always the spoil place, for a
+    #: machine that dumps elsewhere (a record's fixed dump place): a fill place's room would cap every pass
+    fill: bool = True
 
     def __post_init__(self) -> None:
         for name in ("tolerance", "tolerance_p95", "tolerance_max", "min_cut", "max_pass_depth", "max_pass_length",
@@ -245,7 +248,7 @@ class PassPlanner:
         rows, cols = z.shape
         cx, cy = (terrain.x_max - terrain.x_min) / cols, (terrain.y_max - terrain.y_min) / rows
 
-        dump = self._fill_place(s, z, radius, ground, xc, yc, cx, cy)
+        dump = self._fill_place(s, z, radius, ground, xc, yc, cx, cy) if st.fill else None
         if dump is None:
             dump = self._spoil_place(s, z, radius, ground, outside_dist, xc, yc)
         if dump is None:
