@@ -20,19 +20,26 @@ edge down with the arm (as ``force_steps`` does) and hands the front to the loop
     min, max), the distance dragged and the soil cut.
 
 ``FORCE_DIG_DRAG_FT`` [N]: a feed-forward pull along the cut (default 0: the tip PD alone drags).
+``FORCE_DIG_ADMITTANCE="path_gain=0.5,admittance=0.0002"``: overrides of ``config/tms_rc/force_control.yaml``'s
+``admittance`` keys for a sweep.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
+from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
+from sim_bridge.plant import Plant
 from tests.bench.bench_force_steps import FlatRig, press
 from tests.bench.bench_piston import PlantRig, identify
 from tms_model.excavator.kinematics import load_kinematics
+from tms_rc.excavator.admittance import AdmittanceDrag, load_force_control_settings
 from tms_rc.excavator.dynamics import FrontDynamics
 from tms_rc.excavator.force_control import DRAG_ROLES, ForceLoop, ForceLoopSettings
 from tms_rc.excavator.id_hqp import IdReference
@@ -43,6 +50,10 @@ STEP_FRACTIONS = [0.3, 0.6, 0.45, 0.8, 0.3]  # of the largest press
 DRAG_FRACTION = 0.45
 HOLD_S, WINDOW_S = 8.0, 2.0
 DRAG_M, DRAG_SPEED = 2.0, 0.15  # [m], [m/s]
+MOUND_FRACTIONS = [0.3, 0.6]  # of the largest press at the pose on the mound's slope
+#: over the mound ahead of the machine (the paper plant's start heading): the edge ~7 m out over its flat top
+#: (1.5 m high, ~5.9-7.3 m out; beyond ~5.9 m towards the machine its slope falls, so the 2 m drag ends downhill)
+MOUND_FRONT = {"arm_joint": 1.2, "bucket_joint": 1.2}
 
 
 def largest_press(dyn: FrontDynamics, q: np.ndarray, margin: float) -> float:
@@ -70,7 +81,7 @@ def largest_press(dyn: FrontDynamics, q: np.ndarray, margin: float) -> float:
 class Driver:
     """The loop on the rig: the measured state in, the pilot pairs out, one plant step."""
 
-    def __init__(self, rig: PlantRig, loop: ForceLoop) -> None:
+    def __init__(self, rig: PlantRig, loop: ForceLoop | None) -> None:
         self.rig, self.loop = rig, loop
 
     def state(self) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[float, float]]]:
@@ -80,6 +91,7 @@ class Driver:
         return np.array(fr.q, dtype=float), np.array(fr.v, dtype=float), pressures
 
     def step(self, ref: IdReference, force_d: np.ndarray):
+        assert self.loop is not None
         q, qd, p = self.state()
         out = self.loop.step(q, qd, p, ref, force_d)
         for n in self.rig.names:
@@ -97,7 +109,7 @@ def truth_normal(rig: PlantRig) -> float:
     return float(p.press_force + cut)
 
 
-def hold_reference(loop: ForceLoop, q: np.ndarray) -> IdReference:
+def hold_reference(loop: ForceLoop | AdmittanceDrag, q: np.ndarray) -> IdReference:
     tip = loop.dyn.tip_position(q)
     return IdReference(position=tip, theta_w=float(q[1] + q[2] + q[3]) + loop.kin.c_bucket)
 
@@ -133,42 +145,216 @@ def run_steps(drv: Driver, fmax: float) -> None:
         f_from = f_to
 
 
-def run_drag(drv: Driver, f_n: float, f_t: float) -> None:
-    rig, loop = drv.rig, drv.loop
-    q, _, _ = drv.state()
-    start = loop.dyn.tip_position(q)
-    theta = float(q[1] + q[2] + q[3]) + loop.kin.c_bucket
+@dataclass
+class DragResult:
+    """One drag's figures (the plant's truth scores; the estimate is the controller's own)."""
+
+    rms: float  # [N] RMS of F_ref - F (truth: bearing + the cut's vertical)
+    mean: float  # [N]
+    rms_est: float  # [N] RMS of F_ref - the controller's (unfiltered) estimate from the pressures
+    depth: np.ndarray  # [m] the edge below the ground under it, per step after the first second
+    along: float  # [m] the tip's horizontal travel
+    cut: float  # [m^3] the plant's soil volume change (soil.dug)
+    bucket: float  # [m^3] the bucket's load at the end
+
+    def line(self) -> str:
+        d = 100 * self.depth
+        return (f"RMS force error {self.rms / 1e3:5.2f} kN (estimate's {self.rms_est / 1e3:5.2f}), mean "
+                f"{self.mean / 1e3:+6.2f} kN; depth mean {d.mean():5.1f} cm (min {d.min():5.1f}, max {d.max():5.1f}); "
+                f"dragged {self.along:.2f} m; cut {self.cut:.3f} m^3, bucket {self.bucket:.3f} m^3")
+
+
+class LoopDesign:
+    """Design 1: the colleague's :class:`ForceLoop` (ID + piston force control; roles) on the rig."""
+
+    name = "ForceLoop"
+
+    def __init__(self, rig: PlantRig, loop: ForceLoop, f_t: float = 0.0) -> None:
+        self.drv, self.loop, self.f_t = Driver(rig, loop), loop, f_t
+
+    def press(self, f_n: float, seconds: float) -> None:
+        rig = self.drv.rig
+        for _ in range(round(seconds / rig.dt)):
+            self.drv.step(hold_reference(self.loop, self.drv.state()[0]), np.array([0.0, 0.0, -f_n]))
+
+    def start(self) -> np.ndarray:
+        return self.loop.dyn.tip_position(self.drv.state()[0])
+
+    def step(self, ref: IdReference, f_n: float, back: np.ndarray) -> float:
+        out = self.drv.step(ref, np.array([0.0, 0.0, -f_n]) + self.f_t * back)
+        return -float(out.pressed[2])
+
+
+class AdmittanceDesign:
+    """Design 2: :class:`AdmittanceDrag` (admittance over piston velocity control of boom, arm and bucket)."""
+
+    name = "AdmittanceDrag"
+
+    def __init__(self, rig: PlantRig, ctl: AdmittanceDrag) -> None:
+        self.rig, self.ctl = rig, ctl
+        self.drv = Driver(rig, None)  # type: ignore[arg-type]  # only its state()
+        self.anchor: np.ndarray | None = None  # the path's start: its height is the depth offset's zero
+        self.track: list[float] = []  # [m] the tip's height above its reference (path - depth offset), per step
+
+    def _step(self, ref: IdReference, f_n: float):
+        q, qd, p = self.drv.state()
+        out = self.ctl.step(q, qd, p, ref, f_n)
+        for n in self.rig.names:
+            self.rig.pairs[n] = PilotPair(0.0, 0.0)
+        for fn, pair in out.pairs.items():
+            self.rig.set_pair(fn, pair)
+        self.rig.advance()
+        return out
+
+    def press(self, f_n: float, seconds: float) -> None:
+        q = self.drv.state()[0]
+        ref = hold_reference(self.ctl, q)
+        self.anchor = ref.position
+        for _ in range(round(seconds / self.rig.dt)):
+            self._step(ref, f_n)
+
+    def start(self) -> np.ndarray:
+        tip = self.ctl.dyn.tip_position(self.drv.state()[0])
+        assert self.anchor is not None
+        return np.array([tip[0], tip[1], self.anchor[2]])  # along where the tip is, at the depth offset's zero
+
+    def step(self, ref: IdReference, f_n: float, back: np.ndarray) -> float:
+        out = self._step(ref, f_n)
+        tip = self.ctl.dyn.tip_position(np.array(self.rig.front.q, dtype=float))
+        self.track.append(float(tip[2] - (ref.position[2] - out.depth)))
+        return -float(out.pressed[2])
+
+
+def run_drag(rig: PlantRig, design, f_n: float) -> DragResult:
+    """The tip reference moving ``DRAG_M`` towards the machine at ``DRAG_SPEED`` (theta_w held), then 2 s still,
+    with the normal force reference ``f_n`` [N] down; scored after the first second."""
+    q = np.array(rig.front.q, dtype=float)
+    start = design.start()
+    kin = load_kinematics()
+    theta = float(q[1] + q[2] + q[3]) + kin.c_bucket
     back = -np.array([math.cos(q[0]), math.sin(q[0]), 0.0])  # towards the machine, horizontal
     dug0 = rig.plant.soil.dug
     tip0 = np.array(rig.plant.bucket_tip())
     duration = DRAG_M / DRAG_SPEED
-    force = np.array([0.0, 0.0, -f_n]) + f_t * back
     errs, errs_est, depths = [], [], []
     for k in range(round((duration + 2.0) / rig.dt)):
         t = min((k + 1) * rig.dt, duration)
         moving = (k + 1) * rig.dt < duration
         ref = IdReference(position=start + back * DRAG_SPEED * t, velocity=back * DRAG_SPEED if moving else np.zeros(3),
                           theta_w=theta)
-        out = drv.step(ref, force)
+        est = design.step(ref, f_n, back)
         if (k + 1) * rig.dt >= 1.0:  # the first second: the valves' dead time after the reference starts
             errs.append(f_n - truth_normal(rig))
-            errs_est.append(f_n + float(out.pressed[2]))
+            errs_est.append(f_n - est)
             depths.append(rig.tip_depth())
     tip1 = np.array(rig.plant.bucket_tip())
-    along = float(np.hypot(*(tip1 - tip0)[:2]))
-    rms = math.sqrt(float(np.mean(np.square(errs))))
-    rms_est = math.sqrt(float(np.mean(np.square(errs_est))))
-    d = 100 * np.array(depths)
-    print(f"    reference {f_n / 1e3:.1f} kN down{f', {f_t / 1e3:.1f} kN pull' if f_t else ''}, tip path "
-          f"{DRAG_M:.1f} m at {DRAG_SPEED:.2f} m/s: RMS force error {rms / 1e3:.2f} kN (truth: bearing + cut's "
-          f"vertical; the estimate's {rms_est / 1e3:.2f} kN), mean error {np.mean(errs) / 1e3:+.2f} kN")
-    print(f"    edge depth along the cut mean {d.mean():.1f} cm (min {d.min():.1f}, max {d.max():.1f}); dragged "
-          f"{along:.2f} m of {DRAG_M:.1f}; soil cut {rig.plant.soil.dug - dug0:.3f} m^3 (bucket holds "
-          f"{rig.plant.soil.bucket:.3f} m^3)")
+    return DragResult(math.sqrt(float(np.mean(np.square(errs)))), float(np.mean(errs)),
+                      math.sqrt(float(np.mean(np.square(errs_est)))), np.array(depths),
+                      float(np.hypot(*(tip1 - tip0)[:2])), rig.plant.soil.dug - dug0, rig.plant.soil.bucket)
+
+
+def mound_front(clearance: float = 0.01) -> dict[str, float]:
+    """The front over the mound's flat top ahead of the machine (:data:`MOUND_FRONT`'s arm and bucket), the boom
+    lowered (bisection on a scratch copy of the plant, teleported) until the edge is ``clearance`` [m] above it."""
+    rig = PlantRig()
+    name = rig.plant.spec.excavator
+    base = rig.plant.truth(name)
+    here = dict(zip(rig.names, rig.front.q, strict=True))
+    lo, hi = rig.machine.joint("boom_joint").lower, rig.machine.joint("boom_joint").upper  # raised .. lowest
+
+    def gap(boom: float) -> float:
+        rig.plant.set_truth(name, base.x, base.y, base.yaw, {**here, **MOUND_FRONT, "boom_joint": boom})
+        x, y, z = rig.plant.bucket_tip()
+        return z - rig.plant.ground.height(x, y)
+
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if gap(mid) > clearance else (lo, mid)
+    return {**MOUND_FRONT, "boom_joint": lo}
+
+
+class MoundRig(PlantRig):
+    """:class:`PlantRig` on the paper plant (the ZX200 facing the mound) with ``soil.penetration`` on, the front
+    started at ``front``."""
+
+    def __init__(self, front: dict[str, float]) -> None:
+        super().__init__()
+        spec = self.plant.spec
+        pm = spec.machines[spec.excavator]
+        machines = dict(spec.machines)
+        machines[spec.excavator] = dataclasses.replace(
+            pm, start_joints=MappingProxyType({**pm.start_joints, **front}))
+        self.plant = Plant(dataclasses.replace(spec, machines=MappingProxyType(machines),
+                                               soil=dataclasses.replace(spec.soil, penetration=True)))
+        self.zx = self.plant.excavator
+        self.front = self.zx.front
+        self._last = {fn: self.length(fn) for fn in CYLINDER_FUNCTIONS}
+        self.start_length = dict(self._last)
+
+
+def new_rig(where: str) -> PlantRig:
+    """A fresh plant with the edge pressed on the ground: ``flat`` (bench force_steps' flat ground, pressed by the
+    arm as (a)) or ``mound`` (over the mound's flat top, :func:`mound_front`, pressed by the boom)."""
+    if where == "flat":
+        rig: PlantRig = FlatRig(True)
+        press(rig, "arm_joint")
+    else:  # the arm's press would slide the edge over the mound's top to its slope: the boom presses it down
+        rig = MoundRig(mound_front())
+        press(rig, "boom_joint")
+    return rig
+
+
+def make_design(which: str, rig: PlantRig, luts, settings, adm_settings, f_t: float):
+    dyn = FrontDynamics(rig.machine)
+    kin = load_kinematics()
+    if which == "ForceLoop":
+        return LoopDesign(rig, ForceLoop(dyn, kin, luts, settings, rig.p_max,
+                                         settings=ForceLoopSettings(**DRAG_ROLES)), f_t)
+    return AdmittanceDesign(rig, AdmittanceDrag(dyn, kin, luts, settings, rig.p_max, adm_settings))
+
+
+def compare_drags(luts, settings, adm_settings, f_t: float) -> None:
+    """Both designs over the same drags, side by side (flat ground, the mound at two force references)."""
+    cases = [("flat", DRAG_FRACTION)] + [("mound", f) for f in MOUND_FRACTIONS]
+    print(f"  drags, both designs ({DRAG_M:.1f} m towards the machine at {DRAG_SPEED:.2f} m/s, 4 s of pressing at the "
+          "reference first; scored from 1 s after the start; force = the plant's bearing + the cut's vertical):")
+    for where, frac in cases:
+        rig = new_rig(where)
+        dyn = FrontDynamics(rig.machine)
+        fmax = largest_press(dyn, np.array(rig.front.q, dtype=float), PRESS_MARGIN)
+        f_n = frac * fmax
+        print(f"  {where}: edge {100 * rig.tip_depth():.1f} cm deep, bearing {rig.plant.press_force / 1e3:.1f} kN; "
+              f"largest press the model allows {fmax / 1e3:.1f} kN; reference {f_n / 1e3:.1f} kN down")
+        res = {}
+        for which in ("ForceLoop", "AdmittanceDrag"):
+            rig = new_rig(where)
+            design = make_design(which, rig, luts, settings, adm_settings, f_t)
+            t0 = time.monotonic()
+            design.press(f_n, 4.0)
+            res[which] = run_drag(rig, design, f_n)
+            print(f"    {which:14s}: {res[which].line()} ({time.monotonic() - t0:.1f} s wall)")
+            if isinstance(design, AdmittanceDesign):
+                tr = 100 * np.array(design.track)
+                print(f"    {'':14s}  the tip's height above its reference (path - depth offset): RMS "
+                      f"{math.sqrt(float(np.mean(tr ** 2))):.1f} cm (min {tr.min():.1f}, max {tr.max():.1f})")
+        a, b = res["AdmittanceDrag"], res["ForceLoop"]
+
+        def ratio(x: float, y: float) -> str:
+            return f"{x / y:.2f}" if abs(y) > 1e-9 else "n/a"
+
+        print(f"    ratio AdmittanceDrag / ForceLoop: RMS error {ratio(a.rms, b.rms)}, mean depth "
+              f"{ratio(float(a.depth.mean()), float(b.depth.mean()))}, dragged {ratio(a.along, b.along)}, cut "
+              f"{ratio(a.cut, b.cut)}")
 
 
 def main() -> None:
     settings = load_piston_settings()
+    adm_settings = load_force_control_settings().admittance
+    override = {k: float(v) for k, v in (kv.split("=") for kv in os.environ.get("FORCE_DIG_ADMITTANCE", "").split(",")
+                                         if kv)}
+    if override:
+        adm_settings = dataclasses.replace(adm_settings, **override)
+        print(f"  AdmittanceDrag settings overridden by FORCE_DIG_ADMITTANCE: {override}")
     wall0 = time.monotonic()
     rig = PlantRig()
     luts = {fn: identify(rig, fn, settings)[0] for fn in CYLINDER_FUNCTIONS}
@@ -177,28 +363,28 @@ def main() -> None:
           f"{time.monotonic() - wall0:.0f} s wall)")
     kin = load_kinematics()
     f_t = float(os.environ.get("FORCE_DIG_DRAG_FT", "0"))
-    cases = [("a", "steps", ForceLoopSettings()), ("b", "drag", ForceLoopSettings(**DRAG_ROLES)),
-             ("b'", "drag", ForceLoopSettings())]
-    for tag, part, loop_settings in cases:
-        rig = FlatRig(True)
-        press(rig, "arm_joint")
+    for tag, part, loop_settings in (("a", "steps", ForceLoopSettings()), ("b'", "drag", ForceLoopSettings())):
+        rig = new_rig("flat")
         dyn = FrontDynamics(rig.machine)
         loop = ForceLoop(dyn, kin, luts, settings, rig.p_max, settings=loop_settings)
-        drv = Driver(rig, loop)
-        q, _, _ = drv.state()
+        q = np.array(rig.front.q, dtype=float)
         fmax = largest_press(dyn, q, PRESS_MARGIN)
         roles = (f"force control {', '.join(loop_settings.functions)}; velocity control "
                  f"{', '.join(loop_settings.velocity_functions) or 'none'}")
-        print(f"  ({tag}) {roles}. Edge {100 * rig.tip_depth():.1f} cm into flat ground after the arm's press, bearing "
-              f"{rig.plant.press_force / 1e3:.1f} kN; largest press the model allows here {fmax / 1e3:.1f} kN")
+        print(f"  ({tag}) ForceLoop, {roles}. Edge {100 * rig.tip_depth():.1f} cm into flat ground after the arm's "
+              f"press, bearing {rig.plant.press_force / 1e3:.1f} kN; largest press the model allows here "
+              f"{fmax / 1e3:.1f} kN")
         t0 = time.monotonic()
         if part == "steps":
-            run_steps(drv, fmax)
+            run_steps(Driver(rig, loop), fmax)
         else:
-            for _ in range(round(4.0 / rig.dt)):  # press to the drag's force first
-                drv.step(hold_reference(loop, drv.state()[0]), np.array([0.0, 0.0, -DRAG_FRACTION * fmax]))
-            run_drag(drv, DRAG_FRACTION * fmax, f_t)
+            design = LoopDesign(rig, loop, f_t)
+            design.press(DRAG_FRACTION * fmax, 4.0)
+            print(f"    drag at {DRAG_FRACTION * fmax / 1e3:.1f} kN: "
+                  f"{run_drag(rig, design, DRAG_FRACTION * fmax).line()}")
         print(f"    ({time.monotonic() - t0:.1f} s wall)")
+    compare_drags(luts, settings, adm_settings, f_t)
+    print(f"  {time.monotonic() - wall0:.1f} s wall")
 
 
 if __name__ == "__main__":
