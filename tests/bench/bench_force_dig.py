@@ -12,12 +12,16 @@ edge down with the arm (as ``force_steps`` does) and hands the front to the loop
     bores and relief): per step the time to 10 %, rise 10-90 % and steady-state error (mean of F_ref - F over the
     last 2 s of 8 s) of the *plant's* bearing force on the edge (``Plant.press_force``, the truth), and the steady
     error of the loop's own estimate from the pressures;
-(b) a drag towards the machine along the ground (the tip reference moving ``DRAG_M`` at ``DRAG_SPEED``, theta_w
-    held) with a constant normal force reference, with the drag's roles
-    (:data:`tms_rc.excavator.force_control.DRAG_ROLES`: bucket under force control, boom and arm under velocity
-    control) and (b') with the pressing roles of (a) (arm and bucket under force control, the boom held): RMS of
-    F_ref - F (truth: the bearing + the cut's vertical force; and the estimate), the tip's depth along the cut (mean,
-    min, max), the distance dragged and the soil cut.
+(b') a drag towards the machine along the ground (the tip reference moving ``DRAG_M`` at ``DRAG_SPEED``, theta_w
+    held) with a constant normal force reference and (a)'s roles (arm and bucket under force control, the boom
+    held): RMS of F_ref - F (truth: the bearing + the cut's vertical force; and the estimate), the tip's depth along
+    the cut (mean, min, max), the distance dragged and the soil cut;
+(c) both designs side by side over the same drags on fresh plants (:func:`compare_drags`): ``ForceLoop`` with the
+    drag's roles (:data:`tms_rc.excavator.force_control.DRAG_ROLES`: bucket under force control, boom and arm under
+    velocity control) and :class:`tms_rc.excavator.admittance.AdmittanceDrag` (admittance over piston velocity
+    control of all three, ``config/tms_rc/force_control.yaml``), on flat ground at ``DRAG_FRACTION`` and over the
+    mound's flat top (:func:`mound_front`, pressed by the boom) at ``MOUND_FRACTIONS`` of the largest press, with
+    the ratios admittance / ForceLoop and the admittance's tip height against its own reference.
 
 ``FORCE_DIG_DRAG_FT`` [N]: a feed-forward pull along the cut (default 0: the tip PD alone drags).
 ``FORCE_DIG_ADMITTANCE="path_gain=0.5,admittance=0.0002"``: overrides of ``config/tms_rc/force_control.yaml``'s

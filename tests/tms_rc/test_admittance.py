@@ -139,6 +139,19 @@ def test_step_too_little_force_commands_the_edge_down(front, settings) -> None:
     assert np.allclose(jac @ rates, out.v_tip, atol=2e-3)
 
 
+def test_normal_gain_zero_is_damping_control(front, settings) -> None:
+    """With no P along the normal the commanded normal speed is the admittance's alone, however far the tip is from
+    its reference; along the cut the P acts."""
+    dyn, kin = front
+    ctl = _drag(front, dataclasses.replace(settings, normal_gain=0.0, path_gain=0.5))
+    tip = dyn.tip_position(Q)
+    t = cut_axes(float(Q[0]), UP)
+    ref = IdReference(position=tip + 0.3 * UP + 0.1 * t, theta_w=float(Q[1] + Q[2] + Q[3]) + kin.c_bucket)
+    out = ctl.step(Q, np.zeros(4), _pressures(dyn, Q, 10e3), ref, 40e3)
+    assert float(out.v_tip @ UP) == pytest.approx(-out.depth_rate, abs=1e-6)
+    assert float(out.v_tip @ t) == pytest.approx(0.05, abs=1e-6)
+
+
 def test_refused_settings(tmp_path) -> None:
     good = load_force_control_settings()
     with pytest.raises(ValueError):

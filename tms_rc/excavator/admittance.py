@@ -13,8 +13,10 @@ slow for a pressure loop. Per control step (:meth:`AdmittanceDrag.step`):
    along -n) integrates the force error: ``d_dot = sat(admittance * (F_ref - F_est), max_normal_speed)`` (no motion
    within ``force_deadband``), ``d`` held within ``[depth_min, depth_max]`` (it stops integrating at a bound): too
    little force drives the edge deeper, too much lifts it;
-3. the tip's commanded velocity ``v = v_path - n d_dot + path_gain (p_path - n d - tip)`` (the path point and its
-   velocity from the reference; the P term corrects what the velocity loops leave) and theta_w's rate
+3. the tip's commanded velocity ``v = v_path - n d_dot + path_gain e_t + normal_gain e_n`` with ``e = p_path - n d -
+   tip`` split along the cut (``e_t``) and the normal (``e_n``) (the path point and its velocity from the reference;
+   the P terms correct what the velocity loops leave; ``normal_gain`` 0: the normal speed is the admittance's alone,
+   damping control, the shipped choice) and theta_w's rate
    ``theta_w_rate + theta_gain (theta_w_ref - theta_w)`` are resolved into boom, arm and bucket joint rates
    (:func:`resolved_rates`: the tip Jacobian's rows along the cut ``t`` and the normal ``n`` in the front's vertical
    plane plus theta_w = sum of the three angles, theta_w's row weighted ``theta_weight``); a joint within
@@ -73,6 +75,8 @@ class AdmittanceSettings:
     depth_min: float = setting(doc="[m] the depth offset below the path never goes above this (- = above the path)")
     depth_max: float = setting(doc="[m] ... nor deeper than this")
     path_gain: float = setting(lo=0.0, doc="[1/s] tip position error (along the cut and the normal) -> tip speed")
+    normal_gain: float | None = setting(None, lo=0.0, doc="[1/s] the P gain along the normal alone (None: "
+                                        "path_gain; 0: the normal speed is the admittance's alone, damping control)")
     theta_gain: float = setting(lo=0.0, doc="[1/s] theta_w error -> its rate")
     velocity_deadband: float = setting(lo=0.0, doc="[m/s] a smaller piston speed command is none (spool centred)")
     theta_weight: float = setting(lo=0.0, doc="theta_w's row against the tip's (1) where not all can be met")
@@ -225,7 +229,10 @@ class AdmittanceDrag:
         self.depth, d_rate = admittance_update(self.depth, force_ref, f_est, s, self.dt)
         tip = self.dyn.tip_position(q)
         target = ref.position - n * self.depth
-        v_tip = ref.velocity - n * d_rate + s.path_gain * (target - tip)
+        err = target - tip
+        err_n = float(err @ n)
+        k_n = s.path_gain if s.normal_gain is None else s.normal_gain
+        v_tip = ref.velocity - n * d_rate + s.path_gain * (err - n * err_n) + k_n * err_n * n
         theta = float(q[1] + q[2] + q[3]) + self.kin.c_bucket
         theta_rate = ref.theta_w_rate + s.theta_gain * (ref.theta_w - theta)
         jac = self.dyn.tip_jacobian(q)[:, self.index]
