@@ -24,11 +24,16 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from tms_common.config import load_yaml, repo_root
 from tms_db import get_design, open_store
-from tms_rp.excavation.design import Design
+from tms_model.fleet import load_named
+from tms_rp.excavation.design import Design, cell_centres
 from tms_rp.excavation.evaluation import excavated_volume, figures, plot_errors, truth_grid
 from tms_sp.terrain import DYNAMIC_ID, heightmap_from_blob, latest_heightmap
+from tms_ts.design_excavation import DesignExcavation
+from tms_ts.subtask_specs import build_excavate_design
 
 SEED = "design_trench"
 PASSES = re.compile(r"(\d+) pass\(es\), ([0-9.]+) m3 planned moved")
@@ -54,6 +59,64 @@ def _task_end(metrics: dict, log: Path) -> tuple[str, str]:
             if "[experiment] task " in line and ("pass(es)" in line or state in line):
                 message = line.split("[experiment] ", 1)[1].strip()
     return state, message
+
+
+def pass_execution(job: dict, design: Design, maps: list) -> dict[str, Any]:
+    """How the machine carried out its passes, from the sensed heightmaps in time order: each pass the subtask's
+    planner (the record's settings) plans on one map, matched with the first later map where the cells it lowers
+    by more than 3 cm dropped 3 cm on average, then one map later (the pass over); their heights against the
+    planned edge height (+ = left above): mean, 10th / 90th percentile, and the mean by place along the drag
+    (0 = the far end where the edge enters, 1 = the near end) and across it [m]. The subtask planned on maps of
+    its own moments, so a matched pass is the pass planned there, not necessarily the one the machine ran."""
+    plan = build_excavate_design(job, str(job.get("record_name", "")))
+    run = DesignExcavation(plan, load_named(str(job["model_name"])))
+    planner = run.planner
+    devs: list[np.ndarray] = []
+    along: dict[float, list] = {}
+    across: dict[float, list] = {}
+    planned = achieved = 0.0
+    i = 0
+    while i < len(maps) - 2:
+        a = maps[i]
+        cut = planner.next_pass(a, design, run.base).cut
+        if cut is None:
+            break
+        r, c = cut.cells[:, 0], cut.cells[:, 1]
+        before = a.z[r, c]
+        act = before > cut.cut_to + 0.03
+        j = i + 1
+        while j < len(maps) and (before - maps[j].z[r, c])[act].mean() < 0.03:
+            j += 1
+        if j + 1 >= len(maps) or not act.any():
+            break
+        after = maps[j + 1].z[r, c]
+        dev = (after - cut.cut_to)[act]
+        devs.append(dev)
+        area = (a.x_max - a.x_min) / a.z.shape[1] * (a.y_max - a.y_min) / a.z.shape[0]
+        planned += cut.volume
+        achieved += float(np.sum((before - after)[act])) * area
+        xc, yc = cell_centres(a)
+        u = np.array(cut.direction)
+        dx, dy = xc[r, c][act] - cut.start[0], yc[r, c][act] - cut.start[1]
+        for f, o, e in zip((dx * u[0] + dy * u[1]) / max(cut.length, 1e-9), -dx * u[1] + dy * u[0], dev, strict=True):
+            along.setdefault(round(f * 4) / 4, []).append(e)
+            across.setdefault(round(o * 4) / 4, []).append(e)
+        i = j + 1
+    if not devs:
+        return {"passes_matched": 0}
+    d = np.concatenate(devs)
+    return {"passes_matched": len(devs), "planned_m3": planned, "achieved_m3": achieved,
+            "above_planned_cm": {"mean": float(d.mean()) * 100, "p10": float(np.percentile(d, 10)) * 100,
+                                 "p90": float(np.percentile(d, 90)) * 100},
+            "by_along_cm": {f"{k:g}": float(np.mean(v)) * 100 for k, v in sorted(along.items())},
+            "by_across_m_cm": {f"{k:g}": float(np.mean(v)) * 100 for k, v in sorted(across.items())}}
+
+
+def _dynamic_maps(store: Any, ident: int) -> list:
+    """Every stored dynamic heightmap of ``ident``, oldest first (the launch keeps them all)."""
+    docs = sorted(store.find_blobs({"type": "dynamic", "id": ident}), key=lambda doc: str(doc.get("time", "")))
+    return [heightmap_from_blob(store.get_blob(doc["_id"]), doc, source=str(doc.get("time"))) for doc in docs
+            if "offset_z" in doc]
 
 
 def report(run_dir: Path, db: str | None) -> dict[str, Any]:
@@ -83,6 +146,7 @@ def report(run_dir: Path, db: str | None) -> dict[str, Any]:
                                                              y_min=truth.y_min, x_max=truth.x_max,
                                                              y_max=truth.y_max), design, ground),
     }
+    out["execution"] = pass_execution(job, design, _dynamic_maps(store, int(job.get("terrain_id", DYNAMIC_ID))))
     for key in ("sim_time_s", "wall_time_s", "real_time_factor", "ended"):
         if key in metrics:
             out[key] = metrics[key]
@@ -101,6 +165,12 @@ def report(run_dir: Path, db: str | None) -> dict[str, Any]:
         print(f"{label:6s}: MAE {f['mae_cm']:.2f} cm, p95 {f['p95_cm']:.2f} cm, max {f['max_cm']:.2f} cm, signed mean "
               f"{f['signed_mean_cm']:+.2f} cm, {f['cut_remaining_m3']:.3f} m3 above, {f['fill_remaining_m3']:.3f} m3 "
               f"below ({f['cells']} cells of {f['cell_m']:.2f} m)")
+    ex = out["execution"]
+    if ex["passes_matched"]:
+        print(f"execution: {ex['passes_matched']} passes matched, {ex['achieved_m3']:.2f} of {ex['planned_m3']:.2f} m3 "
+              f"planned, the band {ex['above_planned_cm']['mean']:+.1f} cm above the planned edge height (p10 "
+              f"{ex['above_planned_cm']['p10']:+.1f}, p90 {ex['above_planned_cm']['p90']:+.1f}); by place along the "
+              f"drag {ex['by_along_cm']}; across [m] {ex['by_across_m_cm']}")
     print(f"passes {out['passes']}, planned {out['planned_volume_m3']} m3, dug out of the area (truth) "
           f"{out['excavated_from_area_m3_truth']:.3f} m3 of the design's {out['design_volume_m3']:.3f} m3; task "
           f"{state}; {run_dir / 'design.json'}, {png}")
