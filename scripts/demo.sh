@@ -7,8 +7,10 @@
 #   SCENARIO=fleet:           config/seeds/fleet.yaml, config/launch/fleet.yaml (one ZX200 loads three carriers)
 #   SCENARIO=design:          config/seeds/design_trench.yaml, config/launch/design_trench.yaml (the ZX200 digs the
 #                             trench design of task 35 pass by pass over CAN); the plant writes its true height field
-#                             to heights.npz and tests/bench/bench_design_trench.py --report then writes the surface
-#                             error against the design (truth and sensed) to design.json and design_error.png
+#                             to heights.npz, the launch's output goes to launch.log too (the task's end message),
+#                             and tests/bench/bench_design_trench.py --report then writes the surface error against
+#                             the design (truth and sensed) to design.json and design_error.png (figures:
+#                             tms_rp/excavation/README.md)
 #   RECORD=0:                 no recording (and no replay page)
 # A first argument (a launch file) replaces the scenario's launch file.
 set -euo pipefail
