@@ -10,7 +10,10 @@ terrain (the dynamic heightmap), and runs the goals it answers through the origi
    reaches the pass's edge height; ``offset`` the pass's length (the arm planner drags radially toward the swing
    axis, the direction the pass planner cuts in); ``theta_w`` the record's entry edge angle;
 2. ``change_pose`` (position_with_angle, ``pass_through``): the tip ``dump_height`` over the dump place, bucket
-   closed (``DUMP_THETA_W``, the paper's release pose);
+   closed (``DUMP_THETA_W``, the paper's release pose); over a fixed dump place (the record's) ``dump_height`` counts
+   from the highest sensed ground within a bucket width of it when the terrain covers it, else from the record's
+   ``dump_z``: the spoil heap grows there (3.2 m high after 31 passes of the trench, which buried a bucket opening
+   at 1.5 m over the ground and failed the release);
 3. ``release`` (TmsRpZx200ReleaseSimple): the swing angle of the dump place from the swing axis; the bucket opens.
 
 Points of the goals are the excavator's base frame (as the original's targets): the map point moved by the base
@@ -28,13 +31,15 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from tms_common.errors import TmsError
 from tms_rp.arm.planner import load_planner_config
-from tms_rp.excavation.design import Design, DesignError, GridLike, SurfaceError
+from tms_rp.excavation.design import Design, DesignError, GridLike, SurfaceError, cell_centres
 from tms_rp.excavation.planner import BasePose, Pass, PassPlanner, PlannerSettings
 from tms_ts.plans import POSITION_WITH_ANGLE, AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
 
-__all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "DesignExcavation", "to_base"]
+__all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "DesignExcavation", "ground_top", "to_base"]
 
 #: [rad] the edge angle the bucket is carried over the dump place with (85 deg, bucket closed: the paper's release pose)
 DUMP_THETA_W = 1.483530
@@ -67,6 +72,16 @@ def to_base(base: BasePose, x: float, y: float, z: float) -> tuple[float, float,
     dx, dy = x - base.x, y - base.y
     c, s = math.cos(base.yaw), math.sin(base.yaw)
     return c * dx + s * dy, -s * dx + c * dy, z - (base.z or 0.0)
+
+
+def ground_top(terrain: GridLike, x: float, y: float, radius: float) -> float | None:
+    """The highest ``terrain`` cell whose centre is within ``radius`` of (x, y) (the heightmaps' convention: row 0
+    the north edge); None when no cell centre is (the point outside the sensed terrain)."""
+    z = np.asarray(terrain.z, dtype=float)
+    xs, ys = cell_centres(terrain)
+    near = (xs - x) ** 2 + (ys - y) ** 2 <= radius * radius
+    vals = z[near & np.isfinite(z)]
+    return float(vals.max()) if vals.size else None
 
 
 class DesignExcavation:
@@ -136,9 +151,9 @@ class DesignExcavation:
         cut = decision.cut
         self.passes += 1
         self.volume += cut.volume
-        return PassGoals(self._goals(cut), cut, self.passes, err)
+        return PassGoals(self._goals(cut, terrain), cut, self.passes, err)
 
-    def _goals(self, cut: Pass) -> tuple[tuple[str, Any], ...]:
+    def _goals(self, cut: Pass, terrain: GridLike) -> tuple[tuple[str, Any], ...]:
         p = self.plan
         sx, sy, sz = to_base(self.base, *cut.start)
         excavate = ExcavatePlan({"x": sx, "y": sy, "z": sz + self.penetrate_depth, "theta_w": p.theta_w,
@@ -146,6 +161,9 @@ class DesignExcavation:
         if p.dump is not None:
             dx, dy = float(p.dump["x"]), float(p.dump["y"])
             dz = float(p.dump.get("z", cut.dump[2]))
+            top = ground_top(terrain, dx, dy, self.planner.bucket_width)
+            if top is not None:
+                dz = max(dz, top)
         else:
             dx, dy, dz = cut.dump
         bx, by, bz = to_base(self.base, dx, dy, dz + p.dump_height)

@@ -18,7 +18,7 @@ from tms_model.site import load_site
 from tms_rp.arm.planner import load_planner_config
 from tms_rp.excavation.design import Design, Grid, cell_centres
 from tms_rp.excavation.planner import BasePose, PlannerSettings
-from tms_ts.design_excavation import DUMP_THETA_W, DesignExcavation, Done, PassGoals, to_base
+from tms_ts.design_excavation import DUMP_THETA_W, DesignExcavation, Done, PassGoals, ground_top, to_base
 from tms_ts.errors import SubtaskRecordError
 from tms_ts.plans import AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
 from tms_ts.subtask_specs import SUBTASKS, build_excavate_design
@@ -110,6 +110,29 @@ def test_a_pass_becomes_excavate_carry_release_in_the_base_frame() -> None:
     origin = run.planner.kin.swing_origin
     assert rel.what == "release" and rel.target_angle == pytest.approx(math.atan2(-7.5 - origin[1], 1.0 - origin[0]))
     assert run.volume == pytest.approx(cut.volume) and run.passes == 1
+
+
+def test_the_dump_height_counts_from_the_sensed_heap_at_a_fixed_dump_place() -> None:
+    """The spoil heap at the record's dump place grows pass by pass (3.2 m after 31 passes of the trench on the plant,
+    which buried a bucket opening at dump_height over the bare ground): the carry goes dump_height over the highest
+    sensed cell within a bucket width of the place; a place outside the sensed terrain keeps the record's dump_z."""
+    grid = flat()
+    x, y = cell_centres(grid)
+    r = np.hypot(x - 1.0, y + 7.5)
+    grid.z[:] = np.where(r < 1.5, 2.0 * (1.0 - r / 1.5), 0.0)  # a cone 2 m high at (1, -7.5)
+    top = ground_top(grid, 1.0, -7.5, MACHINE.bucket.width)
+    assert top == pytest.approx(float(grid.z.max()))
+    assert ground_top(grid, 30.0, 0.0, 1.0) is None
+    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE).step(TRENCH, grid).goals[1][1]
+    assert carry.pwa["z"] == pytest.approx(top + 1.5)
+    # a heap beside the place, farther than a bucket width: not under the bucket
+    shifted = flat()
+    shifted.z[:] = np.where(np.hypot(x - 1.0, y + 4.0) < 0.5, 3.0, 0.0)
+    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE).step(TRENCH, shifted).goals[1][1]
+    assert carry.pwa["z"] == pytest.approx(1.5)
+    # the place outside the terrain: the record's dump_z
+    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-12.0, dump_z=0.2), MACHINE).step(TRENCH, grid).goals[1][1]
+    assert carry.pwa["z"] == pytest.approx(0.2 + 1.5)
 
 
 def test_the_base_frame_follows_the_base_pose() -> None:
