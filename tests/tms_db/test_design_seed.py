@@ -15,7 +15,8 @@ from tms_rp.excavation.design import Design
 
 def test_the_design_trench_seed_puts_its_design(store: Store) -> None:
     n_tasks, n_params = seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")
-    assert (n_tasks, n_params) == (1, 1)
+    assert (n_tasks, n_params) == (1, 2)  # the job and the run's blackboard (the supervisor writes CONTINUE_FLG)
+    assert store.get_parameter("global_blackboard", "DESIGN_BLACKBOARD")["CONTINUE_FLG"] is True
     job = store.get_parameter("zx200", "design_trench_job")
     design = Design.from_dict(get_design(store, job["design"]))
     assert design.kind == "trench" and design.params["depth"] == 0.5 and design.params["width"] == 1.0
