@@ -14,8 +14,9 @@ plant:
   the pass), then the excavate.
 
 Printed per case: the truth bucket tip's lateral offset from the drag line and its height against the goal's -0.3 m
-while it is below the ground (the surface under it before that period) in the penetrate and the drag (mean, extremes), the ground's height along the drag line
-after the excavate (every 0.1 m from the far end), the length at the far end left uncut, and the volume cut.
+while it is below the ground (the surface under it before that period) in the penetrate and the drag (mean,
+extremes), the ground's height along the drag line after the excavate (every 0.1 m from the far end), the length at
+the far end left uncut, and the volume cut.
 """
 
 from __future__ import annotations
