@@ -348,18 +348,7 @@ class PassPlanner:
             cut_to[sel] = np.minimum(z[sel], edge[b[sel] - first])
             return cut_to, edge, float(np.sum(z[sel] - cut_to[sel])) * s.cell_area
 
-        depth = st.max_pass_depth
-        cut_to, edge, volume = plan(depth)
-        if volume > cap:
-            lo_d, hi_d = 0.0, depth
-            for _ in range(40):
-                mid = 0.5 * (lo_d + hi_d)
-                if plan(mid)[2] > cap:
-                    hi_d = mid
-                else:
-                    lo_d = mid
-            depth = lo_d
-            cut_to, edge, volume = plan(depth)
+        depth, (cut_to, edge, volume) = _deepest_within(plan, st.max_pass_depth, cap)
         if volume <= 0.0:
             return None
         # the edge path: from the far end (first bin) toward the machine, one point per bin with cells
@@ -424,18 +413,7 @@ class PassPlanner:
             cut_to[sel] = np.minimum(z[sel], level)
             return cut_to, level, float(np.sum(z[sel] - cut_to[sel])) * s.cell_area
 
-        depth = st.max_pass_depth
-        cut_to, level, volume = plan(depth)
-        if volume > cap:
-            lo_d, hi_d = 0.0, depth
-            for _ in range(40):
-                mid = 0.5 * (lo_d + hi_d)
-                if plan(mid)[2] > cap:
-                    hi_d = mid
-                else:
-                    lo_d = mid
-            depth = lo_d
-            cut_to, level, volume = plan(depth)
+        depth, (cut_to, level, volume) = _deepest_within(plan, st.max_pass_depth, cap)
         if volume <= 0.0:
             return None
         ks = np.arange(first, last + 1)
@@ -483,3 +461,19 @@ def _height_at(grid: GridLike, z: np.ndarray, xy: np.ndarray) -> float:
     col = int(np.clip((xy[0] - grid.x_min) / ((grid.x_max - grid.x_min) / cols), 0, cols - 1))
     row = int(np.clip((grid.y_max - xy[1]) / ((grid.y_max - grid.y_min) / rows), 0, rows - 1))
     return float(z[row, col])
+
+
+def _deepest_within(plan: Any, max_depth: float, cap: float) -> tuple[float, Any]:
+    """``(depth, plan(depth))`` for the deepest depth up to ``max_depth`` whose volume (``plan(depth)[2]``) stays
+    within ``cap`` (bisection to ~1e-12 of ``max_depth``; the volume grows with the depth)."""
+    result = plan(max_depth)
+    if result[2] <= cap:
+        return max_depth, result
+    lo, hi = 0.0, max_depth
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if plan(mid)[2] > cap:
+            hi = mid
+        else:
+            lo = mid
+    return lo, plan(lo)
