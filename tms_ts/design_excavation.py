@@ -5,11 +5,6 @@ collection ``design``), the excavator's base pose on the map and optionally a fi
 then calls :meth:`DesignExcavation.step` once per pass with the newest stored design document and the newest sensed
 terrain (the dynamic heightmap), and runs the goals it answers through the original's planning actions:
 
-0. ``change_pose`` (position_with_angle, at rest): the tip the arm planner's ``approach_height`` over the pass's far
-   end with the entry edge angle, as the paper tree's ``return_over_mound`` before its excavate: the swing from the
-   dump place (up to ~3 rad) settles there before the bucket enters the soil (run straight into the excavate, the
-   excavate's via points passed on the controller's prediction while the swing still lagged: the edge entered up to
-   0.58 m to the side of its point and 0.4 m above it: tms_rp/excavation/README.md);
 1. ``excavate`` (TmsRpZx200ExcavateSimple's ``position_with_angle``): the pass's far end, the bucket-tip point the
    arm penetrates to, raised by the arm planner's ``penetrate_depth`` (which it goes deeper) so that the edge
    reaches the pass's edge height; ``offset`` the pass's length (the arm planner drags radially toward the swing
@@ -48,7 +43,7 @@ __all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "Desig
 
 #: [rad] the edge angle the bucket is carried over the dump place with (85 deg, bucket closed: the paper's release pose)
 DUMP_THETA_W = 1.483530
-#: [rad] where that angle (or the entry angle over the pass) cannot be held, the nearest holdable one within this
+#: [rad] where that angle cannot be held over the dump place, the nearest holdable one within this
 DUMP_THETA_W_TOLERANCE = 0.5
 
 
@@ -102,9 +97,7 @@ class DesignExcavation:
         settings = settings or PlannerSettings(level_sweep=True, fill=plan.dump is None)
         try:
             self.planner = PassPlanner(machine, settings)
-            arm = load_planner_config(machine.kind)
-            self.penetrate_depth = float(arm.penetrate_depth)
-            self.approach_height = float(arm.approach_height)
+            self.penetrate_depth = float(load_planner_config(machine.kind).penetrate_depth)
         except TmsError as exc:
             raise DesignError(f"{self.who}: machine {getattr(machine, 'kind', machine)!r} cannot excavate it: "
                               f"{exc}") from None
@@ -165,9 +158,6 @@ class DesignExcavation:
         sx, sy, sz = to_base(self.base, *cut.start)
         excavate = ExcavatePlan({"x": sx, "y": sy, "z": sz + self.penetrate_depth, "theta_w": p.theta_w,
                                  "offset": cut.length})
-        approach = ChangePosePlan(POSITION_WITH_ANGLE, pwa={"x": sx, "y": sy, "theta_w": p.theta_w,
-                                                            "z": sz + self.penetrate_depth + self.approach_height},
-                                  theta_w_tolerance=DUMP_THETA_W_TOLERANCE)
         if p.dump is not None:
             dx, dy = float(p.dump["x"]), float(p.dump["y"])
             dz = float(p.dump.get("z", cut.dump[2]))
@@ -181,4 +171,4 @@ class DesignExcavation:
                                pass_through=True, theta_w_tolerance=DUMP_THETA_W_TOLERANCE)
         ox, oy = float(self.planner.kin.swing_origin[0]), float(self.planner.kin.swing_origin[1])
         release = AnglePlan("release", math.atan2(by - oy, bx - ox))
-        return ("change_pose", approach), ("excavate", excavate), ("change_pose", carry), ("release", release)
+        return ("excavate", excavate), ("change_pose", carry), ("release", release)

@@ -97,13 +97,8 @@ def test_a_pass_becomes_excavate_carry_release_in_the_base_frame() -> None:
     run = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE)
     step = run.step(TRENCH, flat())
     assert isinstance(step, PassGoals) and step.number == 1
-    (w0, approach), (w1, exc), (w2, carry), (w3, rel) = step.goals
-    assert (w0, w1, w2, w3) == ("change_pose", "excavate", "change_pose", "release")
-    # the swing settles over the pass's far end before the bucket enters: at rest, approach_height over it
-    arm = load_planner_config(KIND)
-    assert isinstance(approach, ChangePosePlan) and not approach.pass_through
-    assert approach.pwa == pytest.approx({"x": step.cut.start[0], "y": step.cut.start[1], "theta_w": 1.1,
-                                          "z": step.cut.start[2] + arm.penetrate_depth + arm.approach_height})
+    (w1, exc), (w2, carry), (w3, rel) = step.goals
+    assert (w1, w2, w3) == ("excavate", "change_pose", "release")
     assert isinstance(exc, ExcavatePlan) and isinstance(carry, ChangePosePlan) and isinstance(rel, AnglePlan)
     cut = step.cut
     depth = load_planner_config(KIND).penetrate_depth
@@ -128,15 +123,15 @@ def test_the_dump_height_counts_from_the_sensed_heap_at_a_fixed_dump_place() -> 
     top = ground_top(grid, 1.0, -7.5, MACHINE.bucket.width)
     assert top == pytest.approx(float(grid.z.max()))
     assert ground_top(grid, 30.0, 0.0, 1.0) is None
-    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE).step(TRENCH, grid).goals[2][1]
+    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE).step(TRENCH, grid).goals[1][1]
     assert carry.pwa["z"] == pytest.approx(top + 1.5)
     # a heap beside the place, farther than a bucket width: not under the bucket
     shifted = flat()
     shifted.z[:] = np.where(np.hypot(x - 1.0, y + 4.0) < 0.5, 3.0, 0.0)
-    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE).step(TRENCH, shifted).goals[2][1]
+    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-7.5), MACHINE).step(TRENCH, shifted).goals[1][1]
     assert carry.pwa["z"] == pytest.approx(1.5)
     # the place outside the terrain: the record's dump_z
-    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-12.0, dump_z=0.2), MACHINE).step(TRENCH, grid).goals[2][1]
+    carry = DesignExcavation(plan_of(dump_x=1.0, dump_y=-12.0, dump_z=0.2), MACHINE).step(TRENCH, grid).goals[1][1]
     assert carry.pwa["z"] == pytest.approx(0.2 + 1.5)
 
 
@@ -152,7 +147,7 @@ def test_the_base_frame_follows_the_base_pose() -> None:
         rotated, flat(-8, 12, -9, 4))
     assert isinstance(a, PassGoals) and isinstance(b, PassGoals)
     for step in (a, b):  # in its own frame each machine cuts the trench 5 m behind it
-        pwa = step.goals[1][1].pwa
+        pwa = step.goals[0][1].pwa
         assert -6.0 <= pwa["x"] <= -4.0 and abs(pwa["y"]) <= 5.5, pwa
 
 
@@ -183,7 +178,7 @@ def test_by_default_a_pass_is_the_level_sweep_the_arm_drags() -> None:
         step = run.step(TRENCH, grid)
         assert isinstance(step, PassGoals)
         cut = step.cut
-        assert np.ptp(cut.path[:, 2]) == 0.0 and step.goals[1][1].pwa["z"] == pytest.approx(cut.start[2])
+        assert np.ptp(cut.path[:, 2]) == 0.0 and step.goals[0][1].pwa["z"] == pytest.approx(cut.start[2])
         rows, cols = cut.cells[:, 0], cut.cells[:, 1]
         assert np.all(target[rows, cols] == pytest.approx(-0.5))  # only floor cells under the bucket
         assert np.all(cut.cut_to >= target[rows, cols] - 1e-9)

@@ -1,7 +1,6 @@
 """The design subtask end to end on ROS with planning stubs: ``tms_ts_subtasks`` reads the design and the dynamic
-heightmap from the store, runs a pass as the original's change_pose (over the pass), excavate, change_pose and
-release goals, and ends SUCCEEDED when the newest terrain is within tolerance; a missing design or one out of reach
-ends with a message naming it."""
+heightmap from the store, runs a pass as the original's excavate, change_pose and release goals, and ends SUCCEEDED
+when the newest terrain is within tolerance; a missing design or one out of reach ends with a message naming it."""
 
 from __future__ import annotations
 
@@ -97,7 +96,7 @@ def test_a_pass_runs_as_the_originals_goals_and_the_design_ends_within_tolerance
     assert stub.wait_for("DONE", 5)
     goals = [line.split()[1] for line in stub.output.splitlines() if line.startswith("GOAL ")]
     assert [g.rsplit("/", 1)[-1] for g in goals] == [ROW.steps[w].planning_action for w in
-                                                      ("change_pose", "excavate", "change_pose", "release")], goals
+                                                      ("excavate", "change_pose", "release")], goals
 
     status, outcome = run("job_far")
     assert status == GoalStatus.STATUS_ABORTED and outcome.error_code == SubtaskOutcome.PLANNING_FAILED
