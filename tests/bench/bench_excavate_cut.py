@@ -9,9 +9,9 @@ a 1 m drag toward the swing axis, i.e. a pass of the design trench at x -5.5 .. 
 plant:
 
 * ``straight``: the excavate alone (its approach swings about pi and the penetrate follows at once), as the design
-  subtask's passes ran before it settled the arm first;
-* ``settled``: the excavate's approach point first as a goal of its own run to rest (the subtask's change_pose over
-  the pass), then the excavate.
+  subtask's passes run;
+* ``settled``: the excavate's approach point first as a goal of its own run to rest (design run 7's change_pose over
+  the pass, measured and not kept: tms_rp/excavation/README.md), then the excavate.
 
 Printed per case: the truth bucket tip's lateral offset from the drag line and its height against the goal's -0.3 m
 while it is below the ground (the surface under it before that period) in the penetrate and the drag (mean,
