@@ -316,13 +316,7 @@ class PassPlanner:
         if st.level_sweep:
             return self._sweep(s, z, cuttable, axis, xc, yc, cx, cy, cap, rc)
         w = self.bucket_width
-        r, c = rc
-        seed = np.array([xc[r, c], yc[r, c]])
-        toward = axis - seed
-        u = toward / float(np.hypot(*toward))
-        n = np.array([-u[1], u[0]])
-        along = (xc - seed[0]) * u[0] + (yc - seed[1]) * u[1]
-        across = (xc - seed[0]) * n[0] + (yc - seed[1]) * n[1]
+        seed, u, along, across = _drag_frame(xc, yc, axis, rc)
         step = min(cx, cy)
         strip = cuttable & (np.abs(across) <= w / 2.0 + 1e-9)
         b = np.rint(along / step).astype(int)
@@ -370,12 +364,7 @@ class PassPlanner:
         st = self.settings
         w = self.bucket_width
         r, c = rc
-        seed = np.array([xc[r, c], yc[r, c]])
-        toward = axis - seed
-        u = toward / float(np.hypot(*toward))
-        n = np.array([-u[1], u[0]])
-        along = (xc - seed[0]) * u[0] + (yc - seed[1]) * u[1]
-        across = (xc - seed[0]) * n[0] + (yc - seed[1]) * n[1]
+        seed, u, along, across = _drag_frame(xc, yc, axis, rc)
         step = min(cx, cy)
         band = np.abs(across) <= w / 2.0 + 1e-9
         b = np.rint(along / step).astype(int)
@@ -477,3 +466,17 @@ def _deepest_within(plan: Any, max_depth: float, cap: float) -> tuple[float, Any
         else:
             lo = mid
     return lo, plan(lo)
+
+
+def _drag_frame(xc: np.ndarray, yc: np.ndarray, axis: np.ndarray, rc: tuple[Any, Any]
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The radial drag from seed cell ``rc`` toward the swing ``axis``: the seed's centre, the unit direction, and
+    every cell centre's distance along it and across it (left positive)."""
+    r, c = rc
+    seed = np.array([xc[r, c], yc[r, c]])
+    toward = axis - seed
+    u = toward / float(np.hypot(*toward))
+    n = np.array([-u[1], u[0]])
+    along = (xc - seed[0]) * u[0] + (yc - seed[1]) * u[1]
+    across = (xc - seed[0]) * n[0] + (yc - seed[1]) * n[1]
+    return seed, u, along, across
