@@ -35,11 +35,9 @@ import math
 import os
 import time
 from dataclasses import dataclass
-from types import MappingProxyType
 
 import numpy as np
 
-from sim_bridge.plant import Plant
 from tests.bench.bench_force_steps import FlatRig, press
 from tests.bench.bench_piston import PlantRig, identify
 from tms_model.excavator.kinematics import load_kinematics
@@ -277,25 +275,6 @@ def mound_front(clearance: float = 0.01) -> dict[str, float]:
     return {**MOUND_FRONT, "boom_joint": lo}
 
 
-class MoundRig(PlantRig):
-    """:class:`PlantRig` on the paper plant (the ZX200 facing the mound) with ``soil.penetration`` on, the front
-    started at ``front``."""
-
-    def __init__(self, front: dict[str, float]) -> None:
-        super().__init__()
-        spec = self.plant.spec
-        pm = spec.machines[spec.excavator]
-        machines = dict(spec.machines)
-        machines[spec.excavator] = dataclasses.replace(
-            pm, start_joints=MappingProxyType({**pm.start_joints, **front}))
-        self.plant = Plant(dataclasses.replace(spec, machines=MappingProxyType(machines),
-                                               soil=dataclasses.replace(spec.soil, penetration=True)))
-        self.zx = self.plant.excavator
-        self.front = self.zx.front
-        self._last = {fn: self.length(fn) for fn in CYLINDER_FUNCTIONS}
-        self.start_length = dict(self._last)
-
-
 def new_rig(where: str) -> PlantRig:
     """A fresh plant with the edge pressed on the ground: ``flat`` (bench force_steps' flat ground, pressed by the
     arm as (a)) or ``mound`` (over the mound's flat top, :func:`mound_front`, pressed by the boom)."""
@@ -303,7 +282,7 @@ def new_rig(where: str) -> PlantRig:
         rig: PlantRig = FlatRig(True)
         press(rig, "arm_joint")
     else:  # the arm's press would slide the edge over the mound's top to its slope: the boom presses it down
-        rig = MoundRig(mound_front())
+        rig = FlatRig(True, mound_front())  # the same rig, the front over the mound (soil.penetration on)
         press(rig, "boom_joint")
     return rig
 

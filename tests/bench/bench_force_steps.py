@@ -56,15 +56,16 @@ HOLD_S, WINDOW_S = 8.0, 2.0
 
 
 class FlatRig(PlantRig):
-    """:class:`PlantRig` on the paper plant started at :data:`FLAT_FRONT`, ``soil.penetration`` as asked."""
+    """:class:`PlantRig` on the paper plant started at ``front`` (default :data:`FLAT_FRONT`), ``soil.penetration``
+    as asked."""
 
-    def __init__(self, penetration: bool) -> None:
+    def __init__(self, penetration: bool, front: dict[str, float] | None = None) -> None:
         super().__init__()
         spec = self.plant.spec
         pm = spec.machines[spec.excavator]
         machines = dict(spec.machines)
         machines[spec.excavator] = dataclasses.replace(
-            pm, start_joints=MappingProxyType({**pm.start_joints, **FLAT_FRONT}))
+            pm, start_joints=MappingProxyType({**pm.start_joints, **(FLAT_FRONT if front is None else front)}))
         self.plant = Plant(dataclasses.replace(spec, machines=MappingProxyType(machines),
                                                soil=dataclasses.replace(spec.soil, penetration=penetration)))
         self.zx = self.plant.excavator
