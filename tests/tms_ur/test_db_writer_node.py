@@ -24,13 +24,10 @@ def test_pose_writes_reach_the_db_through_the_parameter_writer(procs, ros_node, 
     with open_store(path=db) as store:
         store.upsert_parameter(PATH)
     ros = ["--ros-args", "-p", f"db_path:={db}"]
-    writer = procs([executable("tms_db", "tms_db_writer_param"), *ros], name="param_writer")
     ui = procs([executable("tms_ur", "tms_ur_db_writer")], name="ui_writer")
     assert ui.wait_for("tms_ur_db_writer ready", 60), ui.output
     client = ros_node.create_client(TmsdbTerrainDBPoseWriteSrv, "/input/DB_machine/data")
     _until(ros_node, lambda: client.service_is_ready(), 30, "the pose-write service", ui)
-    _until(ros_node, lambda: ros_node.count_subscribers("/tms_db_param_data") > 0, 30,
-           "the parameter writer's subscription", writer)
 
     def record(model: str, name: str) -> dict | None:
         with open_store(path=db) as store:
@@ -46,6 +43,13 @@ def test_pose_writes_reach_the_db_through_the_parameter_writer(procs, ros_node, 
         r.joints.position = list(joints)
         return r
 
+    # with no parameter writer the query would reach no one: refused, not "written"
+    lost = _call(ros_node, client, request("pose_query", "LOAD_PATH", 4.0))
+    assert not lost.written and "no parameter writer subscribes to tms_db_param_data" in lost.log_data
+
+    writer = procs([executable("tms_db", "tms_db_writer_param"), *ros], name="param_writer")
+    # the writer's own publisher must have matched, not only this test's view of the graph
+    assert ui.wait_for("tms_db_param_data: 1 parameter writer(s) subscribed", 30), ui.output
     reply = _call(ros_node, client, request("pose_query", "LOAD_PATH", 4.0))
     assert reply.written and "pose_query ic120/LOAD_PATH" in reply.log_data
     _until(ros_node, lambda: record("ic120", "LOAD_PATH")["x"] == [0.0, 4.0], 30,

@@ -3,7 +3,9 @@
 Takes ``tms_msg_ur/TmsdbPoseWriteMsg`` on ``/input/WriteDB/pose_joint`` and the service ``/input/DB_machine/data``
 (``tms_msg_ur/TmsdbTerrainDBPoseWriteSrv``), the original's ``tms_ur_db_writer`` names, and publishes one
 ``tms_msg_db/TmsdbQuery`` on ``tms_db_param_data`` per write (:mod:`tms_ur.db_pose_writer` says what is checked).
-The service answers ``written`` false with the reason in ``log_data`` for a write it refused.
+The service answers ``written`` false with the reason in ``log_data`` for a write it refused, and for any write
+while no parameter writer subscribes to ``tms_db_param_data`` (the query would reach no one). The node logs each
+change in the number of parameter writers it reaches.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import sys
 from datetime import datetime
 from typing import Any
 
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 
 from tms_common.node import run_node
@@ -32,10 +35,14 @@ class DbPoseWriter(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("tms_ur_db_writer", **kwargs)
-        self._pub = self.create_publisher(TmsdbQuery, QUERY_TOPIC, 10)
+        self._pub = self.create_publisher(TmsdbQuery, QUERY_TOPIC, 10,
+                                          event_callbacks=PublisherEventCallbacks(matched=self._on_matched))
         self.create_subscription(TmsdbPoseWriteMsg, TOPIC, self._on_write, 10)
         self.create_service(TmsdbTerrainDBPoseWriteSrv, SERVICE, self._on_request)
         self.get_logger().info(f"tms_ur_db_writer ready: {TOPIC}, {SERVICE} -> {QUERY_TOPIC}")
+
+    def _on_matched(self, info: Any) -> None:
+        self.get_logger().info(f"{QUERY_TOPIC}: {info.current_count} parameter writer(s) subscribed")
 
     def _on_write(self, msg: Any) -> None:
         try:
@@ -57,6 +64,9 @@ class DbPoseWriter(Node):
     def _publish(self, write: Any) -> None:
         check_pose_write(PoseWrite(write.machine_name, write.record_type, write.record_name, write.write_target,
                                    len(write.joints.position)))
+        if self._pub.get_subscription_count() == 0:
+            # a publish with no subscriber is lost; saying "written" then would be a lie
+            raise PoseWriteError(f"no parameter writer subscribes to {QUERY_TOPIC} (is tms_db_writer_param running?)")
         query = TmsdbQuery()
         query.time = datetime.now().isoformat()
         query.type = write.record_type
