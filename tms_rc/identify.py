@@ -142,9 +142,13 @@ def _plant_machines(plant_config: Path) -> Reader:
 
 
 class Link:
-    """The COM3 peer: a command frame on every Front_Angular_Velocity frame, the latest state kept per tick."""
+    """The COM3 peer: a command frame on every Front_Angular_Velocity frame, the latest state kept per tick.
 
-    def __init__(self, codec: Codec, bus_cfg: Mapping[str, Any]) -> None:
+    ``front_mode`` / ``travel_mode``: the ``Machine_Setting_Cmd`` sources (front 1 pilot pressure, 2 velocity; travel
+    1 pilot, 3 centre velocity + yaw rate); a pilot-pressure peer (:mod:`tms_rc.identify_pistons`) sends its own
+    frames through :meth:`transmit` and :meth:`send_setting`."""
+
+    def __init__(self, codec: Codec, bus_cfg: Mapping[str, Any], front_mode: int = 2, travel_mode: int = 3) -> None:
         self._can = can
         self.codec = codec
         self.bus = can.Bus(ignore_config=True, **bus_cfg)
@@ -154,7 +158,8 @@ class Link:
         self.v = np.zeros(len(JOINTS))
         self.flow = np.zeros(len(JOINTS))
         self._setting = codec.neutral("Machine_Setting_Cmd")
-        self._setting.update(front_signal_switch_command=2, travel_signal_switch_command=3, engine_rpm=2000,
+        self._setting.update(front_signal_switch_command=front_mode, travel_signal_switch_command=travel_mode,
+                             engine_rpm=2000,
                              power_eco_mode=1, working_mode_notice=1, yellow_led_mode=2)
 
     def close(self) -> None:
@@ -165,11 +170,15 @@ class Link:
     def send(self, u: Mapping[str, float]) -> None:
         values = self.codec.neutral("Velocity_Cmd_1")
         values.update({f"{SHORT[j]}_target_anguler_velocity": float(u.get(j, 0.0)) for j in JOINTS})
-        self._tx("Velocity_Cmd_1", values)
-        if self.tick % 5 == 0:
-            self._tx("Machine_Setting_Cmd", self._setting)
+        self.transmit("Velocity_Cmd_1", values)
+        self.send_setting()
 
-    def _tx(self, frame: str, values: Mapping[str, float]) -> None:
+    def send_setting(self, now: bool = False) -> None:
+        """``Machine_Setting_Cmd`` on every 5th tick (its 50 ms DBC cycle), or ``now``."""
+        if now or self.tick % 5 == 0:
+            self.transmit("Machine_Setting_Cmd", self._setting)
+
+    def transmit(self, frame: str, values: Mapping[str, float]) -> None:
         self.bus.send(self._can.Message(arbitration_id=self.codec.frame_id(frame),
                                         data=self.codec.encode(frame, values), is_extended_id=True))
 
@@ -536,15 +545,26 @@ def _plant_lines(plant_config: Path | None, machine_file: Path | None, bus: Mapp
     return lines
 
 
+def _command_line(prog: str, argv: Sequence[str] | None) -> str:
+    """The command as run (``prog`` and its words; existing files relative to the repo), for a file's header."""
+    words = [prog, *(sys.argv[1:] if argv is None else argv)]
+    return shlex.join(_rel(Path(w)) if Path(w).exists() else w for w in words)
+
+
 # -------------------------------------------------------------------------------------------------------- main
-def _args(argv: Sequence[str] | None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog="tms_rc_identify", description=__doc__.split("\n\n")[0])
+def _common_args(ap: argparse.ArgumentParser) -> None:
+    """The options every identification over the bus has: the machine, the plant it may start, the bus."""
     ap.add_argument("--machine", required=True, help="the excavator's name on the site (its namespace)")
     ap.add_argument("--plant-config", type=Path, help="start sim_plant on this plant YAML (private CAN buses)")
     ap.add_argument("--speed", type=float, default=1.0, help="sim_plant speed (x real time) with --plant-config")
     ap.add_argument("--machine-config", type=Path, help="the machine description (default: the plant config's "
                     "entry, else config/machines/<kind>.yaml)")
     ap.add_argument("--can-interface"), ap.add_argument("--can-channel"), ap.add_argument("--can-port", type=int)
+
+
+def _args(argv: Sequence[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog="tms_rc_identify", description=__doc__.split("\n\n")[0])
+    _common_args(ap)
     ap.add_argument("--joints", default=",".join(JOINTS), help="comma-separated front joints to identify")
     ap.add_argument("--amplitudes", default=",".join(map(str, AMPLITUDES)),
                     help="step amplitudes, fractions of each joint's velocity limit")
@@ -585,8 +605,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.plant_config is not None:
         args.plant_config = args.plant_config.resolve()
-    words = ["tms_rc_identify", *(sys.argv[1:] if argv is None else argv)]
-    command_line = shlex.join(_rel(Path(w)) if Path(w).exists() else w for w in words)
+    command_line = _command_line("tms_rc_identify", argv)
 
     def log(msg: str) -> None:
         print(msg, flush=True)
