@@ -36,8 +36,9 @@ from pathlib import Path
 
 import cantools
 
-from tms_common.config import config_path
-from tms_common.schema import load_schema, setting
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_common.schema import Reader, load_schema, setting
 from tms_model.cylinders import Cylinder, cylinder_length, moment_arm
 from tms_model.machines import Machine
 
@@ -45,7 +46,7 @@ __all__ = [
     "CYLINDER_FUNCTIONS", "SETTINGS_FILE", "PiGains", "PistonControlSettings", "LutIdentificationSettings",
     "DirectionLut", "PistonLut", "PilotPair", "PiController", "PistonVelocityController", "PistonForceController",
     "dead_zone", "cylinder_force", "extend_sign", "cylinder_of", "piston_length", "piston_stroke",
-    "load_piston_settings", "settings_path", "pilot_range",
+    "load_piston_settings", "settings_path", "pilot_range", "piston_lut_path", "load_piston_luts",
 ]
 
 #: the front functions driven by a cylinder (the swing motor is not done here)
@@ -221,6 +222,45 @@ class PistonLut:
     def from_dict(cls, data: Mapping[str, Mapping[str, Sequence[float]]]) -> PistonLut:
         return cls(*(DirectionLut(tuple(data[n]["pilot_mpa"]), tuple(data[n]["speed_mps"]))
                      for n in ("extend", "retract")))
+
+
+def piston_lut_path(name: str) -> Path:
+    """``config/tms_rc/identified/<name>_piston_lut.yaml``: the tables ``tms_rc_identify_pistons`` identified on the
+    machine called ``name`` (beside the dead times and flow gains of ``tms_rc_identify``'s ``<name>.yaml``)."""
+    return Path(config_path("tms_rc", "identified", f"{name}_piston_lut.yaml"))
+
+
+def load_piston_luts(name: str | None = None, path: str | Path | None = None) -> dict[str, PistonLut]:
+    """The identified table of each function in ``path`` (default :func:`piston_lut_path` of ``name``): its
+    ``functions: {<joint>: {extend: {pilot_mpa: [...], speed_mps: [...]}, retract: {...}}}``. A missing file is a
+    ConfigError naming it and the command that writes it; a bad one ``file:line: key: problem``."""
+    if path is None:
+        if name is None:
+            raise ValueError("load_piston_luts: give the machine's name or the file")
+        path = piston_lut_path(name)
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no identified piston look-up table; tms_rc_identify_pistons --machine "
+                          f"{name or '<machine>'} writes it")
+    data, where = load_yaml(path)
+    functions = Reader(data, where).sub("functions")
+    functions.only(set(CYLINDER_FUNCTIONS))
+    out = {}
+    for fn in functions.keys():
+        sides = []
+        per_fn = functions.sub(fn)
+        per_fn.only({"extend", "retract"})
+        for direction in ("extend", "retract"):
+            pairs = per_fn.sub(direction)
+            pairs.only({"pilot_mpa", "speed_mps"})
+            pilots = pairs.raw("pilot_mpa")
+            n = len(pilots) if isinstance(pilots, list) else -1
+            try:
+                sides.append(DirectionLut(pairs.vector("pilot_mpa", n), pairs.vector("speed_mps", n)))
+            except ValueError as exc:
+                raise pairs.error(pairs.path, str(exc)) from None
+        out[fn] = PistonLut(*sides)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- output stage
