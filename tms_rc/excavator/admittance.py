@@ -93,6 +93,9 @@ class ForceControlSettings:
     """``config/tms_rc/force_control.yaml``."""
 
     admittance: AdmittanceSettings = setting(doc="the admittance drag (tms_rc.excavator.admittance)")
+    #: the cut-force drag's section, read and checked key by key by tms_rc.excavator.cut_force (which imports this
+    #: module: a nested dataclass here would import it back)
+    cut_force: dict[str, float] | None = setting(None, doc="the cut-force drag (tms_rc.excavator.cut_force)")
 
 
 def settings_path() -> Path:
