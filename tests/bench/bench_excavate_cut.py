@@ -13,6 +13,9 @@ plant:
 * ``settled``: the excavate's approach point first as a goal of its own run to rest (design run 7's change_pose over
   the pass, measured and not kept: tms_rp/excavation/README.md), then the excavate.
 
+Each case twice: with the penetrate and the drag passed on the controller's prediction (the kind's planning file),
+and on the measured tip too (``dig_measured``, as the design run's ``config/tms_rp/zx200_planner_design.yaml``).
+
 Printed per case: the truth bucket tip's lateral offset from the drag line and its height against the goal's -0.3 m
 while it is below the ground (the surface under it before that period) in the penetrate and the drag (mean,
 extremes), the ground's height along the drag line after the excavate (every 0.1 m from the far end), the length at
@@ -21,6 +24,7 @@ the far end left uncut, and the volume cut.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -49,8 +53,9 @@ class CutRig(PassRig):
         self.tips.append((self.ctl.status.label or "", np.array(self.plant.bucket_tip(), dtype=float), surface))
 
 
-def run_case(settle: bool) -> None:
+def run_case(settle: bool, measured: bool) -> None:
     rig = CutRig()
+    rig.planner.cfg = dataclasses.replace(rig.planner.cfg, dig_measured=measured)
     t0 = time.monotonic()
     targets = rig.planner.excavate(TARGET, THETA_W, DRAG)
     if settle:
@@ -66,7 +71,8 @@ def run_case(settle: bool) -> None:
     u = -TARGET[:2] / np.linalg.norm(TARGET[:2])  # toward the swing axis (at the origin)
     lateral = np.array([-u[1], u[0]])
     inside = [(lab, p) for lab, p, surface in rig.tips if lab in ("penetrate", "drag") and p[2] < surface]
-    print(f"  {'settled' if settle else 'straight'}: result {code} ({message}); segments [s] {segs}; "
+    print(f"  {'settled' if settle else 'straight'}, dig segments passed on the "
+          f"{'measured tip' if measured else 'prediction'}: result {code} ({message}); segments [s] {segs}; "
           f"{sim_s:.1f} s simulated, {time.monotonic() - t0:.1f} s wall")
     if inside:
         pts = np.array([p for _, p in inside])
@@ -90,7 +96,8 @@ def main() -> None:
     print(f"excavate to {TARGET.tolist()} (base frame), theta_w {THETA_W}, drag {DRAG} m, on the design plant; "
           f"the truth tip every control period")
     for settle in (False, True):
-        run_case(settle)
+        for measured in (False, True):
+            run_case(settle, measured)
 
 
 if __name__ == "__main__":

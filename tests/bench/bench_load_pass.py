@@ -16,6 +16,7 @@ transport and CPU of the full launch, so it shows what digging and release setti
     tree's)
     LOAD_PASS_TRANSPORT=2 python -m tests.bench load_pass   # measurements 2 periods old, commands 2 periods late
     LOAD_PASS_GAP=0.2 python -m tests.bench load_pass   # the controller idles this long [s] before each next goal
+    LOAD_PASS_DIG_MEASURED=1 python -m tests.bench load_pass   # penetrate and drag reached on the measured tip
     LOAD_PASS_PENETRATION=1 python -m tests.bench load_pass   # the plant with soil.penetration on (the bucket
     pressed into the ground meets the soil's bearing; off in the shipped plant YAMLs)
 
@@ -66,6 +67,9 @@ TRANSPORT = int(os.environ.get("LOAD_PASS_TRANSPORT", "0"))
 GAP_S = float(os.environ.get("LOAD_PASS_GAP", "0"))
 #: The plant's soil.penetration (LOAD_PASS_PENETRATION=1: on; default: the plant YAML's, off).
 PENETRATION = os.environ.get("LOAD_PASS_PENETRATION", "0") != "0"
+#: LOAD_PASS_DIG_MEASURED=0/1: the planner's dig_measured instead of its config's (penetrate and drag reached on the
+#: measured tip, not the prediction alone)
+DIG_MEASURED = os.environ.get("LOAD_PASS_DIG_MEASURED")
 #: The seed's theta_w_tolerance of that record.
 APPROACH_TOLERANCE = next(d["theta_w_tolerance"] for d in load_seed()["parameters"]
                           if d.get("record_name") == "target_excavate_approach_pose")
@@ -86,7 +90,10 @@ class PassRig:
         # one controller for every action, as excavator_arm_controller keeps one: a goal that ends at a
         # pass-through point leaves commands in flight, and the next goal starts from their prediction
         self.ctl = ArmController(self.kin, cfg)
-        self.planner = ArmPlanner(self.kin, load_planner_config(self.kin.machine.kind), ground_min_z=cfg.ground_min_z)
+        planner_cfg = load_planner_config(self.kin.machine.kind)
+        if DIG_MEASURED is not None:
+            planner_cfg = dataclasses.replace(planner_cfg, dig_measured=DIG_MEASURED != "0")
+        self.planner = ArmPlanner(self.kin, planner_cfg, ground_min_z=cfg.ground_min_z)
         self.sensing = load_sensing_config()
         self.sub_steps = max(1, round(1.0 / (RATE_HZ * self.plant.dt)))
         self._measured: deque = deque(maxlen=TRANSPORT + 1)

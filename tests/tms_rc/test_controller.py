@@ -207,3 +207,31 @@ def test_a_stalled_via_segment_is_passed_on_and_the_run_goes_on(kin, cfg):
     ctl, _, _ = _stalled_drag(kin, dataclasses.replace(cfg, via_stall_s=0.0, segment_timeout_margin_s=3.0))
     assert ctl.status.result == codes.TIMEOUT and "drag" in ctl.status.message, ctl.status
 
+
+
+def _slow_drag_handover(kin, cfg, measured: bool) -> float:
+    """A drag then a lift on a plant whose joints move at 70 % of every command (the soil's load against the
+    predictor's model): how far [m] the measured tip still was from the drag's end when the lift began."""
+    ctl = ArmController(kin, cfg)
+    q = np.array([0.0, -0.6, 1.2, 1.0])
+    p0, th = kin.tip_position(q), kin.theta_w(q)
+    end = p0 + np.array([-1.0, 0.0, 0.0])
+    ctl.start([CartesianTarget(end, th, "drag", measured=measured),
+               CartesianTarget(end + np.array([0.0, 0.0, 1.0]), th, "lift")])
+    plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q)
+    v = np.zeros(4)
+    for _ in range(int(60 * cfg.rate_hz)):
+        u = ctl.step(q, v)
+        if ctl.status.label == "lift":  # the measurement that step saw
+            assert not ctl.stalled
+            return float(np.linalg.norm(kin.tip_position(q) - end))
+        q, v = plant.step(0.7 * u)
+    raise AssertionError(f"the lift never began: {ctl.status}")
+
+
+def test_a_segment_marked_measured_is_passed_on_the_measured_tip_not_the_prediction(kin, cfg):
+    cfg = dataclasses.replace(cfg, via_stall_s=0.0)  # the rule alone, without passing a slow segment on as stalled
+    predicted = _slow_drag_handover(kin, cfg, measured=False)
+    measured = _slow_drag_handover(kin, cfg, measured=True)
+    assert predicted > 2 * cfg.via_tolerance_m  # the prediction alone lets the lift start with the drag unfinished
+    assert measured < cfg.via_tolerance_m, (predicted, measured)

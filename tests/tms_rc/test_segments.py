@@ -12,7 +12,8 @@ from tms_model.excavator.targets import CartesianTarget, JointTarget
 from tms_rc.excavator.segments import CARTESIAN, JOINT, targets_from_segments
 
 
-def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5), theta_w=1.0, scale=0.0, via=False):
+def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5), theta_w=1.0, scale=0.0, via=False,
+        measured=False):
     return SimpleNamespace(
         kind=kind,
         label=label,
@@ -21,12 +22,14 @@ def seg(kind=JOINT, label="approach", q=(0.0, -0.8, 1.3, 1.2), p=(5.0, 0.0, 0.5)
         theta_w=theta_w,
         speed_scale=scale,
         via=via,
+        measured=measured,
     )
 
 
 def test_joint_and_cartesian_segments_become_targets_in_order():
-    j, c = targets_from_segments([seg(via=True), seg(CARTESIAN, "penetrate", scale=2.0)])
+    j, c = targets_from_segments([seg(via=True), seg(CARTESIAN, "penetrate", scale=2.0, measured=True)])
     assert isinstance(j, JointTarget) and j.via and j.speed_scale == 1.0  # 0 = the configured speeds
+    assert not j.measured and c.measured
     np.testing.assert_allclose(j.q, [0.0, -0.8, 1.3, 1.2])
     assert isinstance(c, CartesianTarget) and c.label == "penetrate" and not c.via and c.speed_scale == 2.0
     np.testing.assert_allclose(c.position, [5.0, 0.0, 0.5])

@@ -8,6 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from tms_common.config import config_path
+from tms_common.errors import ConfigError
 from tms_model.excavator.codes import InvalidGoalError, OutOfReachError
 from tms_model.excavator.kinematics import load_kinematics
 from tms_rp.arm.planner import ArmPlanner, load_planner_config
@@ -58,3 +60,30 @@ def test_bad_excavate_goals_are_rejected_with_the_reason() -> None:
         PLAN.excavate([5.85, 0.0, 1.15], 1.0, -1.0)
     with pytest.raises(OutOfReachError, match="boom foot"):
         PLAN.excavate([15.0, 0.0, 1.0], 1.0, 1.0)
+
+
+def test_dig_measured_marks_the_penetrate_and_the_drag_only() -> None:
+    assert not any(t.measured for t in PLAN.excavate([5.85, -0.05, 1.15], 1.2, 1.5))  # the kind's file: off
+    design = load_planner_config(KIN.machine.kind, config_path("tms_rp", "zx200_planner_design.yaml"))
+    marked = ArmPlanner(KIN, design).excavate([5.85, -0.05, 1.15], 1.2, 1.5)
+    assert [t.label for t in marked if t.measured] == ["penetrate", "drag"]
+
+
+def test_a_planner_file_with_a_base_changes_only_its_own_keys(tmp_path) -> None:
+    base = load_planner_config(KIN.machine.kind)
+    design = load_planner_config(KIN.machine.kind, config_path("tms_rp", "zx200_planner_design.yaml"))
+    assert dataclasses.replace(design, dig_measured=base.dig_measured) == base and design.dig_measured
+    (tmp_path / "kind.yaml").write_text(config_path("tms_rp", "zx200_planner.yaml").read_text())
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("base: kind.yaml\nlift_height: 1.0\ndig_measured: 1\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml:3: dig_measured: expected true or false"):
+        load_planner_config(KIN.machine.kind, bad)
+    bad.write_text("base: kind.yaml\nlift_hieght: 1.0\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml:2: lift_hieght: unknown key"):
+        load_planner_config(KIN.machine.kind, bad)
+    (tmp_path / "middle.yaml").write_text("base: kind.yaml\n")
+    bad.write_text("base: middle.yaml\nlift_height: 1.0\n")
+    with pytest.raises(ConfigError, match="has a base of its own"):
+        load_planner_config(KIN.machine.kind, bad)
+    bad.write_text("base: kind.yaml\nlift_height: 1.0\n")
+    assert load_planner_config(KIN.machine.kind, bad) == dataclasses.replace(base, lift_height=1.0)

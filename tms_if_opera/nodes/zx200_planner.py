@@ -304,7 +304,7 @@ class ArmPlannerNode(Node):
         out = []
         for k, target in enumerate(targets):
             seg = Zx200ArmSegment(label=target.label, speed_scale=float(target.speed_scale),
-                                  via=bool(target.via or k < len(targets) - 1))
+                                  via=bool(target.via or k < len(targets) - 1), measured=bool(target.measured))
             if isinstance(target, JointTarget):
                 seg.kind = Zx200ArmSegment.JOINT
                 seg.joint_positions = [float(v) for v in target.q]

@@ -17,6 +17,9 @@ class JointTarget:
     label: str = ""
     speed_scale: float = 1.0
     via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
+    # reached only once the measured arm is within tolerance too, not the prediction alone (a via point otherwise
+    # passes on the prediction): a segment in the soil, whose load slows the cylinders below the predictor's model
+    measured: bool = False
 
 
 @dataclass(frozen=True)
@@ -28,6 +31,9 @@ class CartesianTarget:
     label: str = ""
     speed_scale: float = 1.0
     via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
+    # reached only once the measured arm is within tolerance too, not the prediction alone (a via point otherwise
+    # passes on the prediction): a segment in the soil, whose load slows the cylinders below the predictor's model
+    measured: bool = False
 
 
 Target = JointTarget | CartesianTarget

@@ -836,8 +836,9 @@ class ArmController:
             # and lag) have acted: declaring success on the measurement alone let the arm drift off after.
             joint_err = [self._joint_delta(x, spline.p1) for x in (q, qp)]
             tip_err = [self.status.distance_remaining, float(np.linalg.norm(tip_goal - self.kin.tip_position(qp)))]
-            # A via point is passed on the prediction alone: the next segment's spline starts from it.
-            checked = slice(1, 2) if via else slice(0, 2)
+            # A via point is passed on the prediction alone (the next segment's spline starts from it), unless it
+            # asks for the measurement too (a segment in the soil).
+            checked = slice(1, 2) if via and not target.measured else slice(0, 2)
             reached = (max(float(np.max(np.abs(e))) for e in joint_err[checked]) < tol_rad
                        and max(tip_err[checked]) < tol_m)
             self._remaining = (
@@ -858,7 +859,7 @@ class ArmController:
             dists = [float(np.linalg.norm(spline.p1 - self.kin.tip_position(x))) for x in (q, qp)]
             th_errs = [abs(float(self._theta_spline.p1[0]) - self.kin.theta_w(x)) for x in (q, qp)]
             # measured and predicted (commands in flight) both within tolerance, as for joint targets
-            checked = slice(1, 2) if via else slice(0, 2)
+            checked = slice(1, 2) if via and not target.measured else slice(0, 2)
             reached = max(dists[checked]) < tol_m and max(th_errs[checked]) < tol_rad
             dist = dists[0]
             self.status.distance_remaining = dist

@@ -39,12 +39,13 @@ def targets_from_segments(segments: Iterable[Any]) -> list[JointTarget | Cartesi
             if q.shape != (len(JOINTS),) or not np.all(np.isfinite(q)):
                 raise ValueError(f"{name}: joint_positions must be {len(JOINTS)} finite angles "
                                  f"({', '.join(JOINTS)}), got {list(seg.joint_positions)}")
-            out.append(JointTarget(q, seg.label, speed_scale=scale, via=bool(seg.via)))
+            out.append(JointTarget(q, seg.label, speed_scale=scale, via=bool(seg.via), measured=bool(seg.measured)))
         elif seg.kind == CARTESIAN:
             p = np.array([seg.position.x, seg.position.y, seg.position.z], dtype=float)
             if not (np.all(np.isfinite(p)) and math.isfinite(seg.theta_w)):
                 raise ValueError(f"{name}: position / theta_w must be finite")
-            out.append(CartesianTarget(p, float(seg.theta_w), seg.label, speed_scale=scale, via=bool(seg.via)))
+            out.append(CartesianTarget(p, float(seg.theta_w), seg.label, speed_scale=scale, via=bool(seg.via),
+                                       measured=bool(seg.measured)))
         else:
             raise ValueError(f"{name}: unknown kind {seg.kind} (JOINT={JOINT}, CARTESIAN={CARTESIAN})")
     if not out:

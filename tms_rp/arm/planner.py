@@ -22,8 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from tms_common.config import config_path
-from tms_common.schema import load_schema, setting
+from tms_common.config import config_path, load_yaml
+from tms_common.errors import ConfigError
+from tms_common.schema import read_schema, setting
 from tms_model.excavator.codes import InvalidGoalError, JointLimitError, PlanningError
 from tms_model.excavator.kinematics import JOINTS, ExcavatorKinematics
 from tms_model.excavator.targets import CartesianTarget, JointTarget
@@ -52,6 +53,9 @@ class PlannerConfig:
     limit_margin: float = 0.005
     dig_joint_margin: float = 0.06
     continue_window_rad: float = 0.5
+    dig_measured: bool = setting(False, doc="the excavate's penetrate and drag are reached only once the measured "
+                                 "tip is there too, not on the prediction alone (the soil's load slows the cylinders "
+                                 "below the controller's model): deeper, fuller cuts, longer passes")
 
 
 def planner_config_path(kind: str) -> Path:
@@ -61,8 +65,23 @@ def planner_config_path(kind: str) -> Path:
 
 def load_planner_config(kind: str, path: str | Path | None = None) -> PlannerConfig:
     """The planning geometry of excavator ``kind`` (or of the file ``path``), read with :mod:`tms_common.schema`:
-    unknown keys and non-numbers are errors naming the file, line and key."""
-    return load_schema(PlannerConfig, path if path is not None else planner_config_path(kind))
+    unknown keys and non-numbers are errors naming the file, line and key.
+
+    A file with ``base: <file name beside it>`` holds only the keys it changes in that file (a scenario's choices
+    over the kind's planning file, which stays the one place for the rest); the base may not have a base itself.
+    """
+    file = Path(path) if path is not None else planner_config_path(kind)
+    data, where = load_yaml(file)
+    if not (isinstance(data, dict) and "base" in data):
+        return read_schema(PlannerConfig, data, where)
+    base_file = file.parent / str(data["base"])
+    base_data, base_where = load_yaml(base_file)
+    if isinstance(base_data, dict) and "base" in base_data:
+        raise ConfigError(f"{base_file}: the base of {file} has a base of its own; one level only")
+    read_schema(PlannerConfig, base_data, base_where)  # the base on its own, its errors with its lines
+    # then the base with the changes, read with this file's lines: an error now is in one of the changes
+    changes = {k: v for k, v in data.items() if k != "base"}
+    return read_schema(PlannerConfig, {**base_data, **changes}, where)
 
 
 def _finite(values: Any, what: str) -> np.ndarray:
@@ -304,6 +323,7 @@ class ArmPlanner:
         th_curl = self.feasible_theta_w(dragged, cfg.curl_theta_w)
         th_lift = self.feasible_theta_w(lifted, th_curl)
         dig = cfg.dig_speed_scale
+        in_soil = cfg.dig_measured
         q_above = self.kin.ik_position_with_angle(above, th_above)  # reason names joint/distance
         # lift clear is a pass-through point: the carry (next goal) goes on from where the arm will be
         lift = self._cartesian(lifted, th_lift, "lift", label="curl and lift" if cfg.curl_during_lift else "lift",
@@ -313,8 +333,8 @@ class ArmPlanner:
         )
         return [
             JointTarget(q_above, "approach"),
-            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig),
-            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=dig),
+            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig, measured=in_soil),
+            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=dig, measured=in_soil),
             *curl,
             lift,
         ]
