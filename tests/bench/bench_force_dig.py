@@ -21,11 +21,18 @@ edge down with the arm (as ``force_steps`` does) and hands the front to the loop
     velocity control) and :class:`tms_rc.excavator.admittance.AdmittanceDrag` (admittance over piston velocity
     control of all three, ``config/tms_rc/force_control.yaml``), on flat ground at ``DRAG_FRACTION`` and over the
     mound's flat top (:func:`mound_front`, pressed by the boom) at ``MOUND_FRACTIONS`` of the largest press, with
-    the ratios admittance / ForceLoop and the admittance's tip height against its own reference.
+    the ratios admittance / ForceLoop and the admittance's tip height against its own reference;
+(d) the third design, :class:`tms_rc.excavator.cut_force.CutForceDrag` (the force along the cut regulated through the
+    depth of cut, ``cut_force:`` of ``config/tms_rc/force_control.yaml``), on flat ground and the mound with the
+    bearing and on flat ground without it (:data:`CUT_CASES`): per case the plant's cutting resistance against the
+    depth (:func:`cut_curve`, its slope in kN per cm), tangential references at :data:`CUT_DEPTHS` of that curve, and
+    per drag the RMS tangential error (truth), the depth reached against the depth the reference implies, the volume
+    cut, the normal force and a trace every 2 s (``FORCE_DIG_TRACE=0``: none); then one table of all three designs.
 
 ``FORCE_DIG_DRAG_FT`` [N]: a feed-forward pull along the cut (default 0: the tip PD alone drags).
 ``FORCE_DIG_ADMITTANCE="path_gain=0.5,admittance=0.0002"``: overrides of ``config/tms_rc/force_control.yaml``'s
 ``admittance`` keys for a sweep.
+``FORCE_DIG_CUT="normal_gain=0.5"``: the same for ``cut_force``; ``FORCE_DIG_ONLY=cut``: (d) alone.
 """
 
 from __future__ import annotations
@@ -517,8 +524,9 @@ def cut_drags(luts, settings, cut_settings: CutForceSettings, trace: bool) -> li
                   f"{cap / 1e3:.1f} kN (a descending edge, even while it moves along, meets it)")
         table = ", ".join(f"{100 * d:.0f} cm {f / 1e3:.1f}" for d, f in zip(depths, forces, strict=True)
                           if round(100 * d) % 5 == 0)
-        print(f"  {where}: the plant's cutting resistance along the cut at the start pose (rake "
-              f"{math.degrees(rig.zx.tip_angle()):.0f} deg, bucket empty): {table} kN; slope over 3-20 cm "
+        print(f"  {where}: the plant's cutting resistance along the cut at the start pose (tip angle "
+              f"{math.degrees(rig.zx.tip_angle()):.0f} deg, the wedge's rake clamped to 30-80 deg; bucket empty): "
+              f"{table} kN; slope over 3-20 cm "
               f"{k:.2f} kN per cm (intercept {c:+.1f} kN)")
         for d_cut in CUT_DEPTHS:
             f_ref = float(np.interp(d_cut, depths, forces))
