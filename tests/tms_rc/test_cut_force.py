@@ -11,6 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from tests.tms_rc.test_admittance import LUT, Q  # the force_dig bench's flat-ground pose, a piston table
 from tms_common.errors import ConfigError
 from tms_model.excavator.kinematics import load_kinematics
 from tms_model.machines import load_machine
@@ -21,14 +22,10 @@ from tms_rc.excavator.force_control import contact_force_estimate
 from tms_rc.excavator.id_hqp import IdReference
 from tms_rc.excavator.piston import (
     CYLINDER_FUNCTIONS,
-    DirectionLut,
-    PistonLut,
     cylinder_of,
     load_piston_settings,
 )
 
-Q = np.array([0.0, -0.23, 1.14, -0.24])  # the force_dig bench's flat-ground pose
-LUT = PistonLut(DirectionLut((0.76, 1.5, 3.0), (0.0, 0.17, 0.49)), DirectionLut((0.74, 1.5, 3.0), (0.0, 0.32, 0.96)))
 DT = 0.01
 
 
