@@ -172,7 +172,7 @@ def test_success_only_when_commands_in_flight_keep_the_goal(kin, cfg):
         assert np.linalg.norm(kin.tip_position(q) - kin.tip_position(q1)) < cfg.goal_tolerance_m * 1.5
 
 
-def _stalled_drag(kin, cfg):
+def _stalled_drag(kin, cfg, measured=False):
     """A drag towards the machine that the 'soil' stops 0.7 m along (no motion of the tip past that line is let
     through), then a lift out: (controller, final q)."""
     ctl = ArmController(kin, cfg)
@@ -180,7 +180,7 @@ def _stalled_drag(kin, cfg):
     p0 = kin.tip_position(q)
     wall = p0[0] - 0.7
     th = kin.theta_w(q)
-    ctl.start([CartesianTarget(p0 + np.array([-1.5, 0.0, 0.0]), th, "drag"),
+    ctl.start([CartesianTarget(p0 + np.array([-1.5, 0.0, 0.0]), th, "drag", measured=measured),
                CartesianTarget(p0 + np.array([-0.5, 0.0, 1.0]), th, "lift")])
     plant = LagDeadTimePlant(cfg.dt, cfg.dead_time_s, cfg.lag_s, q)
     v = np.zeros(4)
@@ -203,6 +203,9 @@ def test_a_stalled_via_segment_is_passed_on_and_the_run_goes_on(kin, cfg):
     assert 0.7 < ctl.stalled[0][1] < 0.85  # the drag stopped ~0.8 m short of its end (0.7 m of 1.5 m done)
     assert "drag stalled" in ctl.status.message
     assert np.linalg.norm(kin.tip_position(q) - (p0 + np.array([-0.5, 0.0, 1.0]))) < cfg.goal_tolerance_m
+    # a drag reached on the measured tip stalls the same once the joints stand
+    ctl, _, _ = _stalled_drag(kin, dataclasses.replace(cfg, via_stall_s=1.0, via_stall_progress_m=0.05), measured=True)
+    assert ctl.status.result == codes.SUCCESS and [label for label, _ in ctl.stalled] == ["drag"], ctl.status
     # without the rule the same drag times out
     ctl, _, _ = _stalled_drag(kin, dataclasses.replace(cfg, via_stall_s=0.0, segment_timeout_margin_s=3.0))
     assert ctl.status.result == codes.TIMEOUT and "drag" in ctl.status.message, ctl.status
@@ -230,7 +233,7 @@ def _slow_drag_handover(kin, cfg, measured: bool) -> float:
 
 
 def test_a_segment_marked_measured_is_passed_on_the_measured_tip_not_the_prediction(kin, cfg):
-    cfg = dataclasses.replace(cfg, via_stall_s=0.0)  # the rule alone, without passing a slow segment on as stalled
+    # with the stall rule on (config: 1 s): the measured drag creeps in and is not passed on as stalled
     predicted = _slow_drag_handover(kin, cfg, measured=False)
     measured = _slow_drag_handover(kin, cfg, measured=True)
     assert predicted > 2 * cfg.via_tolerance_m  # the prediction alone lets the lift start with the drag unfinished

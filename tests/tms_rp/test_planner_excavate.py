@@ -62,11 +62,11 @@ def test_bad_excavate_goals_are_rejected_with_the_reason() -> None:
         PLAN.excavate([15.0, 0.0, 1.0], 1.0, 1.0)
 
 
-def test_dig_measured_marks_the_penetrate_and_the_drag_only() -> None:
+def test_dig_measured_marks_the_approach_penetrate_and_drag_not_the_lift() -> None:
     assert not any(t.measured for t in PLAN.excavate([5.85, -0.05, 1.15], 1.2, 1.5))  # the kind's file: off
     design = load_planner_config(KIN.machine.kind, config_path("tms_rp", "zx200_planner_design.yaml"))
     marked = ArmPlanner(KIN, design).excavate([5.85, -0.05, 1.15], 1.2, 1.5)
-    assert [t.label for t in marked if t.measured] == ["penetrate", "drag"]
+    assert [t.label for t in marked if t.measured] == ["approach", "penetrate", "drag"]
 
 
 def test_a_planner_file_with_a_base_changes_only_its_own_keys(tmp_path) -> None:

@@ -876,9 +876,12 @@ class ArmController:
             # operator lifts out of a cut that stalls; the next segment starts from where the arm is.
             # Counted only once the commands in flight have acted (the swing's dead time and lag are ~1.9 s: a short
             # swing's profile ends before its measured tip has begun to move).
+            # A segment reached on the measurement (in the soil) creeps in slowly under load: it stalls only once the
+            # joints stand (the soil holds them), not while they still move.
             left = self.status.distance_remaining
             if (left < self._stall_best - cfg.via_stall_progress_m
-                    or self._seg_time < spline.duration + self._in_flight_s):
+                    or self._seg_time < spline.duration + self._in_flight_s
+                    or (target.measured and float(np.max(np.abs(dq))) >= cfg.rest_speed)):
                 self._stall_best, self._stall_time = left, 0.0
             else:
                 self._stall_time += self.elapsed

@@ -53,9 +53,10 @@ class PlannerConfig:
     limit_margin: float = 0.005
     dig_joint_margin: float = 0.06
     continue_window_rad: float = 0.5
-    dig_measured: bool = setting(False, doc="the excavate's penetrate and drag are reached only once the measured "
-                                 "tip is there too, not on the prediction alone (the soil's load slows the cylinders "
-                                 "below the controller's model): deeper, fuller cuts, longer passes")
+    dig_measured: bool = setting(False, doc="the excavate's approach, penetrate and drag are reached only once the "
+                                 "measured arm is there too, not on the prediction alone (the swing still lags at the "
+                                 "approach; the soil's load slows the cylinders below the controller's model): the "
+                                 "edge enters where planned and cuts to depth, the passes take longer")
 
 
 def planner_config_path(kind: str) -> Path:
@@ -332,7 +333,7 @@ class ArmPlanner:
             [] if cfg.curl_during_lift else [self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=dig)]
         )
         return [
-            JointTarget(q_above, "approach"),
+            JointTarget(q_above, "approach", measured=in_soil),
             self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig, measured=in_soil),
             self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=dig, measured=in_soil),
             *curl,
