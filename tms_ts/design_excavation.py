@@ -97,7 +97,8 @@ class DesignExcavation:
         settings = settings or PlannerSettings(level_sweep=True, fill=plan.dump is None)
         try:
             self.planner = PassPlanner(machine, settings)
-            self.penetrate_depth = float(load_planner_config(machine.kind).penetrate_depth)
+            arm = load_planner_config(machine.kind)
+            self.penetrate_depth, self.curl_carry = float(arm.penetrate_depth), float(arm.curl_carry)
         except TmsError as exc:
             raise DesignError(f"{self.who}: machine {getattr(machine, 'kind', machine)!r} cannot excavate it: "
                               f"{exc}") from None
@@ -156,8 +157,11 @@ class DesignExcavation:
     def _goals(self, cut: Pass, terrain: GridLike) -> tuple[tuple[str, Any], ...]:
         p = self.plan
         sx, sy, sz = to_base(self.base, *cut.start)
+        # the curl and lift goes on cutting past the drag's end: drag that much shorter (at most half the pass), so a
+        # band that ends at the design's wall is not carried into the apron beyond it
+        drag = max(cut.length - self.curl_carry, 0.5 * cut.length)
         excavate = ExcavatePlan({"x": sx, "y": sy, "z": sz + self.penetrate_depth, "theta_w": p.theta_w,
-                                 "offset": cut.length})
+                                 "offset": drag})
         if p.dump is not None:
             dx, dy = float(p.dump["x"]), float(p.dump["y"])
             dz = float(p.dump.get("z", cut.dump[2]))

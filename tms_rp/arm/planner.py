@@ -53,6 +53,9 @@ class PlannerConfig:
     limit_margin: float = 0.005
     dig_joint_margin: float = 0.06
     continue_window_rad: float = 0.5
+    curl_carry: float = setting(0.0, lo=0.0, doc="[m] how far past the drag's end the curl and lift still carries the "
+                                "edge through the soil (measured: the design subtask ends its drags this much short "
+                                "of a wall)")
     dig_measured: bool = setting(False, doc="the excavate's approach, penetrate and drag are reached only once the "
                                  "measured arm is there too, not on the prediction alone (the swing still lags at the "
                                  "approach; the soil's load slows the cylinders below the controller's model): the "
