@@ -18,7 +18,8 @@ class JointTarget:
     speed_scale: float = 1.0
     via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
     # reached only once the measured arm is within tolerance too, not the prediction alone (a via point otherwise
-    # passes on the prediction): a segment in the soil, whose load slows the cylinders below the predictor's model
+    # passes on it): an excavate's approach (the swing lags) and its segments in the soil (the load slows the
+    # cylinders below the predictor's model)
     measured: bool = False
 
 
@@ -32,7 +33,8 @@ class CartesianTarget:
     speed_scale: float = 1.0
     via: bool = False  # pass-through point: via_tolerance_* even when it is the last segment of the run
     # reached only once the measured arm is within tolerance too, not the prediction alone (a via point otherwise
-    # passes on the prediction): a segment in the soil, whose load slows the cylinders below the predictor's model
+    # passes on it): an excavate's approach (the swing lags) and its segments in the soil (the load slows the
+    # cylinders below the predictor's model)
     measured: bool = False
 
 

@@ -837,7 +837,7 @@ class ArmController:
             joint_err = [self._joint_delta(x, spline.p1) for x in (q, qp)]
             tip_err = [self.status.distance_remaining, float(np.linalg.norm(tip_goal - self.kin.tip_position(qp)))]
             # A via point is passed on the prediction alone (the next segment's spline starts from it), unless it
-            # asks for the measurement too (a segment in the soil).
+            # asks for the measurement too (target.measured).
             checked = slice(1, 2) if via and not target.measured else slice(0, 2)
             reached = (max(float(np.max(np.abs(e))) for e in joint_err[checked]) < tol_rad
                        and max(tip_err[checked]) < tol_m)
@@ -876,8 +876,8 @@ class ArmController:
             # operator lifts out of a cut that stalls; the next segment starts from where the arm is.
             # Counted only once the commands in flight have acted (the swing's dead time and lag are ~1.9 s: a short
             # swing's profile ends before its measured tip has begun to move).
-            # A segment reached on the measurement (in the soil) creeps in slowly under load: it stalls only once the
-            # joints stand (the soil holds them), not while they still move.
+            # A segment reached on the measurement creeps in slowly (in the soil, under load): it stalls only once the
+            # joints stand, not while they still move.
             left = self.status.distance_remaining
             if (left < self._stall_best - cfg.via_stall_progress_m
                     or self._seg_time < spline.duration + self._in_flight_s

@@ -327,7 +327,7 @@ class ArmPlanner:
         th_curl = self.feasible_theta_w(dragged, cfg.curl_theta_w)
         th_lift = self.feasible_theta_w(lifted, th_curl)
         dig = cfg.dig_speed_scale
-        in_soil = cfg.dig_measured
+        measured = cfg.dig_measured  # approach, penetrate and drag reached on the measured arm too
         q_above = self.kin.ik_position_with_angle(above, th_above)  # reason names joint/distance
         # lift clear is a pass-through point: the carry (next goal) goes on from where the arm will be
         lift = self._cartesian(lifted, th_lift, "lift", label="curl and lift" if cfg.curl_during_lift else "lift",
@@ -336,9 +336,9 @@ class ArmPlanner:
             [] if cfg.curl_during_lift else [self._cartesian(dragged, th_curl, "curl", label="curl", speed_scale=dig)]
         )
         return [
-            JointTarget(q_above, "approach", measured=in_soil),
-            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig, measured=in_soil),
-            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=dig, measured=in_soil),
+            JointTarget(q_above, "approach", measured=measured),
+            self._cartesian(bottom, th_in, "penetrate", label="penetrate", speed_scale=dig, measured=measured),
+            self._cartesian(dragged, th_drag, "drag", label="drag", speed_scale=dig, measured=measured),
             *curl,
             lift,
         ]
