@@ -94,7 +94,10 @@ def ts_system(tmp_path, procs, ros_node):
         system.procs["manager"] = procs(
             [executable("tms_ts", "tms_ts_manager"), "--ros-args", *db_params,
              "-p", f"server_wait_s:={server_wait_s}", "-p", f"halt_timeout_s:={halt_timeout_s}",
-             "-p", "tick_rate_hz:=20.0", "-p", "status_rate_hz:=4.0", *manager_args], name="manager")
+             "-p", "tick_rate_hz:=20.0", "-p", "status_rate_hz:=4.0",
+             # as every launch file: the original's 1 s default tripped on a loaded 2-core CI machine ("did not
+             # accept the goal ... within 1 s" for a server that accepted it)
+             "-p", "accept_timeout_s:=5.0", *manager_args], name="manager")
         for name, text in (("stub", "planning stub ready"), ("zx200", "subtask servers"),
                            ("ic120", "subtask servers"), ("manager", "tms_ts_manager ready")):
             assert system.procs[name].wait_for(text, 60), f"{name} did not start:\n{system.procs[name].output}"
