@@ -233,10 +233,22 @@ class Probe:
 
     # -- commands / queries --------------------------------------------------------------------------
     def start(self, *task_ids: int) -> None:
+        self._matched(self.start_pub, "/tms_ts/start")
         self.start_pub.publish(self._TaskIds(task_ids=list(task_ids)))
 
     def cancel(self, task_id: int) -> None:
+        self._matched(self.cancel_pub, "/tms_ts/cancel")
         self.cancel_pub.publish(self._Int32(data=task_id))
+
+    @staticmethod
+    def _matched(pub, topic: str, timeout: float = 60.0) -> None:
+        """Wait until this publisher has matched the manager's subscription: a message published before is lost
+        (a rehearsal's partition test saw the servers on the graph, published the start, and no task ever ran)."""
+        end = time.monotonic() + timeout
+        while pub.get_subscription_count() == 0:
+            if time.monotonic() > end:
+                raise AssertionError(f"no subscriber of {topic} matched this test's publisher within {timeout:g} s")
+            time.sleep(0.05)
 
     def task(self, task_id: int) -> tuple[int, str] | None:
         with self._lock:
