@@ -181,3 +181,20 @@ class Proc:
                 self.signal(signal.SIGKILL)
                 self.wait(3.0)
         self._thread.join(timeout=1.0)
+
+
+def start_private_plant(procs, domain: int, config: str | Path, speed: float = 1.0, group: int = 77) -> dict:
+    """sim_plant on ``config`` (its zx200 and ic120) on CAN buses of their own: udp_multicast groups
+    ``239.<group>.x.y`` picked at random and ports no socket holds (:func:`free_can_ports`), so tests running
+    beside each other never share a bus. Returns ``{machine: {"channel", "port"}}`` once the plant runs."""
+    rng = random.Random(domain * 7919 + time.monotonic_ns())
+    ports = free_can_ports(domain, 2, rng)
+    buses = {m: {"channel": f"239.{group}.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", "port": p}
+             for m, p in zip(("zx200", "ic120"), ports, strict=True)}
+    args = [executable("sim_bridge", "sim_plant"), "--ros-args", "-p", f"config:={config}", "-p", f"speed:={speed}"]
+    for m, b in buses.items():
+        args += ["-p", f"{m}_can_interface:=udp_multicast", "-p", f"{m}_can_channel:={b['channel']}",
+                 "-p", f"{m}_can_port:={b['port']}"]
+    plant = procs(args, name="sim_plant")
+    assert plant.wait_for("sim_plant: running", 60), plant.output
+    return buses

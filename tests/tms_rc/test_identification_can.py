@@ -6,14 +6,11 @@ The test may read the plant's description (the identification and the controller
 
 from __future__ import annotations
 
-import random
-import time
-
 import pytest
 import yaml
 
 from sim_bridge.config import load_plant
-from tests.rosproc import executable, free_can_ports
+from tests.rosproc import executable, start_private_plant
 from tms_common.config import config_path
 
 pytestmark = pytest.mark.integration
@@ -22,19 +19,9 @@ JOINT = "bucket_joint"
 
 
 def test_a_short_identification_of_the_bucket_over_can_finds_the_plants_dead_time_and_lag(procs, domain, tmp_path):
-    rng = random.Random(domain * 7919 + time.monotonic_ns())
-    ports = free_can_ports(domain, 2, rng)
-    buses = {m: {"channel": f"239.77.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", "port": p}
-             for m, p in zip(("zx200", "ic120"), ports, strict=True)}
     # the paper plant starts the front in the air (plant.yaml's home pose has the bucket in the mound, where the
     # soil's cutting resistance would enter the figures)
-    args = [executable("sim_bridge", "sim_plant"), "--ros-args", "-p",
-            f"config:={config_path('sim', 'paper_plant.yaml')}"]
-    for m, b in buses.items():
-        args += ["-p", f"{m}_can_interface:=udp_multicast", "-p", f"{m}_can_channel:={b['channel']}",
-                 "-p", f"{m}_can_port:={b['port']}"]
-    plant = procs(args, name="sim_plant")
-    assert plant.wait_for("sim_plant: running", 60), plant.output
+    buses = start_private_plant(procs, domain, config_path('sim', 'paper_plant.yaml'), speed=1.0, group=77)
     out = tmp_path / "zx200.yaml"
     ident = procs([executable("tms_rc", "tms_rc_identify"), "--machine", "zx200", "--can-interface", "udp_multicast",
                    "--can-channel", buses["zx200"]["channel"], "--can-port", str(buses["zx200"]["port"]),

@@ -14,7 +14,6 @@ import dataclasses
 import math
 import random
 import re
-import time
 from importlib import resources
 from pathlib import Path
 from types import SimpleNamespace
@@ -210,23 +209,13 @@ LEVELS = 3
 @pytest.mark.integration
 def test_one_direction_identified_over_can_agrees_with_the_in_process_identification(procs, domain, tmp_path):
     from tests.bench.bench_piston import PlantRig
-    from tests.rosproc import executable, free_can_ports
+    from tests.rosproc import executable, start_private_plant
     from tms_common.config import config_path
     from tms_rc.piston_lut import identify_direction
 
-    rng = random.Random(domain * 7919 + time.monotonic_ns())
-    ports = free_can_ports(domain, 2, rng)
-    buses = {m: {"channel": f"239.78.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", "port": p}
-             for m, p in zip(("zx200", "ic120"), ports, strict=True)}
     # the paper plant starts the front in the air (plant.yaml's home pose has the bucket in the mound); at twice real
     # time the over-CAN run of one direction (~60 s simulated) stays near 30 s wall
-    args = [executable("sim_bridge", "sim_plant"), "--ros-args", "-p",
-            f"config:={config_path('sim', 'paper_plant.yaml')}", "-p", "speed:=2.0"]
-    for m, b in buses.items():
-        args += ["-p", f"{m}_can_interface:=udp_multicast", "-p", f"{m}_can_channel:={b['channel']}",
-                 "-p", f"{m}_can_port:={b['port']}"]
-    plant = procs(args, name="sim_plant")
-    assert plant.wait_for("sim_plant: running", 60), plant.output
+    buses = start_private_plant(procs, domain, config_path('sim', 'paper_plant.yaml'), speed=2.0, group=78)
     out = tmp_path / "lut.yaml"
     ident = procs([executable("tms_rc", "tms_rc_identify_pistons"), "--machine", "zx200", "--can-interface",
                    "udp_multicast", "--can-channel", buses["zx200"]["channel"], "--can-port",
