@@ -20,7 +20,7 @@ test: setup vm-setup
 bench: setup
 	scripts/isolated.sh $(PY) -m tests.bench $(BENCH_ARGS)
 
-# SCENARIO=paper (default), fleet or design picks the seed and launch file (scripts/demo.sh); DEMO_LAUNCH replaces the launch file
+# SCENARIO=paper (default), fleet, design or embankment picks the seed and launch file (scripts/demo.sh); DEMO_LAUNCH replaces the launch file
 DEMO_LAUNCH ?=
 demo: setup
 	SCENARIO=$(or $(SCENARIO),paper) scripts/isolated.sh scripts/demo.sh $(DEMO_LAUNCH) $(DEMO_ARGS)

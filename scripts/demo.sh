@@ -11,6 +11,9 @@
 #                             and tests/bench/bench_design_trench.py --report then writes the surface error against
 #                             the design (truth and sensed) to design.json and design_error.png (figures:
 #                             tms_rp/excavation/README.md)
+#   SCENARIO=embankment:      as design, on config/seeds/design_embankment.yaml (task 36: the ZX200 cuts a two-faced
+#                             embankment out of a soil pile), the same launch file with the pile's plant
+#                             (config/sim/design_embankment_plant.yaml)
 #   RECORD=0:                 no recording (and no replay page)
 # A first argument (a launch file) replaces the scenario's launch file.
 set -euo pipefail
@@ -20,8 +23,11 @@ case "$SCENARIO" in
   paper) DEFAULT_LAUNCH=config/launch/paper_experiment.yaml ;;
   fleet) DEFAULT_LAUNCH=config/launch/fleet.yaml ;;
   design) DEFAULT_LAUNCH=config/launch/design_trench.yaml; SEED=design_trench ;;
-  *) echo "demo.sh: unknown SCENARIO=$SCENARIO (paper, fleet or design)" >&2; exit 2 ;;
+  embankment) DEFAULT_LAUNCH=config/launch/design_trench.yaml; SEED=design_embankment ;;
+  *) echo "demo.sh: unknown SCENARIO=$SCENARIO (paper, fleet, design or embankment)" >&2; exit 2 ;;
 esac
+DESIGN=0
+case "$SCENARIO" in design|embankment) DESIGN=1 ;; esac
 SEED=${SEED:-$SCENARIO}
 LAUNCH=${1:-$DEFAULT_LAUNCH}
 shift || true
@@ -39,11 +45,14 @@ fi
 if [ "${RECORD:-1}" != 0 ]; then
   ARGS+=(--record "$RUN_DIR/bag")
 fi
-if [ "$SCENARIO" = design ]; then
+if [ "$DESIGN" = 1 ]; then
   ARGS+=(--param "sim_plant:heights_npz=$RUN_DIR/heights.npz")
 fi
+if [ "$SCENARIO" = embankment ]; then
+  ARGS+=(--param "sim_plant:config=config/sim/design_embankment_plant.yaml" --param "tms_ur_experiment:task_ids=[36]")
+fi
 set +e
-if [ "$SCENARIO" = design ]; then
+if [ "$DESIGN" = 1 ]; then
   # the task's end message (its pass count) is in the launch's output only: kept for the design figures
   .venv/bin/tms-launch "$LAUNCH" "${ARGS[@]}" "$@" 2>&1 | tee "$RUN_DIR/launch.log"
   rc=${PIPESTATUS[0]}
@@ -55,8 +64,8 @@ set -e
 if [ "${RECORD:-1}" != 0 ] && [ -f "$RUN_DIR/bag/metadata.yaml" ]; then
   .venv/bin/python -m tms_ur.replay_page "$RUN_DIR" || echo "demo.sh: no replay page (see above)" >&2
 fi
-if [ "$SCENARIO" = design ]; then
-  .venv/bin/python -m tests.bench.bench_design_trench --report "$RUN_DIR" || echo "demo.sh: no design figures (see above)" >&2
+if [ "$DESIGN" = 1 ]; then
+  .venv/bin/python -m tests.bench.bench_design_trench --report "$RUN_DIR" --seed "$SEED" || echo "demo.sh: no design figures (see above)" >&2
 fi
 echo "demo.sh: run directory $RUN_DIR"
 exit $rc

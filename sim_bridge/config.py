@@ -21,7 +21,7 @@ from sim_bridge.errors import SimConfigError
 from sim_bridge.physics import PhysicsSpec
 from sim_bridge.profiles import PLANT_PROFILES
 from sim_bridge.soil_force import SoilParams, load_soil_types
-from sim_bridge.spec import FineGrid, PlantMachine, PlantSpec, SensorSpec, SoilSpec, fine_grid_problem
+from sim_bridge.spec import FineGrid, Pile, PlantMachine, PlantSpec, SensorSpec, SoilSpec, fine_grid_problem
 from tms_common.config import config_path, load_yaml
 from tms_common.errors import ConfigError
 from tms_common.schema import Reader, load_schema, read_schema, setting
@@ -70,6 +70,8 @@ class _Soil:
     penetration: bool = False
     penetration_breadth_m: float = setting(0.3, lo=0.02, hi=2.0, doc="[m] the pressed bucket's contact along its "
                                            "motion (edge plate and front of the floor); its length is the edge's width")
+    #: soil piles on the ground at the start besides the site's mound ([{x, y, base_radius, top_radius, height}])
+    piles: tuple[Pile, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -170,6 +172,7 @@ def _soil(soil: _Soil, site: Site) -> SoilSpec:
         dump_radius=soil.dump_radius, mound_region_margin=soil.mound_region_margin,
         loose_density=soil.density,
         cutting=cutting, fine=g.fine, penetration=soil.penetration, penetration_breadth=soil.penetration_breadth_m,
+        piles=soil.piles,
     )
 
 

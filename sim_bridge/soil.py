@@ -29,15 +29,22 @@ from sim_bridge.spec import SoilSpec
 __all__ = ["HeightField", "SoilState"]
 
 
+def _cone(h: np.ndarray, r: np.ndarray, base: float, top: float, height: float) -> np.ndarray:
+    """``h`` raised to a truncated cone of ``height`` (radius ``base`` at the ground, ``top`` flat) at distances
+    ``r``."""
+    if height <= 0 or base <= 0:
+        return h
+    return np.maximum(h, height * np.clip((base - r) / max(base - top, 1e-9), 0.0, 1.0))
+
+
 def _mound_heights(spec: SoilSpec, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """Initial ground heights at the cell centres ``xs`` (cols) x ``ys`` (rows): flat ground and the mound."""
+    """Initial ground heights at the cell centres ``xs`` (cols) x ``ys`` (rows): flat ground, the mound and the
+    piles (where they overlap, the higher)."""
     gx, gy = np.meshgrid(xs, ys)
     r = np.hypot(gx - spec.mound_center[0], gy - spec.mound_center[1])
-    h = np.zeros_like(r)
-    if spec.mound_height > 0 and spec.mound_base_radius > 0:
-        rb, rt = spec.mound_base_radius, spec.mound_top_radius
-        slope_part = np.clip((rb - r) / max(rb - rt, 1e-9), 0.0, 1.0)
-        h = spec.mound_height * slope_part
+    h = _cone(np.zeros_like(r), r, spec.mound_base_radius, spec.mound_top_radius, spec.mound_height)
+    for pile in spec.piles:
+        h = _cone(h, np.hypot(gx - pile.x, gy - pile.y), pile.base_radius, pile.top_radius, pile.height)
     return spec.ground_z + h
 
 

@@ -43,6 +43,22 @@ class PlantMachine:
 
 
 @dataclass(frozen=True)
+class Pile:
+    """A soil pile on the flat ground at the start (the plant YAML's ``soil.piles``): a truncated cone, as the
+    site's mound, for scenarios that shape soil already there (an embankment cut from a pile)."""
+
+    x: float
+    y: float
+    base_radius: float = setting(lo=0.05, doc="[m] at ground level")
+    top_radius: float = setting(lo=0.0, doc="[m] flat top; 0 = a cone")
+    height: float = setting(lo=0.0, doc="[m] above the ground")
+
+    def __post_init__(self) -> None:
+        if self.top_radius >= self.base_radius:
+            raise ValueError(f"top_radius {self.top_radius} must be below base_radius {self.base_radius}")
+
+
+@dataclass(frozen=True)
 class FineGrid:
     """A finer patch of the soil grid where the tool works (the plant YAML's ``soil.grid.fine``).
 
@@ -112,6 +128,8 @@ class SoilSpec:
     #: [m] the pressed bucket's contact along its motion (breadth B of the bearing capacity; its length is the
     #: cutting edge's width): the edge plate and the front of the floor behind it
     penetration_breadth: float = 0.3
+    #: soil piles on the ground at the start besides the mound (the plant YAML's ``soil.piles``)
+    piles: tuple[Pile, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@
       param get RECORD [--model-name M]
       param set RECORD FIELD=VALUE... [--model-name M] [--upsert]   (VALUE parsed as JSON: true, 3, 1.5, "s")
       dump DIR | restore DIR [--drop] (MongoDB Extended JSON, one document per line; mongoimport reads it)
-      seed paper|fleet|original_202412|design_trench [--file config/seeds/<name>.yaml]
+      seed paper|fleet|original_202412|design_trench|design_embankment [--file config/seeds/<name>.yaml]
       design put FILE.yaml            (one design document or {designs: [...]}, checked by Design.from_dict)
       design list | design show NAME  (the newest stored version; collection ``design``, tms_db.design)
       check                           (the store's consistency check)
@@ -278,7 +278,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("dir")
     r.add_argument("--drop", action="store_true", help="empty each restored collection first")
     s = sub.add_parser("seed", help="load a named seed")
-    s.add_argument("name", choices=["paper", "fleet", "original_202412", "design_trench"])
+    s.add_argument("name", choices=["paper", "fleet", "original_202412", "design_trench",
+                                                "design_embankment"])
     s.add_argument("--file", default=None, help="seed file (default config/seeds/<name>.yaml)")
     sub.add_parser("check", help="run the store's consistency check")
 

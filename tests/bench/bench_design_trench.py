@@ -1,11 +1,14 @@
-"""Excavation to a design surface on the MuJoCo plant over CAN: the trench of task 35 (issue 35).
+"""Excavation to a design surface on the MuJoCo plant over CAN: the trench of task 35, the embankment of task 36
+(issue 35).
 
-``python -m tests.bench design_trench`` runs ``SCENARIO=design scripts/demo.sh`` (config/launch/design_trench.yaml:
+``python -m tests.bench design_trench`` runs ``SCENARIO=design scripts/demo.sh`` (``SCENARIO=embankment`` in the
+environment: the embankment) (config/launch/design_trench.yaml:
 plant, the ZX200's converter, arm controller and planner, dynamic terrain, subtask server, manager, supervisor; a
 full run of ~30 passes, 10-20 min of wall time on 2 cores), which ends by calling this module with ``--report``.
 
-``python -m tests.bench.bench_design_trench --report RUN_DIR [--db PATH]`` judges a finished run: the design and
-the record of the seed (``config/seeds/design_trench.yaml``, the parameter that names a ``design``) from the run's
+``python -m tests.bench.bench_design_trench --report RUN_DIR [--db PATH] [--seed NAME]`` judges a finished run: the
+design and the record of the seed (``config/seeds/design_trench.yaml``, or ``design_embankment`` for
+``SCENARIO=embankment``; the parameter that names a ``design``) from the run's
 store (``TMS_DB_PATH`` or ``--db``), the plant's true height field (``RUN_DIR/heights.npz``) and the newest sensed
 dynamic heightmap against the design (:mod:`tms_rp.excavation.evaluation`), the task's end and times from the
 supervisor's ``metrics.json``. Writes ``RUN_DIR/design.json`` and ``RUN_DIR/design_error.png`` (linked from the
@@ -119,9 +122,16 @@ def _dynamic_maps(store: Any, ident: int) -> list:
             if "offset_z" in doc]
 
 
-def report(run_dir: Path, db: str | None) -> dict[str, Any]:
+def _area_volume(grid: Any, design: Design, *, target: bool = False) -> float:
+    """[m^3] above z = 0 over the design's area on ``grid``: its surface, or the design's (``target``)."""
+    sample = design.sample(grid)
+    z = sample.target if target else np.asarray(grid.z, float)
+    return float(np.sum(z[sample.inside]) * sample.cell_area)
+
+
+def report(run_dir: Path, db: str | None, seed: str = SEED) -> dict[str, Any]:
     root = repo_root()
-    job = _job(root / "config" / "seeds" / f"{SEED}.yaml")
+    job = _job(root / "config" / "seeds" / f"{seed}.yaml")
     store = open_store(path=db or os.environ.get("TMS_DB_PATH"))
     design = Design.from_dict(get_design(store, str(job["design"])))
     ground = float(job.get("base_z", 0.0))
@@ -146,7 +156,14 @@ def report(run_dir: Path, db: str | None) -> dict[str, Any]:
                                                              y_min=truth.y_min, x_max=truth.x_max,
                                                              y_max=truth.y_max), design, ground),
     }
-    out["execution"] = pass_execution(job, design, _dynamic_maps(store, int(job.get("terrain_id", DYNAMIC_ID))))
+    maps = _dynamic_maps(store, int(job.get("terrain_id", DYNAMIC_ID)))
+    if maps:
+        # net volumes over the area against the first sensed heightmap (the ground before the first pass): what the
+        # run took out of it and what the design asks to take out (a pile's design too, where the area was not flat)
+        first = maps[0]
+        out["removed_from_area_m3"] = _area_volume(first, design) - _area_volume(truth, design)
+        out["design_removal_m3"] = _area_volume(first, design) - _area_volume(first, design, target=True)
+    out["execution"] = pass_execution(job, design, maps)
     for key in ("sim_time_s", "wall_time_s", "real_time_factor", "ended"):
         if key in metrics:
             out[key] = metrics[key]
@@ -171,9 +188,13 @@ def report(run_dir: Path, db: str | None) -> dict[str, Any]:
               f"planned, the band {ex['above_planned_cm']['mean']:+.1f} cm above the planned edge height (p10 "
               f"{ex['above_planned_cm']['p10']:+.1f}, p90 {ex['above_planned_cm']['p90']:+.1f}); by place along the "
               f"drag {ex['by_along_cm']}; across [m] {ex['by_across_m_cm']}")
-    print(f"passes {out['passes']}, planned {out['planned_volume_m3']} m3, dug out of the area (truth) "
-          f"{out['excavated_from_area_m3_truth']:.3f} m3 of the design's {out['design_volume_m3']:.3f} m3; task "
-          f"{state}; {run_dir / 'design.json'}, {png}")
+    if "removed_from_area_m3" in out:
+        print(f"net out of the area since the first heightmap: {out['removed_from_area_m3']:.3f} m3 of the design's "
+              f"{out['design_removal_m3']:.3f} m3")
+    below = (f", dug below the ground out of the area (truth) {out['excavated_from_area_m3_truth']:.3f} m3 of the "
+             f"design's {out['design_volume_m3']:.3f} m3" if out["design_volume_m3"] > 0 else "")
+    print(f"passes {out['passes']}, planned {out['planned_volume_m3']} m3{below}; task {state}; "
+          f"{run_dir / 'design.json'}, {png}")
     return out
 
 
@@ -181,7 +202,10 @@ def main() -> None:
     """The full run (demo.sh, which then writes the report through ``--report``)."""
     root = repo_root()
     run_dir = root / "runs" / f"bench-design-{time.strftime('%Y%m%d-%H%M%S')}"
-    env = dict(os.environ, SCENARIO="design", RECORD="0", RUN_DIR=str(run_dir))
+    scenario = os.environ.get("SCENARIO", "design")  # or embankment (task 36)
+    if scenario not in ("design", "embankment"):
+        raise SystemExit(f"SCENARIO={scenario}: this bench runs design or embankment")
+    env = dict(os.environ, SCENARIO=scenario, RECORD="0", RUN_DIR=str(run_dir))
     start = time.monotonic()
     rc = subprocess.run([str(root / "scripts" / "demo.sh")], cwd=root, env=env, check=False).returncode
     print(f"design run: exit {rc} after {time.monotonic() - start:.0f} s wall; {run_dir}")
@@ -193,9 +217,10 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--report", metavar="RUN_DIR", type=Path, help="judge a finished run")
     parser.add_argument("--db", help="the run's embedded store (default TMS_DB_PATH)")
+    parser.add_argument("--seed", default=SEED, help=f"the run's seed under config/seeds (default {SEED})")
     args = parser.parse_args()
     if args.report is None:
         main()
     else:
-        report(args.report, args.db)
+        report(args.report, args.db, args.seed)
     sys.exit(0)

@@ -1,5 +1,5 @@
-"""The design_trench seed (config/seeds/design_trench.yaml): its design goes into the store's collection ``design``
-beside its task and record; a seed with a bad design stores nothing (both backends)."""
+"""The design seeds (config/seeds/design_trench.yaml, design_embankment.yaml): each design goes into the store's
+collection ``design`` beside its task and record; a seed with a bad design stores nothing (both backends)."""
 
 from __future__ import annotations
 
@@ -22,6 +22,14 @@ def test_the_design_trench_seed_puts_its_design(store: Store) -> None:
     assert design.kind == "trench" and design.params["depth"] == 0.5 and design.params["width"] == 1.0
     seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")  # idempotent: no second version
     assert len(store.find_data(DESIGN_COLLECTION, 3040, name=job["design"])) == 1
+
+
+def test_the_design_embankment_seed_puts_its_design(store: Store) -> None:
+    assert seed(store, ROOT / "config" / "seeds" / "design_embankment.yaml") == (1, 2)
+    job = store.get_parameter("zx200", "design_embankment_job")
+    design = Design.from_dict(get_design(store, job["design"]))
+    assert design.kind == "embankment" and (design.params["height"], design.params["crest_width"]) == (0.4, 1.0)
+    assert 'record_name="design_embankment_job"' in store.get_task(36)["task_sequence"]
 
 
 def test_a_seed_with_a_bad_design_stores_nothing(store: Store, tmp_path: Path) -> None:

@@ -256,3 +256,58 @@ def test_the_tree_runs_the_row_on_the_seed_record() -> None:
     xml = (ROOT / "trees" / "design_trench.xml").read_text()
     assert f'subtask_name="{ROW.name}"' in xml and 'record_name="design_trench_job"' in xml
     assert Path(SEED).is_file()
+
+
+# ---- the embankment seed (config/seeds/design_embankment.yaml) on its plant's pile ----------------------------------
+EMBANKMENT_SEED = ROOT / "config" / "seeds" / "design_embankment.yaml"
+
+
+def _sweep(grid: Grid, cut: object, width: float) -> None:
+    """The excavate goal on an ideal machine: the bucket-wide band from the pass's start over its length, down to
+    the start's edge height (the arm drags the edge level; the pass's planned cells are not used)."""
+    xc, yc = cell_centres(grid)
+    u = np.array(cut.direction)
+    along = (xc - cut.start[0]) * u[0] + (yc - cut.start[1]) * u[1]
+    across = -(xc - cut.start[0]) * u[1] + (yc - cut.start[1]) * u[0]
+    band = (along >= 0) & (along <= cut.length) & (np.abs(across) <= width / 2)
+    grid.z[band] = np.minimum(grid.z[band], cut.start[2])
+
+
+def test_the_seed_embankment_is_cut_out_of_the_plants_pile_by_level_sweeps() -> None:
+    """The pile of config/sim/design_embankment_plant.yaml (the plant's own initial heights, 0.05 m) covers the
+    embankment's body, so cutting alone makes it; the subtask's passes, carried out as level sweeps by an ideal
+    machine, end with the planner's own stop well inside the seed's max_passes and a few centimetres of MAE (what
+    level radial drags leave on the faces; the plant run's figures: tms_rp/excavation/README.md)."""
+    from sim_bridge.config import load_plant
+    from sim_bridge.soil import HeightField
+
+    data, _ = load_yaml(EMBANKMENT_SEED)
+    job = next(p for p in data["parameters"] if p["record_name"] == "design_embankment_job")
+    doc = next(d for d in data["designs"] if d["name"] == job["design"])
+    design = Design.from_dict(doc)
+    assert design.kind == "embankment" and job["base_z"] == 0.0
+    field = HeightField(load_plant(ROOT / "config" / "sim" / "design_embankment_plant.yaml").soil)
+    f = field.fine
+    grid = Grid(z=np.flipud(f.h).copy(), x_min=f.x0, y_min=f.y0, x_max=f.x1, y_max=f.y1)  # row 0 = north
+    sampled = design.sample(grid)
+    assert np.all(grid.z[sampled.inside] >= sampled.target[sampled.inside] - 1e-9)  # nothing to fill
+    assert design.contains(np.array([job["dump_x"]]), np.array([job["dump_y"]])).sum() == 0
+    run = DesignExcavation(build_excavate_design(job, "design_embankment_job"), MACHINE)
+    start = None
+    while True:
+        step = run.step(doc, grid)
+        if isinstance(step, Done):
+            break
+        start = start or step.error
+        _sweep(grid, step.cut, run.planner.bucket_width)
+    assert not step.ok and "nothing reachable worth a pass" in step.message, step.message
+    print(f"\nembankment seed, ideal level sweeps: {run.summary()}; start MAE {start.mae * 100:.1f} cm; {step.message}")
+    assert run.passes < job["max_passes"]
+    assert start.mae > 0.1 and step.error.mae < 0.06 and step.error.fill_volume == 0.0
+
+
+def test_the_embankment_tree_runs_the_row_on_its_seed_record() -> None:
+    xml = (ROOT / "trees" / "design_embankment.xml").read_text()
+    assert f'subtask_name="{ROW.name}"' in xml and 'record_name="design_embankment_job"' in xml
+    data, _ = load_yaml(EMBANKMENT_SEED)
+    assert [t["file"] for t in data["tasks"]] == ["trees/design_embankment.xml"]
