@@ -243,10 +243,10 @@ class Recording:
 
 
 class Experiment:
-    def __init__(self, link: Link, machine: Machine, log: Callable[[str], None]) -> None:
+    def __init__(self, link: Link, machine: Machine, log: Callable[[str], None], wait_s: float = 30.0) -> None:
         self.link = link
         self.log = log
-        self.link.wait_tick(30.0)
+        self.link.wait_tick(wait_s)
         assert link.q is not None
         self.start_q = link.q.copy()
         self.plans: dict[str, JointPlan] = {}
@@ -570,6 +570,8 @@ def _args(argv: Sequence[str] | None) -> argparse.Namespace:
                     help="step amplitudes, fractions of each joint's velocity limit")
     ap.add_argument("--chirp-s", type=float, default=25.0, help="chirp duration [s] per joint (0: no chirp)")
     ap.add_argument("--no-pump", action="store_true", help="skip the boom+arm+bucket pump saturation run")
+    ap.add_argument("--wait-s", type=float, default=30.0,
+                    help="[s] longest wait for the plant's first state frame (a plant still starting)")
     ap.add_argument("--output", type=Path, help="default config/tms_rc/identified/<machine>.yaml")
     return ap.parse_args(argv)
 
@@ -592,7 +594,8 @@ def _terminate(_signum: int, _frame: Any) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """The command line; a bad file or option stops it with one line (``file:line: key: problem``), exit code 2."""
+    """The command line; a bad file or option stops it with one line (``file:line: key: problem``), exit code 2; a
+    plant that sends nothing, a plant that does not start or a CAN bus that cannot be opened, one line, exit code 1."""
     signal.signal(signal.SIGTERM, _terminate)
     args = _args(argv)
     try:
@@ -600,6 +603,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"tms_rc_identify: {exc}", file=sys.stderr, flush=True)
         return 2
+    except (TimeoutError, RuntimeError, can.CanError, OSError) as exc:
+        print(f"tms_rc_identify: {exc}", file=sys.stderr, flush=True)
+        return 1
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
@@ -630,7 +636,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             bus = real_bus
         link = Link(codec, bus)
         stack.callback(link.close)
-        exp = Experiment(link, machine, log)
+        exp = Experiment(link, machine, log, args.wait_s)
         log(f"{args.machine}: start pose {np.round(exp.start_q, 3).tolist()} ({list(JOINTS)})")
         estimates: dict[str, JointEstimate] = {}
         flows: dict[str, tuple[float, float]] = {}

@@ -33,6 +33,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import can
 import numpy as np
 
 from tms_common.errors import ConfigError
@@ -266,7 +267,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"tms_rc_identify_pistons: {exc}", file=sys.stderr, flush=True)
         return 2
-    except (TimeoutError, RuntimeError) as exc:
+    except (TimeoutError, RuntimeError, can.CanError, OSError) as exc:
         print(f"tms_rc_identify_pistons: {exc}", file=sys.stderr, flush=True)
         return 1
 

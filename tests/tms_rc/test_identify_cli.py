@@ -4,6 +4,7 @@ naming the file and line, exit code 2 (no bus is opened, no plant started)."""
 
 from __future__ import annotations
 
+import random
 import re
 from pathlib import Path
 
@@ -69,3 +70,16 @@ def test_a_plant_file_without_the_machine_names_its_line(tmp_path: Path,
     plant.write_text("step_s: 0.01\nmachines: {ic120: machines/ic120.yaml}\n")
     assert identify.main(["--machine", "zx200", "--plant-config", str(plant)]) == 2
     assert re.search(r"plant\.yaml:2: machines: no machine 'zx200'", _one_error_line(capsys))
+
+
+def test_a_plant_that_sends_nothing_stops_it_with_one_line_naming_the_bus(capsys: pytest.CaptureFixture[str],
+                                                                         tmp_path: Path) -> None:
+    """No plant on the bus (a python-can virtual channel nobody else uses): one line naming the frame it waited for
+    and the bus, exit code 1, nothing written."""
+    channel = f"silent_{random.randrange(1 << 30)}"
+    out = tmp_path / "zx200.yaml"
+    assert identify.main(["--machine", "zx200", "--can-interface", "virtual", "--can-channel", channel,
+                          "--wait-s", "0.3", "--output", str(out)]) == 1
+    line = _one_error_line(capsys)
+    assert line.startswith("tms_rc_identify: no Front_Angular_Velocity frame within 0.3 s"), line
+    assert channel in line and not out.exists()
