@@ -1,8 +1,9 @@
 """Force-controlled pressing and digging through the ID hierarchy + piston force control
 (:class:`tms_rc.excavator.force_control.ForceLoop`) against the plant core in-process, ``soil.penetration: true``.
 
-``python -m tests.bench force_dig``: identifies the boom's, arm's and bucket's look-up tables on
-``config/sim/paper_plant.yaml`` as ``python -m tests.bench piston`` does (their cracks feed the dead-zone
+``python -m tests.bench force_dig``: reads the boom's, arm's and bucket's look-up tables identified over CAN
+(``config/tms_rc/identified/zx200_piston_lut.yaml``; ``PISTON_LUTS=in_process``: identified on
+``config/sim/paper_plant.yaml`` as ``python -m tests.bench piston`` does; their cracks feed the dead-zone
 compensation), starts the ZX200 over flat ground (:data:`tests.bench.bench_force_steps.FLAT_FRONT`), presses the
 edge down with the arm (as ``force_steps`` does) and hands the front to the loop at 100 Hz (the swing's pilot 0):
 
@@ -46,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tests.bench.bench_force_steps import FlatRig, press
-from tests.bench.bench_piston import PlantRig, identify
+from tests.bench.bench_piston import PlantRig, controller_luts
 from tms_model.excavator.kinematics import load_kinematics
 from tms_rc.excavator.admittance import AdmittanceDrag, load_force_control_settings
 from tms_rc.excavator.cut_force import CutForceDrag, CutForceSettings, load_cut_force_settings
@@ -573,10 +574,9 @@ def main() -> None:
         print(f"  AdmittanceDrag settings overridden by FORCE_DIG_ADMITTANCE: {override}")
     wall0 = time.monotonic()
     rig = PlantRig()
-    luts = {fn: identify(rig, fn, settings)[0] for fn in CYLINDER_FUNCTIONS}
+    luts, source = controller_luts(rig, CYLINDER_FUNCTIONS, settings)
     print(f"force-controlled pressing and digging in-process (MuJoCo plant core, config/sim/paper_plant.yaml, "
-          f"soil.penetration on, {settings.rate_hz:.0f} Hz; tables of {', '.join(luts)} identified in "
-          f"{time.monotonic() - wall0:.0f} s wall)")
+          f"soil.penetration on, {settings.rate_hz:.0f} Hz; tables of {', '.join(luts)} {source})")
     kin = load_kinematics()
     f_t = float(os.environ.get("FORCE_DIG_DRAG_FT", "0"))
     only_cut = os.environ.get("FORCE_DIG_ONLY", "") == "cut"  # the cut-force drags alone (a sweep)

@@ -1,8 +1,9 @@
 """Force steps of the arm and bucket cylinders with the bucket pressed on flat ground, with and without the soil's
 bearing (``soil.penetration``), against the plant core in-process.
 
-``python -m tests.bench force_steps``: identifies the arm's and the bucket's look-up tables on
-``config/sim/paper_plant.yaml`` as ``python -m tests.bench piston`` does (the dead-zone compensation of
+``python -m tests.bench force_steps``: reads the arm's and the bucket's look-up tables identified over CAN
+(``config/tms_rc/identified/zx200_piston_lut.yaml``; ``PISTON_LUTS=in_process``: identified on
+``config/sim/paper_plant.yaml`` as ``python -m tests.bench piston`` does; the dead-zone compensation of
 :class:`tms_rc.excavator.piston.PistonForceController` needs their crack pilots), then per function and case:
 
 * ``ON, flat ground``: the plant with ``soil.penetration: true``, the ZX200 swung a quarter turn away from the mound
@@ -30,7 +31,7 @@ import time
 from types import MappingProxyType
 
 from sim_bridge.plant import Plant
-from tests.bench.bench_piston import PlantRig, bury_bucket, force_steps, identify
+from tests.bench.bench_piston import PlantRig, bury_bucket, controller_luts, force_steps
 from tms_rc.excavator.piston import (
     CYLINDER_FUNCTIONS,
     PiGains,
@@ -113,8 +114,8 @@ def main() -> None:
     rig = PlantRig()
     print(f"force steps in-process (MuJoCo plant core, config/sim/paper_plant.yaml, {settings.rate_hz:.0f} Hz); "
           f"{HOLD_S:.0f} s each, steady-state error = mean of f_ref - f over the last {WINDOW_S:.0f} s")
-    luts = {fn: identify(rig, fn, settings)[0] for fn in functions}
-    print(f"  tables identified for {', '.join(functions)} ({time.monotonic() - wall0:.0f} s wall)")
+    luts, source = controller_luts(rig, functions, settings)
+    print(f"  tables of {', '.join(functions)} {source}")
     for fn in functions:
         print(f"{fn} cylinder:")
         for on, which in ((True, "force"), (True, "force_contact"), (False, "force_contact")):

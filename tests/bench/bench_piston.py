@@ -24,7 +24,7 @@ import numpy as np
 
 from sim_bridge.config import load_plant
 from sim_bridge.plant import Plant
-from tms_common.config import config_path
+from tms_common.config import config_path, repo_root
 from tms_model.excavator.kinematics import load_kinematics
 from tms_rc.excavator.piston import (
     CYLINDER_FUNCTIONS,
@@ -37,9 +37,11 @@ from tms_rc.excavator.piston import (
     cylinder_force,
     cylinder_of,
     extend_sign,
+    load_piston_luts,
     load_piston_settings,
     pilot_range,
     piston_length,
+    piston_lut_path,
     piston_stroke,
 )
 from tms_rc.piston_lut import LutRecord, identify_lut
@@ -149,6 +151,20 @@ def identify(rig: PlantRig, fn: str, settings: PistonControlSettings) -> tuple[P
         move_to(rig, "arm_joint", rig.start_length["arm_joint"])
     rec.sim_s = rig.plant.time - t0
     return lut, rec
+
+
+def controller_luts(rig: PlantRig, functions, settings: PistonControlSettings) -> tuple[dict[str, PistonLut], str]:
+    """The tables the force benches' controllers use, and where they came from: the ZX200's file identified over CAN
+    (``config/tms_rc/identified/zx200_piston_lut.yaml``, ``tms_rc_identify_pistons``), as a controller on the machine
+    would read it; ``PISTON_LUTS=in_process``: identified here on ``rig`` (:func:`identify`, the rig left where it
+    started)."""
+    if os.environ.get("PISTON_LUTS", "identified") == "in_process":
+        t0 = time.monotonic()
+        luts = {fn: identify(rig, fn, settings)[0] for fn in functions}
+        return luts, f"identified in-process on this plant ({time.monotonic() - t0:.0f} s wall)"
+    path = piston_lut_path(rig.zx.name)  # the name the plant gives the machine: its file, as its controller reads it
+    every = load_piston_luts(path=path)
+    return {fn: every[fn] for fn in functions}, f"read from {path.relative_to(repo_root())} (identified over CAN)"
 
 
 def move_to(rig: PlantRig, fn: str, goal: float, pilot: float = 1.5, tol: float = 0.03) -> None:
