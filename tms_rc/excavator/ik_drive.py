@@ -83,8 +83,9 @@ class IkDriveSettings:
     swing_deadband: float = 0.002
     #: the piston speed PI (``piston_control.yaml``'s ``velocity`` gains) on top of the table; off by default: the
     #: table alone gives the commanded speed within a few % after the valve's dead time, while the PI, integrating
-    #: the error through that dead time, overshoots it (boom ~1.4x) and breaks the predictor's model (bench
-    #: ik_plant: tip RMS 0.33 m with it, 0.07 m without). The position loop above removes the table's droop
+    #: the error through that dead time, overshoots it (boom ~1.4x) and breaks the predictor's model (a one-off
+    #: sweep on bench ik_plant's air case with IK Kp 0.8/s: tip RMS 0.33 m with it, 0.08 m without). The position
+    #: loop above removes the table's droop
     piston_feedback: bool = False
     #: with the identified delays: the joint-space Smith predictor (commands equalised to the slowest delay, the IK
     #: at the predicted pose for the reference one delay ahead); False: the IK at the measured pose, reference now
