@@ -36,8 +36,9 @@ autonomous walking excavator", sec. 4.3.2, eqs. 29-36; the cascade after Bellico
    level, clamped, and charged only inside an error zone);
 7. minimal cylinder velocity ``v = 0`` (whatever freedom is left).
 
-Every buffer of a step is preallocated; the pump rows are constant (their OSQP matrix is never re-sent). Not yet
-done (``tms_rc/excavator/README.md``): a node and a config file, the piston control below it on the plant.
+Every buffer of a step is preallocated; the pump rows are constant (their OSQP matrix is never re-sent). Over the
+piston control on the plant: :mod:`tms_rc.excavator.ik_drive`. Not yet done (``tms_rc/excavator/README.md``): a
+node and a config file.
 """
 
 from __future__ import annotations
