@@ -323,7 +323,7 @@ class SlicedEventsExecutor:
 
     def spin(self) -> None:
         while self._context.ok() and not self._stop.is_set():
-            self._spin_slice(EVENTS_SLICE_S)
+            self._spin_slice(EVENTS_SLICE_S, stoppable=True)
         self._stop.clear()  # the request is consumed
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
@@ -346,12 +346,16 @@ class SlicedEventsExecutor:
         return self._inner.shutdown(timeout_sec=timeout_sec)
 
     # internals ---------------------------------------------------------------------------------------
-    def _spin_slice(self, seconds: float, future: Any = None) -> None:
+    def _spin_slice(self, seconds: float, future: Any = None, stoppable: bool = False) -> None:
         from rclpy.task import Future
 
         end_on = Future()
         with self._slice_lock:
             self._slice_future = end_on
+        if stoppable and self._stop.is_set():
+            # a request_stop between spin()'s check and the line above found no slice to end: without this the
+            # new slice ran its whole EVENTS_SLICE_S (a test saw spin() return 1 s after the request)
+            end_on.set_result(None)
         if future is not None:
             future.add_done_callback(lambda _f: end_on.done() or end_on.set_result(None))
         self._inner.spin_until_future_complete(end_on, timeout_sec=seconds)

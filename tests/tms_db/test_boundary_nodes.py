@@ -169,8 +169,10 @@ def test_tmsdb_query_updates_records(procs, ros_node, backend) -> None:
     assert all(p.popen.poll() is None for p in (writer, reader, param_reader))
 
 
-def _action(ros_node, client, goal, timeout: float = 120.0):
-    assert client.wait_for_server(timeout_sec=30), "action server not available"
+def _action(ros_node, client, goal, timeout: float = 120.0, server=None):
+    # 60 s: a loaded CI machine once took over 30 s to discover the reader's server
+    assert client.wait_for_server(timeout_sec=60), (
+        "action server not available" + (f"; its output:\n{server.output}" if server is not None else ""))
     sent = client.send_goal_async(goal)
     handle = _until(ros_node, lambda: sent.done() and sent.result(), timeout, "goal acceptance")
     assert handle.accepted
@@ -227,7 +229,7 @@ def test_gridfs_put_and_get_10mb(procs, ros_node, tmp_path, backend) -> None:
                            f"{limit + 1:,} bytes, over the store's limit of {limit:,}", 30), writer.output
     assert big.exists() and os.path.getsize(big) == limit + 1
 
-    result, _ = _action(ros_node, client, GridFSAction.Goal(type="static", filename=str(terrain)))
+    result, _ = _action(ros_node, client, GridFSAction.Goal(type="static", filename=str(terrain)), server=reader)
     assert result.status == GoalStatus.STATUS_SUCCEEDED and result.result.result, result.result.msg
     assert terrain.read_bytes() == payload
 

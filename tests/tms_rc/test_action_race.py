@@ -97,4 +97,13 @@ def test_goal_response_is_not_lost_when_the_sender_is_preempted(procs, ros_node)
                                               RaceFreeActionClient, 60.0)
         assert done, "RaceFreeActionClient lost the goal response"
         assert result is not None, "RaceFreeActionClient: goal accepted but no result within 60 s"
-        assert result.status == 4 and result.result.error_code.val == 1, (result.status, result.result.message)
+        if result.status == 0:
+            # STATUS_UNKNOWN: the server had already dropped the ended goal's result (ACTION_RESULT_TIMEOUT_S after
+            # it ended) when the loaded machine delivered the request for it, as a rehearsal once saw; the goal
+            # must still have ended reached on the controller (the stock client's goal before it too: two lines)
+            end = time.monotonic() + 10.0
+            while ctl.output.count("goal ended 1 (reached)") < 2 and time.monotonic() < end:
+                time.sleep(0.1)
+            assert ctl.output.count("goal ended 1 (reached)") >= 2, ctl.output
+        else:
+            assert result.status == 4 and result.result.error_code.val == 1, (result.status, result.result.message)

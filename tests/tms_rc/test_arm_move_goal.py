@@ -205,6 +205,10 @@ def test_re_sent_goals_to_the_held_pose_and_a_preempting_goal_each_end_with_a_re
     _wait(executor, results)
     codes_seen = [(r.result().status, r.result().result.error_code.val) for r in results]
     assert (4, codes.SUCCESS) in codes_seen and all(c != 0 for _, c in codes_seen), codes_seen
+    # the controller's log lines reach the test through its output pipe, the last one possibly after its result
+    deadline = time.monotonic() + 10.0
+    while sum("goal ended" in ln for ln in ctl.output.splitlines()) < 14 and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.2)
     executor.spin_once(timeout_sec=0.2)
     ended = [ln for ln in ctl.output.splitlines() if "goal ended" in ln]
     assert len(ended) == 14, "\n".join(ended)  # one log line per goal: 10 + 2 + 2
