@@ -28,7 +28,8 @@ def _drag(grid: Grid, cut, width: float) -> float:
     band = (along >= 0) & (along <= cut.length) & (np.abs(across) <= width / 2)
     before = grid.z[band].copy()
     grid.z[band] = np.minimum(before, cut.start[2])
-    return float(np.sum(before - grid.z[band])) * 0.1 * 0.1
+    cell = (grid.x_max - grid.x_min) / grid.z.shape[1] * (grid.y_max - grid.y_min) / grid.z.shape[0]
+    return float(np.sum(before - grid.z[band])) * cell
 
 
 def test_level_sweeps_executed_as_goals_never_cut_below_the_design_and_move_what_they_plan():

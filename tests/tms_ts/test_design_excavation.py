@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tests.rosproc import ROOT
+from tests.tms_rp.test_excavation_sweep import _drag
 from tms_common.config import load_yaml
 from tms_model.excavator.kinematics import site_excavator_kind
 from tms_model.machines import load_machine
@@ -262,17 +263,6 @@ def test_the_tree_runs_the_row_on_the_seed_record() -> None:
 EMBANKMENT_SEED = ROOT / "config" / "seeds" / "design_embankment.yaml"
 
 
-def _sweep(grid: Grid, cut: object, width: float) -> None:
-    """The excavate goal on an ideal machine: the bucket-wide band from the pass's start over its length, down to
-    the start's edge height (the arm drags the edge level; the pass's planned cells are not used)."""
-    xc, yc = cell_centres(grid)
-    u = np.array(cut.direction)
-    along = (xc - cut.start[0]) * u[0] + (yc - cut.start[1]) * u[1]
-    across = -(xc - cut.start[0]) * u[1] + (yc - cut.start[1]) * u[0]
-    band = (along >= 0) & (along <= cut.length) & (np.abs(across) <= width / 2)
-    grid.z[band] = np.minimum(grid.z[band], cut.start[2])
-
-
 def test_the_seed_embankment_is_cut_out_of_the_plants_pile_by_level_sweeps() -> None:
     """The pile of config/sim/design_embankment_plant.yaml (the plant's own initial heights, 0.05 m) covers the
     embankment's body, so cutting alone makes it; the subtask's passes, carried out as level sweeps by an ideal
@@ -299,7 +289,7 @@ def test_the_seed_embankment_is_cut_out_of_the_plants_pile_by_level_sweeps() -> 
         if isinstance(step, Done):
             break
         start = start or step.error
-        _sweep(grid, step.cut, run.planner.bucket_width)
+        _drag(grid, step.cut, run.planner.bucket_width)  # the excavate goal on an ideal machine
     assert not step.ok and "nothing reachable worth a pass" in step.message, step.message
     print(f"\nembankment seed, ideal level sweeps: {run.summary()}; start MAE {start.mae * 100:.1f} cm; {step.message}")
     assert run.passes < job["max_passes"]
