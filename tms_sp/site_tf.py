@@ -21,8 +21,11 @@ The point an odometry message places is the machine type's reference point: ``ba
 dump, the swing centre (``body_link`` origin) for an excavator, whose COM3 state reports
 ``Swing_Center_Position`` (com3_can's excavator profile forwards it as the pose).
 
-Every transform carries the stamp of the message it comes from. Bad input raises ``ValueError`` naming the
-machine, the field and the value; nothing is published for it.
+Every transform carries the stamp of the message it comes from. An edge is given once per stamp: a second message
+at a stamp already given (a converter publishing every CAN state between two /clock ticks) gives nothing for the
+edges it repeats, as tf2's buffer keeps the first and warns TF_REPEATED_DATA for the rest.
+
+Bad input raises ``ValueError`` naming the machine, the field and the value; nothing is published for it.
 """
 
 from __future__ import annotations
@@ -85,6 +88,13 @@ class SiteTf:
                     )
                 owner[frame] = name
         self._reference = {name: self._reference_offset(t) for name, t in self.trees.items()}
+        self._given: dict[tuple[str, str], float] = {}  # (parent, child) -> stamp last given
+
+    def _once_per_stamp(self, transforms: list[StampedTransform]) -> list[StampedTransform]:
+        out = [t for t in transforms if self._given.get((t.parent, t.child)) != t.stamp]
+        for t in out:
+            self._given[(t.parent, t.child)] = t.stamp
+        return out
 
     @staticmethod
     def _reference_offset(tree: MachineTree) -> Transform:
@@ -125,7 +135,7 @@ class SiteTf:
             if not math.isfinite(q):
                 raise ValueError(f"{machine}: joint_states {j.state} position is not finite: {q}")
             out.append(StampedTransform(t.frame(j.parent), t.frame(j.child), stamp, j.transform(q)))
-        return out
+        return self._once_per_stamp(out)
 
     def odometry(self, machine: str, frame_id: str, position: Sequence[float], orientation: Sequence[float],
                  stamp: float) -> list[StampedTransform]:
@@ -143,9 +153,10 @@ class SiteTf:
         pose = Transform(tuple(float(v) for v in position), q) * self._reference[machine]  # type: ignore[arg-type]
         odom, base = t.frame("odom"), t.frame("base_link")
         if frame_id in ("odom", odom):
-            return [StampedTransform(odom, base, stamp, pose)]
+            return self._once_per_stamp([StampedTransform(odom, base, stamp, pose)])
         if frame_id == MAP:
-            return [StampedTransform(MAP, odom, stamp, Transform()), StampedTransform(odom, base, stamp, pose)]
+            return self._once_per_stamp(
+                [StampedTransform(MAP, odom, stamp, Transform()), StampedTransform(odom, base, stamp, pose)])
         raise ValueError(f"{machine}: odometry frame {frame_id!r} is neither 'odom', {odom!r} nor 'map'")
 
     def map_to_odom(self, machine: str, frame_id: str, translation: Sequence[float], rotation: Sequence[float],
@@ -161,4 +172,4 @@ class SiteTf:
             raise ValueError(f"{machine}: map_to_odom rotation quaternion has norm {norm:.4f}, expected 1")
         rot = tuple(float(c) / norm for c in rotation)
         tr = Transform(tuple(float(v) for v in translation), rot)  # type: ignore[arg-type]
-        return [StampedTransform(MAP, t.frame("odom"), stamp, tr)]
+        return self._once_per_stamp([StampedTransform(MAP, t.frame("odom"), stamp, tr)])

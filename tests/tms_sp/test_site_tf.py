@@ -55,9 +55,9 @@ def test_map_to_bucket_tip_is_the_kinematics_on_the_excavator_pose(site_tf: Site
     assert [(e.parent, e.child) for e in odom] == [(MAP, "odom"), ("odom", "base_link")]
     assert odom[0].transform == Transform()
     rng = np.random.default_rng(1)
-    for _ in range(50):
+    for i in range(50):
         q = rng.uniform([-math.pi, -1.1, 0.6, -0.6], [math.pi, -0.1, 2.6, 2.3])
-        joints = site_tf.joint_states("zx200", [*FRONT, "left_track"], [*q, 9.0], 5.01)
+        joints = site_tf.joint_states("zx200", [*FRONT, "left_track"], [*q, 9.0], 5.01 + 0.01 * i)
         assert [(e.parent, e.child) for e in joints] == [
             ("track_link", "body_link"),
             ("body_link", "boom_link"),
@@ -83,6 +83,22 @@ def test_ic120_odom_and_localisation_compose_to_the_map_pose(site_tf: SiteTf) ->
     vessel = lookup(edges, "ic120_tf/base_link", "ic120_tf/vessel_pin_link")
     assert np.allclose(vessel.translation, load_tree("ic120").machine.vessel.hinge_xyz)
     assert vessel.apply((3.0, 0.0, 0.0))[2] > 2.0  # raised 0.5 rad: the vessel's front end is up
+
+
+def test_an_edge_is_given_once_per_stamp_as_tf2_keeps_it(site_tf: SiteTf) -> None:
+    """Two odometry messages at one stamp (the converter stamps with the last /clock): the second gives nothing,
+    as tf2's buffer keeps the first; a new stamp, or an edge not yet given at that stamp, is given."""
+    first = site_tf.odometry("ic120", "odom", (1.0, 0.0, 0.0), (0, 0, 0, 1), 3.0)
+    assert [e.transform.translation for e in first] == [(1.0, 0.0, 0.0)]
+    assert site_tf.odometry("ic120", "odom", (1.02, 0.0, 0.0), (0, 0, 0, 1), 3.0) == []
+    assert site_tf.map_to_odom("ic120", "map", (0, 0, 0), (0, 0, 0, 1), 3.0) != []  # another edge, same stamp
+    later = site_tf.odometry("ic120", "odom", (1.02, 0.0, 0.0), (0, 0, 0, 1), 3.02)
+    assert [e.transform.translation for e in later] == [(1.02, 0.0, 0.0)]
+    # the excavator's pose in map: both its edges at a stamp once
+    assert len(site_tf.odometry("zx200", "map", (0, 0, 0), (0, 0, 0, 1), 3.0)) == 2
+    assert site_tf.odometry("zx200", "map", (0.01, 0, 0), (0, 0, 0, 1), 3.0) == []
+    # a sim reset (time back) is a new stamp
+    assert len(site_tf.odometry("ic120", "odom", (0.0, 0.0, 0.0), (0, 0, 0, 1), 0.5)) == 1
 
 
 def test_bad_input_is_refused_naming_machine_and_field(site_tf: SiteTf) -> None:
