@@ -15,6 +15,7 @@
 #                             embankment out of a soil pile), the same launch file with the pile's plant
 #                             (config/sim/design_embankment_plant.yaml)
 #   RECORD=0:                 no recording (and no replay page)
+#   SEED=<name>:              another seed of config/seeds/ (`tms-db seed <name>`) instead of the scenario's
 # A first argument (a launch file) replaces the scenario's launch file.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,13 +23,13 @@ SCENARIO=${SCENARIO:-paper}
 case "$SCENARIO" in
   paper) DEFAULT_LAUNCH=config/launch/paper_experiment.yaml ;;
   fleet) DEFAULT_LAUNCH=config/launch/fleet.yaml ;;
-  design) DEFAULT_LAUNCH=config/launch/design_trench.yaml; SEED=design_trench ;;
-  embankment) DEFAULT_LAUNCH=config/launch/design_trench.yaml; SEED=design_embankment ;;
+  design) DEFAULT_LAUNCH=config/launch/design_trench.yaml; DEFAULT_SEED=design_trench ;;
+  embankment) DEFAULT_LAUNCH=config/launch/design_trench.yaml; DEFAULT_SEED=design_embankment ;;
   *) echo "demo.sh: unknown SCENARIO=$SCENARIO (paper, fleet, design or embankment)" >&2; exit 2 ;;
 esac
 DESIGN=0
 case "$SCENARIO" in design|embankment) DESIGN=1 ;; esac
-SEED=${SEED:-$SCENARIO}
+SEED=${SEED:-${DEFAULT_SEED:-$SCENARIO}}
 LAUNCH=${1:-$DEFAULT_LAUNCH}
 shift || true
 STAMP=$(date +%Y%m%d-%H%M%S)
