@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 from pathlib import Path
 
@@ -46,6 +47,15 @@ def _launch(tmp: Path) -> Path:
     return path
 
 
+def _flags_at_the_end(tmp: Path) -> str:
+    """The last changes of each global-blackboard flag in the supervisor's record, if it wrote one."""
+    runs = sorted((tmp / "runs").glob("*/metrics.json"))
+    if not runs:
+        return "(no metrics.json written)"
+    timeline = json.loads(runs[-1].read_text()).get("flags_timeline", {})
+    return "flags (last changes, simulated s):\n" + "\n".join(f"  {k}: {v[-4:]}" for k, v in sorted(timeline.items()))
+
+
 def test_fleet_cycle_each_carrier_loaded_once(procs, tmp_path):
     db = tmp_path / "db"
     db.mkdir()
@@ -54,9 +64,13 @@ def test_fleet_cycle_each_carrier_loaded_once(procs, tmp_path):
     assert seeded.returncode == 0, seeded.stdout + seeded.stderr
     proc = procs([VENV / "bin" / "tms-launch", _launch(tmp_path)], name="fleet", TMS_DB_PATH=str(db))
     code = proc.wait(WALL_LIMIT_S)
+    if code is None:  # stalled: stop it so the supervisor writes its record, and show where the flags stood
+        proc.signal(signal.SIGINT)
+        proc.wait(240)
     out = proc.output
-    tail = "\n".join(out.splitlines()[-80:])
-    assert code == 0, f"exit {code}:\n{tail}"
+    tail = "\n".join(out.splitlines()[-40:])
+    warnings = "\n".join([line for line in out.splitlines() if "[WARN]" in line or "[ERROR]" in line][-30:])
+    assert code == 0, f"exit {code}:\n{tail}\nwarnings and errors (last 30):\n{warnings}\n{_flags_at_the_end(tmp_path)}"
     m = json.loads(sorted((tmp_path / "runs").glob("*/metrics.json"))[-1].read_text())
     assert m["tasks"] and all(t["state"] == "SUCCESS" for t in m["tasks"].values()), m["tasks"]
     assert {t["machine"] for t in m["tasks"].values()} == {"zx200", "ic120_1", "ic120_2", "mst110cr_2"}

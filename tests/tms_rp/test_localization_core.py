@@ -180,3 +180,41 @@ def test_delayed_gnss_with_jump_recovers_after_the_jump():
     assert max(after) < 0.1, f"after the jump: max error {max(after):.3f} m"
     assert ekf.stats.reinits == 0
     assert ekf.stats.gnss_rejected >= 25  # the 30 jumped fixes (10 Hz for 3 s), give or take the delay
+
+
+def _heading_errors(params: EkfParams, *, odom_extra_turn: float, dropout=(10.0, 12.0), glitch=None):
+    """Heading error [rad] per sample: during an azimuth dropout the odometry turns ``odom_extra_turn`` more than
+    the machine (ramped in), so the estimate leaves the azimuth's gate; ``glitch`` = (t0, t1, rad) offsets the
+    azimuth stream itself."""
+    ekf = TrackedEkf(params)
+    errors = []
+    for s in simulate(30.0):
+        extra = odom_extra_turn * min(max((s.t - dropout[0]) / (dropout[1] - dropout[0]), 0.0), 1.0)
+        ox, oy, oyaw = s.odom
+        ekf.odometry(s.t, ox, oy, wrap_angle(oyaw + extra))
+        ekf.gnss(s.t, *s.gnss)
+        if not dropout[0] <= s.t < dropout[1]:
+            az = s.azimuth + (glitch[2] if glitch and glitch[0] <= s.t < glitch[1] else 0.0)
+            ekf.azimuth(s.t, wrap_angle(az))
+        errors.append(abs(wrap_angle(ekf.pose[2] - s.truth[2])))
+    return ekf, np.array(errors)
+
+
+def test_a_heading_off_the_azimuth_gate_is_recovered_not_gated_forever():
+    """The fleet's stall: the estimate 0.34 rad (19.5 deg) off, every azimuth rejected from then on. With the
+    recovery the azimuth stream (continuous: it turns as the odometry) is used again after 1 s."""
+    trapped, err_trapped = _heading_errors(EkfParams(azimuth_recover_after_s=1e9), odom_extra_turn=0.34)
+    assert err_trapped[-1] > 0.3 and trapped.stats.yaw_rejected > 100  # the trap, without the recovery
+    ekf, errors = _heading_errors(EkfParams(), odom_extra_turn=0.34)
+    assert ekf.stats.yaw_drift_recoveries >= 1
+    i = 135  # t = 13.5 s: 1.5 s after the azimuth came back
+    worst = math.degrees(errors[i:].max())
+    assert worst < 1.0, f"heading error after the recovery {worst:.2f} deg"
+
+
+def test_an_azimuth_glitch_is_rejected_not_taken_for_drift():
+    """A 0.3 rad offset in the azimuth stream for 0.8 s (a compass glitch, shorter than azimuth_recover_after_s):
+    rejected throughout, the estimate stays. (A steady offset held longer is taken for the estimate's drift.)"""
+    ekf, errors = _heading_errors(EkfParams(), odom_extra_turn=0.0, glitch=(15.0, 15.8, 0.3))
+    assert ekf.stats.yaw_drift_recoveries == 0 and ekf.stats.yaw_rejected >= 8
+    assert errors[100:].max() < math.radians(1.0)

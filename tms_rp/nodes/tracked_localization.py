@@ -71,6 +71,7 @@ class TrackedLocalization(Node):
         self.create_subscription(NavSatFix, "gnss/fix", self._on_fix, 50)
         self.create_subscription(Imu, "imu", self._on_imu, 50)
         self._rejected_logged = 0
+        self._yaw_rejected_logged = 0
         self._log.info(f"{self.machine} ({machine.kind}): EKF ready ({cfg.file}); waiting for the first GNSS fix "
                        f"(or an odom_pose in frame {self.map_frame!r}, passed through)")
 
@@ -110,9 +111,14 @@ class TrackedLocalization(Node):
             return
         sigma = math.sqrt(msg.orientation_covariance[8]) if msg.orientation_covariance[8] > 0 else None
         try:
-            self.ekf.azimuth(self._now(msg.header), yaw_from_quaternion(q), sigma)
+            result = self.ekf.azimuth(self._now(msg.header), yaw_from_quaternion(q), sigma)
         except ValueError as exc:
             self._log.warning(f"imu ignored: {exc}")
+            return
+        if not result.accepted and self.ekf.stats.yaw_rejected - self._yaw_rejected_logged >= 20:
+            self._yaw_rejected_logged = self.ekf.stats.yaw_rejected
+            self._log.warning(f"azimuth rejected (Mahalanobis^2 {result.mahalanobis2:.1f}, estimate "
+                              f"{math.degrees(self.ekf.pose[2]):.1f} deg); {self.ekf.stats.yaw_rejected} so far")
 
     def _on_odom(self, msg: Odometry) -> None:
         p = msg.pose.pose

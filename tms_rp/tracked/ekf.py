@@ -19,6 +19,14 @@ fix is used. A discontinuous step (a jump) keeps the stream rejected until it ag
 or until it is continuous again and within ``jump_threshold`` of the estimate (after a jump ends, the estimate
 may have drifted a few centimetres beyond the gate while dead-reckoning; a 5 m offset never qualifies).
 
+The azimuth has the same trap: a heading estimate a few degrees off lies outside the azimuth's tight gate,
+every azimuth is rejected from then on, and nothing but odometry moves the heading again (in the fleet run a
+carrier's estimate stood 19.5 degrees off its IMU for 1000 s, and the carrier stopped that far off its loading
+heading).
+So azimuths rejected for ``azimuth_recover_after_s`` in a row, while their stream turned as the odometry did
+(each step within ``azimuth_jump_threshold`` of the odometry's turn: no sensor glitch), mean the estimate
+drifted: the heading variance is inflated by the innovation and the azimuth is used.
+
 Latency: a GNSS fix or azimuth stamped at ``t`` may arrive after odometry stamped later than ``t`` (DDS
 delivery order, a relay, a loaded CPU). Applied as is, it would pull the estimate back along the track by
 speed x delay. So the filter keeps the last ``latency_window_s`` of odometry poses and moves such a
@@ -63,6 +71,8 @@ class EkfParams:
     jump_threshold: float = 0.5
     initial_yaw_sigma: float = 0.5
     latency_window_s: float = 2.0
+    azimuth_recover_after_s: float = 1.0
+    azimuth_jump_threshold: float = 0.05
 
     def __post_init__(self) -> None:
         for name in (
@@ -72,12 +82,13 @@ class EkfParams:
             "gate_chi2_yaw",
             "initial_yaw_sigma",
             "jump_threshold",
+            "azimuth_jump_threshold",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"localization.{name} must be > 0, got {value!r}")
         for name in ("odom_slip", "odom_yaw_slip", "odom_drift_xy", "reinit_after_s", "scale_sigma", "scale_walk",
-                     "latency_window_s"):
+                     "latency_window_s", "azimuth_recover_after_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"localization.{name} must be >= 0, got {value!r}")
@@ -109,6 +120,7 @@ class _Stats:
     yaw_rejected: int = 0
     reinits: int = 0
     gnss_drift_recoveries: int = 0
+    yaw_drift_recoveries: int = 0
     last: dict = field(default_factory=dict)
 
 
@@ -129,6 +141,8 @@ class TrackedEkf:
         self._pending_yaw: tuple[float, float] | None = None
         self._last_fix: tuple[float, float, tuple[float, float, float] | None] | None = None
         self._chain_ok = True
+        self._yaw_reject_since: float | None = None
+        self._last_az: tuple[float, float] | None = None  # (azimuth, odometry yaw when it was measured)
         self._odom_hist: deque[tuple[float, float, float, float]] = deque()  # (t, x, y, yaw) in odom
         self.stats = _Stats()
 
@@ -312,9 +326,20 @@ class TrackedEkf:
         innov = wrap_angle(yaw - float(self._kf.x[2]))
         s_val = float((h @ self._kf.P @ h.T + r)[0, 0])
         d2 = innov * innov / s_val
+        continuous = self._azimuth_continuous(yaw)
         if d2 > self.params.gate_chi2_yaw:
-            self.stats.yaw_rejected += 1
-            return UpdateResult(False, d2)
+            if not continuous or self._yaw_reject_since is None:
+                self._yaw_reject_since = t
+            if continuous and t - self._yaw_reject_since >= self.params.azimuth_recover_after_s:
+                LOGGER.warning("azimuth rejected for %.1f s, off the estimate by %.1f deg: the estimate drifted; "
+                               "using the azimuth", t - self._yaw_reject_since, math.degrees(innov))
+                self._kf.P[2, 2] += innov * innov
+                self.stats.yaw_drift_recoveries += 1
+                d2 = innov * innov / float((h @ self._kf.P @ h.T + r)[0, 0])
+            else:
+                self.stats.yaw_rejected += 1
+                return UpdateResult(False, d2)
+        self._yaw_reject_since = None
         self._kf.update(
             np.array([yaw]), lambda _x: h, lambda xs: np.array([xs[2]]), R=r,
             residual=lambda a, b: np.array([wrap_angle(float(a[0]) - float(b[0]))]),
@@ -322,6 +347,15 @@ class TrackedEkf:
         self._kf.x[2] = wrap_angle(float(self._kf.x[2]))
         self.stats.yaw_accepted += 1
         return UpdateResult(True, d2)
+
+    def _azimuth_continuous(self, yaw: float) -> bool:
+        """True if the azimuth turned as the odometry did since the previous azimuth (no sensor glitch)."""
+        odom_yaw = self._last_odom[2] if self._last_odom is not None else None
+        last, self._last_az = self._last_az, (yaw, odom_yaw) if odom_yaw is not None else None
+        if last is None or odom_yaw is None:
+            return False
+        turned = wrap_angle(odom_yaw - last[1])
+        return abs(wrap_angle(yaw - last[0] - turned)) <= self.params.azimuth_jump_threshold
 
     def _initialise(self, x: float, y: float, r: np.ndarray, *, keep_yaw: bool = False) -> None:
         yaw = float(self._kf.x[2]) if keep_yaw else 0.0
