@@ -95,8 +95,10 @@ class ConverterProfile:
 
     # state handlers shared by the types (both DBCs carry these frames)
     def roll_pitch(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
-        az = core.state.get("Vehicle_Azimuth", {})
-        yaw = -az.get("track_body_azimuth", 0.0)
+        az = core.state.get("Vehicle_Azimuth")
+        if az is None:  # no azimuth yet: an IMU with a made-up yaw of 0 would be taken as the machine's heading
+            return []
+        yaw = -az["track_body_azimuth"]
         rate = az.get("yaw_rate")  # clockwise-positive like the azimuth -> ROS angular z = -yaw_rate
         return [ImuOut(values["roll_angle"], values["pitch_angle"], yaw, None if rate is None else -rate)]
 

@@ -8,8 +8,10 @@ Commands, on com3_ros's crawler-carrier topics: ``cmd_vel`` -> ``Velocity_Cmd`` 
 [-pi, pi] for an endless slew). A machine without a swing (the IC120) refuses a command naming ``rotate_joint``.
 The vessel and the swing are two channels (two watchdogs): a ``rot_dump_cmd`` naming one joint leaves the other's
 command as it was. States: ``Track_Velocity`` -> odometry integrated from the track speeds (heading from
-``Vehicle_Azimuth`` when present) and joint states (``rotate_joint`` if any, ``vessel_joint``, track positions),
-``GNSS_Altitude_Status`` (with the latest latitude/longitude) -> fix, ``Roll_Pitch_Angle`` -> IMU.
+``Vehicle_Azimuth`` when present; dead-reckoned from 0 before the first azimuth, then turning with the azimuth
+from where it was, since odom must not jump, REP 105) and joint states (``rotate_joint`` if any,
+``vessel_joint``, track positions), ``GNSS_Altitude_Status`` (with the latest latitude/longitude) -> fix,
+``Roll_Pitch_Angle`` -> IMU (once an azimuth is known).
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ class TrackedProfile(ConverterProfile):
         # odometry integrated from the track velocities
         self._x = self._y = self._yaw = 0.0
         self._stamp: float | None = None
+        self._published = False  # an odometry pose went out (dead-reckoned, before any azimuth)
+        self._azimuth_offset: float | None = None  # odom yaw - azimuth, fixed at the first azimuth
         self._track_pos = [0.0, 0.0]
 
     def tracks_cmd(self, core: Core, names: Sequence[str], control_type: int, velocity: Sequence[float],
@@ -80,7 +84,13 @@ class TrackedProfile(ConverterProfile):
         w = (vr - vl) / core.config.track_gauge
         az = core.state.get("Vehicle_Azimuth")
         if az is not None:
-            self._yaw = -az["track_body_azimuth"]
+            azimuth = -az["track_body_azimuth"]
+            if self._azimuth_offset is None:
+                # The first azimuth. Odometry already out (the state frames' order on the bus at start-up) was
+                # dead-reckoned from 0: jumping to the azimuth would be a turn in place that never happened (a
+                # localisation took it as one, its heading left its azimuth gate for good). Odom stays continuous.
+                self._azimuth_offset = (self._yaw + w * dt - azimuth) if self._published else 0.0
+            self._yaw = math.remainder(azimuth + self._azimuth_offset, math.tau)
         else:
             self._yaw += w * dt
         self._x += v * math.cos(self._yaw) * dt
@@ -93,6 +103,7 @@ class TrackedProfile(ConverterProfile):
             (*pos, self._track_pos[0], self._track_pos[1]),
             (*vel, vl, vr),
         )
+        self._published = True
         return [OdomOut(self._x, self._y, 0.0, self._yaw, v, w), joints]
 
     def gnss(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:

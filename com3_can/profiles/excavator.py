@@ -102,8 +102,11 @@ class ExcavatorProfile(ConverterProfile):
         except KeyError:
             return []
         z = values["swing_center_position_z"]
-        yaw = -core.state.get("Vehicle_Azimuth", {}).get("track_body_azimuth", 0.0)
         ox, oy, oz = core.config.map_origin
         lat, lon = core.plane_to_geodetic(x, y)
-        return [OdomOut(x - ox, y - oy, z - oz, yaw, 0.0, 0.0, frame_id="map"), FixOut(lat, lon, z, 2, None)]
+        fix = FixOut(lat, lon, z, 2, None)
+        az = core.state.get("Vehicle_Azimuth")
+        if az is None:  # the pose in map needs the heading: none with a made-up yaw of 0, the fix alone
+            return [fix]
+        return [OdomOut(x - ox, y - oy, z - oz, -az["track_body_azimuth"], 0.0, 0.0, frame_id="map"), fix]
 

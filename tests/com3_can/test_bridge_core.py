@@ -262,14 +262,48 @@ def test_zx200_state_frames_to_joint_states_imu_odom_fix() -> None:
         codec.frame_id("Swing_Center_Position_2"),
         codec.encode("Swing_Center_Position_2", {"swing_center_position_y": 14024.450}),
     )
-    odom, fix = core.on_frame(
-        codec.frame_id("Swing_Center_Position_3"),
-        codec.encode("Swing_Center_Position_3", {"swing_center_position_z": 28.552}),
-    )
+    z3 = codec.encode("Swing_Center_Position_3", {"swing_center_position_z": 28.552})
+    # no azimuth yet: the fix alone (a pose in map with a made-up heading of 0 would be a wrong pose), no IMU
+    (fix,) = core.on_frame(codec.frame_id("Swing_Center_Position_3"), z3)
+    assert isinstance(fix, FixOut)
+    rp = codec.encode("Roll_Pitch_Angle", {"roll_angle": 0.01, "pitch_angle": -0.02})
+    assert core.on_frame(codec.frame_id("Roll_Pitch_Angle"), rp) == []
+    az = codec.encode("Vehicle_Azimuth", {"track_body_azimuth": -0.7, "upper_body_azimuth": -0.95})  # yaw +0.7 rad
+    core.on_frame(codec.frame_id("Vehicle_Azimuth"), az)
+    (imu,) = core.on_frame(codec.frame_id("Roll_Pitch_Angle"), rp)
+    assert imu.yaw == pytest.approx(0.7, abs=1e-3)
+    odom, fix = core.on_frame(codec.frame_id("Swing_Center_Position_3"), z3)
     assert isinstance(odom, OdomOut) and (odom.x, odom.y) == pytest.approx((10.0, -10.0), abs=1e-3)
+    assert odom.yaw == pytest.approx(0.7, abs=1e-3)
     assert isinstance(fix, FixOut) and (fix.latitude, fix.longitude) == pytest.approx(
         (36.12626 - 9.0e-5, 140.07103 + 1.11e-4), abs=2e-5
     )
+
+
+def test_carrier_odometry_before_the_first_azimuth_stays_continuous() -> None:
+    """Track frames before the first azimuth (the frames' order on the bus at start-up): odometry dead-reckons from
+    0, and the first azimuth does not make it jump (REP 105); from then on it turns with the azimuth. No IMU before
+    the azimuth."""
+    core = ic()
+    codec = core.codec
+    rp = codec.encode("Roll_Pitch_Angle", {"roll_angle": 0.0, "pitch_angle": 0.0})
+    assert core.on_frame(codec.frame_id("Roll_Pitch_Angle"), rp) == []
+    tv = codec.encode("Track_Velocity", {"left_track_velocity": 0.0, "right_track_velocity": 0.0})
+    odom, _ = core.on_frame(codec.frame_id("Track_Velocity"), tv, stamp=0.0)
+    assert odom.yaw == 0.0
+    for i, azimuth in enumerate((1.4, 1.5)):  # the machine stands at +1.4 rad, then turns by 0.1 rad
+        core.on_frame(codec.frame_id("Vehicle_Azimuth"),
+                      codec.encode("Vehicle_Azimuth", {"track_body_azimuth": -azimuth, "yaw_rate": 0.0}))
+        odom, _ = core.on_frame(codec.frame_id("Track_Velocity"), tv, stamp=0.01 * (i + 1))
+        assert odom.yaw == pytest.approx(azimuth - 1.4, abs=1e-3)
+    (imu,) = core.on_frame(codec.frame_id("Roll_Pitch_Angle"), rp)
+    assert imu.yaw == pytest.approx(1.5, abs=1e-3)
+    # a converter that hears the azimuth first reports it as the odometry's heading
+    fresh = ic()
+    fresh.on_frame(codec.frame_id("Vehicle_Azimuth"),
+                   codec.encode("Vehicle_Azimuth", {"track_body_azimuth": -1.4, "yaw_rate": 0.0}))
+    odom, _ = fresh.on_frame(codec.frame_id("Track_Velocity"), tv, stamp=0.0)
+    assert odom.yaw == pytest.approx(1.4, abs=1e-3)
 
 
 def test_ic120_odometry_integrates_track_velocities_with_azimuth() -> None:

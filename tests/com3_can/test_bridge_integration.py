@@ -425,9 +425,10 @@ def test_imu_period_thins_imu(procs, ros_node, peer, can_cfg) -> None:
     imus: list[Imu] = []
     ros_node.create_subscription(Imu, "/ic120/imu", imus.append, 100)
     rp = IC.encode("Roll_Pitch_Angle", {"roll_angle": 0.05, "pitch_angle": 0.0})
-    assert spin_until(
-        ros_node, lambda: bool(imus), 20 * SCALE, (0.05, lambda: peer.send(IC.frame_id("Roll_Pitch_Angle"), rp))
-    )
+    # the IMU goes out once an azimuth is known (its yaw)
+    azimuth = IC.encode("Vehicle_Azimuth", {"track_body_azimuth": 0.0, "yaw_rate": 0.0})
+    assert spin_until(ros_node, lambda: bool(imus), 20 * SCALE, (0.05, lambda: (
+        peer.send(IC.frame_id("Vehicle_Azimuth"), azimuth), peer.send(IC.frame_id("Roll_Pitch_Angle"), rp))))
     n0, t0 = len(imus), time.monotonic()
     frames = 0
 
