@@ -47,7 +47,6 @@ class TrackedProfile(ConverterProfile):
         # odometry integrated from the track velocities
         self._x = self._y = self._yaw = 0.0
         self._stamp: float | None = None
-        self._published = False  # an odometry pose went out (dead-reckoned, before any azimuth)
         self._azimuth_offset: float | None = None  # odom yaw - azimuth, fixed at the first azimuth
         self._track_pos = [0.0, 0.0]
 
@@ -78,7 +77,8 @@ class TrackedProfile(ConverterProfile):
     # state frames
     def tracks(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:
         vl, vr = values[V.left_track_velocity], values[V.right_track_velocity]
-        dt = 0.0 if self._stamp is None else min(max(stamp - self._stamp, 0.0), 0.1)
+        first = self._stamp is None  # every Track_Velocity gives an odometry pose: none went out before this one
+        dt = 0.0 if first else min(max(stamp - self._stamp, 0.0), 0.1)
         self._stamp = stamp
         v = 0.5 * (vl + vr)
         w = (vr - vl) / core.config.track_gauge
@@ -89,7 +89,7 @@ class TrackedProfile(ConverterProfile):
                 # The first azimuth. Odometry already out (the state frames' order on the bus at start-up) was
                 # dead-reckoned from 0: jumping to the azimuth would be a turn in place that never happened (a
                 # localisation took it as one, its heading left its azimuth gate for good). Odom stays continuous.
-                self._azimuth_offset = (self._yaw + w * dt - azimuth) if self._published else 0.0
+                self._azimuth_offset = 0.0 if first else self._yaw + w * dt - azimuth
             self._yaw = math.remainder(azimuth + self._azimuth_offset, math.tau)
         else:
             self._yaw += w * dt
@@ -103,7 +103,6 @@ class TrackedProfile(ConverterProfile):
             (*pos, self._track_pos[0], self._track_pos[1]),
             (*vel, vl, vr),
         )
-        self._published = True
         return [OdomOut(self._x, self._y, 0.0, self._yaw, v, w), joints]
 
     def gnss(self, core: Core, values: dict[str, float], stamp: float) -> list[Any]:

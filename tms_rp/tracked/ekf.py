@@ -350,9 +350,13 @@ class TrackedEkf:
 
     def _azimuth_continuous(self, yaw: float) -> bool:
         """True if the azimuth turned as the odometry did since the previous azimuth (no sensor glitch)."""
-        odom_yaw = self._last_odom[2] if self._last_odom is not None else None
-        last, self._last_az = self._last_az, (yaw, odom_yaw) if odom_yaw is not None else None
-        if last is None or odom_yaw is None:
+        last = self._last_az
+        if self._last_odom is None:
+            self._last_az = None
+            return False
+        odom_yaw = self._last_odom[2]
+        self._last_az = (yaw, odom_yaw)
+        if last is None:
             return False
         turned = wrap_angle(odom_yaw - last[1])
         return abs(wrap_angle(yaw - last[0] - turned)) <= self.params.azimuth_jump_threshold
