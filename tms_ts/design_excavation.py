@@ -17,12 +17,14 @@ terrain (the dynamic heightmap), and runs the goals it answers through the origi
 3. ``release`` (TmsRpZx200ReleaseSimple): the swing angle of the dump place from the swing axis; the bucket opens.
 
 Points of the goals are the excavator's base frame (as the original's targets): the map point moved by the base
-pose (x, y, yaw; heights relative to the base's ``z``). The step answers :class:`Done` instead when the pass
-planner stops: ``ok`` when it says the surface is within tolerance, else a failure whose message names the design,
-the passes done and the planner's reason (nothing reachable, no place to dump, ...). A design document that is
-wrong, a terrain that does not cover the design's area, or more than ``max_passes`` passes end it as a failure
-naming the design too. Machine-independent: the machine's description gives the bucket, the reach and the swing
-origin; the arm planner's settings of its kind give ``penetrate_depth``.
+pose (x, y, yaw; heights relative to the base's ``z``): the record's, or with ``base_measured`` the one the server
+measured when the subtask began (:func:`base_from_swing_centre`). The step answers :class:`Done` instead when the pass
+planner stops: ``ok`` when it says the surface is within tolerance (with the record's ``scope`` ``reachable`` also
+when nothing reachable from the base is worth a pass: the tree moves the machine to its next base pose), else a
+failure whose message names the design, the passes done and the planner's reason (nothing reachable, no place to
+dump, ...). A design document that is wrong, a terrain that does not cover the design's area, or more than
+``max_passes`` passes end it as a failure naming the design too. Machine-independent: the machine's description
+gives the bucket, the reach and the swing origin; the arm planner's settings of its kind give ``penetrate_depth``.
 """
 
 from __future__ import annotations
@@ -34,12 +36,14 @@ from typing import Any
 import numpy as np
 
 from tms_common.errors import TmsError
+from tms_model.excavator.kinematics import ExcavatorKinematics
 from tms_rp.arm.planner import load_planner_config
 from tms_rp.excavation.design import Design, DesignError, GridLike, SurfaceError, cell_centres
 from tms_rp.excavation.planner import BasePose, Pass, PassPlanner, PlannerSettings
 from tms_ts.plans import POSITION_WITH_ANGLE, AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
 
-__all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "DesignExcavation", "ground_top", "to_base"]
+__all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "DesignExcavation", "base_from_swing_centre",
+           "ground_top", "standing_pose", "to_base"]
 
 #: [rad] the edge angle the bucket is carried over the dump place with (85 deg, bucket closed: the paper's release pose)
 DUMP_THETA_W = 1.483530
@@ -74,6 +78,38 @@ def to_base(base: BasePose, x: float, y: float, z: float) -> tuple[float, float,
     return c * dx + s * dy, -s * dx + c * dy, z - (base.z or 0.0)
 
 
+def base_from_swing_centre(machine: Any, x: float, y: float, yaw: float, z: float) -> BasePose:
+    """The base pose (base_link on the map, ground ``z``) of an excavator whose swing centre stands at map (x, y)
+    with heading ``yaw`` (what its RTK GNSS and azimuth report: com3_can's ``odom_pose``); the swing centre's offset
+    from base_link comes from the machine's description."""
+    o = ExcavatorKinematics(machine).swing_origin
+    c, s = math.cos(yaw), math.sin(yaw)
+    return BasePose(x - (c * o[0] - s * o[1]), y - (s * o[0] + c * o[1]), yaw, z)
+
+
+#: [m] how far the measured swing centre may spread (1 sigma) while the base pose is measured: more is a machine that
+#: moves (RTK noise is ~1 cm)
+STANDING_SIGMA_M = 0.03
+#: [rad] the same for the heading
+STANDING_SIGMA_RAD = 0.01
+
+
+def standing_pose(samples: list[tuple[float, float, float]], who: str) -> tuple[float, float, float]:
+    """The mean (x, y, yaw) of pose samples of a machine standing still (yaw averaged on the circle); DesignError
+    naming ``who`` when there are fewer than 3 or they spread like a machine that moves."""
+    if len(samples) < 3:
+        raise DesignError(f"{who}: {len(samples)} pose sample(s), at least 3 needed")
+    a = np.asarray(samples, dtype=float)
+    yaw = math.atan2(float(np.sin(a[:, 2]).mean()), float(np.cos(a[:, 2]).mean()))
+    dyaw = np.angle(np.exp(1j * (a[:, 2] - yaw)))
+    sx, sy, syaw = float(a[:, 0].std()), float(a[:, 1].std()), float(dyaw.std())
+    if max(sx, sy) > STANDING_SIGMA_M or syaw > STANDING_SIGMA_RAD:
+        raise DesignError(f"{who}: the machine is not standing still (1 sigma x {sx:.3f} m, y {sy:.3f} m, yaw "
+                          f"{syaw:.4f} rad over {len(samples)} samples; at most {STANDING_SIGMA_M} m, "
+                          f"{STANDING_SIGMA_RAD} rad)")
+    return float(a[:, 0].mean()), float(a[:, 1].mean()), yaw
+
+
 def ground_top(terrain: GridLike, x: float, y: float, radius: float) -> float | None:
     """The highest ``terrain`` cell whose centre is within ``radius`` of (x, y) (the heightmaps' convention: row 0
     the north edge); None when no cell centre is (the point outside the sensed terrain)."""
@@ -87,7 +123,8 @@ def ground_top(terrain: GridLike, x: float, y: float, radius: float) -> float | 
 class DesignExcavation:
     """One run of a design subtask (see the module docstring): call :meth:`step` with each fresh terrain."""
 
-    def __init__(self, plan: DesignPlan, machine: Any, settings: PlannerSettings | None = None) -> None:
+    def __init__(self, plan: DesignPlan, machine: Any, settings: PlannerSettings | None = None,
+                 base: BasePose | None = None) -> None:
         self.plan = plan
         self.who = f"design {plan.design!r}"
         # the arm's excavate drags the edge level over the whole bucket width: the passes are planned as that sweep
@@ -102,8 +139,12 @@ class DesignExcavation:
         except TmsError as exc:
             raise DesignError(f"{self.who}: machine {getattr(machine, 'kind', machine)!r} cannot excavate it: "
                               f"{exc}") from None
+        if plan.base_measured and base is None:
+            raise DesignError(f"{self.who}: the record asks for the measured base pose (base_measured); none given")
+        if base is not None and not plan.base_measured:
+            raise DesignError(f"{self.who}: the record fixes the base pose; a measured one is not taken beside it")
         b = plan.base
-        self.base = BasePose(float(b["x"]), float(b["y"]), float(b["yaw"]), float(b.get("z", 0.0)))
+        self.base = base or BasePose(float(b["x"]), float(b["y"]), float(b["yaw"]), float(b.get("z", 0.0)))
         self.passes = 0
         self.volume = 0.0  # [m^3 bank] planned volume of the passes sent
         self.first_error: SurfaceError | None = None
@@ -144,6 +185,10 @@ class DesignExcavation:
         if decision.cut is None:
             if decision.reason.startswith("within tolerance"):
                 return Done(True, f"{self.who} done after {self.summary()}: {decision.reason}", err)
+            if self.plan.scope == "reachable" and decision.reason.startswith("nothing reachable"):
+                b = self.base
+                return Done(True, f"{self.who}: the part reachable from the base at ({b.x:.2f}, {b.y:.2f}, yaw "
+                                  f"{b.yaw:.3f}) done after {self.summary()} ({figures}): {decision.reason}", err)
             return Done(False, f"{self.who}: the pass planner stops after {self.summary()} ({figures}): "
                                f"{decision.reason}", err)
         if self.passes >= self.plan.max_passes:

@@ -79,7 +79,10 @@ class DesignPlan:
     """Excavation to a stored design surface: the ``design``'s name (tms_db collection ``design``), the excavator's
     ``base`` {x, y, yaw, z} on the map, the ``dump`` point {x, y} on the map (None: the pass planner's place), the
     bucket tip's height over the dump ground when it is emptied, the edge angle at entry ``theta_w`` [rad], at most
-    ``max_passes`` passes, the dynamic terrain's DATA_ID ``terrain_id``."""
+    ``max_passes`` passes, the dynamic terrain's DATA_ID ``terrain_id``. ``base_measured``: the base's x, y, yaw are
+    the machine's own pose when the subtask starts (``base`` then holds ``z`` only); ``scope`` ``design``: done when
+    the whole design is within tolerance, ``reachable``: done when nothing reachable from this base is worth a pass
+    (one of several base poses, each a subtask of the tree)."""
 
     design: str
     base: Mapping[str, float]
@@ -88,6 +91,8 @@ class DesignPlan:
     theta_w: float
     max_passes: int
     terrain_id: int
+    base_measured: bool = False
+    scope: str = "design"
 
 
 Plan = ChangePosePlan | ExcavatePlan | AnglePlan | SwingAlignPlan | SamplePlan | PosePlan | PosesPlan | DesignPlan

@@ -30,8 +30,11 @@ Planning goal data (``kind`` -> keys):
 * ``excavate``: ``pwa`` {x, y, z, theta_w, offset}; ``release``/``dump``: ``target_angle``
 * ``excavate_design`` (ours, beside the original's): :class:`~tms_ts.plans.DesignPlan` from the record's
   ``design`` (a design's name, tms_db collection ``design``), ``base_x``, ``base_y``, ``base_yaw`` [rad] (and
-  ``base_z``, default 0: the excavator's base_link on the map), optional ``dump_x``, ``dump_y`` (map; both or none:
-  a fixed dump place, e.g. a carrier's vessel or a spoil heap; absent: the pass planner's place) and ``dump_z``
+  ``base_z``, default 0: the excavator's base_link on the map; or ``base_measured`` 1 instead of x, y, yaw: the
+  machine's own pose from ``/<model_name>/odom_pose`` when the subtask starts, e.g. after a travel subtask),
+  ``scope`` (``design``, default: done when the whole design is within tolerance; ``reachable``: done when nothing
+  reachable from the base is worth a pass, one base pose of several), optional ``dump_x``, ``dump_y`` (map; both or
+  none: a fixed dump place, e.g. a carrier's vessel or a spoil heap; absent: the pass planner's place) and ``dump_z``
   (its ground), ``dump_height`` (1.5 m), ``theta_w`` (1.1 rad), ``max_passes`` (200), ``terrain_id`` (3031, the
   dynamic terrain's DATA_ID). The row's ``steps`` name the rows whose planning actions each pass runs
   (excavate, change_pose, release; :mod:`tms_ts.design_excavation`); the server loops until the pass planner stops.
@@ -184,13 +187,28 @@ def build_excavate(doc: dict, record: str) -> ExcavatePlan:
     return ExcavatePlan(pwa)
 
 
+#: a design record's ``scope``: done when the whole design is within tolerance, or when nothing reachable from the
+#: base is worth a pass (one base pose of several, each a subtask of the tree)
+DESIGN_SCOPES = ("design", "reachable")
+
+
 def build_excavate_design(doc: dict, record: str) -> DesignPlan:
     """The design subtask's record (see the module docstring): a design name, the base pose, the dump place."""
     design = doc.get("design")
     if not isinstance(design, str) or not design.strip():
         raise SubtaskRecordError(record, "design", f"must be a design's name (tms-db design list), got {design!r}")
-    base = {k: _num(doc, record, f"base_{k}") for k in ("x", "y", "yaw")}
+    measured = _bool(doc, record, "base_measured")
+    if measured:
+        given = [f"base_{k}" for k in ("x", "y", "yaw") if f"base_{k}" in doc]
+        if given:
+            raise SubtaskRecordError(record, given[0], "give base_x, base_y, base_yaw or base_measured, not both")
+        base = {}
+    else:
+        base = {k: _num(doc, record, f"base_{k}") for k in ("x", "y", "yaw")}
     base["z"] = _num(doc, record, "base_z", 0.0)
+    scope = doc.get("scope", "design")
+    if scope not in DESIGN_SCOPES:
+        raise SubtaskRecordError(record, "scope", f"must be one of {', '.join(DESIGN_SCOPES)}, got {scope!r}")
     given = [k for k in ("dump_x", "dump_y") if k in doc]
     if len(given) == 1:
         raise SubtaskRecordError(record, "dump_x|dump_y", f"give both or neither (only {given[0]} is there)")
@@ -210,7 +228,7 @@ def build_excavate_design(doc: dict, record: str) -> DesignPlan:
         raise SubtaskRecordError(record, "terrain_id", f"must be an integer, got {terrain}")
     theta_w = _num(doc, record, "theta_w", 1.1)
     return DesignPlan(design=design, base=base, dump=dump, dump_height=height, theta_w=theta_w,
-                      max_passes=int(passes), terrain_id=int(terrain))
+                      max_passes=int(passes), terrain_id=int(terrain), base_measured=measured, scope=scope)
 
 
 def build_angle(what: str) -> Callable[[dict, str], AnglePlan]:

@@ -34,6 +34,7 @@ from tms_db import get_design, open_store
 from tms_model.fleet import load_named
 from tms_rp.excavation.design import Design, cell_centres
 from tms_rp.excavation.evaluation import excavated_volume, figures, plot_errors, truth_grid
+from tms_rp.excavation.planner import BasePose
 from tms_sp.terrain import DYNAMIC_ID, heightmap_from_blob, latest_heightmap
 from tms_ts.design_excavation import DesignExcavation
 from tms_ts.subtask_specs import build_excavate_design
@@ -42,8 +43,25 @@ SEED = "design_trench"
 PASSES = re.compile(r"(\d+) pass\(es\), ([0-9.]+) m3 planned moved")
 
 
+BASE = re.compile(r"record '([^']+)': measured base pose x (\S+) y (\S+) yaw (\S+)")
+
+
+def _legs(log: Path) -> tuple[int | None, float | None, dict[str, BasePose]]:
+    """From the launch's output: the passes and planned volume summed over the design subtask's goals (one per base
+    pose of the tree), and the base pose each measured, by record; (None, None, {}) without the output."""
+    passes, volume, bases = None, None, {}
+    if log.is_file():
+        for line in log.read_text(errors="replace").splitlines():
+            if "_excavate_design '" in line and (found := PASSES.search(line)):
+                passes = (passes or 0) + int(found.group(1))
+                volume = (volume or 0.0) + float(found.group(2))
+            elif found := BASE.search(line):
+                bases[found.group(1)] = BasePose(float(found.group(2)), float(found.group(3)), float(found.group(4)))
+    return passes, volume, bases
+
+
 def _job(seed: Path) -> dict:
-    """The seed's design record (the parameter naming a ``design``)."""
+    """The seed's first design record (the first parameter naming a ``design``)."""
     data, _ = load_yaml(seed)
     for doc in data.get("parameters", []):
         if "design" in doc:
@@ -64,15 +82,18 @@ def _task_end(metrics: dict, log: Path) -> tuple[str, str]:
     return state, message
 
 
-def pass_execution(job: dict, design: Design, maps: list) -> dict[str, Any]:
+def pass_execution(job: dict, design: Design, maps: list, base: BasePose | None = None) -> dict[str, Any]:
     """How the machine carried out its passes, from the sensed heightmaps in time order: each pass the subtask's
     planner (the record's settings) plans on one map, matched with the first later map where the cells it lowers
     by more than 3 cm dropped 3 cm on average, then one map later (the pass over); their heights against the
     planned edge height (+ = left above): mean, 10th / 90th percentile, and the mean by place along the drag
     (0 = the far end where the edge enters, 1 = the near end) and across it [m]. The subtask planned on maps of
-    its own moments, so a matched pass is the pass planned there, not necessarily the one the machine ran."""
+    its own moments, so a matched pass is the pass planned there, not necessarily the one the machine ran. A record
+    with ``base_measured`` needs the ``base`` the subtask measured; the maps are then matched from that base alone
+    (the first base pose's passes of a tree of several)."""
     plan = build_excavate_design(job, str(job.get("record_name", "")))
-    run = DesignExcavation(plan, load_named(str(job["model_name"])))
+    run = DesignExcavation(plan, load_named(str(job["model_name"])),
+                           base=BasePose(base.x, base.y, base.yaw, float(plan.base.get("z", 0.0))) if base else None)
     planner = run.planner
     devs: list[np.ndarray] = []
     along: dict[float, list] = {}
@@ -141,13 +162,17 @@ def report(run_dir: Path, db: str | None, seed: str = SEED) -> dict[str, Any]:
     metrics_path = run_dir / "metrics.json"
     metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
     state, message = _task_end(metrics, run_dir / "launch.log")
+    passes, volume, bases = _legs(run_dir / "launch.log")
     found = PASSES.search(message)
+    if passes is None and found:
+        passes, volume = int(found.group(1)), float(found.group(2))
     out: dict[str, Any] = {
         "design": design.name,
         "task_state": state,
         "task_message": message,
-        "passes": int(found.group(1)) if found else None,
-        "planned_volume_m3": float(found.group(2)) if found else None,
+        "passes": passes,
+        "planned_volume_m3": volume,
+        "measured_bases": {k: [b.x, b.y, b.yaw] for k, b in bases.items()},
         "truth": figures(design, truth),
         "sensed": figures(design, sensed),
         "sensed_time": doc.get("time"),
@@ -163,7 +188,10 @@ def report(run_dir: Path, db: str | None, seed: str = SEED) -> dict[str, Any]:
         first = maps[0]
         out["removed_from_area_m3"] = _area_volume(first, design) - _area_volume(truth, design)
         out["design_removal_m3"] = _area_volume(first, design) - _area_volume(first, design, target=True)
-    out["execution"] = pass_execution(job, design, maps)
+    if job.get("base_measured") and job["record_name"] not in bases:
+        out["execution"] = {"passes_matched": 0, "why": f"no measured base of {job['record_name']} in launch.log"}
+    else:
+        out["execution"] = pass_execution(job, design, maps, bases.get(job["record_name"]))
     for key in ("sim_time_s", "wall_time_s", "real_time_factor", "ended"):
         if key in metrics:
             out[key] = metrics[key]

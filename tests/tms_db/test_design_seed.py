@@ -15,9 +15,11 @@ from tms_rp.excavation.design import Design
 
 def test_the_design_trench_seed_puts_its_design(store: Store) -> None:
     n_tasks, n_params = seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")
-    assert (n_tasks, n_params) == (1, 2)  # the job and the run's blackboard (the supervisor writes CONTINUE_FLG)
+    # the two bases' poses and design records, and the run's blackboard (the supervisor writes CONTINUE_FLG)
+    assert (n_tasks, n_params) == (1, 5)
     assert store.get_parameter("global_blackboard", "DESIGN_BLACKBOARD")["CONTINUE_FLG"] is True
-    job = store.get_parameter("zx200", "design_trench_job")
+    assert store.get_parameter("zx200", "design_trench_base_north")["y"] == 4.5
+    job = store.get_parameter("zx200", "design_trench_south")
     design = Design.from_dict(get_design(store, job["design"]))
     assert design.kind == "trench" and design.params["depth"] == 0.5 and design.params["width"] == 1.0
     seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")  # idempotent: no second version

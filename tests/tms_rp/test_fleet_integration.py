@@ -202,6 +202,8 @@ def test_zx200_drives_to_a_pose_through_its_subtask_and_a_sample_subtask_moves_o
     e_xy, e_yaw = _err(truth.pose, goal)
     print(f"zx200 at {truth.pose}: error {e_xy:.3f} m {e_yaw:.3f} rad")
     assert e_xy < 0.25 and e_yaw < 0.12
+    # its pose in map is passed through: no filter gates its azimuth (it gated every one against a stale heading)
+    assert "passed through (the EKF" in pc.output and "azimuth rejected" not in pc.output, pc.output[-2000:]
     # one joint: the swing to 20 deg, the others where they were
     before = dict(truth.joints)
     call = ActionCall(ros_node, LeafNodeBase, "/zx200/st_zx200_sample_swing",

@@ -13,13 +13,22 @@ import pytest
 from tests.rosproc import ROOT
 from tests.tms_rp.test_excavation_sweep import _drag
 from tms_common.config import load_yaml
-from tms_model.excavator.kinematics import site_excavator_kind
+from tms_model.excavator.kinematics import ExcavatorKinematics, site_excavator_kind
 from tms_model.machines import load_machine
 from tms_model.site import load_site
 from tms_rp.arm.planner import load_planner_config
-from tms_rp.excavation.design import Design, Grid, cell_centres
+from tms_rp.excavation.design import Design, DesignError, Grid, cell_centres
 from tms_rp.excavation.planner import BasePose, PlannerSettings
-from tms_ts.design_excavation import DUMP_THETA_W, DesignExcavation, Done, PassGoals, ground_top, to_base
+from tms_ts.design_excavation import (
+    DUMP_THETA_W,
+    DesignExcavation,
+    Done,
+    PassGoals,
+    base_from_swing_centre,
+    ground_top,
+    standing_pose,
+    to_base,
+)
 from tms_ts.errors import SubtaskRecordError
 from tms_ts.plans import AnglePlan, ChangePosePlan, DesignPlan, ExcavatePlan
 from tms_ts.subtask_specs import SUBTASKS, build_excavate_design
@@ -225,38 +234,131 @@ def test_max_passes_fails_naming_the_design() -> None:
     assert step.message.startswith("design 'tr': not within tolerance after max_passes = 2 (2 pass(es)")
 
 
-# ---- the seed ----------------------------------------------------------------------------------------------------
-def test_the_seed_trench_is_reachable_on_flat_ground_and_off_the_mound() -> None:
+# ---- the seed: two base poses ------------------------------------------------------------------------------------
+def _seed_records() -> tuple[dict, dict[str, dict]]:
     data, _ = load_yaml(SEED)
-    job = next(p for p in data["parameters"] if p["record_name"] == "design_trench_job")
-    design = Design.from_dict(next(d for d in data["designs"] if d["name"] == job["design"]))
+    return data, {p["record_name"]: p for p in data["parameters"]}
+
+
+TREE_LEGS = [("design_trench_base_south", "st_zx200_navigate_anywhere_deg"), ("design_trench_south", ROW.name),
+             ("design_trench_base_north", "st_zx200_navigate_anywhere_deg"), ("design_trench_north", ROW.name)]
+
+
+def test_the_seed_trench_is_reachable_from_its_two_bases_on_flat_ground_and_off_the_mound() -> None:
+    data, records = _seed_records()
+    design = Design.from_dict(next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"]))
     assert design.kind == "trench" and (design.params["width"], design.params["depth"]) == (1.0, 0.5)
     assert math.dist(design.params["start"], design.params["end"]) == pytest.approx(10.0)
     site = load_site()
-    base = site.points[f"{KIND}_base"]
-    assert (job["base_x"], job["base_y"], job["base_yaw"]) == pytest.approx((base.x, base.y, base.yaw))
-    # off the mound: every corner of the design area further from its centre than its base radius + 1 m
     mound = site.mound
-    for x, y in design.area:
+    for x, y in design.area:  # off the mound: every corner further from its centre than its base radius + 1 m
         assert math.hypot(x - mound.cx, y - mound.cy) > mound.base_radius + 1.0, (x, y)
-    # every trench cell reachable at its bottom from the base; the dump place reachable and clear of the area
-    run = DesignExcavation(build_excavate_design(job, "design_trench_job"), MACHINE)
-    grid = flat()
+    grid = flat(-11, 3, -12, 12)
     xc, yc = cell_centres(grid)
     sampled = design.sample(grid)
-    axis = run.planner.swing_axis(run.base)
     bottom = sampled.inside & (sampled.target < -0.4)
-    radius = np.hypot(xc - axis[0], yc - axis[1])
-    assert bottom.sum() > 900 and run.planner.reachable(radius[bottom], sampled.target[bottom]).all()
-    dump = np.array([[job["dump_x"], job["dump_y"]]])
-    assert not design.contains(dump[:, 0], dump[:, 1]).any()
-    assert run.planner.reachable(np.hypot(*(dump[0] - axis)), np.array(job["dump_height"])).all()
+    covered = np.zeros_like(bottom)
+    for nav, job in (("design_trench_base_south", "design_trench_south"),
+                     ("design_trench_base_north", "design_trench_north")):
+        b, j = records[nav], records[job]
+        assert j["base_measured"] and j["scope"] == "reachable" and j["design"] == design.name
+        base = BasePose(b["x"], b["y"], math.radians(b["yaw"]), j["base_z"])
+        run = DesignExcavation(build_excavate_design(j, job), MACHINE, base=base)
+        axis = run.planner.swing_axis(base)
+        radius = np.hypot(xc - axis[0], yc - axis[1])
+        reach = bottom & run.planner.reachable(radius, sampled.target)
+        assert reach.sum() > 0.5 * bottom.sum(), job  # each base reaches the trench's near half and more
+        covered |= reach
+        assert math.hypot(b["x"] - mound.cx, b["y"] - mound.cy) > mound.base_radius + 3.0, nav
+        dump = np.array([j["dump_x"], j["dump_y"]])
+        assert not design.contains(dump[:1], dump[1:]).any()
+        assert run.planner.reachable(np.hypot(*(dump - axis)), np.array(j["dump_height"])).all(), job
+    assert covered[bottom].all()  # together every trench cell at its bottom
 
 
-def test_the_tree_runs_the_row_on_the_seed_record() -> None:
+def test_two_bases_beside_the_trench_ends_cut_what_one_base_cannot() -> None:
+    """An ideal machine (the excavate goal's level, bucket-wide drag) on flat ground: from the map origin the drags
+    meet the trench's ends slanted and leave its end strips; from the seed's two bases, each leg ending when nothing
+    reachable from it is worth a pass, they are cut. The figures: tms_rp/excavation/README.md."""
+    data, records = _seed_records()
+    doc = next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"])
+
+    def legs(bases: list[tuple[BasePose, dict]]) -> tuple[Done, int]:
+        grid, passes = flat(-11, 3, -12, 12), 0
+        for base, job in bases:
+            run = DesignExcavation(build_excavate_design(job, "job"), MACHINE, base=base)
+            while not isinstance(step := run.step(doc, grid), Done):
+                _drag(grid, step.cut, run.planner.bucket_width)
+            assert step.ok and "part reachable from the base" in step.message, step.message
+            passes += run.passes
+        return step, passes
+
+    one, n_one = legs([(BasePose(0.0, 0.0, 0.0, 0.0), records["design_trench_south"])])
+    two, n_two = legs([(BasePose(records[n]["x"], records[n]["y"], 0.0, 0.0), records[j])
+                       for n, j in (("design_trench_base_south", "design_trench_south"),
+                                    ("design_trench_base_north", "design_trench_north"))])
+    print(f"\ntrench, ideal level sweeps: one base {n_one} passes, MAE {one.error.mae * 100:.2f} cm; two bases {n_two} "
+          f"passes, MAE {two.error.mae * 100:.2f} cm, p95 {two.error.p95 * 100:.1f} cm")
+    assert two.error.mae < 0.03 < one.error.mae and two.error.cut_volume < 0.7 * one.error.cut_volume
+    assert n_two < records["design_trench_south"]["max_passes"]
+
+
+def test_the_tree_drives_to_each_base_and_digs_there() -> None:
     xml = (ROOT / "trees" / "design_trench.xml").read_text()
-    assert f'subtask_name="{ROW.name}"' in xml and 'record_name="design_trench_job"' in xml
+    import re
+
+    legs = re.findall(r'record_name="([^"]+)" subtask_name="([^"]+)"', xml)
+    assert legs == TREE_LEGS
+    _, records = _seed_records()
+    assert all(r in records for r, _ in legs)
     assert Path(SEED).is_file()
+
+
+# ---- a leg of several: the measured base, the reachable scope -------------------------------------------------------
+def test_a_measured_base_and_the_reachable_scope_are_read_and_checked() -> None:
+    doc = {"design": "tr", "base_measured": 1, "scope": "reachable"}
+    p = build_excavate_design(doc, "job")
+    assert p.base_measured and p.scope == "reachable" and p.base == {"z": 0.0}
+    assert plan_of().scope == "design" and not plan_of().base_measured
+    with pytest.raises(SubtaskRecordError, match=r"record 'job'.*base_x.*base_measured, not both"):
+        build_excavate_design({**doc, "base_x": 0.0}, "job")
+    with pytest.raises(SubtaskRecordError, match=r"scope.*design, reachable.*'all'"):
+        build_excavate_design({**RECORD, "scope": "all"}, "job")
+    with pytest.raises(DesignError, match=r"design 'tr'.*base_measured.*none given"):
+        DesignExcavation(p, MACHINE)
+    with pytest.raises(DesignError, match=r"design 'tr'.*fixes the base pose"):
+        DesignExcavation(plan_of(), MACHINE, base=BasePose(0.0, 0.0, 0.0, 0.0))
+
+
+def test_the_reachable_scope_ends_ok_where_the_design_scope_fails() -> None:
+    far = {**TRENCH, "name": "far", "start": [-25.0, -5.0], "end": [-25.0, 5.0]}
+    base = BasePose(0.0, 0.0, 0.0, 0.0)
+    leg = DesignExcavation(build_excavate_design({"design": "far", "base_measured": 1, "scope": "reachable"}, "j"),
+                           MACHINE, base=base).step(far, flat(-30, 3, -9, 9))
+    assert isinstance(leg, Done) and leg.ok
+    assert leg.message.startswith("design 'far': the part reachable from the base at (0.00, 0.00, yaw 0.000) done")
+    whole = DesignExcavation(plan_of(design="far"), MACHINE).step(far, flat(-30, 3, -9, 9))
+    assert isinstance(whole, Done) and not whole.ok
+
+
+def test_the_base_pose_of_a_standing_machine_from_its_swing_centre() -> None:
+    rng = np.random.default_rng(3)
+    truth = BasePose(1.0, -4.5, 0.3, 0.0)
+    o = ExcavatorKinematics(MACHINE).swing_origin
+    sx = truth.x + math.cos(truth.yaw) * o[0] - math.sin(truth.yaw) * o[1]
+    sy = truth.y + math.sin(truth.yaw) * o[0] + math.cos(truth.yaw) * o[1]
+    samples = [(sx + rng.normal(0, 0.01), sy + rng.normal(0, 0.01), truth.yaw + rng.normal(0, 0.001))
+               for _ in range(50)]
+    base = base_from_swing_centre(MACHINE, *standing_pose(samples, "t"), 0.0)
+    assert (base.x, base.y, base.yaw) == pytest.approx((truth.x, truth.y, truth.yaw), abs=0.005)
+    # the heading averaged on the circle across +-pi
+    across = standing_pose([(0.0, 0.0, math.pi - 0.001), (0.0, 0.0, -math.pi + 0.001), (0.0, 0.0, math.pi)], "t")
+    assert abs(math.remainder(across[2] - math.pi, 2 * math.pi)) < 0.002  # not 0, the arithmetic mean
+    moving = [(0.1 * i, 0.0, 0.0) for i in range(20)]
+    with pytest.raises(DesignError, match=r"who: the machine is not standing still"):
+        standing_pose(moving, "who")
+    with pytest.raises(DesignError, match=r"who: 2 pose sample\(s\), at least 3"):
+        standing_pose(samples[:2], "who")
 
 
 # ---- the embankment seed (config/seeds/design_embankment.yaml) on its plant's pile ----------------------------------

@@ -44,6 +44,9 @@ def design_servers(tmp_path, procs):
             store.upsert_parameter({"model_name": KIND, "type": "static", "record_name": f"job_{name}",
                                     "design": name, "base_x": 0.0, "base_y": 0.0, "base_yaw": 0.0,
                                     "dump_x": 1.0, "dump_y": -7.5})
+        store.upsert_parameter({"model_name": KIND, "type": "static", "record_name": "job_far_measured",
+                                "design": "far", "base_measured": 1, "scope": "reachable", "dump_x": 1.0,
+                                "dump_y": -7.5})
         put_design(store, TRENCH)
         put_design(store, FAR)
         terrain(store, dug=False)
@@ -106,3 +109,29 @@ def test_a_pass_runs_as_the_originals_goals_and_the_design_ends_within_tolerance
     status, outcome = run("job_gone")
     assert status == GoalStatus.STATUS_ABORTED and outcome.error_code == SubtaskOutcome.RECORD_INVALID
     assert "design 'gone': not in the store's collection 'design' (stored: 'far', 'tr'" in outcome.error_msg
+
+    # a leg of a tree of several bases: without the machine's pose in map, nothing; with it, the base it measured
+    status, outcome = run("job_far_measured")
+    assert status == GoalStatus.STATUS_ABORTED and outcome.error_code == SubtaskOutcome.PLANNING_UNAVAILABLE
+    assert f"design 'far': base pose from /{KIND}/odom_pose: 0 message(s) within" in outcome.error_msg
+
+    from nav_msgs.msg import Odometry
+
+    pose_pub = ros_node.create_publisher(Odometry, f"/{KIND}/odom_pose", 10)
+
+    def publish_pose() -> None:  # the converter's pose in map of a machine standing at (3, 1) facing north
+        msg = Odometry()
+        msg.header.frame_id = "map"
+        msg.pose.pose.position.x, msg.pose.pose.position.y = 3.0, 1.0
+        msg.pose.pose.orientation.z = msg.pose.pose.orientation.w = 0.5 ** 0.5
+        pose_pub.publish(msg)
+
+    timer = ros_node.create_timer(0.02, publish_pose)
+    try:
+        status, outcome = run("job_far_measured")
+    finally:
+        ros_node.destroy_timer(timer)
+    assert status == GoalStatus.STATUS_SUCCEEDED, outcome.error_msg
+    # base_link from the swing centre: less the description's swing origin (0.108, -0.034) turned to face north
+    assert outcome.error_msg.startswith("design 'far': the part reachable from the base at (2.97, 0.89, yaw 1.571) "
+                                        "done after 0 pass(es)"), outcome.error_msg

@@ -16,7 +16,9 @@ map -> odom correction, which ``tms_sp_tf`` puts on /tf).
 An ``odom_pose`` already in frame ``map`` (an excavator's converter: RTK GNSS at the swing centre) needs no
 filter: it is passed through to ``odometry/global`` with the body velocity estimated from the poses of the
 last ``velocity_window_s`` (:class:`tms_rp.tracked.rtk.GlobalPoseRelay`); ``map_to_odom`` is not published
-(map = odom for such a machine; ``tms_sp_tf`` takes the identity from the pose's frame).
+(map = odom for such a machine; ``tms_sp_tf`` takes the identity from the pose's frame). From the first such
+pose on, ``gnss/fix`` and ``imu`` are not filtered (the EKF, with no odometry to predict with, gated every azimuth of
+a standing ZX200 against a heading it never updated: thousands of warnings).
 
 Parameters: ``machine`` (name on the site; default: the namespace), ``nav_config`` (YAML, default
 config/nav/<kind>_nav.yaml over config/nav/tracked_nav.yaml), ``site_config`` (default config/site.yaml),
@@ -71,6 +73,9 @@ class TrackedLocalization(Node):
         self.create_subscription(NavSatFix, "gnss/fix", self._on_fix, 50)
         self.create_subscription(Imu, "imu", self._on_imu, 50)
         self._rejected_logged = 0
+        # an odom_pose in map has come: the pose is passed through, and the EKF (no odometry to predict with) would
+        # only gate the azimuth and fixes against a heading it never updates
+        self._relaying = False
         self._yaw_rejected_logged = 0
         self._log.info(f"{self.machine} ({machine.kind}): EKF ready ({cfg.file}); waiting for the first GNSS fix "
                        f"(or an odom_pose in frame {self.map_frame!r}, passed through)")
@@ -82,7 +87,7 @@ class TrackedLocalization(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_fix(self, msg: NavSatFix) -> None:
-        if msg.status.status < 0:
+        if msg.status.status < 0 or self._relaying:
             return
         try:
             x, y, _ = self.projector.geodetic_to_map(msg.latitude, msg.longitude, msg.altitude)
@@ -104,7 +109,7 @@ class TrackedLocalization(Node):
             )
 
     def _on_imu(self, msg: Imu) -> None:
-        if not self.use_azimuth:
+        if not self.use_azimuth or self._relaying:
             return
         q = msg.orientation
         if q.x == q.y == q.z == q.w == 0.0 or msg.orientation_covariance[0] < 0:
@@ -123,6 +128,10 @@ class TrackedLocalization(Node):
     def _on_odom(self, msg: Odometry) -> None:
         p = msg.pose.pose
         if msg.header.frame_id == self.map_frame:
+            if not self._relaying:
+                self._relaying = True
+                self._log.info(f"odom_pose in frame {self.map_frame!r}: passed through (the EKF, its GNSS fixes "
+                               "and azimuths unused)")
             self._relay(msg)
             return
         try:

@@ -40,7 +40,7 @@ sensing may update the excavation target again), as the original subtasks did.
 Parameters (read-only, read at start-up): ``machine`` (the kind whose subtasks are served; default the kind of
 ``model_name`` on the site, config/site.yaml ``machines``), ``model_name`` (the namespace; default = machine),
 ``planning_wait_s`` (5.0), ``stop_timeout_s`` (5.0), ``server_lost_s`` (3.0), ``service_timeout_s`` (60.0),
-``joint_states_wait_s`` (2.0), ``terrain_wait_s`` (20.0), ``db_uri``, ``db_path``.
+``joint_states_wait_s`` (2.0), ``terrain_wait_s`` (20.0), ``base_measure_s`` (1.0), ``db_uri``, ``db_path``.
 
 A row with ``steps`` (ours: ``*_excavate_design``, excavation to a design stored in tms_db's ``design``
 collection) runs several planning goals: before each pass it reads the design and the newest dynamic heightmap
@@ -48,8 +48,12 @@ collection) runs several planning goals: before each pass it reads the design an
 was planned on, waiting up to ``terrain_wait_s``), asks :class:`tms_ts.design_excavation.DesignExcavation` for
 the pass and runs its excavate, change_pose and release goals through those rows' planning actions (failures as
 the single-goal rows', the message naming the design and the pass). It ends SUCCEEDED when the pass planner says
-the surface is within tolerance, else with PLANNING_FAILED naming the design and the planner's reason; a design
-not in the store ends RECORD_INVALID, no terrain PLANNING_UNAVAILABLE.
+the surface is within tolerance (the record's ``scope`` ``reachable``: also when nothing reachable from the base is
+worth a pass), else with PLANNING_FAILED naming the design and the planner's reason; a design
+not in the store ends RECORD_INVALID, no terrain PLANNING_UNAVAILABLE. A record with ``base_measured`` takes the
+base pose from ``/<model_name>/odom_pose`` (the swing centre by RTK GNSS, in map) averaged over ``base_measure_s``
+while the machine stands (waiting up to ``joint_states_wait_s`` more for the messages); none, or a machine that
+moves, ends PLANNING_UNAVAILABLE naming the topic.
 The node is named ``<machine>_subtasks`` when ``-p machine:=<m>`` is on the command line, so the two
 machines' servers started by hand do not share a name.
 """
@@ -57,6 +61,7 @@ machines' servers started by hand do not share a name.
 from __future__ import annotations
 
 import functools
+import math
 import sys
 import threading
 import time
@@ -66,6 +71,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from action_msgs.msg import GoalStatus
+from nav_msgs.msg import Odometry
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
@@ -86,8 +92,10 @@ from tms_model.fleet import load_named
 from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_ts.action import LeafNodeBase
+from tms_rp.excavation.design import DesignError
+from tms_rp.excavation.planner import BasePose
 from tms_sp.terrain import TerrainError, heightmap_from_blob, latest_heightmap, latest_heightmap_doc
-from tms_ts.design_excavation import DesignExcavation, Done
+from tms_ts.design_excavation import DesignExcavation, Done, base_from_swing_centre, standing_pose
 from tms_ts.errors import SubtaskRecordError, SubtaskStateError
 from tms_ts.nodes.ros_port import HEARTBEAT_PERIOD_S, HEARTBEAT_TOPIC
 from tms_ts.outcomes import SUBTASK_OUTCOME_TOPIC, code_name
@@ -152,6 +160,7 @@ class SubtaskServers(Node):
         self.service_timeout_s = p.number("service_timeout_s", 60.0, lo=0.0)
         self.joint_states_wait_s = p.number("joint_states_wait_s", 2.0, lo=0.0)
         self.terrain_wait_s = p.number("terrain_wait_s", 20.0, lo=0.0)
+        self.base_measure_s = p.number("base_measure_s", 1.0, lo=0.0)
         db_uri = p.text("db_uri")
         db_path = p.text("db_path")
         specs = subtasks_for(machine)  # ConfigError naming the known kinds
@@ -440,6 +449,33 @@ class SubtaskServers(Node):
                                         f"terrain_wait_s = {self.terrain_wait_s:g} s: {why}")
             await self._ticker.next()
 
+    async def _measured_base(self, gh, plan: DesignPlan) -> BasePose:
+        """The base pose of a machine standing still: ``/<model_name>/odom_pose`` (its swing centre by RTK GNSS and
+        its azimuth, in map) averaged over ``base_measure_s``; DesignError naming the design and the topic when
+        none comes within ``joint_states_wait_s`` plus that, or the machine moves."""
+        topic = f"/{self.model_name}/odom_pose"
+        samples: list[tuple[float, float, float]] = []
+
+        def on_pose(msg: Odometry) -> None:
+            q = msg.pose.pose.orientation
+            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+            samples.append((msg.pose.pose.position.x, msg.pose.pose.position.y, yaw))
+
+        who = f"design {plan.design!r}: base pose from {topic}"
+        started = time.monotonic()
+        deadline = started + self.joint_states_wait_s + self.base_measure_s
+        sub = self.create_subscription(Odometry, topic, on_pose, 50, callback_group=self._group)
+        try:
+            while time.monotonic() - started < self.base_measure_s or len(samples) < 3:
+                if time.monotonic() > deadline or gh.is_cancel_requested or self._goals.stopping.is_set():
+                    raise DesignError(f"{who}: {len(samples)} message(s) within "
+                                      f"{self.joint_states_wait_s + self.base_measure_s:g} s")
+                await self._ticker.next()
+        finally:
+            self.destroy_subscription(sub)
+        x, y, yaw = standing_pose(samples, who)
+        return base_from_swing_centre(self.description, x, y, yaw, float(plan.base.get("z", 0.0)))
+
     async def _execute_steps(self, gh, spec: SubtaskSpec, plan: Plan) -> LeafNodeBase.Result:
         """The design subtask: per pass the newest design and terrain -> the pass planner -> its goals through the
         planning actions of the row's ``steps`` (tms_ts.design_excavation), until the planner stops."""
@@ -449,9 +485,13 @@ class SubtaskServers(Node):
             return self._finish(gh, spec, R.PLANNING_UNAVAILABLE, f"design {plan.design!r}: no description of "
                                 f"{self.model_name} on the site (the pass planner needs its bucket and reach)")
         try:
-            run = DesignExcavation(plan, self.description)
+            base = await self._measured_base(gh, plan) if plan.base_measured else None
+            run = DesignExcavation(plan, self.description, base=base)
         except TmsError as exc:
             return self._finish(gh, spec, R.PLANNING_UNAVAILABLE, str(exc))
+        if base is not None:
+            self.get_logger().info(f"design {plan.design!r}: record '{record}': measured base pose x {base.x:.3f} "
+                                   f"y {base.y:.3f} yaw {base.yaw:.4f} (z {base.z:g} from the record)")
         started = time.monotonic()
         terrain_id = None
         while True:
