@@ -131,10 +131,13 @@ class DesignExcavation:
         # (clipped strips cut the trench's walls and apron on the plant: tms_rp/excavation/README.md)
         # with the record's fixed dump place the bucket never fills the design's low cells, so their room must not
         # cap the passes (on the plant: 0.024 m3 a pass once the first passes had left 3 cm dips)
-        settings = settings or PlannerSettings(level_sweep=True, fill=plan.dump is None)
         try:
-            self.planner = PassPlanner(machine, settings)
             arm = load_planner_config(machine.kind)
+            # the reach the arm planner grants a dig target: joints its dig margin inside their limits (a pass beyond
+            # it failed the excavate goal at 8.7 m: "no bucket angle keeps every joint 0.06 rad inside its limits")
+            settings = settings or PlannerSettings(level_sweep=True, fill=plan.dump is None,
+                                                   joint_margin=float(arm.dig_joint_margin))
+            self.planner = PassPlanner(machine, settings)
             self.penetrate_depth, self.curl_carry = float(arm.penetrate_depth), float(arm.curl_carry)
         except TmsError as exc:
             raise DesignError(f"{self.who}: machine {getattr(machine, 'kind', machine)!r} cannot excavate it: "

@@ -7,7 +7,8 @@ One call of :meth:`PassPlanner.next_pass` looks at the terrain grid (the heightm
    ``tolerance``, its 95th percentile within ``tolerance_p95`` and its maximum within ``tolerance_max``: done;
 2. the cells the bucket can cut: inside the design area, more than ``min_cut`` above the design, and reachable
    from the base pose at the height they would be cut to (the radial reach of the bucket tip at that height, from
-   the machine description's kinematics, less ``reach_margin``; never nearer the swing axis than half the
+   the machine description's kinematics with every joint ``joint_margin`` inside its limits, less ``reach_margin``;
+   never nearer the swing axis than half the
    footprint length plus ``track_clearance``, so the tracks are not undermined); none: done, nothing reachable;
 3. where the material goes: the reachable design cells most below the design (a window of ``dump_radius``
    around the cell with the largest deficit sum), when they can take at least ``min_fill_volume``; otherwise a
@@ -69,6 +70,9 @@ class PlannerSettings:
     dump_radius: float = 1.0  # radius of the place one bucket is dumped over
     spoil_clearance: float = 1.0  # spoil (the whole dump disc) stays this far outside the design area
     reach_band: float = 0.2  # height band [m] of the reach table's rows
+    #: [rad] the reach table's poses keep every front joint this far inside its limits (the arm planner's own margin
+    #: for a dig target: a cell reached only with a joint at its limit is refused there)
+    joint_margin: float = 0.0
     seeds: int = 8  # seed cells tried, best first, before the planner says nothing is worth a pass
     #: plan what the arm's excavate does (tms_rp.arm.planner: the edge dragged level, the bucket's whole width):
     #: every cell the edge sweeps is cut to one edge height, never below the design of any of them, so the drag
@@ -150,9 +154,10 @@ class ReachBand:
     r_max: np.ndarray
 
     @classmethod
-    def of(cls, kin: ExcavatorKinematics, band: float, samples: int = 41) -> ReachBand:
-        """The tip's planar reach over the joint limits (boom, arm, bucket sampled ``samples`` each)."""
-        lo, hi = kin.limits.lower, kin.limits.upper
+    def of(cls, kin: ExcavatorKinematics, band: float, samples: int = 41, joint_margin: float = 0.0) -> ReachBand:
+        """The tip's planar reach over the joint limits less ``joint_margin`` [rad] (boom, arm, bucket sampled
+        ``samples`` each)."""
+        lo, hi = kin.limits.lower + joint_margin, kin.limits.upper - joint_margin
         qb, qa, qk = np.meshgrid(*(np.linspace(lo[i], hi[i], samples) for i in (1, 2, 3)), indexing="ij")
         pb, pa, pk = qb + kin.c_boom, qb + qa + kin.c_arm, qb + qa + qk + kin.c_bucket
         x = kin.boom_foot[0] + kin.l_boom * np.cos(pb) + kin.l_arm * np.cos(pa) + kin.l_bucket * np.cos(pk)
@@ -195,7 +200,7 @@ class PassPlanner:
         assert bucket is not None  # ExcavatorKinematics refused a machine that is no excavator
         self.bucket_width = float(bucket.width)
         self.bucket_volume = float(bucket.capacity) * self.settings.fill_factor
-        self.reach = ReachBand.of(self.kin, self.settings.reach_band)
+        self.reach = ReachBand.of(self.kin, self.settings.reach_band, joint_margin=self.settings.joint_margin)
         self.min_radius = machine.footprint.length / 2.0 + self.settings.track_clearance
         self._cache: tuple[object, tuple, Sampled, np.ndarray] | None = None
 
