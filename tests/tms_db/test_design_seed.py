@@ -27,11 +27,11 @@ def test_the_design_trench_seed_puts_its_design(store: Store) -> None:
 
 
 def test_the_design_embankment_seed_puts_its_design(store: Store) -> None:
-    assert seed(store, ROOT / "config" / "seeds" / "design_embankment.yaml") == (1, 5)
-    job = store.get_parameter("zx200", "design_embankment_south")
+    assert seed(store, ROOT / "config" / "seeds" / "design_embankment.yaml") == (1, 2)
+    job = store.get_parameter("zx200", "design_embankment_job")
     design = Design.from_dict(get_design(store, job["design"]))
     assert design.kind == "embankment" and (design.params["height"], design.params["crest_width"]) == (0.4, 1.0)
-    assert 'record_name="design_embankment_south"' in store.get_task(36)["task_sequence"]
+    assert 'record_name="design_embankment_job"' in store.get_task(36)["task_sequence"]
 
 
 def test_a_seed_with_a_bad_design_stores_nothing(store: Store, tmp_path: Path) -> None:
