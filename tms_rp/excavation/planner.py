@@ -8,8 +8,8 @@ One call of :meth:`PassPlanner.next_pass` looks at the terrain grid (the heightm
 2. the cells the bucket can cut: inside the design area, more than ``min_cut`` above the design, and reachable
    from the base pose at the height they would be cut to (the radial reach of the bucket tip at that height, from
    the machine description's kinematics with every joint ``joint_margin`` inside its limits, less ``reach_margin``;
-   never nearer the swing axis than half the
-   footprint length plus ``track_clearance``, so the tracks are not undermined); none: done, nothing reachable;
+   never nearer the swing axis than half the footprint length plus ``track_clearance``, so the tracks are not
+   undermined); none: done, nothing reachable;
 3. where the material goes: the reachable design cells most below the design (a window of ``dump_radius``
    around the cell with the largest deficit sum), when they can take at least ``min_fill_volume``; otherwise a
    spoil place outside the design area (its whole dump disc at least ``spoil_clearance`` from it, reachable, the
