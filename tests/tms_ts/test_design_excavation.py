@@ -17,7 +17,7 @@ from tms_common.config import load_yaml
 from tms_model.excavator.kinematics import ExcavatorKinematics, site_excavator_kind
 from tms_model.machines import load_machine
 from tms_model.site import load_site
-from tms_rp.arm.planner import load_planner_config
+from tms_rp.arm.planner import ArmPlanner, load_planner_config
 from tms_rp.excavation.design import Design, DesignError, Grid, cell_centres
 from tms_rp.excavation.planner import BasePose, PlannerSettings
 from tms_ts.design_excavation import (
@@ -284,11 +284,16 @@ def test_two_bases_beside_the_trench_ends_cut_what_one_base_cannot() -> None:
     data, records = _seed_records()
     doc = next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"])
 
+    arm = ArmPlanner(ExcavatorKinematics(MACHINE), load_planner_config(KIND))
+
     def legs(bases: list[tuple[BasePose, dict]]) -> tuple[Done, int]:
         grid, passes = flat(-11, 3, -12, 12), 0
         for base, job in bases:
             run = DesignExcavation(build_excavate_design(job, "job"), MACHINE, base=base)
             while not isinstance(step := run.step(doc, grid), Done):
+                # the arm planner takes every excavate goal (a pass 8.73 m out once failed on the plant)
+                pwa = step.goals[0][1].pwa
+                arm.feasible_theta_w(np.array([pwa["x"], pwa["y"], pwa["z"] - run.penetrate_depth]), pwa["theta_w"])
                 _drag(grid, step.cut, run.planner.bucket_width)
             assert step.ok and "part reachable from the base" in step.message, step.message
             passes += run.passes

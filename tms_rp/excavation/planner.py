@@ -18,7 +18,8 @@ One call of :meth:`PassPlanner.next_pass` looks at the terrain grid (the heightm
    ``max_pass_depth`` per cell) gives the seed cell (the next best seeds, up to ``seeds``, when its pass is
    smaller than ``min_pass_volume``); the pass runs along the radial line through it toward the
    machine (the bucket is dragged in), over the contiguous cuttable cells of a strip one bucket wide, at most
-   ``max_pass_length`` long, starting at the far end. The edge path holds, along the line, the highest of the
+   ``max_pass_length`` long, starting at the far end; a pass whose far end is out of reach at its edge height is not
+   planned (the next seed is tried). The edge path holds, along the line, the highest of the
    strip's cut-to heights (never below the design); its depth below the surface is bounded by ``max_pass_depth``
    and shrunk until the volume fits the bucket (heaped capacity times ``fill_factor``) and the dump place.
 
@@ -269,6 +270,8 @@ class PassPlanner:
         cut, best = None, 0.0
         for seed in order[score[order] > 0]:
             cut = self._cut(s, z, excess, cuttable, axis, xc, yc, cx, cy, cap, np.unravel_index(int(seed), z.shape))
+            if cut is not None and not self._start_reachable(cut[4], axis, ground):
+                cut = None
             best = max(best, 0.0 if cut is None else cut[3])
             if cut is not None and cut[3] >= st.min_pass_volume:
                 break
@@ -314,6 +317,15 @@ class PassPlanner:
         r, c = np.unravel_index(int(idx[order[0]]), z.shape)
         return "spoil", (int(r), int(c)), math.inf
 
+    def _start_reachable(self, path: np.ndarray, axis: np.ndarray, ground: float) -> bool:
+        """The far end of an edge path (the point the bucket penetrates to) within reach at its own height: the cells
+        were judged at the heights they would be cut to, but the edge height is the strip's and the end lies half a
+        cell beyond the cells (a far end 8.73 m out at the trench's depth failed the excavate goal, reached to
+        8.72 m)."""
+        r = float(np.hypot(path[0, 0] - axis[0], path[0, 1] - axis[1]))
+        r_min, r_max = self.reach.limits(np.array([path[0, 2] - ground]))
+        return bool(r <= r_max[0] - self.settings.reach_margin)
+
     def _cut(self, s: Sampled, z: np.ndarray, excess: np.ndarray, cuttable: np.ndarray, axis: np.ndarray,
              xc: np.ndarray, yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any]
              ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
@@ -354,6 +366,7 @@ class PassPlanner:
         ok = np.isfinite(edge)
         pts = seed[None, :] + (ks[ok] * step)[:, None] * u[None, :]
         path = np.column_stack([pts, edge[ok]])
+        path = np.repeat(path, 2, axis=0) if len(path) == 1 else path  # one bin: its two edges, not one point
         # the cut's ends are the strip's outer cell edges
         path[0, :2] -= 0.5 * step * u
         path[-1, :2] += 0.5 * step * u
@@ -413,6 +426,7 @@ class PassPlanner:
         ks = np.arange(first, last + 1)
         pts = seed[None, :] + (ks * step)[:, None] * u[None, :]
         path = np.column_stack([pts, np.full(len(ks), level)])
+        path = np.repeat(path, 2, axis=0) if len(path) == 1 else path  # one bin: its two edges, not one point
         path[0, :2] -= 0.5 * step * u
         path[-1, :2] += 0.5 * step * u
         return sel, cut_to, float(depth), volume, path, u
