@@ -113,7 +113,7 @@ def test_a_pass_runs_as_the_originals_goals_and_the_design_ends_within_tolerance
     # a leg of a tree of several bases: without the machine's pose in map, nothing; with it, the base it measured
     status, outcome = run("job_far_measured")
     assert status == GoalStatus.STATUS_ABORTED and outcome.error_code == SubtaskOutcome.PLANNING_UNAVAILABLE
-    assert f"design 'far': base pose from /{KIND}/odom_pose: 0 message(s) within" in outcome.error_msg
+    assert f"design 'far': base pose from /{KIND}/odom_pose: 0 message(s) in frame 'map' within" in outcome.error_msg
 
     from nav_msgs.msg import Odometry
 

@@ -322,9 +322,8 @@ class PassPlanner:
         were judged at the heights they would be cut to, but the edge height is the strip's and the end lies half a
         cell beyond the cells (a far end 8.73 m out at the trench's depth failed the excavate goal, reached to
         8.72 m)."""
-        r = float(np.hypot(path[0, 0] - axis[0], path[0, 1] - axis[1]))
-        r_min, r_max = self.reach.limits(np.array([path[0, 2] - ground]))
-        return bool(r <= r_max[0] - self.settings.reach_margin)
+        r = np.hypot(path[:1, 0] - axis[0], path[:1, 1] - axis[1])
+        return bool(self.reachable(r, path[:1, 2] - ground)[0])
 
     def _cut(self, s: Sampled, z: np.ndarray, excess: np.ndarray, cuttable: np.ndarray, axis: np.ndarray,
              xc: np.ndarray, yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any]

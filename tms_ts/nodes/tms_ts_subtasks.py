@@ -51,9 +51,9 @@ the single-goal rows', the message naming the design and the pass). It ends SUCC
 the surface is within tolerance (the record's ``scope`` ``reachable``: also when nothing reachable from the base is
 worth a pass), else with PLANNING_FAILED naming the design and the planner's reason; a design
 not in the store ends RECORD_INVALID, no terrain PLANNING_UNAVAILABLE. A record with ``base_measured`` takes the
-base pose from ``/<model_name>/odom_pose`` (the swing centre by RTK GNSS, in map) averaged over ``base_measure_s``
-while the machine stands (waiting up to ``joint_states_wait_s`` more for the messages); none, or a machine that
-moves, ends PLANNING_UNAVAILABLE naming the topic.
+base pose from ``/<model_name>/odom_pose`` in frame ``map`` (the swing centre by RTK GNSS) averaged over
+``base_measure_s`` while the machine stands (waiting up to ``joint_states_wait_s`` more for the messages); none, or a
+machine that moves, ends PLANNING_UNAVAILABLE naming the topic.
 The node is named ``<machine>_subtasks`` when ``-p machine:=<m>`` is on the command line, so the two
 machines' servers started by hand do not share a name.
 """
@@ -61,7 +61,6 @@ machines' servers started by hand do not share a name.
 from __future__ import annotations
 
 import functools
-import math
 import sys
 import threading
 import time
@@ -89,6 +88,7 @@ from tms_db import RecordNotFound, StoreError, get_design, open_store
 from tms_if_opera.interface import OUTCOME_GRACE_S as PLANNING_OUTCOME_GRACE_S
 from tms_if_opera.interface import PLANNING_OUTCOME
 from tms_model.fleet import load_named
+from tms_model.geometry import yaw_from_quaternion
 from tms_msg.msg import SubtaskOutcome, Zx200PlanningOutcome
 from tms_msg.srv import Zx200ChangePoseOptions
 from tms_msg_ts.action import LeafNodeBase
@@ -456,10 +456,14 @@ class SubtaskServers(Node):
         topic = f"/{self.model_name}/odom_pose"
         samples: list[tuple[float, float, float]] = []
 
+        frames: set[str] = set()
+
         def on_pose(msg: Odometry) -> None:
-            q = msg.pose.pose.orientation
-            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-            samples.append((msg.pose.pose.position.x, msg.pose.pose.position.y, yaw))
+            if msg.header.frame_id != "map":  # a converter's dead-reckoned odom is no base pose on the map
+                frames.add(msg.header.frame_id)
+                return
+            p = msg.pose.pose
+            samples.append((p.position.x, p.position.y, yaw_from_quaternion(p.orientation)))
 
         who = f"design {plan.design!r}: base pose from {topic}"
         started = time.monotonic()
@@ -468,8 +472,9 @@ class SubtaskServers(Node):
         try:
             while time.monotonic() - started < self.base_measure_s or len(samples) < 3:
                 if time.monotonic() > deadline or gh.is_cancel_requested or self._goals.stopping.is_set():
-                    raise DesignError(f"{who}: {len(samples)} message(s) within "
-                                      f"{self.joint_states_wait_s + self.base_measure_s:g} s")
+                    other = f" (and some in frame(s) {sorted(frames)}, not 'map')" if frames else ""
+                    raise DesignError(f"{who}: {len(samples)} message(s) in frame 'map' within "
+                                      f"{self.joint_states_wait_s + self.base_measure_s:g} s{other}")
                 await self._ticker.next()
         finally:
             self.destroy_subscription(sub)
