@@ -135,8 +135,10 @@ class DesignExcavation:
             arm = load_planner_config(machine.kind)
             # the reach the arm planner grants a dig target: joints its dig margin inside their limits (a pass beyond
             # it failed the excavate goal at 8.7 m: "no bucket angle keeps every joint 0.06 rad inside its limits")
+            # each seed's band also moved sideways by half a cell of the sensed heightmaps (0.05 m), so the bucket's
+            # side can run along a wall (a trench as wide as the bucket is cut in one band only so)
             settings = settings or PlannerSettings(level_sweep=True, fill=plan.dump is None,
-                                                   joint_margin=float(arm.dig_joint_margin))
+                                                   joint_margin=float(arm.dig_joint_margin), lateral_step=0.025)
             self.planner = PassPlanner(machine, settings)
             self.penetrate_depth, self.curl_carry = float(arm.penetrate_depth), float(arm.curl_carry)
         except TmsError as exc:

@@ -15,10 +15,11 @@ from tms_rp.excavation.design import Design
 
 def test_the_design_trench_seed_puts_its_design(store: Store) -> None:
     n_tasks, n_params = seed(store, ROOT / "config" / "seeds" / "design_trench.yaml")
-    # the two bases' poses and design records, and the run's blackboard (the supervisor writes CONTINUE_FLG)
-    assert (n_tasks, n_params) == (1, 5)
+    # the two bases' poses and design records, the two via poses round the trench, and the run's blackboard (the
+    # supervisor writes CONTINUE_FLG)
+    assert (n_tasks, n_params) == (1, 7)
     assert store.get_parameter("global_blackboard", "DESIGN_BLACKBOARD")["CONTINUE_FLG"] is True
-    assert store.get_parameter("zx200", "design_trench_base_north")["y"] == 4.5
+    assert store.get_parameter("zx200", "design_trench_base_north")["y"] == 8.4
     job = store.get_parameter("zx200", "design_trench_south")
     design = Design.from_dict(get_design(store, job["design"]))
     assert design.kind == "trench" and design.params["depth"] == 0.5 and design.params["width"] == 1.0

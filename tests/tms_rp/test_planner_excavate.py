@@ -69,10 +69,19 @@ def test_dig_measured_marks_the_approach_penetrate_and_drag_not_the_lift() -> No
     assert [t.label for t in marked if t.measured] == ["approach", "penetrate", "drag"]
 
 
+def test_release_measured_marks_the_open_only() -> None:
+    q = np.array([0.0, -0.6, 1.2, 1.5])  # a loaded bucket carried over the dump place
+    assert not any(t.measured for t in PLAN.release(1.0, q))  # the kind's file: off
+    design = load_planner_config(KIN.machine.kind, config_path("tms_rp", "zx200_planner_design.yaml"))
+    targets = ArmPlanner(KIN, design).release(1.0, q)
+    assert [t.label for t in targets] == ["swing", "open"] and [t.measured for t in targets] == [False, True]
+
+
 def test_a_planner_file_with_a_base_changes_only_its_own_keys(tmp_path) -> None:
     base = load_planner_config(KIN.machine.kind)
     design = load_planner_config(KIN.machine.kind, config_path("tms_rp", "zx200_planner_design.yaml"))
-    assert dataclasses.replace(design, dig_measured=base.dig_measured) == base and design.dig_measured
+    assert dataclasses.replace(design, dig_measured=base.dig_measured, release_measured=base.release_measured) == base
+    assert design.dig_measured and design.release_measured
     (tmp_path / "kind.yaml").write_text(config_path("tms_rp", "zx200_planner.yaml").read_text())
     bad = tmp_path / "bad.yaml"
     bad.write_text("base: kind.yaml\nlift_height: 1.0\ndig_measured: 1\n")

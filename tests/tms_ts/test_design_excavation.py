@@ -4,6 +4,7 @@ reasons named with the design, and the seed's trench within the paper site's exc
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from pathlib import Path
@@ -18,7 +19,7 @@ from tms_model.excavator.kinematics import ExcavatorKinematics, site_excavator_k
 from tms_model.machines import load_machine
 from tms_model.site import load_site
 from tms_rp.arm.planner import ArmPlanner, load_planner_config
-from tms_rp.excavation.design import Design, DesignError, Grid, cell_centres
+from tms_rp.excavation.design import Design, DesignError, Grid, cell_centres, distance_to_polygon
 from tms_rp.excavation.planner import BasePose, PlannerSettings
 from tms_ts.design_excavation import (
     DUMP_THETA_W,
@@ -242,6 +243,8 @@ def _seed_records() -> tuple[dict, dict[str, dict]]:
 
 
 TREE_LEGS = [("design_trench_base_south", "st_zx200_navigate_anywhere_deg"), ("design_trench_south", ROW.name),
+             ("design_trench_via_south", "st_zx200_navigate_anywhere_deg"),
+             ("design_trench_via_north", "st_zx200_navigate_anywhere_deg"),
              ("design_trench_base_north", "st_zx200_navigate_anywhere_deg"), ("design_trench_north", ROW.name)]
 
 
@@ -273,14 +276,44 @@ def test_the_seed_trench_is_reachable_from_its_two_bases_on_flat_ground_and_off_
         assert math.hypot(b["x"] - mound.cx, b["y"] - mound.cy) > mound.base_radius + 3.0, nav
         dump = np.array([j["dump_x"], j["dump_y"]])
         assert not design.contains(dump[:1], dump[1:]).any()
+        # the heap beside the machine, not under it: a dump disc of the plant's radius clear of its footprint circle
+        footprint = math.hypot(MACHINE.footprint.length, MACHINE.footprint.width) / 2
+        assert math.dist(dump, (b["x"], b["y"])) > footprint + 1.2
+        # the release opens the bucket with its tip held over the dump (tms_rp.arm.planner): there the arm can hold
+        # the edge open enough for the plant to spill at 60 % of its full rate or more (3.6 m out it could not: the
+        # load stayed in and fell on the apron on the way back)
+        arm = ArmPlanner(ExcavatorKinematics(MACHINE), load_planner_config(KIND))
+        tip = np.array([math.dist(dump, axis), 0.0, j["dump_height"] + j["dump_z"]])
+        assert arm.feasible_theta_w(tip, arm.cfg.release_theta_w) < MACHINE.bucket.release_tip_angle - 0.3, job
         assert run.planner.reachable(np.hypot(*(dump - axis)), np.array(j["dump_height"])).all(), job
     assert covered[bottom].all()  # together every trench cell at its bottom
 
 
-def test_two_bases_beside_the_trench_ends_cut_what_one_base_cannot() -> None:
-    """An ideal machine (the excavate goal's level, bucket-wide drag) on flat ground: from the map origin the drags
-    meet the trench's ends slanted and leave its end strips; from the seed's two bases, each leg ending when nothing
-    reachable from it is worth a pass, they are cut. The figures: tms_rp/excavation/README.md."""
+def test_the_route_between_the_bases_keeps_the_machine_off_the_trench() -> None:
+    """The navigator's map does not know the trench: each straight leg of the tree after the south base (vias, north
+    base) keeps the machine's footprint circle 0.5 m clear of the design's area (the first, from the start, runs before
+    anything is dug), and of the south heap."""
+    data, records = _seed_records()
+    design = Design.from_dict(next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"]))
+    start = load_site().points["zx200_base"]
+    stops = [(records[r]["x"], records[r]["y"]) for r, sub in TREE_LEGS if sub == "st_zx200_navigate_anywhere_deg"]
+    assert math.dist(stops[0], (start.x, start.y)) > 5.0  # the first leg is a drive
+    clear = math.hypot(MACHINE.footprint.length, MACHINE.footprint.width) / 2 + 0.5
+    heap = (records["design_trench_south"]["dump_x"], records["design_trench_south"]["dump_y"])
+    for a, b in itertools.pairwise(stops):
+        t = np.linspace(0.0, 1.0, 200)[:, None]
+        pts = np.asarray(a) + t * (np.asarray(b) - np.asarray(a))
+        assert distance_to_polygon(pts[:, 0], pts[:, 1], np.array(design.area)).min() > clear, (a, b)
+        assert np.hypot(pts[:, 0] - heap[0], pts[:, 1] - heap[1]).min() > clear - 0.5 + 1.2, (a, b)  # its dump disc
+
+
+def test_bases_in_line_with_the_trench_cut_what_bases_beside_it_cannot() -> None:
+    """An ideal machine (the excavate goal's level, bucket-wide drag) on flat ground. From beside the trench's ends
+    the radial drags meet its walls at a slant: only many small passes cut the wedges along them; from the seed's two
+    bases in line with it (each leg ending when nothing reachable from it is worth a pass, or the whole design within
+    tolerance) the drags run along the trench, the bands moved sideways onto it (``lateral_step``), and cut it in a
+    few bucket-full passes, also from bases off their goals by the navigator's tolerance. The figures:
+    tms_rp/excavation/README.md."""
     data, records = _seed_records()
     doc = next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"])
 
@@ -295,18 +328,29 @@ def test_two_bases_beside_the_trench_ends_cut_what_one_base_cannot() -> None:
                 pwa = step.goals[0][1].pwa
                 arm.feasible_theta_w(np.array([pwa["x"], pwa["y"], pwa["z"] - run.penetrate_depth]), pwa["theta_w"])
                 _drag(grid, step.cut, run.planner.bucket_width)
-            assert step.ok and "part reachable from the base" in step.message, step.message
+            assert step.ok and ("part reachable from the base" in step.message or "within tolerance" in step.message)
             passes += run.passes
         return step, passes
 
-    one, n_one = legs([(BasePose(0.0, 0.0, 0.0, 0.0), records["design_trench_south"])])
-    two, n_two = legs([(BasePose(records[n]["x"], records[n]["y"], 0.0, 0.0), records[j])
-                       for n, j in (("design_trench_base_south", "design_trench_south"),
-                                    ("design_trench_base_north", "design_trench_north"))])
-    print(f"\ntrench, ideal level sweeps: one base {n_one} passes, MAE {one.error.mae * 100:.2f} cm; two bases {n_two} "
-          f"passes, MAE {two.error.mae * 100:.2f} cm, p95 {two.error.p95 * 100:.1f} cm")
-    assert two.error.mae < 0.03 < one.error.mae and two.error.cut_volume < 0.7 * one.error.cut_volume
-    assert n_two < records["design_trench_south"]["max_passes"]
+    jobs = ("design_trench_south", "design_trench_north")
+
+    def in_line(dx: float, dy: float, dyaw: float) -> list[tuple[BasePose, dict]]:
+        # off the goal by (dx, dy, dyaw), the south base one way and the north the other
+        return [(BasePose(records[n]["x"] + sign * dx, records[n]["y"] + sign * dy,
+                          math.radians(records[n]["yaw"]) + sign * dyaw, 0.0), records[j])
+                for sign, n, j in ((1, "design_trench_base_south", jobs[0]), (-1, "design_trench_base_north", jobs[1]))]
+
+    beside, n_beside = legs([(BasePose(0.0, sign * 4.5, 0.0, 0.0),
+                              {**records[j], "dump_x": 0.5, "dump_y": sign * 9.5, "max_passes": 200})
+                             for sign, j in ((-1, jobs[0]), (1, jobs[1]))])
+    line, n_line = legs(in_line(0.0, 0.0, 0.0))
+    print(f"\ntrench, ideal level sweeps: from beside its ends {n_beside} passes, MAE {beside.error.mae * 100:.2f} cm; "
+          f"in line {n_line} passes, MAE {line.error.mae * 100:.2f} cm, p95 {line.error.p95 * 100:.1f} cm")
+    # beside the ends, the bands moved sideways cut the slanted walls' wedges too, but only in many small passes
+    assert line.error.mae < 0.005 and 5 * n_line < n_beside
+    assert n_line < records[jobs[0]]["max_passes"]
+    for off in ((0.1, 0.2, 0.1), (0.1, -0.2, -0.1)):  # the navigator's goal tolerance: 0.2 m, 0.1 rad
+        assert legs(in_line(*off))[0].error.mae < 0.005, off
 
 
 def test_the_tree_drives_to_each_base_and_digs_there() -> None:

@@ -60,6 +60,10 @@ class PlannerConfig:
                                  "measured arm is there too, not on the prediction alone (the swing still lags at the "
                                  "approach; the soil's load slows the cylinders below the controller's model): the "
                                  "edge enters where planned and cuts to depth, the passes take longer")
+    release_measured: bool = setting(False, doc="the release's open is reached only once the measured bucket is open, "
+                                     "not on the prediction alone: the load is out before the next goal swings the "
+                                     "bucket back (what an open bucket still holds falls along the way: over a "
+                                     "design's apron on the plant)")
 
 
 def planner_config_path(kind: str) -> Path:
@@ -369,13 +373,13 @@ class ArmPlanner:
             # the IK pose that has the tip where it was; pass-through precision: the soil only has to
             # land in the vessel, and it goes on falling while the next goal's swing is in its dead time.
             q_open = self.kin.ik_position_with_angle(tip, th_open)
-            open_ = JointTarget(q_open, "open", via=True)
+            open_ = JointTarget(q_open, "open", via=True, measured=self.cfg.release_measured)
             if self._swing_only_nudges(current_q, q):
                 return [open_]  # already over the vessel (the carry put it there): the open does the rest
             return [JointTarget(q, "swing", via=True), open_]
         opened = q.copy()
         opened[3] = max(self.cfg.release_open_bucket, lim.lower[3] + m)
-        open_ = JointTarget(self._check_joints(opened, "open"), "open")
+        open_ = JointTarget(self._check_joints(opened, "open"), "open", measured=self.cfg.release_measured)
         return [open_] if self._swing_only_nudges(current_q, q) else [JointTarget(q, "swing"), open_]
 
     def _swing_only_nudges(self, current_q: Any, swung: np.ndarray) -> bool:

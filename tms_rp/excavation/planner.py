@@ -18,8 +18,10 @@ One call of :meth:`PassPlanner.next_pass` looks at the terrain grid (the heightm
    ``max_pass_depth`` per cell) gives the seed cell (the next best seeds, up to ``seeds``, when its pass is
    smaller than ``min_pass_volume``); the pass runs along the radial line through it toward the
    machine (the bucket is dragged in), over the contiguous cuttable cells of a strip one bucket wide, at most
-   ``max_pass_length`` long, starting at the far end; a pass whose far end is out of reach at its edge height is not
-   planned (the next seed is tried). The edge path holds, along the line, the highest of the
+   ``max_pass_length`` long, starting at the far end, which the bucket must reach at the lowest the edge may go; a
+   pass whose far end is out of reach at its edge height is not planned (the next seed is tried). With
+   ``lateral_step`` the line is also moved sideways past the seed, the largest pass kept (a bucket's side along a
+   wall). The edge path holds, along the line, the highest of the
    strip's cut-to heights (never below the design); its depth below the surface is bounded by ``max_pass_depth``
    and shrunk until the volume fits the bucket (heaped capacity times ``fill_factor``) and the dump place.
 
@@ -75,6 +77,11 @@ class PlannerSettings:
     #: for a dig target: a cell reached only with a joint at its limit is refused there)
     joint_margin: float = 0.0
     seeds: int = 8  # seed cells tried, best first, before the planner says nothing is worth a pass
+    #: [m] each seed's band also tried with its line moved sideways by multiples of this, less than half the bucket
+    #: width either way (the seed cell stays under the bucket), the largest pass kept; 0: on the seed cell only. A
+    #: band centred on its seed crosses a wall beside it and a level sweep then cuts nothing there; moved, the
+    #: bucket's side runs along the wall (a trench's end, or walls as far apart as the bucket is wide)
+    lateral_step: float = 0.0
     #: plan what the arm's excavate does (tms_rp.arm.planner: the edge dragged level, the bucket's whole width):
     #: every cell the edge sweeps is cut to one edge height, never below the design of any of them, so the drag
     #: stops where a wall of the design would come under the bucket; False: the strip is clipped to the cuttable
@@ -91,7 +98,8 @@ class PlannerSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise DesignError(f"planner settings: {name} must be > 0, got {value!r}")
-        for name in ("reach_margin", "track_clearance", "fill_min", "min_fill_volume", "spoil_clearance"):
+        for name in ("reach_margin", "track_clearance", "fill_min", "min_fill_volume", "spoil_clearance",
+                     "lateral_step"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise DesignError(f"planner settings: {name} must be >= 0, got {value!r}")
@@ -269,9 +277,12 @@ class PassPlanner:
         order = np.argsort(-score, kind="stable")[:max(1, st.seeds)]
         cut, best = None, 0.0
         for seed in order[score[order] > 0]:
-            cut = self._cut(s, z, excess, cuttable, axis, xc, yc, cx, cy, cap, np.unravel_index(int(seed), z.shape))
-            if cut is not None and not self._start_reachable(cut[4], axis, ground):
-                cut = None
+            cut = None
+            rc = np.unravel_index(int(seed), z.shape)
+            for shift in self._shifts():
+                c = self._cut(s, z, excess, cuttable, axis, xc, yc, cx, cy, cap, rc, shift, ground)
+                if c is not None and self._start_reachable(c[4], axis, ground) and (cut is None or c[3] > cut[3]):
+                    cut = c
             best = max(best, 0.0 if cut is None else cut[3])
             if cut is not None and cut[3] >= st.min_pass_volume:
                 break
@@ -317,6 +328,14 @@ class PassPlanner:
         r, c = np.unravel_index(int(idx[order[0]]), z.shape)
         return "spoil", (int(r), int(c)), math.inf
 
+    def _shifts(self) -> list[float]:
+        """Sideways moves [m] of a seed's band line tried (``lateral_step``): none first, then outward both ways."""
+        step, half = self.settings.lateral_step, self.bucket_width / 2.0
+        if step <= 0.0:
+            return [0.0]
+        n = math.ceil(half / step) - 1
+        return [0.0, *(sign * i * step for i in range(1, n + 1) for sign in (1.0, -1.0))]
+
     def _start_reachable(self, path: np.ndarray, axis: np.ndarray, ground: float) -> bool:
         """The far end of an edge path (the point the bucket penetrates to) within reach at its own height: the cells
         were judged at the heights they would be cut to, but the edge height is the strip's and the end lies half a
@@ -326,13 +345,13 @@ class PassPlanner:
         return bool(self.reachable(r, path[:1, 2] - ground)[0])
 
     def _cut(self, s: Sampled, z: np.ndarray, excess: np.ndarray, cuttable: np.ndarray, axis: np.ndarray,
-             xc: np.ndarray, yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any]
-             ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
+             xc: np.ndarray, yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any], shift: float = 0.0,
+             ground: float = 0.0) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
         st = self.settings
         if st.level_sweep:
-            return self._sweep(s, z, cuttable, axis, xc, yc, cx, cy, cap, rc)
+            return self._sweep(s, z, cuttable, axis, xc, yc, cx, cy, cap, rc, shift, ground)
         w = self.bucket_width
-        seed, u, along, across = _drag_frame(xc, yc, axis, rc)
+        seed, u, along, across = _drag_frame(xc, yc, axis, rc, shift)
         step = min(cx, cy)
         strip = cuttable & (np.abs(across) <= w / 2.0 + 1e-9)
         b = np.rint(along / step).astype(int)
@@ -372,8 +391,8 @@ class PassPlanner:
         return sel, cut_to, float(depth), volume, path, u
 
     def _sweep(self, s: Sampled, z: np.ndarray, cuttable: np.ndarray, axis: np.ndarray, xc: np.ndarray,
-               yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any]
-               ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
+               yc: np.ndarray, cx: float, cy: float, cap: float, rc: tuple[Any, Any], shift: float = 0.0,
+               ground: float = 0.0) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray, np.ndarray] | None:
         """The ``level_sweep`` pass from seed cell ``rc``: the bucket-wide band along the drag, its bins (one cell
         step along the drag) kept while each holds a cuttable cell and no cell whose floor (the design inside the
         area, the surface outside it) lies above the seed bin's; every cell of the band cut to one edge height,
@@ -381,7 +400,7 @@ class PassPlanner:
         st = self.settings
         w = self.bucket_width
         r, c = rc
-        seed, u, along, across = _drag_frame(xc, yc, axis, rc)
+        seed, u, along, across = _drag_frame(xc, yc, axis, rc, shift)
         step = min(cx, cy)
         band = np.abs(across) <= w / 2.0 + 1e-9
         b = np.rint(along / step).astype(int)
@@ -393,15 +412,22 @@ class PassPlanner:
         has_cut = np.zeros_like(top, dtype=bool)
         has_cut[b[band & cuttable] - k0] = True
         base_floor = top[-k0] + 1e-6
+        # the lowest the edge can go; the bucket enters at a bin's far edge, half a cell beyond its cells, and must
+        # reach it there (the cells were judged at their own heights): a band grown to the reach would fail the goal
+        lowest = max(float(top[-k0]), float(z[r, c]) - st.max_pass_depth) - ground
 
         def ok(k: int) -> bool:
             i = k - k0
             return 0 <= i < len(top) and has_cut[i] and top[i] <= base_floor
 
-        if not ok(0):
+        def enters(k: int) -> bool:
+            edge = seed + (k - 0.5) * step * u
+            return bool(self.reachable(np.array([math.dist(edge, axis)]), np.array([lowest]))[0])
+
+        if not (ok(0) and enters(0)):
             return None
         lo = 0
-        while ok(lo - 1):
+        while ok(lo - 1) and enters(lo - 1):
             lo -= 1
         hi = 0
         while ok(hi + 1):
@@ -486,12 +512,15 @@ def _deepest_within(plan: Any, max_depth: float, cap: float) -> tuple[float, Any
     return lo, plan(lo)
 
 
-def _drag_frame(xc: np.ndarray, yc: np.ndarray, axis: np.ndarray, rc: tuple[Any, Any]
+def _drag_frame(xc: np.ndarray, yc: np.ndarray, axis: np.ndarray, rc: tuple[Any, Any], shift: float = 0.0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The radial drag from seed cell ``rc`` toward the swing ``axis``: the seed's centre, the unit direction, and
-    every cell centre's distance along it and across it (left positive)."""
+    """The radial drag through seed cell ``rc``'s centre moved ``shift`` [m] across (left positive) toward the
+    swing ``axis``: that point, the unit direction, and every cell centre's distance along it and across it."""
     r, c = rc
     seed = np.array([xc[r, c], yc[r, c]])
+    if shift:
+        toward = axis - seed
+        seed = seed + shift * np.array([-toward[1], toward[0]]) / float(np.hypot(*toward))
     toward = axis - seed
     u = toward / float(np.hypot(*toward))
     n = np.array([-u[1], u[0]])

@@ -518,9 +518,11 @@ class SubtaskServers(Node):
                 took = f"; {time.monotonic() - started:.1f} s"
                 return self._finish(gh, spec, R.NONE if step.ok else R.PLANNING_FAILED, step.message + took)
             cut = step.cut
-            gh.publish_feedback(LeafNodeBase.Feedback(
-                status=f"design {plan.design!r} pass {step.number}: cut {cut.volume:.3f} m3 depth {cut.depth:.2f} m "
-                       f"length {cut.length:.2f} m, dump to {cut.dump_kind}; MAE {step.error.mae * 100:.2f} cm"))
+            status = (f"design {plan.design!r} pass {step.number}: cut {cut.volume:.3f} m3 depth {cut.depth:.2f} m "
+                      f"length {cut.length:.2f} m from ({cut.start[0]:.2f}, {cut.start[1]:.2f}, {cut.start[2]:.2f}), "
+                      f"dump to {cut.dump_kind}; MAE {step.error.mae * 100:.2f} cm")
+            self.get_logger().info(status)  # the run's log tells each pass as the feedback does
+            gh.publish_feedback(LeafNodeBase.Feedback(status=status))
             for what, goal_plan in step.goals:
                 code, message = await self._run_planning(gh, spec.steps[what], goal_plan, record)
                 if code != R.NONE:
