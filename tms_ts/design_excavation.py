@@ -22,8 +22,11 @@ measured when the subtask began (:func:`base_from_swing_centre`). The step answe
 planner stops: ``ok`` when it says the surface is within tolerance (with the record's ``scope`` ``reachable`` also
 when nothing reachable from the base is worth a pass: the tree moves the machine to its next base pose), else a
 failure whose message names the design, the passes done and the planner's reason (nothing reachable, no place to
-dump, ...). A design document that is wrong, a terrain that does not cover the design's area, or more than
-``max_passes`` passes end it as a failure naming the design too. Machine-independent: the machine's description
+dump, ...). A pass that cut less than ``FUTILE_SHARE`` of what it planned (judged on the next terrain) counts
+against its cells; a cell counted ``FUTILE_PASSES`` times is left out of the passes planned after it (the planner's
+``skip``; a strip at a wall the bucket does not reach into would otherwise be planned again and again until
+``max_passes``), and the answers name how many were left. A design document that is wrong, a terrain that does not
+cover the design's area, or more than ``max_passes`` passes end it as a failure naming the design too. Machine-independent: the machine's description
 gives the bucket, the reach and the swing origin; the arm planner's settings of its kind give ``penetrate_depth``.
 """
 
@@ -46,6 +49,10 @@ __all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "Desig
            "ground_top", "standing_pose", "to_base"]
 
 #: [rad] the edge angle the bucket is carried over the dump place with (85 deg, bucket closed: the paper's release pose)
+#: a pass that cut less than this share of its planned volume did not work its cells ...
+FUTILE_SHARE = 0.2
+#: ... and a cell so passed over this many times is not planned again (by this run)
+FUTILE_PASSES = 2
 DUMP_THETA_W = 1.483530
 #: [rad] where that angle cannot be held over the dump place, the nearest holdable one within this
 DUMP_THETA_W_TOLERANCE = 0.5
@@ -76,6 +83,10 @@ def to_base(base: BasePose, x: float, y: float, z: float) -> tuple[float, float,
     dx, dy = x - base.x, y - base.y
     c, s = math.cos(base.yaw), math.sin(base.yaw)
     return c * dx + s * dy, -s * dx + c * dy, z - (base.z or 0.0)
+
+
+def _grid_key(terrain: GridLike) -> tuple:
+    return (terrain.x_min, terrain.y_min, terrain.x_max, terrain.y_max, np.shape(terrain.z))
 
 
 def base_from_swing_centre(machine: Any, x: float, y: float, yaw: float, z: float) -> BasePose:
@@ -153,6 +164,9 @@ class DesignExcavation:
         self.passes = 0
         self.volume = 0.0  # [m^3 bank] planned volume of the passes sent
         self.first_error: SurfaceError | None = None
+        # the last pass sent, with its cells' heights then; per cell the passes that did not work it
+        self._sent: tuple[Pass, np.ndarray, tuple] | None = None
+        self._futile: np.ndarray | None = None
 
     def _covered(self, design: Design, terrain: GridLike) -> str | None:
         xs = [p[0] for p in design.area]
@@ -178,8 +192,9 @@ class DesignExcavation:
         uncovered = self._covered(design, terrain)
         if uncovered:
             return Done(False, uncovered)
+        skip = self._judge_last(terrain)
         try:
-            decision = self.planner.next_pass(terrain, design, self.base)
+            decision = self.planner.next_pass(terrain, design, self.base, skip=skip)
         except DesignError as exc:
             return Done(False, f"{self.who}: {exc}")
         err = decision.error
@@ -187,6 +202,9 @@ class DesignExcavation:
             self.first_error = err
         figures = (f"MAE {err.mae * 100:.2f} cm, p95 {err.p95 * 100:.2f} cm, max {err.max_abs * 100:.2f} cm, "
                    f"{err.cut_volume:.3f} m3 above and {err.fill_volume:.3f} m3 below the design")
+        if skip is not None and skip.any():
+            figures += (f"; {int(skip.sum())} cell(s) left after {FUTILE_PASSES} passes over them each cut less "
+                        f"than {FUTILE_SHARE:.0%} of their plan")
         if decision.cut is None:
             if decision.reason.startswith("within tolerance"):
                 return Done(True, f"{self.who} done after {self.summary()}: {decision.reason}", err)
@@ -202,7 +220,28 @@ class DesignExcavation:
         cut = decision.cut
         self.passes += 1
         self.volume += cut.volume
+        z = np.asarray(terrain.z, dtype=float)
+        self._sent = (cut, z[cut.cells[:, 0], cut.cells[:, 1]].copy(), _grid_key(terrain))
         return PassGoals(self._goals(cut, terrain), cut, self.passes, err)
+
+    def _judge_last(self, terrain: GridLike) -> np.ndarray | None:
+        """Count the last pass against its cells when ``terrain`` (the one after it) shows it cut less than
+        ``FUTILE_SHARE`` of its plan; the cells counted ``FUTILE_PASSES`` times (None: none yet, or a terrain of
+        another grid: the counts start over)."""
+        key = _grid_key(terrain)
+        if self._futile is None or self._futile.shape != np.shape(terrain.z):
+            self._futile = np.zeros(np.shape(terrain.z), dtype=int)
+        sent, self._sent = self._sent, None
+        if sent is not None and sent[2] == key:
+            cut, before, _ = sent
+            z = np.asarray(terrain.z, dtype=float)
+            rows, cols = cut.cells[:, 0], cut.cells[:, 1]
+            cell = (terrain.x_max - terrain.x_min) / z.shape[1] * (terrain.y_max - terrain.y_min) / z.shape[0]
+            done = float(np.sum(np.clip(before - z[rows, cols], 0.0, None))) * cell
+            if done < FUTILE_SHARE * cut.volume:
+                np.add.at(self._futile, (rows, cols), 1)
+        skip = self._futile >= FUTILE_PASSES
+        return skip if skip.any() else None
 
     def _goals(self, cut: Pass, terrain: GridLike) -> tuple[tuple[str, Any], ...]:
         p = self.plan

@@ -353,6 +353,32 @@ def test_bases_in_line_with_the_trench_cut_what_bases_beside_it_cannot() -> None
         assert legs(in_line(*off))[0].error.mae < 0.005, off
 
 
+def test_cells_a_machine_does_not_cut_are_left_after_two_futile_passes() -> None:
+    """A machine that cuts the trench but not its south end strip (y < -4.8, as the plant's bucket did not at the
+    near wall in run 15): the passes over the strip cut nothing; after two over each cell those cells are left out,
+    and the leg ends naming them instead of planning the strip until max_passes."""
+    data, records = _seed_records()
+    doc = next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"])
+    b = records["design_trench_base_south"]
+    run = DesignExcavation(build_excavate_design(records["design_trench_south"], "job"), MACHINE,
+                           base=BasePose(b["x"], b["y"], math.radians(b["yaw"]), 0.0))
+    grid = flat(-11, 3, -12, 12)
+    _, yc = cell_centres(grid)
+    strip = (yc < -4.8) & (yc > -5.0)
+    futile = 0
+    while not isinstance(step := run.step(doc, grid), Done):
+        before = grid.z.copy()
+        _drag(grid, step.cut, run.planner.bucket_width)
+        grid.z[strip] = before[strip]  # the bucket does not reach into the strip
+        futile += int(np.sum(before - grid.z) < 0.2 * step.cut.volume / 0.01)
+    assert step.ok and "part reachable" in step.message, step.message
+    assert re.search(r"\d+ cell\(s\) left after 2 passes over them each cut less than 20%", step.message)
+    assert 2 <= futile <= 6 and run.passes < 20  # not planned again and again
+    design = Design.from_dict(doc)
+    s = design.sample(grid)
+    assert np.all(grid.z[strip & s.inside & (np.abs(cell_centres(grid)[0] + 5) < 0.5)] > -0.1)  # left
+
+
 def test_the_tree_drives_to_each_base_and_digs_there() -> None:
     xml = (ROOT / "trees" / "design_trench.xml").read_text()
     legs = re.findall(r'record_name="([^"]+)" subtask_name="([^"]+)"', xml)

@@ -238,8 +238,10 @@ class PassPlanner:
         return self._cache[2], self._cache[3]
 
     # ------------------------------------------------------------------ the plan
-    def next_pass(self, terrain: GridLike, design: Design, base: BasePose) -> Decision:
-        """The next pass, or none with the reason (see the module docstring)."""
+    def next_pass(self, terrain: GridLike, design: Design, base: BasePose, skip: np.ndarray | None = None
+                  ) -> Decision:
+        """The next pass, or none with the reason (see the module docstring); ``skip`` (a boolean mask of the
+        terrain's shape) marks cells not to plan a cut for (a caller's cells the machine could not cut)."""
         st = self.settings
         s, outside_dist = self._sampled(design, terrain)
         err = surface_error(design, terrain, sampled=s)
@@ -255,6 +257,8 @@ class PassPlanner:
         excess = z - s.target
         floor = np.maximum(s.target, z - st.max_pass_depth)
         cuttable = s.inside & (excess > st.min_cut) & self.reachable(radius, floor - ground)
+        if skip is not None:
+            cuttable &= ~skip
         if not cuttable.any():
             return Decision(None, f"nothing reachable to cut: {err.cut_volume:.3f} m3 above the design, none of it "
                                   f"more than {st.min_cut * 100:.1f} cm above and within reach of the base at "
