@@ -26,8 +26,9 @@ dump, ...). A pass that cut less than ``FUTILE_SHARE`` of what it planned (judge
 against its cells; a cell counted ``FUTILE_PASSES`` times is left out of the passes planned after it (the planner's
 ``skip``; a strip at a wall the bucket does not reach into would otherwise be planned again and again until
 ``max_passes``), and the answers name how many were left. A design document that is wrong, a terrain that does not
-cover the design's area, or more than ``max_passes`` passes end it as a failure naming the design too. Machine-independent: the machine's description
-gives the bucket, the reach and the swing origin; the arm planner's settings of its kind give ``penetrate_depth``.
+cover the design's area, or more than ``max_passes`` passes end it as a failure naming the design too.
+Machine-independent: the machine's description gives the bucket, the reach and the swing origin; the arm planner's
+settings of its kind give ``penetrate_depth``.
 """
 
 from __future__ import annotations
