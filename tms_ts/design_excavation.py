@@ -22,10 +22,15 @@ measured when the subtask began (:func:`base_from_swing_centre`). The step answe
 planner stops: ``ok`` when it says the surface is within tolerance (with the record's ``scope`` ``reachable`` also
 when nothing reachable from the base is worth a pass: the tree moves the machine to its next base pose), else a
 failure whose message names the design, the passes done and the planner's reason (nothing reachable, no place to
-dump, ...). A pass that cut less than ``FUTILE_SHARE`` of what it planned (judged on the next terrain) counts
-against its cells; a cell counted ``FUTILE_PASSES`` times is left out of the passes planned after it (the planner's
-``skip``; a strip at a wall the bucket does not reach into would otherwise be planned again and again until
-``max_passes``), and the answers name how many were left. A design document that is wrong, a terrain that does not
+dump, ...). A cell a pass lowered by less than ``FUTILE_SHARE`` of what it planned there (judged on the next
+terrain) counts as passed over; a cell passed over ``FUTILE_PASSES`` times is left out of the passes planned after it
+(the planner's ``skip``: a strip the bucket does not reach into, at a wall or at the edge of its reach, would otherwise
+be planned again and again until ``max_passes``), and the answers name how many were left. The cells a pass did
+lower tell how deep the edge really went: the median of their heights after it less the heights planned; where that
+is below the plan (the arm under the soil's load going deeper than asked: a cut below the design cannot be undone),
+the excavate's edge is aimed that much higher in the passes after (``edge_offset``, half of each pass's median added,
+between 0 and ``EDGE_OFFSET_MAX``); a pass left above its plan is cut again by the next one and lowers it no
+further. A design document that is wrong, a terrain that does not
 cover the design's area, or more than ``max_passes`` passes end it as a failure naming the design too.
 Machine-independent: the machine's description gives the bucket, the reach and the swing origin; the arm planner's
 settings of its kind give ``penetrate_depth``.
@@ -50,10 +55,14 @@ __all__ = ["DUMP_THETA_W", "DUMP_THETA_W_TOLERANCE", "Done", "PassGoals", "Desig
            "ground_top", "standing_pose", "to_base"]
 
 #: [rad] the edge angle the bucket is carried over the dump place with (85 deg, bucket closed: the paper's release pose)
-#: a pass that cut less than this share of its planned volume did not work its cells ...
+#: a cell a pass lowered by less than this share of the depth it planned there was passed over ...
 FUTILE_SHARE = 0.2
-#: ... and a cell so passed over this many times is not planned again (by this run)
+#: ... and a cell passed over this many times is not planned again (by this run)
 FUTILE_PASSES = 2
+#: [m] the most the excavate's edge is aimed above a pass's planned height for the depth the cuts overshot
+EDGE_OFFSET_MAX = 0.1
+#: cells a pass lowered, at least, for its median to count
+EDGE_CELLS_MIN = 20
 DUMP_THETA_W = 1.483530
 #: [rad] where that angle cannot be held over the dump place, the nearest holdable one within this
 DUMP_THETA_W_TOLERANCE = 0.5
@@ -168,6 +177,7 @@ class DesignExcavation:
         # the last pass sent, with its cells' heights then; per cell the passes that did not work it
         self._sent: tuple[Pass, np.ndarray, tuple] | None = None
         self._futile: np.ndarray | None = None
+        self.edge_offset = 0.0  # [m] the excavate's edge aimed this far above each pass's planned height
 
     def _covered(self, design: Design, terrain: GridLike) -> str | None:
         xs = [p[0] for p in design.area]
@@ -204,8 +214,8 @@ class DesignExcavation:
         figures = (f"MAE {err.mae * 100:.2f} cm, p95 {err.p95 * 100:.2f} cm, max {err.max_abs * 100:.2f} cm, "
                    f"{err.cut_volume:.3f} m3 above and {err.fill_volume:.3f} m3 below the design")
         if skip is not None and skip.any():
-            figures += (f"; {int(skip.sum())} cell(s) left after {FUTILE_PASSES} passes over them each cut less "
-                        f"than {FUTILE_SHARE:.0%} of their plan")
+            figures += (f"; {int(skip.sum())} cell(s) left after {FUTILE_PASSES} passes each lowered them by less "
+                        f"than {FUTILE_SHARE:.0%} of the depth planned")
         if decision.cut is None:
             if decision.reason.startswith("within tolerance"):
                 return Done(True, f"{self.who} done after {self.summary()}: {decision.reason}", err)
@@ -226,21 +236,25 @@ class DesignExcavation:
         return PassGoals(self._goals(cut, terrain), cut, self.passes, err)
 
     def _judge_last(self, terrain: GridLike) -> np.ndarray | None:
-        """Count the last pass against its cells when ``terrain`` (the one after it) shows it cut less than
-        ``FUTILE_SHARE`` of its plan; the cells counted ``FUTILE_PASSES`` times (None: none yet, or a terrain of
-        another grid: the counts start over)."""
+        """Count the cells the last pass passed over (``terrain`` is the one after it: lowered by less than
+        ``FUTILE_SHARE`` of the depth it planned there); the cells counted ``FUTILE_PASSES`` times (None: none yet;
+        a terrain of another grid starts the counts over)."""
         key = _grid_key(terrain)
         if self._futile is None or self._futile.shape != np.shape(terrain.z):
             self._futile = np.zeros(np.shape(terrain.z), dtype=int)
         sent, self._sent = self._sent, None
         if sent is not None and sent[2] == key:
             cut, before, _ = sent
-            z = np.asarray(terrain.z, dtype=float)
             rows, cols = cut.cells[:, 0], cut.cells[:, 1]
-            cell = (terrain.x_max - terrain.x_min) / z.shape[1] * (terrain.y_max - terrain.y_min) / z.shape[0]
-            done = float(np.sum(np.clip(before - z[rows, cols], 0.0, None))) * cell
-            if done < FUTILE_SHARE * cut.volume:
-                np.add.at(self._futile, (rows, cols), 1)
+            planned = before - cut.cut_to
+            lowered = before - np.asarray(terrain.z, dtype=float)[rows, cols]
+            meant = planned > self.planner.settings.min_cut
+            over = meant & (lowered < FUTILE_SHARE * planned)
+            np.add.at(self._futile, (rows[over], cols[over]), 1)
+            worked = meant & ~over
+            if worked.sum() >= EDGE_CELLS_MIN:  # where the edge went against where it was sent (+ = left above)
+                above = float(np.median(before[worked] - lowered[worked] - cut.cut_to[worked]))
+                self.edge_offset = float(np.clip(self.edge_offset - 0.5 * above, 0.0, EDGE_OFFSET_MAX))
         skip = self._futile >= FUTILE_PASSES
         return skip if skip.any() else None
 
@@ -250,8 +264,8 @@ class DesignExcavation:
         # the curl and lift goes on cutting past the drag's end: drag that much shorter (at most half the pass), so a
         # band that ends at the design's wall is not carried into the apron beyond it
         drag = max(cut.length - self.curl_carry, 0.5 * cut.length)
-        excavate = ExcavatePlan({"x": sx, "y": sy, "z": sz + self.penetrate_depth, "theta_w": p.theta_w,
-                                 "offset": drag})
+        excavate = ExcavatePlan({"x": sx, "y": sy, "z": sz + self.penetrate_depth + self.edge_offset,
+                                 "theta_w": p.theta_w, "offset": drag})
         if p.dump is not None:
             dx, dy = float(p.dump["x"]), float(p.dump["y"])
             dz = float(p.dump.get("z", cut.dump[2]))

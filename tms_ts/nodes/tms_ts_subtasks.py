@@ -520,7 +520,8 @@ class SubtaskServers(Node):
             cut = step.cut
             status = (f"design {plan.design!r} pass {step.number}: cut {cut.volume:.3f} m3 depth {cut.depth:.2f} m "
                       f"length {cut.length:.2f} m from ({cut.start[0]:.2f}, {cut.start[1]:.2f}, {cut.start[2]:.2f}), "
-                      f"dump to {cut.dump_kind}; MAE {step.error.mae * 100:.2f} cm")
+                      f"edge aimed {run.edge_offset * 100:.1f} cm higher, dump to {cut.dump_kind}; "
+                      f"MAE {step.error.mae * 100:.2f} cm")
             self.get_logger().info(status)  # the run's log tells each pass as the feedback does
             gh.publish_feedback(LeafNodeBase.Feedback(status=status))
             for what, goal_plan in step.goals:
