@@ -354,15 +354,21 @@ def test_bases_in_line_with_the_trench_cut_what_bases_beside_it_cannot() -> None
         assert legs(in_line(*off))[0].error.mae < 0.005, off
 
 
-def test_cells_a_machine_does_not_cut_are_left_after_two_futile_passes() -> None:
-    """A machine that cuts the trench but not its south end strip (y < -4.8, as the plant's bucket did not at the
-    near wall in run 15): the passes over the strip do not lower it; after two over each of its cells they are left
-    out, and the leg ends naming them instead of planning the strip until max_passes."""
+def _south_leg() -> tuple[dict, DesignExcavation]:
+    """The seed's design document and its south leg's run, from the base it names."""
     data, records = _seed_records()
     doc = next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"])
     b = records["design_trench_base_south"]
     run = DesignExcavation(build_excavate_design(records["design_trench_south"], "job"), MACHINE,
                            base=BasePose(b["x"], b["y"], math.radians(b["yaw"]), 0.0))
+    return doc, run
+
+
+def test_cells_a_machine_does_not_cut_are_left_after_two_futile_passes() -> None:
+    """A machine that cuts the trench but not its south end strip (y < -4.8, as the plant's bucket did not at the
+    near wall in run 15): the passes over the strip do not lower it; after two over each of its cells they are left
+    out, and the leg ends naming them instead of planning the strip until max_passes."""
+    doc, run = _south_leg()
     grid = flat(-11, 3, -12, 12)
     _, yc = cell_centres(grid)
     strip = (yc < -4.8) & (yc > -5.0)
@@ -385,11 +391,7 @@ def test_an_edge_that_goes_deeper_than_sent_is_aimed_higher() -> None:
     """A machine whose edge goes 5 cm deeper than the excavate goal sends it (the arm under the soil's load): the
     subtask measures that on the cells each pass lowered and aims the edge higher, so the trench's floor ends within
     a centimetre of the design where without it the whole floor would be 5 cm too deep."""
-    data, records = _seed_records()
-    doc = next(d for d in data["designs"] if d["name"] == records["design_trench_south"]["design"])
-    b = records["design_trench_base_south"]
-    run = DesignExcavation(build_excavate_design(records["design_trench_south"], "job"), MACHINE,
-                           base=BasePose(b["x"], b["y"], math.radians(b["yaw"]), 0.0))
+    doc, run = _south_leg()
     grid = flat(-11, 3, -12, 12)
     offsets = []
     while not isinstance(step := run.step(doc, grid), Done):
