@@ -30,8 +30,8 @@ lower tell how deep the edge really went: the median of their heights after it l
 is below the plan (the arm under the soil's load going deeper than asked: a cut below the design cannot be undone),
 the excavate's edge is aimed that much higher in the passes after (``edge_offset``, half of each pass's median added,
 between 0 and ``EDGE_OFFSET_MAX``); a pass left above its plan is cut again by the next one and lowers it no
-further. A design document that is wrong, a terrain that does not
-cover the design's area, or more than ``max_passes`` passes end it as a failure naming the design too.
+further. A design document that is wrong, a terrain that does not cover the design's area, or more than
+``max_passes`` passes end it as a failure naming the design too.
 Machine-independent: the machine's description gives the bucket, the reach and the swing origin; the arm planner's
 settings of its kind give ``penetrate_depth``.
 """
