@@ -238,12 +238,19 @@ class EmbeddedStore(Store):
             return self._conn
         conn = None
         try:
+            self._lock_fd = os.open(self.directory / LOCK_FILE, os.O_CREAT | os.O_RDWR, 0o666)
             conn = sqlite3.connect(
                 self.file, timeout=self._busy_timeout_s, isolation_level=None, check_same_thread=False
             )
-            conn.execute("PRAGMA journal_mode=WAL")
+            # a new database's switch to WAL needs a lock SQLite's busy handler does not wait for: two processes
+            # opening one new store at once (a launch's writer and reader) failed one of them "database is locked";
+            # the store's cross-process lock puts them in turn (the second finds WAL already set)
+            fcntl.flock(self._lock_fd, fcntl.LOCK_EX)
+            try:
+                conn.execute("PRAGMA journal_mode=WAL")
+            finally:
+                fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
             conn.execute(f"PRAGMA synchronous={self._synchronous}")
-            self._lock_fd = os.open(self.directory / LOCK_FILE, os.O_CREAT | os.O_RDWR, 0o666)
             self._conn = conn
             self._pid = os.getpid()
             self._transaction(lambda c: c.executescript(_SCHEMA) and None, script=True)

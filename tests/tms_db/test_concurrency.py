@@ -168,3 +168,32 @@ def test_mongodb_check_names_a_missing_unique_key(mongodb_uri) -> None:
     finally:
         client.drop_database(name)
         client.close()
+
+
+def _open_new_store(path: str, barrier, results) -> None:
+    barrier.wait()
+    try:
+        open_store(path=path).close()
+        results.put("ok")
+    except Exception as exc:  # noqa: BLE001 - the test reports what each process met
+        results.put(f"{type(exc).__name__}: {exc}")
+
+
+def test_processes_opening_one_new_embedded_store_at_once_all_open_it(tmp_path) -> None:
+    """A launch starts the DB writer and reader together on a store not made yet: each process opens it (switching
+    a new database to WAL is put in turn; before, one in ~60 such processes failed "database is locked", and the
+    boundary test's writer once died so in a fresh-clone run of the suite)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    results, met = ctx.Queue(), []
+    for trial in range(20):
+        barrier = ctx.Barrier(6)
+        procs = [ctx.Process(target=_open_new_store, args=(str(tmp_path / f"db{trial}"), barrier, results))
+                 for _ in range(6)]
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join(60)
+        met += [results.get(timeout=10) for _ in procs]
+    assert met == ["ok"] * 120, [m for m in met if m != "ok"]
