@@ -245,11 +245,8 @@ class EmbeddedStore(Store):
             # a new database's switch to WAL needs a lock SQLite's busy handler does not wait for: two processes
             # opening one new store at once (a launch's writer and reader) failed one of them "database is locked";
             # the store's cross-process lock puts them in turn (the second finds WAL already set)
-            fcntl.flock(self._lock_fd, fcntl.LOCK_EX)
-            try:
+            with self._write_lock():
                 conn.execute("PRAGMA journal_mode=WAL")
-            finally:
-                fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
             conn.execute(f"PRAGMA synchronous={self._synchronous}")
             self._conn = conn
             self._pid = os.getpid()
@@ -260,6 +257,9 @@ class EmbeddedStore(Store):
             self._conn = None
             if conn is not None:
                 conn.close()
+            if self._lock_fd is not None:
+                os.close(self._lock_fd)
+                self._lock_fd = None
             if isinstance(exc, StoreError):
                 raise
             raise self._storage_error(exc, "cannot open") from None
