@@ -246,14 +246,14 @@ class DesignExcavation:
         if sent is not None and sent[2] == key:
             cut, before, _ = sent
             rows, cols = cut.cells[:, 0], cut.cells[:, 1]
-            planned = before - cut.cut_to
-            lowered = before - np.asarray(terrain.z, dtype=float)[rows, cols]
+            after = np.asarray(terrain.z, dtype=float)[rows, cols]
+            planned, lowered = before - cut.cut_to, before - after
             meant = planned > self.planner.settings.min_cut
             over = meant & (lowered < FUTILE_SHARE * planned)
             np.add.at(self._futile, (rows[over], cols[over]), 1)
             worked = meant & ~over
             if worked.sum() >= EDGE_CELLS_MIN:  # where the edge went against where it was sent (+ = left above)
-                above = float(np.median(before[worked] - lowered[worked] - cut.cut_to[worked]))
+                above = float(np.median(after[worked] - cut.cut_to[worked]))
                 self.edge_offset = float(np.clip(self.edge_offset - 0.5 * above, 0.0, EDGE_OFFSET_MAX))
         skip = self._futile >= FUTILE_PASSES
         return skip if skip.any() else None
